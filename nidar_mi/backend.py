@@ -1,0 +1,152 @@
+"""Dr.Jit / Mitsuba back end: LLVM discovery, variant choice and plugin registration.
+
+Dr.Jit's LLVM back end needs ``libLLVM`` >= 16 (older versions fail with "Cannot select
+fminimum"). :func:`configure_llvm` looks for the newest libLLVM on the system and exports
+``DRJIT_LIBLLVM_PATH`` unless the user already set it; it runs when :mod:`nidar_mi` is
+imported, before Dr.Jit initialises its LLVM back end.
+
+:func:`set_variant` picks ``cuda_ad_spectral`` when a CUDA device works, else
+``llvm_ad_spectral``, and registers this package's Mitsuba plugins for that variant
+(Python plugin classes are bound to the variant active when they are defined).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import sys
+
+from .errors import NidarError
+
+__all__ = [
+    "LLVM_MIN_VERSION",
+    "find_libllvm",
+    "configure_llvm",
+    "default_variant",
+    "set_variant",
+    "SUPPORTED_VARIANTS",
+]
+
+#: Oldest libLLVM major version Dr.Jit 1.5 works with here.
+LLVM_MIN_VERSION = 16
+
+SUPPORTED_VARIANTS = ("cuda_ad_spectral", "llvm_ad_spectral")
+
+_LLVM_GLOBS = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM-*.so*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM-*.so*",
+    "/usr/lib/x86_64-linux-gnu/libLLVM.so.*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM.so.*",
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/lib64/libLLVM*.so*",
+    "/usr/lib/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+    "/opt/homebrew/opt/llvm/lib/libLLVM.dylib",
+    "/usr/local/opt/llvm/lib/libLLVM.dylib",
+)
+
+_FIX = (
+    "install LLVM >= {v} (Debian/Ubuntu: apt-get install libllvm19) "
+    "or point DRJIT_LIBLLVM_PATH at libLLVM.so"
+).format(v=LLVM_MIN_VERSION)
+
+
+def _llvm_major(path: str) -> int | None:
+    """Major version encoded in a libLLVM file name, e.g. ``libLLVM-19.so`` -> 19."""
+    name = os.path.basename(path)
+    m = re.search(r"libLLVM[-.]?(?:so\.)?(\d+)", name) or re.search(r"llvm-(\d+)", path)
+    return int(m.group(1)) if m else None
+
+
+def find_libllvm(patterns: tuple[str, ...] = _LLVM_GLOBS) -> str | None:
+    """Path of the newest libLLVM with major version >= :data:`LLVM_MIN_VERSION`, or None."""
+    best: tuple[int, str] | None = None
+    for pattern in patterns:
+        for path in glob.glob(pattern):
+            major = _llvm_major(path)
+            if major is None or major < LLVM_MIN_VERSION or not os.path.exists(path):
+                continue
+            if best is None or major > best[0]:
+                best = (major, path)
+    return None if best is None else best[1]
+
+
+def configure_llvm() -> str | None:
+    """Export ``DRJIT_LIBLLVM_PATH`` to the newest suitable libLLVM unless already set.
+
+    Returns the path in use, or None when none was found (the error is raised later, only
+    if the LLVM back end is actually needed).
+    """
+    if os.environ.get("DRJIT_LIBLLVM_PATH"):
+        return os.environ["DRJIT_LIBLLVM_PATH"]
+    path = find_libllvm()
+    if path is not None:
+        os.environ["DRJIT_LIBLLVM_PATH"] = path
+    return path
+
+
+def _cuda_available() -> bool:
+    import drjit as dr
+
+    try:
+        return bool(dr.has_backend(dr.JitBackend.CUDA))
+    except Exception:  # pragma: no cover - depends on drivers
+        return False
+
+
+def _llvm_available() -> bool:
+    import drjit as dr
+
+    try:
+        return bool(dr.has_backend(dr.JitBackend.LLVM))
+    except Exception:  # pragma: no cover
+        return False
+
+
+def default_variant() -> str:
+    """``cuda_ad_spectral`` when CUDA works, else ``llvm_ad_spectral``."""
+    if os.environ.get("NIDAR_VARIANT"):
+        return os.environ["NIDAR_VARIANT"]
+    return "cuda_ad_spectral" if _cuda_available() else "llvm_ad_spectral"
+
+
+_registered: set[str] = set()
+
+
+def set_variant(variant: str | None = None) -> str:
+    """Activate a Mitsuba variant and register this package's plugins for it.
+
+    Args:
+        variant: a Mitsuba variant name; None picks :func:`default_variant`.
+
+    Returns:
+        The variant now active.
+
+    Raises:
+        NidarError: the variant is unknown, not a spectral one, or its back end is missing.
+    """
+    configure_llvm()
+    import mitsuba as mi
+
+    variant = variant or default_variant()
+    if variant not in mi.variants():
+        raise NidarError(f"unknown Mitsuba variant '{variant}' (available: {', '.join(mi.variants())})")
+    if "spectral" not in variant:
+        raise NidarError(f"variant '{variant}' is not spectral: use one of {', '.join(SUPPORTED_VARIANTS)}")
+    if variant.startswith("llvm") and not _llvm_available():
+        raise NidarError(f"Dr.Jit cannot load libLLVM for variant '{variant}': {_FIX}")
+    if variant.startswith("cuda") and not _cuda_available():
+        raise NidarError(f"variant '{variant}' needs a working CUDA device; use --variant llvm_ad_spectral")
+    if mi.variant() != variant:
+        mi.set_variant(variant)
+    if variant not in _registered:
+        from . import plugins
+
+        plugins.register_all()
+        _registered.add(variant)
+    return variant
+
+
+if sys.platform == "darwin":  # pragma: no cover
+    _LLVM_GLOBS = _LLVM_GLOBS + ("/opt/local/libexec/llvm-*/lib/libLLVM.dylib",)
