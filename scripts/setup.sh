@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs what nidar_mi needs on a Debian/Ubuntu machine: libLLVM >= 16 for Dr.Jit's CPU
+# back end (via apt when missing and running as root), then a virtual environment with the
+# package, its dependencies and the development tools.
+set -euo pipefail
+PYTHON=${PYTHON:-python3}
+VENV=${VENV:-.venv}
+
+have_llvm() {
+    ls /usr/lib/*-linux-gnu/libLLVM-1[6-9]*.so* /usr/lib/*-linux-gnu/libLLVM-[2-9][0-9]*.so* \
+       /usr/lib/llvm-1[6-9]/lib/libLLVM*.so* /usr/lib/llvm-[2-9][0-9]/lib/libLLVM*.so* >/dev/null 2>&1
+}
+
+if ! have_llvm || ! ldconfig -p 2>/dev/null | grep -q libusb-1.0; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "setup: installing libllvm19 and libusb-1.0-0 with apt-get"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 libusb-1.0-0 >/dev/null
+    elif ! have_llvm; then
+        echo "setup: libLLVM >= 16 not found; run: sudo apt-get install libllvm19" >&2
+        exit 1
+    fi
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+    "$PYTHON" -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
+# The CPU build of torch; an unpinned torch would pull a multi-GB CUDA build.
+"$VENV/bin/python" -m pip install -q "torch==2.13.0" 2>&1 | grep -v '^WARNING: Location' || true
+"$VENV/bin/python" -m pip install -q -e ".[dev]" 2>&1 | grep -v '^WARNING: Location' || true
+"$VENV/bin/python" -c "import nidar_mi, mitsuba, drjit, torch" \
+    || { echo "setup: the environment in $VENV does not import; see the pip output above" >&2; exit 1; }
+echo "setup: ready ($VENV)"
