@@ -131,13 +131,19 @@ def set_variant(variant: str | None = None) -> str:
 
     variant = variant or default_variant()
     if variant not in mi.variants():
-        raise NidarError(f"unknown Mitsuba variant '{variant}' (available: {', '.join(mi.variants())})")
+        raise NidarError(
+            f"unknown Mitsuba variant '{variant}' (available: {', '.join(mi.variants())})"
+        )
     if "spectral" not in variant:
-        raise NidarError(f"variant '{variant}' is not spectral: use one of {', '.join(SUPPORTED_VARIANTS)}")
+        raise NidarError(
+            f"variant '{variant}' is not spectral: use one of {', '.join(SUPPORTED_VARIANTS)}"
+        )
     if variant.startswith("llvm") and not _llvm_available():
         raise NidarError(f"Dr.Jit cannot load libLLVM for variant '{variant}': {_FIX}")
     if variant.startswith("cuda") and not _cuda_available():
-        raise NidarError(f"variant '{variant}' needs a working CUDA device; use --variant llvm_ad_spectral")
+        raise NidarError(
+            f"variant '{variant}' needs a working CUDA device; use --variant llvm_ad_spectral"
+        )
     if mi.variant() != variant:
         mi.set_variant(variant)
     if variant not in _registered:

@@ -1,0 +1,222 @@
+"""Camera renders: RGB, a NIR band image at the LiDAR wavelength, z-depth and calibration.
+
+* RGB: the scene's own ``perspective`` sensor and film (``hdrfilm``), linear sRGB primaries.
+* NIR: the same camera with a ``specfilm`` whose response is a trapezoid around λ (flat over
+  λ ± :data:`NIR_HALF_PLATEAU_NM`, linear ramps of :data:`NIR_RAMP_NM` on each side). Mitsuba's
+  specfilm integrates ``∫ L(λ') r(λ') dλ'``; the image is divided by ``∫ r`` so it reads band-averaged
+  radiance: a uniform sky of radiance 1 reads 1.
+* Depth: z-depth (m, along the optical axis) of the first surface through each pixel centre, by
+  casting the camera's own rays; 0 where nothing is hit.
+* Calibration: OpenCV pinhole intrinsics ``K`` (x right, y down, z forward; the centre of pixel
+  (0, 0) at (0, 0)) and ``T_world_cam`` (camera-to-world, OpenCV camera axes). Mitsuba's camera
+  space is x left, y up, z forward, hence ``T_world_cam = to_world · diag(-1, -1, 1, 1)``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "CameraRender",
+    "render_camera",
+    "camera_calibration",
+    "NIR_HALF_PLATEAU_NM",
+    "NIR_RAMP_NM",
+    "nir_response",
+]
+
+#: Path-tracing depth used when a scene declares no integrator.
+DEFAULT_MAX_DEPTH = 6
+NIR_HALF_PLATEAU_NM = 5.0
+NIR_RAMP_NM = 5.0
+
+
+@dataclass
+class CameraRender:
+    """Images of one camera. Shapes: (H, W) or (H, W, 3).
+
+    Attributes:
+        name: camera id.
+        rgb: (H,W,3) float32 linear sRGB.
+        nir: (H,W) float32 band-averaged radiance at ``wavelength`` (W·m⁻²·sr⁻¹·nm⁻¹ units of the
+            scene's emitters).
+        depth: (H,W) float32 z-depth in m, 0 where no surface.
+        K: (3,3) float64 OpenCV intrinsics.
+        T_world_cam: (4,4) float64 camera-to-world, OpenCV axes.
+        wavelength: NIR band centre in nm.
+        timings: seconds per stage.
+    """
+
+    name: str
+    rgb: np.ndarray
+    nir: np.ndarray
+    depth: np.ndarray
+    K: np.ndarray
+    T_world_cam: np.ndarray
+    wavelength: float
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def nir_response(wavelength: float) -> tuple[list[tuple[float, float]], float]:
+    """Trapezoidal band response around ``wavelength`` (nm) and its integral (nm)."""
+    a, r = NIR_HALF_PLATEAU_NM, NIR_RAMP_NM
+    pts = [
+        (wavelength - a - r, 0.0),
+        (wavelength - a, 1.0),
+        (wavelength + a, 1.0),
+        (wavelength + a + r, 0.0),
+    ]
+    return pts, 2.0 * a + r
+
+
+def _matrix(T) -> np.ndarray:
+    return np.array(T.matrix.numpy(), dtype=np.float64).reshape(4, 4)
+
+
+def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """OpenCV intrinsics, camera-to-world pose and (W, H) of a Mitsuba perspective camera.
+
+    The intrinsics are measured from the camera's own rays (so principal-point offsets and the
+    fov axis are honoured): the ray through the film centre gives (cx, cy), rays one pixel away
+    give (fx, fy).
+    """
+    import mitsuba as mi
+
+    W, H = (int(v) for v in camera.film().size())
+    T_world_cam = _matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    R_cw = T_world_cam[:3, :3].T
+    # film positions (fractions): centre, +1 px in x, +1 px in y
+    fx_pos = np.array([0.5, 0.5 + 1.0 / W, 0.5])
+    fy_pos = np.array([0.5, 0.5, 0.5 + 1.0 / H])
+    ray, _ = camera.sample_ray(
+        0.0, 0.5, mi.Point2f(fx_pos.astype(np.float32), fy_pos.astype(np.float32)), mi.Point2f(0.5)
+    )
+    d = (
+        np.stack([ray.d.x.numpy(), ray.d.y.numpy(), ray.d.z.numpy()], -1).astype(np.float64)
+        @ R_cw.T
+    )
+    xn, yn = d[:, 0] / d[:, 2], d[:, 1] / d[:, 2]
+    fx = 1.0 / (xn[1] - xn[0])
+    fy = 1.0 / (yn[2] - yn[0])
+    # film centre lies at continuous pixel W/2, i.e. OpenCV coordinate W/2 - 0.5
+    cx = W / 2.0 - 0.5 - fx * xn[0]
+    cy = H / 2.0 - 0.5 - fy * yn[0]
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    return K, T_world_cam, (W, H)
+
+
+def _depth(scene, camera, W: int, H: int, T_world_cam: np.ndarray) -> np.ndarray:
+    import drjit as dr
+    import mitsuba as mi
+
+    idx = dr.arange(mi.UInt32, W * H)
+    px = (mi.Float(idx % W) + 0.5) / W
+    py = (mi.Float(idx // W) + 0.5) / H
+    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5))
+    si = scene.ray_intersect(ray)
+    fwd = mi.Vector3f(*[float(v) for v in T_world_cam[:3, 2]])
+    eye = mi.Point3f(*[float(v) for v in T_world_cam[:3, 3]])
+    # rays start on the near plane: measure from the eye
+    z = dr.dot(ray.o + si.t * ray.d - eye, fwd)
+    z = dr.select(si.is_valid(), z, 0.0)
+    return z.numpy().astype(np.float32).reshape(H, W)
+
+
+def _nir_camera(camera, wavelength: float, spp: int):
+    import mitsuba as mi
+
+    params = mi.traverse(camera)
+    W, H = (int(v) for v in camera.film().size())
+    pts, _ = nir_response(wavelength)
+    return mi.load_dict(
+        {
+            "type": "perspective",
+            "fov": float(params["x_fov"][0]),
+            "fov_axis": "x",
+            "principal_point_offset_x": float(params["principal_point_offset_x"][0]),
+            "principal_point_offset_y": float(params["principal_point_offset_y"][0]),
+            "near_clip": float(params["near_clip"]),
+            "far_clip": float(params["far_clip"]),
+            "to_world": mi.ScalarTransform4f(_matrix(camera.world_transform())),
+            "film": {
+                "type": "specfilm",
+                "width": W,
+                "height": H,
+                "nir": {"type": "spectrum", "value": pts},
+            },
+            "sampler": {"type": "independent", "sample_count": spp},
+        }
+    )
+
+
+_warned: set[str] = set()
+
+
+def render_camera(
+    loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0
+) -> CameraRender:
+    """Render RGB, NIR band and depth of one camera of a loaded scene.
+
+    Args:
+        loaded: a :class:`nidar_mi.scene.LoadedScene`.
+        camera: one of ``loaded.cameras``.
+        wavelength: NIR band centre in nm (the LiDAR's).
+        spp: samples per pixel of both renders.
+        seed: sampler seed.
+    """
+    import mitsuba as mi
+
+    scene = loaded.scene
+    for name in loaded.rgb_only_emitters():
+        key = f"{loaded.path}:{name}"
+        if key not in _warned:
+            _warned.add(key)
+            warnings.warn(
+                f"emitter '{name}' has an RGB/float radiance: it carries no meaningful energy "
+                "past 830 nm, so the NIR image misses its light (use a spectrum)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+    timings = {}
+    integrator = scene.integrator() or mi.load_dict(
+        {"type": "path", "max_depth": DEFAULT_MAX_DEPTH}
+    )
+    t0 = time.perf_counter()
+    rgb = mi.render(scene, sensor=camera, integrator=integrator, spp=spp, seed=seed)
+    rgb = np.array(rgb, dtype=np.float32)[..., :3]
+    timings["rgb"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _, integral = nir_response(wavelength)
+    nir_cam = _nir_camera(camera, wavelength, spp)
+    nir = mi.render(scene, sensor=nir_cam, integrator=integrator, spp=spp, seed=seed)
+    nir = np.array(nir, dtype=np.float32)
+    nir = (nir[..., 0] / integral).astype(np.float32)
+    timings["nir"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    K, T_world_cam, (W, H) = camera_calibration(camera)
+    depth = _depth(scene, camera, W, H, T_world_cam)
+    timings["depth"] = time.perf_counter() - t0
+    for name, img in (("rgb", rgb), ("nir", nir)):
+        if not np.all(np.isfinite(img)):
+            bad = int((~np.isfinite(img)).sum())
+            warnings.warn(
+                f"camera '{camera.id()}': {bad} non-finite {name} values set to 0 "
+                "(a material without data at these wavelengths?)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+            img[~np.isfinite(img)] = 0.0
+    return CameraRender(
+        name=camera.id(),
+        rgb=rgb,
+        nir=nir,
+        depth=depth,
+        K=K,
+        T_world_cam=T_world_cam,
+        wavelength=float(wavelength),
+        timings=timings,
+    )
