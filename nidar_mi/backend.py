@@ -47,9 +47,9 @@ _LLVM_GLOBS = (
 )
 
 _FIX = (
-    "install LLVM >= {v} (Debian/Ubuntu: apt-get install libllvm19) "
+    f"install LLVM >= {LLVM_MIN_VERSION} (Debian/Ubuntu: apt-get install libllvm19) "
     "or point DRJIT_LIBLLVM_PATH at libLLVM.so"
-).format(v=LLVM_MIN_VERSION)
+)
 
 
 def _llvm_major(path: str) -> int | None:
