@@ -62,18 +62,27 @@ def _expand(xml: str, rgb_twin: bool) -> str:
 
 
 def _one_line(err: Exception) -> str:
-    text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-    text = re.sub(r"^\[[^\]]*\]\s*", "", text)  # drop "[parser.cpp:123]"
+    lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
+    text = " ".join(lines) if lines else type(err).__name__
+    text = re.sub(r"\[[a-z_]+\.cpp:\d+\]\s*", "", text)  # drop "[parser.cpp:123]"
+    text = re.sub(r"While loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text)
     return text
 
 
-def load_scene(path: str, *, variant: str | None = None, rgb_twin: bool = False) -> LoadedScene:
+def load_scene(
+    path: str,
+    *,
+    variant: str | None = None,
+    rgb_twin: bool = False,
+    params: dict[str, str] | None = None,
+) -> LoadedScene:
     """Load a scene file.
 
     Args:
         path: scene XML.
         variant: Mitsuba variant; None picks the default (CUDA if available, else LLVM).
         rgb_twin: load the RGB-only twin (every material replaced by its sRGB appearance).
+        params: values for the scene's ``<default name=...>`` parameters (``$name`` in the XML).
 
     Raises:
         NidarError: missing/unreadable/malformed file or an invalid sensor parameter.
@@ -97,12 +106,12 @@ def load_scene(path: str, *, variant: str | None = None, rgb_twin: bool = False)
     except Exception as e:
         raise NidarError(f"{path}: {_one_line(e)}") from None
 
-    resolver = mi.Thread.thread().file_resolver()
+    resolver = mi.file_resolver()
     scene_dir = os.path.dirname(os.path.abspath(path))
     resolver.prepend(scene_dir)
     lidar_plugin.LOAD_ERRORS.clear()
     try:
-        scene = mi.load_string(xml)
+        scene = mi.load_string(xml, **{k: str(v) for k, v in (params or {}).items()})
     except Exception as e:
         if lidar_plugin.LOAD_ERRORS:
             raise NidarError(f"{path}: {lidar_plugin.LOAD_ERRORS[-1]}") from None

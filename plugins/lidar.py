@@ -76,7 +76,7 @@ def register() -> None:
         def __init__(self, props: mi.Properties):
             super().__init__(props)
             name = props.id() or "lidar"
-            values = {k: props.get(k) for k in PARAMETERS if props.has_property(k)}
+            values = {k: props.get(k) for k in PARAMETERS if k in props}
             try:
                 self.config = LidarConfig.from_mapping(name, values)
             except ValueError as e:

@@ -10,9 +10,9 @@ Elevation tables (degrees):
 * ``vlp16`` — Velodyne VLP-16 user manual (63-9243 Rev. E), Table 9-1: -15..+15 in 2 deg steps.
 * ``hdl32e`` — Velodyne HDL-32E user manual (63-9113 Rev. J), laser table: -30.67..+10.67 in 4/3 deg
   steps (the sensor of nuScenes, Caesar et al., CVPR 2020).
-* ``hdl64e`` — Velodyne HDL-64E S2 datasheet: upper block of 32 lasers from +2.0 to -8.33 deg (1/3 deg
-  spacing), lower block of 32 from -8.83 to -24.33 deg (1/2 deg spacing); the sensor of KITTI
-  (Geiger et al., IJRR 2013: 26.8 deg vertical field of view).
+* ``hdl64e`` — Velodyne HDL-64E S2 datasheet: vertical field of view +2 deg up to -24.8 deg down
+  with 64 equally spaced subdivisions (~0.4 deg); the sensor of KITTI (Geiger et al., IJRR 2013:
+  26.8 deg vertical field of view).
 * ``os1_128`` — Ouster OS1 Rev 6 datasheet: 128 channels, 45 deg vertical field of view, uniform
   spacing (-22.5..+22.5).
 * ``waymo_top`` — Waymo Open Dataset top LiDAR (Sun et al., CVPR 2020, Table 1): 64 beams over
@@ -75,7 +75,7 @@ PRESETS: dict[str, Preset] = {
         "Velodyne HDL-32E user manual 63-9113 Rev. J (nuScenes)",
     ),
     "hdl64e": Preset(
-        _desc(np.concatenate([np.linspace(2.0, -8.33, 32), np.linspace(-8.83, -24.33, 32)])),
+        _desc(np.linspace(2.0, -24.8, 64)),
         2048,
         0.9,
         120.0,
