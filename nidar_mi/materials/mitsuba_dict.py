@@ -1,0 +1,141 @@
+"""Mitsuba BSDF dicts (``mi.load_dict`` form) for named materials, spectral or RGB twin.
+
+``bsdf_dict(name)`` is meant for a *spectral* variant: spectra become ``irregular`` spectra on the
+360-1700 nm grid, so every material evaluates finite from 360 to 1700 nm (Mitsuba's conductor
+presets are NaN past ~886 nm; the metals here carry their own (n, k) tables).
+
+``bsdf_dict(name, rgb_twin=True)`` is the same BSDF with its spectra replaced by the material's
+linear sRGB appearance (:func:`nidar_mi.materials.linear_rgb`), which is all a graphics-engine asset
+carries; Mitsuba's spectral variants upsample that RGB to a smooth spectrum, whose NIR is the
+"what engines do today" baseline. Per kind:
+
+==============  =====================================  ======================================
+kind            spectral                               RGB twin
+==============  =====================================  ======================================
+diffuse         ``diffuse``, ``reflectance``           ``reflectance`` -> rgb
+plastic         ``roughplastic``, pigment spectrum     ``diffuse_reflectance`` -> rgb
+conductor       ``roughconductor``, ``eta``, ``k``     ``material="none"`` (ideal mirror)
+                                                       times rgb of the normal-incidence R
+dielectric      ``roughdielectric``, tint spectrum     tint -> rgb (clear glass unchanged)
+retroreflector  ``retroreflector``, rho spectrum       ``reflectance`` -> rgb
+==============  =====================================  ======================================
+
+Overrides (``overrides={"roughness": 0.3}``): ``roughness`` (GGX alpha, plastic / conductor /
+dielectric), ``int_ior`` (plastic / dielectric), ``lobe_width`` (degrees) and
+``diffuse_fraction`` (retroreflector).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from ..errors import NidarError
+from .library import get_material, linear_rgb
+from .spectra import Spectrum
+
+__all__ = ["OVERRIDES", "bsdf_dict", "rgb_dict", "spectrum_dict"]
+
+#: Overridable parameters per kind -> (parameter in Material.params, low, high, low included).
+#: Intervals are ``(low, high]`` except ``diffuse_fraction``'s ``[0, 1]``.
+OVERRIDES: dict[str, dict[str, tuple[str, float, float, bool]]] = {
+    "diffuse": {},
+    "plastic": {"roughness": ("alpha", 0.0, 1.0, False), "int_ior": ("int_ior", 1.0, 3.0, False)},
+    "conductor": {"roughness": ("alpha", 0.0, 1.0, False)},
+    "dielectric": {
+        "roughness": ("alpha", 0.0, 1.0, False),
+        "int_ior": ("int_ior", 1.0, 3.0, False),
+    },
+    "retroreflector": {
+        "lobe_width": ("lobe_width", 0.0, 90.0, False),
+        "diffuse_fraction": ("diffuse_fraction", 0.0, 1.0, True),
+    },
+}
+
+
+def spectrum_dict(spectrum: Spectrum) -> dict:
+    """Mitsuba ``irregular`` spectrum dict of ``spectrum``."""
+    return spectrum.mitsuba_dict()
+
+
+def rgb_dict(rgb) -> dict:
+    """Mitsuba ``rgb`` texture dict of a linear RGB triple."""
+    return {"type": "rgb", "value": [float(c) for c in rgb]}
+
+
+def _resolve(kind: str, params: Mapping, overrides: Mapping[str, float] | None) -> dict:
+    out = dict(params)
+    allowed = OVERRIDES[kind]
+    for key, value in (overrides or {}).items():
+        if key not in allowed:
+            ok = ", ".join(sorted(allowed)) or "none"
+            raise NidarError(
+                f"parameter '{key}' cannot be set on a {kind} material (allowed: {ok})"
+            )
+        target, lo, hi, lo_closed = allowed[key]
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise NidarError(f"parameter '{key}' must be a number, got {value!r}") from None
+        if not ((lo <= v) if lo_closed else (lo < v)) or not v <= hi:
+            interval = f"{'[' if lo_closed else '('}{lo:g}, {hi:g}]"
+            raise NidarError(f"parameter '{key}' = {v:g} is outside {interval}")
+        out[target] = v
+    return out
+
+
+def bsdf_dict(
+    name: str, *, rgb_twin: bool = False, overrides: Mapping[str, float] | None = None
+) -> dict:
+    """Mitsuba BSDF dict of a named material for the active spectral variant.
+
+    Args:
+        name: material name (see :func:`nidar_mi.materials.list_materials`).
+        rgb_twin: replace the material's spectra by its linear sRGB appearance.
+        overrides: parameter overrides, see the module docstring.
+
+    Returns:
+        A dict for ``mi.load_dict`` (plain Python values; no Mitsuba import needed).
+
+    Raises:
+        NidarError: unknown material or bad override.
+    """
+    m = get_material(name)
+    p = _resolve(m.kind, m.params, overrides)
+    rgb = rgb_dict(linear_rgb(name)) if rgb_twin else None
+
+    if m.kind == "diffuse":
+        return {"type": "diffuse", "reflectance": rgb or spectrum_dict(p["reflectance"])}
+    if m.kind == "plastic":
+        return {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": float(p["alpha"]),
+            "int_ior": float(p["int_ior"]),
+            "nonlinear": False,
+            "diffuse_reflectance": rgb or spectrum_dict(p["reflectance"]),
+        }
+    if m.kind == "conductor":
+        out = {"type": "roughconductor", "distribution": "ggx", "alpha": float(p["alpha"])}
+        if rgb_twin:
+            out.update(material="none", specular_reflectance=rgb)
+        else:
+            out.update(eta=spectrum_dict(p["eta"]), k=spectrum_dict(p["k"]))
+        return out
+    if m.kind == "dielectric":
+        out = {
+            "type": "roughdielectric",
+            "distribution": "ggx",
+            "alpha": float(p["alpha"]),
+            "int_ior": float(p["int_ior"]),
+        }
+        if p["transmittance"] is not None:
+            out["specular_transmittance"] = rgb or spectrum_dict(p["transmittance"])
+        return out
+    if m.kind == "retroreflector":
+        return {
+            "type": "retroreflector",
+            "reflectance": rgb or spectrum_dict(p["reflectance"]),
+            "lobe_width": float(p["lobe_width"]),
+            "diffuse_fraction": float(p["diffuse_fraction"]),
+        }
+    raise AssertionError(f"unhandled kind {m.kind}")  # pragma: no cover
