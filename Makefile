@@ -27,7 +27,7 @@ lint: setup
 	$(VENV)/bin/ruff format --check nidar_mi plugins tests benchmarks
 
 fixtures: setup
-	$(PY) -m tests.golden.regenerate
+	$(PY) tests/golden/regenerate.py
 
 bench: setup
 	$(PY) benchmarks/bench_scan.py

@@ -75,6 +75,7 @@ def _sha256(path: str) -> str:
 def _write_lidar(stage: str, result, formats, written: list[str]) -> dict:
     from .io import images
     from .io import points as pio
+    from .io.las import write_las
 
     name = result.config.name
     d = os.path.join(stage, name)
@@ -83,7 +84,7 @@ def _write_lidar(stage: str, result, formats, written: list[str]) -> dict:
     writers = {
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
-        "las": lambda p: pio.write_las(p, pts),
+        "las": lambda p: write_las(p, pts),
         "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], pts["intensity"]),
     }
     ext = {"npz": "npz", "ply": "ply", "las": "las", "bin": "bin"}

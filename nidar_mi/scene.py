@@ -101,8 +101,8 @@ def load_scene(
 
     try:
         xml = _expand(xml, rgb_twin)
-    except NidarError:
-        raise
+    except NidarError as e:
+        raise NidarError(f"{path}: {e}") from None
     except Exception as e:
         raise NidarError(f"{path}: {_one_line(e)}") from None
 
