@@ -23,7 +23,18 @@ if ! have_llvm || ! ldconfig -p 2>/dev/null | grep -q libusb-1.0; then
 fi
 
 if [ ! -x "$VENV/bin/python" ]; then
-    "$PYTHON" -m venv "$VENV"
+    if ! "$PYTHON" -m venv "$VENV" >/dev/null 2>&1; then
+        rm -rf "$VENV"
+        if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+            echo "setup: installing python3-venv with apt-get"
+            apt-get update -qq
+            DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3-venv >/dev/null
+            "$PYTHON" -m venv "$VENV"
+        else
+            echo "setup: '$PYTHON -m venv' failed; run: sudo apt-get install python3-venv" >&2
+            exit 1
+        fi
+    fi
 fi
 "$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
 # The CPU build of torch; an unpinned torch would pull a multi-GB CUDA build.
