@@ -7,7 +7,7 @@ registers it with Mitsuba. :func:`register_all` is called by :func:`nidar_mi.bac
 import importlib
 
 #: Plugin modules, in registration order.
-PLUGIN_MODULES = ("lidar",)
+PLUGIN_MODULES = ("lidar", "retroreflector")
 
 __all__ = ["PLUGIN_MODULES", "register_all"]
 
