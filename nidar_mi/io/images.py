@@ -1,0 +1,218 @@
+"""Images: sRGB transfer functions, 8-bit PNG, float32 OpenEXR, false-colour PNG.
+
+Renders are linear (radiance, intensity, depth); :func:`write_srgb_png` encodes a linear RGB
+render for display with the sRGB OETF of IEC 61966-2-1, and :func:`write_colormap_png` maps
+a scalar image (range, intensity) through a matplotlib colour map. EXR keeps float32 values
+exactly, one named channel per image plane.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..errors import NidarError
+from .atomic import atomic_path, reading
+
+__all__ = [
+    "linear_to_srgb",
+    "srgb_to_linear",
+    "write_png",
+    "read_png",
+    "write_exr",
+    "read_exr",
+    "write_colormap_png",
+    "write_srgb_png",
+]
+
+# IEC 61966-2-1: the linear segment ends at 0.0031308 (linear) = 0.04045 (encoded).
+_LINEAR_END = 0.0031308
+_ENCODED_END = 0.04045
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+def _float(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x)
+    return x.astype(np.result_type(x.dtype, np.float32), copy=False)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """sRGB OETF (IEC 61966-2-1): linear values -> encoded values, both clipped to [0, 1].
+
+    ``12.92 x`` for ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``.
+
+    Args:
+        x: linear values, any shape (NaN stays NaN).
+
+    Returns:
+        Encoded values in [0, 1], same shape, as floats (float32 input stays float32).
+    """
+    x = np.clip(_float(x), 0.0, 1.0)
+    with np.errstate(invalid="ignore"):
+        return np.where(x <= _LINEAR_END, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055).astype(x.dtype)
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """Inverse sRGB OETF: encoded values in [0, 1] -> linear values in [0, 1].
+
+    ``x / 12.92`` for ``x <= 0.04045``, else ``((x + 0.055) / 1.055)^2.4``.
+    """
+    x = np.clip(_float(x), 0.0, 1.0)
+    with np.errstate(invalid="ignore"):
+        return np.where(x <= _ENCODED_END, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(x.dtype)
+
+
+def write_png(path: str | os.PathLike, img: np.ndarray) -> None:
+    """Write an 8-bit PNG.
+
+    Args:
+        path: output file.
+        img: uint8 (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA.
+
+    Raises:
+        NidarError: another dtype or shape, or a write failure.
+    """
+    from PIL import Image
+
+    img = np.asarray(img)
+    if img.dtype != np.uint8 or not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] in (3, 4))):
+        raise NidarError(f"write_png needs uint8 (H,W) or (H,W,3|4), got {img.dtype} {img.shape}")
+    with atomic_path(path) as tmp:
+        Image.fromarray(np.ascontiguousarray(img)).save(tmp, format="PNG")
+
+
+def read_png(path: str | os.PathLike) -> np.ndarray:
+    """Read a PNG (or another format Pillow knows).
+
+    Returns:
+        uint8 (H, W) for grey, (H, W, 3) RGB or (H, W, 4) RGBA (palette and grey+alpha
+        images are expanded to RGB/RGBA); 16-bit grey is returned as its integer array.
+
+    Raises:
+        NidarError: missing or unreadable file.
+    """
+    from PIL import Image
+
+    with reading(path) as p, Image.open(p) as im:
+        if im.mode == "1":
+            im = im.convert("L")
+        elif im.mode not in ("L", "RGB", "RGBA") and not im.mode.startswith("I"):
+            alpha = "A" in im.getbands() or "transparency" in im.info
+            im = im.convert("RGBA" if alpha else "RGB")
+        return np.array(im)
+
+
+def write_exr(path: str | os.PathLike, channels: dict[str, np.ndarray]) -> None:
+    """Write float32 channels to a scanline OpenEXR file with ZIP compression.
+
+    Args:
+        path: output file.
+        channels: channel name -> (H, W) array (cast to float32), all the same shape. An RGB
+            image is ``{"R": r, "G": g, "B": b}``; an (H, W, 3|4) array under the key
+            ``"RGB"`` or ``"RGBA"`` is split into those channels.
+
+    Raises:
+        NidarError: no channels, bad shapes, or a write failure.
+    """
+    import OpenEXR
+
+    planes: dict[str, np.ndarray] = {}
+    for name, value in channels.items():
+        a = np.asarray(value)
+        if name in ("RGB", "RGBA") and a.ndim == 3 and a.shape[2] == len(name):
+            planes.update({c: a[..., i] for i, c in enumerate(name)})
+        else:
+            planes[name] = a
+    shapes = {a.shape for a in planes.values()}
+    if not planes or len(shapes) != 1 or len(next(iter(shapes))) != 2:
+        raise NidarError(f"write_exr needs (H,W) channels of one shape, got {sorted(shapes)}")
+    pixels = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in planes.items()}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as tmp:
+        OpenEXR.File(header, pixels).write(str(tmp))
+
+
+def read_exr(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read every channel of a single-part OpenEXR file.
+
+    Returns:
+        Channel name -> (H, W) float32 (half and uint channels are converted).
+
+    Raises:
+        NidarError: missing or unreadable file.
+    """
+    import OpenEXR
+
+    with reading(path) as p:
+        with open(p, "rb") as stream:
+            if stream.read(4) != _EXR_MAGIC:
+                raise ValueError("not an OpenEXR file (no EXR signature)")
+        f = OpenEXR.File(str(p), separate_channels=True)
+        return {k: np.asarray(c.pixels, dtype=np.float32) for k, c in f.channels().items()}
+
+
+def write_colormap_png(
+    path: str | os.PathLike,
+    img: np.ndarray,
+    *,
+    vmin: float | None = None,
+    vmax: float | None = None,
+    cmap: str = "turbo",
+    invalid: np.ndarray | None = None,
+) -> None:
+    """Write a scalar image as a false-colour 8-bit RGB PNG.
+
+    Values are mapped linearly from [vmin, vmax] to the colour map and clipped; invalid
+    pixels (NaN, infinite, or ``invalid``) are black.
+
+    Args:
+        path: output file.
+        img: (H, W) scalar image.
+        vmin: value shown at the low end; default: 1st percentile of the valid pixels.
+        vmax: value shown at the high end; default: 99th percentile of the valid pixels.
+        cmap: matplotlib colour map name.
+        invalid: optional (H, W) bool mask of pixels to show black.
+
+    Raises:
+        NidarError: bad shapes, unknown colour map, or a write failure.
+    """
+    import matplotlib
+
+    img = np.asarray(img, dtype=np.float64)
+    if img.ndim != 2:
+        raise NidarError(f"write_colormap_png needs an (H,W) image, got {img.shape}")
+    valid = np.isfinite(img)
+    if invalid is not None:
+        invalid = np.asarray(invalid, dtype=bool)
+        if invalid.shape != img.shape:
+            raise NidarError(f"invalid mask shape {invalid.shape} != image shape {img.shape}")
+        valid &= ~invalid
+    try:
+        colormap = matplotlib.colormaps[cmap]
+    except KeyError:
+        raise NidarError(f"unknown colour map {cmap!r}") from None
+    rgb = np.zeros((*img.shape, 3), dtype=np.uint8)
+    if valid.any():
+        lo = float(np.percentile(img[valid], 1)) if vmin is None else float(vmin)
+        hi = float(np.percentile(img[valid], 99)) if vmax is None else float(vmax)
+        t = np.clip((img[valid] - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
+        rgb[valid] = np.round(colormap(t)[:, :3] * 255).astype(np.uint8)
+    write_png(path, rgb)
+
+
+def write_srgb_png(path: str | os.PathLike, rgb_linear: np.ndarray) -> None:
+    """Encode a linear RGB image with the sRGB OETF and write it as an 8-bit PNG.
+
+    Args:
+        path: output file.
+        rgb_linear: (H, W, 3) linear RGB; values are clipped to [0, 1], NaN becomes 0.
+
+    Raises:
+        NidarError: bad shape, or a write failure.
+    """
+    rgb = np.asarray(rgb_linear)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise NidarError(f"write_srgb_png needs an (H,W,3) image, got {rgb.shape}")
+    encoded = np.nan_to_num(linear_to_srgb(rgb.astype(np.float64)), nan=0.0)
+    write_png(path, np.round(encoded * 255).astype(np.uint8))

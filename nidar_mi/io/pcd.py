@@ -1,0 +1,123 @@
+"""Reading Point Cloud Library ``.pcd`` files (format v0.7, ``DATA ascii`` and ``binary``).
+
+The header names the fields of each point (``FIELDS x y z intensity ...``), their byte size
+(``SIZE``), type (``TYPE``: ``F`` float, ``I`` signed, ``U`` unsigned integer) and element
+count (``COUNT``, default 1). ``binary`` data are packed little-endian records, one per
+point; ``ascii`` data are whitespace-separated numbers in the same order. Fields named
+``_`` are padding and skipped. ``binary_compressed`` (LZF) is not supported.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..errors import NidarError
+from .atomic import reading
+
+__all__ = ["read_pcd"]
+
+_DTYPES = {
+    ("F", 4): "<f4",
+    ("F", 8): "<f8",
+    ("I", 1): "i1",
+    ("I", 2): "<i2",
+    ("I", 4): "<i4",
+    ("I", 8): "<i8",
+    ("U", 1): "u1",
+    ("U", 2): "<u2",
+    ("U", 4): "<u4",
+    ("U", 8): "<u8",
+}
+
+
+def _parse_header(raw: bytes) -> tuple[dict[str, list[str]], int]:
+    """Header entries (upper-case key -> values) and the byte offset of the data."""
+    header: dict[str, list[str]] = {}
+    pos = 0
+    while pos < len(raw):
+        end = raw.find(b"\n", pos)
+        end = len(raw) if end < 0 else end
+        line = raw[pos:end].decode("ascii", errors="replace").strip()
+        pos = end + 1
+        if not line or line.startswith("#"):
+            continue
+        key, *values = line.split()
+        header[key.upper()] = values
+        if key.upper() == "DATA":
+            return header, min(pos, len(raw))
+    raise ValueError("no DATA line in the PCD header")
+
+
+def _record_dtype(header: dict[str, list[str]]) -> tuple[list[str], np.dtype]:
+    """Field names and the numpy record type of one point."""
+    for key in ("FIELDS", "SIZE", "TYPE"):
+        if key not in header:
+            raise ValueError(f"PCD header has no {key} line")
+    names = header["FIELDS"]
+    counts = header.get("COUNT", ["1"] * len(names))
+    if not (len(names) == len(header["SIZE"]) == len(header["TYPE"]) == len(counts)):
+        raise ValueError("PCD header FIELDS, SIZE, TYPE and COUNT have different lengths")
+    formats = []
+    for name, size, kind, count in zip(names, header["SIZE"], header["TYPE"], counts):
+        code = _DTYPES.get((kind.upper(), int(size)))
+        if code is None:
+            raise ValueError(f"PCD field {name!r} has unsupported TYPE {kind} SIZE {size}")
+        formats.append((code, (int(count),)) if int(count) != 1 else code)
+    # Positional record names: PCD may repeat a name (padding fields are all "_").
+    return names, np.dtype({"names": [f"f{i}" for i in range(len(names))], "formats": formats})
+
+
+def read_pcd(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a PCD v0.7 file (``DATA ascii`` or ``binary``) as a points dict.
+
+    Returns:
+        ``xyz`` (N, 3) float32, ``intensity`` (N,) float32 if the file has that field, and
+        every other field in its own dtype ((N,) or (N, COUNT)); N = ``POINTS`` (default
+        ``WIDTH * HEIGHT``).
+
+    Raises:
+        NidarError: missing or malformed file, no x/y/z fields, or ``binary_compressed``.
+    """
+    with reading(path) as p:
+        raw = p.read_bytes()
+        header, offset = _parse_header(raw)
+        names, record = _record_dtype(header)
+        if "POINTS" in header:
+            n = int(header["POINTS"][0])
+        elif "WIDTH" in header and "HEIGHT" in header:
+            n = int(header["WIDTH"][0]) * int(header["HEIGHT"][0])
+        else:
+            raise ValueError("PCD header has neither POINTS nor WIDTH and HEIGHT")
+        data = (header["DATA"] or ["(none)"])[0].lower()
+        if data == "binary_compressed":
+            raise NidarError(f"cannot read {p}: PCD DATA binary_compressed is unsupported")
+        if data == "binary":
+            if len(raw) - offset < n * record.itemsize:
+                raise ValueError(f"binary data hold fewer than the {n} points announced")
+            rows = np.frombuffer(raw, dtype=record, count=n, offset=offset)
+        elif data == "ascii":
+            tokens = np.array(raw[offset:].split())
+            width = sum(max(1, int(np.prod(record[i].shape))) for i in range(len(names)))
+            if tokens.size != n * width:
+                raise ValueError(f"ascii data hold {tokens.size} values, expected {n} x {width}")
+            tokens = tokens.reshape(n, width)
+            rows = np.empty(n, dtype=record)
+            col = 0
+            for i in range(len(names)):
+                k = max(1, int(np.prod(record[i].shape)))
+                rows[f"f{i}"] = (
+                    tokens[:, col : col + k].astype(record[i].base).reshape(rows[f"f{i}"].shape)
+                )
+                col += k
+        else:
+            raise ValueError(f"unknown PCD DATA type {data!r}")
+        fields = {name: rows[f"f{i}"].copy() for i, name in enumerate(names) if name != "_"}
+        if not {"x", "y", "z"} <= fields.keys():
+            raise ValueError("PCD has no x, y, z fields")
+        out = {"xyz": np.stack([fields.pop(k) for k in "xyz"], axis=1).astype(np.float32)}
+        if "intensity" in fields:
+            out["intensity"] = fields.pop("intensity").astype(np.float32)
+        out.update(fields)
+        return out

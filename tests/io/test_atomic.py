@@ -1,0 +1,85 @@
+"""Tests of nidar_mi.io.atomic: atomic writes and guarded reads."""
+
+import os
+
+import numpy as np
+import pytest
+
+from nidar_mi.errors import NidarError
+from nidar_mi.io.atomic import atomic_path, atomic_write_json, atomic_write_text, reading
+
+
+def test_atomic_path_temp_name_and_replace(tmp_path):
+    target = tmp_path / "sub" / "dir" / "points.npz"
+    with atomic_path(target) as tmp:
+        assert tmp.parent == target.parent  # same directory: os.replace stays atomic
+        assert tmp.name.startswith(".points.npz.tmp-")
+        assert tmp.suffix == ".npz"
+        assert tmp != target
+        tmp.write_bytes(b"abc")
+        assert not target.exists()
+    assert target.read_bytes() == b"abc"
+    assert os.listdir(target.parent) == ["points.npz"]
+
+
+def test_atomic_path_exception_leaves_nothing(tmp_path):
+    target = tmp_path / "out.txt"
+    with pytest.raises(RuntimeError, match="boom"):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("boom")
+    assert os.listdir(tmp_path) == []
+
+
+def test_atomic_path_exception_keeps_old_target(tmp_path):
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(KeyError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("new")
+            raise KeyError("x")
+    assert target.read_text() == "old"
+    assert os.listdir(tmp_path) == ["out.txt"]
+
+
+def test_atomic_path_os_error_becomes_nidar_error(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(NidarError, match="cannot write"):
+        atomic_write_text(blocker / "x.txt", "text")  # parent is a file
+    with pytest.raises(NidarError, match=r"cannot write .*out\.txt"):
+        with atomic_path(tmp_path / "out.txt") as tmp:
+            tmp.write_text("partial")
+            raise OSError(28, "No space left on device")
+    assert os.listdir(tmp_path) == ["file"]
+
+
+def test_atomic_write_text(tmp_path):
+    target = tmp_path / "a" / "note.txt"
+    atomic_write_text(target, "héllo\nworld\n")
+    assert target.read_bytes() == "héllo\nworld\n".encode()
+
+
+def test_atomic_write_json_format_and_numpy(tmp_path):
+    target = tmp_path / "m.json"
+    atomic_write_json(target, {"a": np.int64(3), "b": np.array([0.5, 1.0], np.float32)})
+    assert target.read_text() == '{\n  "a": 3,\n  "b": [\n    0.5,\n    1.0\n  ]\n}\n'
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), np.float32("nan")])
+def test_atomic_write_json_refuses_nan(tmp_path, bad):
+    with pytest.raises(NidarError, match="m.json"):
+        atomic_write_json(tmp_path / "m.json", {"x": [1.0, bad]})
+    assert os.listdir(tmp_path) == []
+
+
+def test_reading_missing_and_failing(tmp_path):
+    with pytest.raises(NidarError, match=r"cannot read .*nope\.bin: no such file"):
+        with reading(tmp_path / "nope.bin"):
+            pass
+    f = tmp_path / "f.bin"
+    f.write_bytes(b"")
+    with pytest.raises(NidarError) as info:
+        with reading(f):
+            raise ValueError("bad\nheader")
+    assert str(info.value) == f"cannot read {f}: bad header"
