@@ -1,0 +1,73 @@
+"""Camera renders: NIR band normalisation, Lambertian radiance, depth, intrinsics, RGB-emitter warning."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+CAM = """
+<sensor type="perspective" id="cam">
+    <float name="fov" value="60"/>
+    <transform name="to_world"><lookat origin="0,0,1" target="{tx},0,{tz}" up="0,0,1"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="16"/></film>
+</sensor>
+<sensor type="lidar" id="lidar"><string name="elevation_angles" value="0"/>
+    <integer name="horizontal_resolution" value="8"/><float name="wavelength" value="{wl}"/></sensor>
+"""
+
+
+def _render(write_scene, body, wl=905.0, spp=4, tx=5, tz=1):
+    from nidar_mi.camera import render_camera
+    from nidar_mi.scene import load_scene
+
+    L = load_scene(write_scene(CAM.format(wl=wl, tx=tx, tz=tz) + body))
+    return render_camera(L, L.cameras[0], wavelength=wl, spp=spp, seed=1)
+
+
+@pytest.mark.parametrize("wl", [905.0, 1550.0])
+def test_uniform_sky_of_radiance_one_reads_one(variant, write_scene, wl):
+    sky = '<emitter type="constant"><spectrum name="radiance" value="300:1, 1700:1"/></emitter>'
+    r = _render(write_scene, sky, wl=wl)
+    np.testing.assert_allclose(r.nir, 1.0, rtol=1e-5)
+    assert (r.depth == 0).all()
+
+
+def test_lambertian_ground_under_uniform_sky(variant, write_scene):
+    """An infinite Lambertian plane under a uniform sky of radiance L reflects ρ(λ)·L."""
+    body = """
+    <emitter type="constant"><spectrum name="radiance" value="300:2, 1700:2"/></emitter>
+    <shape type="rectangle"><transform name="to_world"><scale value="1000"/></transform>
+        <bsdf type="diffuse"><spectrum name="reflectance" value="400:0.2, 1600:0.8"/></bsdf></shape>
+    """
+    r = _render(write_scene, body, wl=905.0, spp=256, tx=3, tz=0)
+    ground = r.depth > 0
+    assert ground.sum() > 100
+    # ρ(905) = 0.2 + 0.6 * 505/1200 = 0.4525; radiance 2 * 0.4525
+    assert r.nir[ground].mean() == pytest.approx(2 * 0.4525, rel=0.02)
+
+
+def test_depth_and_intrinsics(variant, write_scene):
+    body = """
+    <shape type="rectangle"><transform name="to_world"><scale value="20"/><rotate y="1" angle="-90"/>
+        <translate x="4"/></transform><bsdf type="diffuse"/></shape>
+    """
+    r = _render(write_scene, body)
+    # a wall 4 m ahead, facing the camera: z-depth 4 everywhere
+    np.testing.assert_allclose(r.depth, 4.0, rtol=1e-5)
+    fx = 12.0 / np.tan(np.deg2rad(30.0))  # 60 deg over 24 px
+    np.testing.assert_allclose(r.K, [[fx, 0, 11.5], [0, fx, 7.5], [0, 0, 1]], rtol=1e-4, atol=1e-3)
+    # OpenCV axes: camera x right = world -y, y down = world -z, z forward = world +x
+    np.testing.assert_allclose(
+        r.T_world_cam[:3, :3], [[0, 0, 1], [-1, 0, 0], [0, -1, 0]], atol=1e-6
+    )
+    np.testing.assert_allclose(r.T_world_cam[:3, 3], [0, 0, 1], atol=1e-6)
+
+
+def test_rgb_emitter_warns(variant, write_scene):
+    body = '<emitter type="constant" id="rgb_sky"><rgb name="radiance" value="1, 1, 1"/></emitter>'
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        r = _render(write_scene, body)
+    assert any("rgb_sky" in str(x.message) and "830 nm" in str(x.message) for x in w)
+    assert r.nir.max() < 1e-3  # D65-shaped radiance: nothing at 905 nm
