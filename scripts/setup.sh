@@ -11,7 +11,11 @@ have_llvm() {
        /usr/lib/llvm-1[6-9]/lib/libLLVM*.so* /usr/lib/llvm-[2-9][0-9]/lib/libLLVM*.so* >/dev/null 2>&1
 }
 
-if ! have_llvm || ! ldconfig -p 2>/dev/null | grep -q libusb-1.0; then
+have_libusb() {  # Open3D (benchmarks) needs it
+    ls /usr/lib/*-linux-gnu/libusb-1.0.so* /usr/lib/libusb-1.0.so* >/dev/null 2>&1
+}
+
+if ! have_llvm || ! have_libusb; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
         echo "setup: installing libllvm19 and libusb-1.0-0 with apt-get"
         apt-get update -qq
