@@ -6,13 +6,18 @@ set -euo pipefail
 PYTHON=${PYTHON:-python3}
 VENV=${VENV:-.venv}
 
+have_any() {  # true when at least one of the (glob-expanded) paths exists
+    for f in "$@"; do [ -e "$f" ] && return 0; done
+    return 1
+}
+
 have_llvm() {
-    ls /usr/lib/*-linux-gnu/libLLVM-1[6-9]*.so* /usr/lib/*-linux-gnu/libLLVM-[2-9][0-9]*.so* \
-       /usr/lib/llvm-1[6-9]/lib/libLLVM*.so* /usr/lib/llvm-[2-9][0-9]/lib/libLLVM*.so* >/dev/null 2>&1
+    have_any /usr/lib/*-linux-gnu/libLLVM-1[6-9]*.so* /usr/lib/*-linux-gnu/libLLVM-[2-9][0-9]*.so* \
+        /usr/lib/llvm-1[6-9]/lib/libLLVM*.so* /usr/lib/llvm-[2-9][0-9]/lib/libLLVM*.so*
 }
 
 have_libusb() {  # Open3D (benchmarks) needs it
-    ls /usr/lib/*-linux-gnu/libusb-1.0.so* /usr/lib/libusb-1.0.so* >/dev/null 2>&1
+    have_any /usr/lib/*-linux-gnu/libusb-1.0.so* /usr/lib/libusb-1.0.so*
 }
 
 if ! have_llvm || ! have_libusb; then
