@@ -8,14 +8,16 @@ samples (kept as published, no resampling), copied from the refractiveindex.info
 Metal  Source
 =====  ==========================================================================================
 Al     A. D. Rakic, Appl. Opt. 34, 4755 (1995): evaporated films, KK + semiquantum-model analysis
-Cr     P. B. Johnson, R. W. Christy, Phys. Rev. B 9, 5056 (1974): evaporated films, room temp.
+Cr     A. D. Rakic et al., Appl. Opt. 37, 5271 (1998): Brendel-Bormann fit to several data sets
 Cu     P. B. Johnson, R. W. Christy, Phys. Rev. B 6, 4370 (1972): evaporated films, room temp.
 Fe     P. B. Johnson, R. W. Christy, Phys. Rev. B 9, 5056 (1974): evaporated films, room temp.
 Zn     W. S. M. Werner, K. Glantschnig, C. Ambrosch-Draxl, J. Phys. Chem. Ref. Data 38, 1013
        (2009): from reflection electron energy-loss spectra (used for galvanised steel)
 =====  ==========================================================================================
 
-Between samples ``n`` and ``k`` are interpolated linearly (the database's convention).
+Between samples ``n`` and ``k`` are interpolated linearly (the database's convention). For
+chromium the Rakic 1998 fit is used rather than Johnson & Christy 1974, whose evaporated films
+reflect about 0.1 less than bulk chromium plating in the visible (0.55 against 0.65 at 550 nm).
 """
 
 from __future__ import annotations
@@ -36,7 +38,10 @@ METALS_LICENSE = "CC0 1.0 (refractiveindex.info database); data from the cited p
 #: Citation of the optical constants of each metal in ``data/metals_nk.csv``.
 METAL_SOURCES = {
     "Al": "A. D. Rakic, Appl. Opt. 34, 4755-4767 (1995), doi:10.1364/AO.34.004755",
-    "Cr": "P. B. Johnson and R. W. Christy, Phys. Rev. B 9, 5056-5070 (1974), doi:10.1103/PhysRevB.9.5056",
+    "Cr": (
+        "A. D. Rakic, A. B. Djurisic, J. M. Elazar and M. L. Majewski, Appl. Opt. 37, 5271-5283 "
+        "(1998), doi:10.1364/AO.37.005271 (Brendel-Bormann model)"
+    ),
     "Cu": "P. B. Johnson and R. W. Christy, Phys. Rev. B 6, 4370-4379 (1972), doi:10.1103/PhysRevB.6.4370",
     "Fe": "P. B. Johnson and R. W. Christy, Phys. Rev. B 9, 5056-5070 (1974), doi:10.1103/PhysRevB.9.5056",
     "Zn": (
