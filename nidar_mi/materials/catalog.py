@@ -16,7 +16,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from .earthlib_data import EARTHLIB_LICENSE, earthlib_spectrum
+from .earthlib_data import EARTHLIB_LICENSE, earthlib_notes, earthlib_spectrum
 from .library import Material
 from .metals import METAL_SOURCES, METALS_LICENSE, metal_nk, metal_reflectance
 from .optics import SODA_LIME_SOURCE, soda_lime_ior
@@ -71,10 +71,10 @@ def _earthlib_source(level_2: str, level_3: str, name: str) -> str:
 def _earthlib_materials() -> list[Material]:
     out = []
     for name, l2, l3, sid, desc in _EARTHLIB_DIFFUSE:
-        simulated = l3 == "canopy"
         notes = (
-            "PROSAIL canopy simulation shipped by earthlib; " if simulated else "field spectrum; "
-        ) + "extended below 400 nm and across 1350-1460 nm as in nidar_mi.materials.earthlib_data"
+            f"earthlib metadata: {earthlib_notes(l2, l3, sid)}; extended below 400 nm and across "
+            "1350-1460 nm as in nidar_mi.materials.earthlib_data"
+        )
         out.append(
             Material(
                 name=name,

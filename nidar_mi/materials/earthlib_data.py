@@ -41,6 +41,7 @@ __all__ = [
     "earthlib_dir",
     "load_earthlib",
     "earthlib_spectrum",
+    "earthlib_notes",
     "extend_below",
 ]
 
@@ -59,16 +60,18 @@ class EarthlibLibrary:
     Attributes:
         wavelengths_nm: (B,) band centres, nm (400-2450 without the water bands).
         data: (S, B) reflectance, float32.
-        level_2, level_3, names, sources: (S,) metadata columns ``LEVEL_2``, ``LEVEL_3``, ``NAME``,
-            ``SOURCE`` as strings.
+        level_2, level_3, level_4, names, sources, notes: (S,) metadata columns ``LEVEL_2``,
+            ``LEVEL_3``, ``LEVEL_4``, ``NAME``, ``SOURCE``, ``NOTES`` as strings.
     """
 
     wavelengths_nm: np.ndarray
     data: np.ndarray
     level_2: tuple[str, ...]
     level_3: tuple[str, ...]
+    level_4: tuple[str, ...]
     names: tuple[str, ...]
     sources: tuple[str, ...]
+    notes: tuple[str, ...]
 
     def index(self, level_2: str, level_3: str, name: str) -> int:
         """Row of the unique spectrum with these metadata values.
@@ -145,8 +148,10 @@ def load_earthlib(data_dir: str | None = None) -> EarthlibLibrary:
         data=data.reshape(lines, samples),
         level_2=tuple(r["LEVEL_2"] for r in rows),
         level_3=tuple(r["LEVEL_3"] for r in rows),
+        level_4=tuple(r["LEVEL_4"] for r in rows),
         names=tuple(r["NAME"] for r in rows),
         sources=tuple(r["SOURCE"] for r in rows),
+        notes=tuple(r["NOTES"] for r in rows),
     )
 
 
@@ -187,3 +192,10 @@ def earthlib_spectrum(
     ok = np.isfinite(row)
     values = extend_below(lib.wavelengths_nm[ok], row[ok], grid_nm)
     return Spectrum(grid_nm, np.clip(values, 0.0, 1.0))
+
+
+def earthlib_notes(level_2: str, level_3: str, name: str) -> str:
+    """earthlib's own metadata of a spectrum, e.g. ``"measured (asd): urban reflectance ..."``."""
+    lib = load_earthlib()
+    i = lib.index(level_2, level_3, name)
+    return f"{lib.level_4[i]} ({lib.sources[i]}): {lib.notes[i]}"
