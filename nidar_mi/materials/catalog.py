@@ -268,9 +268,9 @@ def _glass() -> list[Material]:
                 description=desc,
                 source=f"model:{SODA_LIME_SOURCE}{extra}",
                 license=MODEL_LICENSE,
-                params=_freeze(int_ior=ior, alpha=0.01, transmittance=trans),
+                params=_freeze(int_ior=ior, alpha=0.0, transmittance=trans),
                 notes=(
-                    f"roughdielectric, GGX alpha=0.01, n={ior:.4f} (Rubin at "
+                    f"thin pane (thindielectric), n={ior:.4f} (Rubin at "
                     f"{GLASS_IOR_WAVELENGTH_NM:g} nm; Mitsuba's dielectric has no dispersion)"
                 ),
             )

@@ -16,7 +16,9 @@ diffuse         ``diffuse``, ``reflectance``           ``reflectance`` -> rgb
 plastic         ``roughplastic``, pigment spectrum     ``diffuse_reflectance`` -> rgb
 conductor       ``roughconductor``, ``eta``, ``k``     ``material="none"`` (ideal mirror)
                                                        times rgb of the normal-incidence R
-dielectric      ``roughdielectric``, tint spectrum     tint -> rgb (clear glass unchanged)
+dielectric      ``thindielectric`` pane (or            tint -> rgb (clear glass unchanged)
+                ``roughdielectric`` with a roughness
+                override), tint spectrum
 retroreflector  ``retroreflector``, rho spectrum       ``reflectance`` -> rgb
 ==============  =====================================  ======================================
 
@@ -122,12 +124,15 @@ def bsdf_dict(
             out.update(eta=spectrum_dict(p["eta"]), k=spectrum_dict(p["k"]))
         return out
     if m.kind == "dielectric":
-        out = {
-            "type": "roughdielectric",
-            "distribution": "ggx",
-            "alpha": float(p["alpha"]),
-            "int_ior": float(p["int_ior"]),
-        }
+        if float(p["alpha"]) > 0.0:
+            out = {
+                "type": "roughdielectric",
+                "distribution": "ggx",
+                "alpha": float(p["alpha"]),
+                "int_ior": float(p["int_ior"]),
+            }
+        else:  # a window pane: both interfaces, as the LiDAR passes through it (README)
+            out = {"type": "thindielectric", "int_ior": float(p["int_ior"])}
         if p["transmittance"] is not None:
             out["specular_transmittance"] = rgb or spectrum_dict(p["transmittance"])
         return out
