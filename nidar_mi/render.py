@@ -30,6 +30,8 @@ from .errors import NidarError
 __all__ = ["main", "render_scene", "FORMATS"]
 
 FORMATS = ("npz", "ply", "las", "bin")
+#: ``physics``: only the simulated intensity; ``nidar``: also NIDAR's prediction from the cameras.
+INTENSITY_SOURCES = ("physics", "nidar")
 
 
 def _parse_formats(text: str) -> list[str]:
@@ -72,7 +74,7 @@ def _sha256(path: str) -> str:
         return hashlib.sha256(f.read()).hexdigest()
 
 
-def _write_lidar(stage: str, result, formats, written: list[str]) -> dict:
+def _write_lidar(stage: str, result, formats, written: list[str], extra=None) -> None:
     from .io import images
     from .io import points as pio
     from .io.las import write_las
@@ -80,7 +82,7 @@ def _write_lidar(stage: str, result, formats, written: list[str]) -> dict:
     name = result.config.name
     d = os.path.join(stage, name)
     os.makedirs(d, exist_ok=True)
-    pts = result.points()
+    pts = result.points() | dict(extra or {})
     writers = {
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
@@ -106,7 +108,6 @@ def _write_lidar(stage: str, result, formats, written: list[str]) -> dict:
         path = os.path.join(d, f"{key}.png")
         images.write_colormap_png(path, channels[key], invalid=~valid, cmap="turbo")
         written.append(path)
-    return {"points": int(valid.sum())}
 
 
 def _write_camera(stage: str, cam, lidar_poses: dict, written: list[str]) -> dict:
@@ -116,7 +117,7 @@ def _write_camera(stage: str, cam, lidar_poses: dict, written: list[str]) -> dic
     os.makedirs(d, exist_ok=True)
     exposure = auto_exposure(cam.rgb)
     outputs = {
-        "rgb.png": lambda p: images.write_srgb_png(p, np.clip(cam.rgb * exposure, 0.0, 1.0)),
+        "rgb.png": lambda p: images.write_png(p, _camera_png8(cam)),
         "rgb.exr": lambda p: images.write_exr(
             p, {"R": cam.rgb[..., 0], "G": cam.rgb[..., 1], "B": cam.rgb[..., 2]}
         ),
@@ -153,6 +154,46 @@ def auto_exposure(rgb: np.ndarray, key: float = 0.85, percentile: float = 99.5) 
     return key / ref if ref > 1e-12 else 1.0
 
 
+def _nidar_columns(results: dict, renders: dict, weights: str | None) -> dict:
+    """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
+    from .nidar.pipeline import NidarModel
+    from .nidar.projection import CameraModel
+
+    if not renders:
+        raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
+    model = NidarModel.load(weights)
+    maps = {cid: model.predict_image(_camera_png8(r)) for cid, (r, _) in renders.items()}
+    out = {}
+    for lid, result in results.items():
+        pts = result.points()
+        cams, depth, cam_maps = [], [], []
+        for cid, (r, calib) in renders.items():
+            cams.append(
+                CameraModel(
+                    r.K,
+                    calib["width"],
+                    calib["height"],
+                    np.array(calib["T_cam_lidar"][lid]),
+                    name=cid,
+                )
+            )
+            depth.append(r.depth)
+            cam_maps.append(maps[cid])
+        res = model.point_intensity(
+            pts["xyz"], cams, [None] * len(cams), depth_images=depth, maps=cam_maps
+        )
+        out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
+    return out
+
+
+def _camera_png8(r) -> np.ndarray:
+    """The 8-bit sRGB image written as rgb.png (the camera image NIDAR sees)."""
+    from .io.images import linear_to_srgb
+
+    rgb = np.clip(r.rgb * auto_exposure(r.rgb), 0.0, 1.0).astype(np.float64)
+    return np.round(np.nan_to_num(linear_to_srgb(rgb), nan=0.0) * 255).astype(np.uint8)
+
+
 def _gray8(img: np.ndarray) -> np.ndarray:
     from .io.images import linear_to_srgb
 
@@ -171,6 +212,8 @@ def render_scene(
     params: dict[str, str] | None = None,
     cameras: bool = True,
     progress: bool = True,
+    intensity: str = "physics",
+    weights: str | None = None,
 ) -> dict:
     """Render a scene into ``out_dir`` (see the module docstring for the layout).
 
@@ -189,6 +232,12 @@ def render_scene(
 
     if spp < 1:
         raise NidarError(f"--spp must be >= 1 (got {spp})")
+    if intensity not in INTENSITY_SOURCES:
+        raise NidarError(
+            f"--intensity must be one of {', '.join(INTENSITY_SOURCES)} (got '{intensity}')"
+        )
+    if intensity == "nidar" and not cameras:
+        raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
     if seed is not None and seed < 0:
         raise NidarError(f"--seed must be >= 0 (got {seed})")
     t_start = time.perf_counter()
@@ -212,14 +261,12 @@ def render_scene(
     steps = len(loaded.lidars) + (len(loaded.cameras) if cameras else 0)
     bar = tqdm(total=steps, desc="render", unit="sensor", disable=not progress, file=sys.stderr)
     try:
-        lidar_entries, poses = {}, {}
+        lidar_entries, poses, results = {}, {}, {}
         for sensor in loaded.lidars:
             bar.set_postfix_str(f"lidar {sensor.id()}")
             t0 = time.perf_counter()
             result = scan(loaded.scene, sensor, seed=seed)
-            t_scan = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            counts = _write_lidar(stage, result, formats, written)
+            results[sensor.id()] = result
             poses[sensor.id()] = result.to_world
             lidar_entries[sensor.id()] = {
                 "parameters": result.config.to_dict()
@@ -227,13 +274,12 @@ def render_scene(
                 "to_world": result.to_world.tolist(),
                 "rays": int(result.valid.size),
                 "hits": int(result.hit.sum()),
-                "returns": counts["points"],
+                "returns": int(result.valid.sum()),
                 "materials": result.material_names,
-                "timings_s": result.timings
-                | {"scan_total": t_scan, "write": time.perf_counter() - t0},
+                "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
             }
             bar.update(1)
-        camera_entries = {}
+        camera_entries, renders = {}, {}
         if cameras:
             wavelength = loaded.lidars[0].config.wavelength
             for cam in loaded.cameras:
@@ -243,12 +289,25 @@ def render_scene(
                 t_render = time.perf_counter() - t0
                 t0 = time.perf_counter()
                 calib = _write_camera(stage, r, poses, written)
+                renders[cam.id()] = (r, calib)
                 camera_entries[cam.id()] = calib | {
                     "spp": spp,
                     "timings_s": r.timings
                     | {"render_total": t_render, "write": time.perf_counter() - t0},
                 }
                 bar.update(1)
+        extra_columns = {}
+        if intensity == "nidar":
+            t0 = time.perf_counter()
+            extra_columns = _nidar_columns(results, renders, weights)
+            timings["nidar"] = time.perf_counter() - t0
+        for lid, result in results.items():
+            t0 = time.perf_counter()
+            _write_lidar(stage, result, formats, written, extra_columns.get(lid, {}))
+            lidar_entries[lid]["timings_s"]["write"] = time.perf_counter() - t0
+            if lid in extra_columns:
+                obs = extra_columns[lid]["nidar_observed"]
+                lidar_entries[lid]["nidar_observed"] = int(obs.sum())
         bar.close()
         manifest = {
             "scene": os.path.abspath(scene_path),
@@ -260,6 +319,8 @@ def render_scene(
             "seed": seed,
             "spp": spp,
             "formats": list(formats),
+            "intensity": intensity,
+            "nidar_weights": str(weights) if intensity == "nidar" and weights else None,
             "lidars": lidar_entries,
             "cameras": camera_entries,
             "timings_s": timings | {"total": time.perf_counter() - t_start},
@@ -342,6 +403,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="set a scene parameter (<default name=...>), e.g. -D cols=512; repeatable",
     )
+    p.add_argument(
+        "--intensity",
+        default="physics",
+        choices=INTENSITY_SOURCES,
+        help="nidar: also predict intensity_nidar / nidar_observed from the cameras with NIDAR",
+    )
+    p.add_argument(
+        "--weights", default=None, help="NIDAR weights folder (default: the shipped model)"
+    )
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
@@ -367,6 +437,8 @@ def main(argv=None) -> int:
                 params=params,
                 cameras=not args.no_cameras,
                 progress=not args.quiet,
+                intensity=args.intensity,
+                weights=args.weights,
             )
     except NidarError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -1,0 +1,145 @@
+"""NIDAR end to end: camera images -> per-point LiDAR intensity.
+
+RGB -> STN pseudo-NIR -> IRNet (R, S, Î) -> the R branch sampled at each point by calibrated
+projection (:func:`nidar_mi.nidar.projection.assign`, occlusion test on) -> distance encoding and
+quantile remapping (:class:`nidar_mi.nidar.calibration.Calibration`). Points no camera sees get 0
+and ``observed = False``.
+
+A weights folder holds ``stn.safetensors``, ``irnet.safetensors``, ``config.json`` (written by
+``python -m nidar_mi.train``) and ``calibration.json`` (written by
+:func:`fit_dataset_calibration`). The package ships one in ``nidar_mi/nidar/weights``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import NidarError
+from .calibration import Calibration, fit_calibration
+from .projection import CameraModel, assign
+
+__all__ = ["NidarModel", "shipped_weights_dir", "fit_dataset_calibration", "PointIntensity"]
+
+
+def shipped_weights_dir() -> Path:
+    """The weights folder shipped inside the package."""
+    return Path(__file__).resolve().parent / "weights"
+
+
+@dataclass
+class PointIntensity:
+    """NIDAR intensity of a point cloud.
+
+    Attributes:
+        intensity: (N,) float32 calibrated intensity in [0, 1], 0 where unobserved.
+        observed: (N,) bool, a camera saw the point.
+        raw_R: (N,) float32 R branch sampled at the points (before calibration), 0 where unobserved.
+        camera_index: (N,) int64 camera that gave the value, -1 where unobserved.
+    """
+
+    intensity: np.ndarray
+    observed: np.ndarray
+    raw_R: np.ndarray
+    camera_index: np.ndarray
+
+
+class NidarModel:
+    """Trained NIDAR networks plus their source-domain calibration."""
+
+    def __init__(self, stn, irnet, config, calibration: Calibration | None, weights_dir: Path):
+        self.stn, self.irnet, self.config = stn, irnet, config
+        self.calibration = calibration
+        self.weights_dir = weights_dir
+
+    @classmethod
+    def load(
+        cls, weights_dir: str | os.PathLike | None = None, device: str | None = "auto"
+    ) -> NidarModel:
+        """Load a weights folder (default: the shipped one); safetensors only, nothing unpickled."""
+        from .model_io import load_pipeline
+
+        wdir = Path(weights_dir) if weights_dir is not None else shipped_weights_dir()
+        if not (wdir / "irnet.safetensors").is_file():
+            raise NidarError(f"{wdir}: no NIDAR weights (irnet.safetensors) found")
+        stn, irnet, cfg = load_pipeline(wdir, device=device)
+        calib_path = wdir / "calibration.json"
+        calib = Calibration.load_json(calib_path) if calib_path.is_file() else None
+        return cls(stn, irnet, cfg, calib, wdir)
+
+    def predict_image(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
+        """Dense maps of one (H, W, 3) uint8 sRGB image: pseudo_nir, R, S, I_hat (H, W) float32."""
+        from .infer import predict
+
+        rgb = np.asarray(rgb)
+        if rgb.ndim != 3 or rgb.shape[2] < 3 or rgb.dtype != np.uint8:
+            raise NidarError(f"expected an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
+        return predict(self.stn, self.irnet, np.ascontiguousarray(rgb[..., :3]))
+
+    def point_intensity(
+        self,
+        xyz_lidar: np.ndarray,
+        cameras: Sequence[CameraModel],
+        images: Sequence[np.ndarray],
+        *,
+        depth_images: Sequence[np.ndarray | None] | None = None,
+        occlusion: bool = True,
+        maps: Sequence[dict[str, np.ndarray]] | None = None,
+    ) -> PointIntensity:
+        """Intensity of LiDAR-frame points seen by calibrated cameras.
+
+        Args:
+            xyz_lidar: (N, 3) points in the LiDAR frame, m (the LiDAR sits at the origin).
+            cameras: C camera models (intrinsics + LiDAR-to-camera extrinsics).
+            images: C (H, W, 3) uint8 sRGB images.
+            depth_images: optional C rendered depth images for the occlusion test (else the
+                cloud's own z-buffer).
+            occlusion: reject points hidden from the camera.
+            maps: precomputed :meth:`predict_image` outputs (skips the networks).
+        """
+        xyz = np.asarray(xyz_lidar, dtype=np.float64)
+        if len(cameras) != len(images):
+            raise NidarError("one image per camera is needed")
+        maps = list(maps) if maps is not None else [self.predict_image(im) for im in images]
+        R = [m["R"] for m in maps]
+        values, observed, cam_idx = assign(
+            xyz, cameras, R, depth_images=depth_images, occlusion=occlusion
+        )
+        if self.calibration is None:
+            raise NidarError(f"{self.weights_dir}: no calibration.json beside the weights")
+        dist = np.linalg.norm(xyz, axis=1)
+        intensity, observed = self.calibration.apply(values, dist, observed)
+        raw = np.where(observed, values, 0.0).astype(np.float32)
+        return PointIntensity(intensity.astype(np.float32), observed, raw, cam_idx)
+
+
+def fit_dataset_calibration(
+    model: NidarModel, data_dir: str | os.PathLike, split: str = "train", **kw
+) -> Calibration:
+    """Fit the distance encoding + quantile map on a dataset split (pixels with a LiDAR return).
+
+    The R branch at every masked pixel is paired with the LiDAR range and the scaled LiDAR
+    intensity there (``intensity / intensity_scale`` clipped to [0, 1], the source-domain
+    distribution).
+    """
+    from .data import list_frames, load_frame, load_meta
+
+    meta = load_meta(data_dir)
+    scale = float(meta.get("intensity_scale", 1.0))
+    preds, dists, refs = [], [], []
+    for path in list_frames(data_dir, split):
+        f = load_frame(path, keys=("rgb", "intensity", "mask"))
+        with np.load(path, allow_pickle=False) as z:
+            f["range"] = z["range"].astype(np.float32)
+        m = f["mask"]
+        R = model.predict_image(f["rgb"])["R"]
+        preds.append(R[m])
+        dists.append(f["range"][m])
+        refs.append(np.clip(f["intensity"][m] / scale, 0.0, 1.0))
+    if not preds:
+        raise NidarError(f"{data_dir}: no '{split}' frames to fit the calibration on")
+    return fit_calibration(np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), **kw)
