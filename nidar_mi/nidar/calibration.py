@@ -33,16 +33,15 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from nidar_mi.errors import NidarError
+from nidar_mi.io.atomic import atomic_write_json
 
 __all__ = [
     "DEFAULT_K",
@@ -362,16 +361,7 @@ class Calibration:
 
     def save_json(self, path: str | os.PathLike[str]) -> None:
         """Write the calibration as JSON, atomically (temp file then ``os.replace``)."""
-        path = Path(path)
-        text = json.dumps(self.to_dict(), indent=2) + "\n"
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write_json(path, self.to_dict())
 
     @classmethod
     def load_json(cls, path: str | os.PathLike[str]) -> Calibration:
