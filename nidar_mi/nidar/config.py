@@ -1,0 +1,259 @@
+"""Configuration of the NIDAR networks and their training.
+
+Plain dataclasses, one per component; every field is documented where it is declared.
+:class:`TrainConfig` gathers them, converts to and from JSON-compatible dicts (the resolved
+configuration is written next to every set of weights) and offers :meth:`TrainConfig.reduced`,
+a tiny configuration that runs the real training loop in seconds on a CPU (used by the tests).
+
+Defaults follow the paper (Sec. IV, "Implementation Details") where it states a value: Adam,
+learning rate 1e-4, weight decay 1e-5, batch 8, 10 epochs, loss weights
+``(lambda_recon, lambda_R, lambda_S, lambda_med, lambda_int) = (1.0, 0.01, 0, 0.01, 0.5)``,
+``(w1, w2, w_ssim) = (1.0, 0.5, 0.2)``, multi-scale L1 at scales ``(1, 1/2, 1/4)``,
+``m0 = 0.5``. Values the paper leaves open (network widths, edge weight ``gamma``, shading
+pool size, warm-up length, crop size) are this package's choices and marked as such.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..errors import NidarError
+
+__all__ = [
+    "STNConfig",
+    "IRNetConfig",
+    "LossConfig",
+    "OptimConfig",
+    "TrainConfig",
+    "IRNET_VARIANTS",
+    "INPUT_MODES",
+    "dataclass_from_dict",
+]
+
+#: IRNet structures of the paper's ablation (Table "IRNet structural ablation"):
+#: ``backbone`` alone, or ``backbone+head``.
+IRNET_VARIANTS = (
+    "unet",
+    "deeplabv3",
+    "unet+3conv",
+    "unet+4conv",
+    "unet+unet",
+    "deeplabv3+3conv",
+    "deeplabv3+4conv",
+    "deeplabv3+unet",
+    "deeplabv3+deeplabv3",
+    "unet+deeplabv3",
+)
+
+#: What IRNet receives: the STN's pseudo-NIR image, or the RGB image itself (the paper's
+#: pseudo-NIR-vs-RGB diagnostic).
+INPUT_MODES = ("pseudo_nir", "rgb")
+
+
+@dataclass
+class STNConfig:
+    """Spectral translation network (cs-stereo encoder-decoder)."""
+
+    width: int = 16
+    """Base channel count; encoder level ``i`` has ``width * 2**min(i, 5)`` channels
+    (cs-stereo uses 16)."""
+    levels: int = 5
+    """Number of stride-2 encoder levels; the network stride is ``2**levels`` (cs-stereo
+    uses 7 on 582x429 images; 5 suits 128-256 px crops)."""
+    num_outputs: int = 4
+    """Pyramid scales with a weight output (full, 1/2, 1/4, 1/8 in cs-stereo); all are
+    supervised during training."""
+
+
+@dataclass
+class IRNetConfig:
+    """Intrinsic reflectance network: decomposition backbone and intensity head."""
+
+    variant: str = "unet+deeplabv3"
+    """One of :data:`IRNET_VARIANTS`; the paper's model is ``unet+deeplabv3``."""
+    input: str = "pseudo_nir"
+    """One of :data:`INPUT_MODES`."""
+    width: int = 16
+    """Base channel count of every sub-network (package choice, sized for CPU training)."""
+    unet_depth: int = 4
+    """Number of down-sampling steps of a UNet (its stride is ``2**unet_depth``)."""
+    output_stride: int = 8
+    """Output stride of a DeepLabV3 network (dilated convolutions replace striding beyond
+    it)."""
+    aspp_rates: tuple[int, ...] = (6, 12, 18)
+    """Atrous rates of the ASPP branches (DeepLabV3's rates; with output stride 8 on 256 px
+    crops they cover the same fraction of the feature map as on DeepLabV3's 513 px crops at
+    stride 16)."""
+
+
+@dataclass
+class LossConfig:
+    """Weights and constants of the STN and IRNet objectives."""
+
+    lambda_recon: float = 1.0
+    """Weight of L_recon = ||R*S - I||_1."""
+    lambda_r: float = 0.01
+    """Weight of the edge-aware reflectance smoothness L_R."""
+    lambda_s: float = 0.0
+    """Weight of the shading prior L_S = ||S - AvgPool(S)||_1."""
+    lambda_med: float = 0.01
+    """Weight of the mean regulariser |mean(R) - m0|."""
+    lambda_int: float = 0.5
+    """Weight of the masked intensity loss L_int (after warm-up)."""
+    w1: float = 1.0
+    """Weight of the masked multi-scale L1 inside L_int."""
+    w2: float = 0.5
+    """Weight of the masked L2 inside L_int."""
+    w_ssim: float = 0.2
+    """Weight of the masked SSIM term inside L_int."""
+    scales: tuple[float, ...] = (1.0, 0.5, 0.25)
+    """Scales of the masked multi-scale L1."""
+    gamma: float = 10.0
+    """Edge sensitivity of the smoothness weights exp(-gamma |grad I|) (package choice)."""
+    shading_pool: int = 5
+    """Kernel size of the AvgPool in the shading prior (package choice)."""
+    m0: float = 0.5
+    """Target mean of R."""
+    int_warmup_epochs: float = 2.0
+    """Epochs over which lambda_int rises linearly from 0 to its value (package choice;
+    the paper warms it up "during the initial training epochs")."""
+    stn_ssim_alpha: float = 0.85
+    """STN photometric loss: alpha * (1 - SSIM) / 2 + (1 - alpha) * L1 (cs-stereo's 0.85)."""
+    eps: float = 1e-6
+    """Epsilon of the masked normalisations."""
+
+
+@dataclass
+class OptimConfig:
+    """Adam optimiser and schedule of one training stage."""
+
+    lr: float = 1e-4
+    """Learning rate."""
+    weight_decay: float = 1e-5
+    """Adam weight decay (L2 penalty)."""
+    batch_size: int = 8
+    """Frames per step (incomplete last batches of an epoch are dropped)."""
+    epochs: int = 10
+    """Passes over the training split."""
+    max_steps: int | None = None
+    """Stop after this many optimiser steps in total (None: run all epochs)."""
+
+
+@dataclass
+class TrainConfig:
+    """Everything that determines a NIDAR training run."""
+
+    stn: STNConfig = field(default_factory=STNConfig)
+    """Spectral translation network."""
+    irnet: IRNetConfig = field(default_factory=IRNetConfig)
+    """Intrinsic reflectance network."""
+    loss: LossConfig = field(default_factory=LossConfig)
+    """Loss weights and constants."""
+    stn_optim: OptimConfig = field(default_factory=OptimConfig)
+    """Optimiser of the STN stage (package choice: the IRNet settings of the paper)."""
+    irnet_optim: OptimConfig = field(default_factory=OptimConfig)
+    """Optimiser of the IRNet stage (paper: Adam 1e-4, wd 1e-5, batch 8, 10 epochs)."""
+    crop_size: int = 256
+    """Side of the square random training crops (centre crops for validation), in pixels;
+    a multiple of every network stride."""
+    seed: int = 0
+    """Seed of weight initialisation, shuffling, crops and flips."""
+    device: str = "auto"
+    """``"auto"`` (CUDA when available, else CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``."""
+    checkpoint_every: int = 500
+    """Write a resumable checkpoint every this many steps (and at the end of every epoch)."""
+    keep_checkpoints: int = 3
+    """Checkpoints kept per stage (older ones are deleted)."""
+    num_workers: int = 0
+    """DataLoader worker processes."""
+
+    @classmethod
+    def reduced(cls) -> TrainConfig:
+        """Tiny networks, 32 px crops, batch 2, two steps per stage: the test configuration."""
+        steps = OptimConfig(lr=1e-3, weight_decay=1e-5, batch_size=2, epochs=1, max_steps=2)
+        return cls(
+            stn=STNConfig(width=4, levels=3, num_outputs=2),
+            irnet=IRNetConfig(width=4, unet_depth=2, output_stride=4, aspp_rates=(1, 2, 3)),
+            loss=LossConfig(int_warmup_epochs=1.0),
+            stn_optim=steps,
+            irnet_optim=dataclasses.replace(steps),
+            crop_size=32,
+            checkpoint_every=1,
+        )
+
+    def validate(self) -> None:
+        """Raise :class:`NidarError` for values that cannot work."""
+        if self.irnet.variant not in IRNET_VARIANTS:
+            raise NidarError(
+                f"unknown IRNet variant {self.irnet.variant!r}; choose one of "
+                + ", ".join(IRNET_VARIANTS)
+            )
+        if self.irnet.input not in INPUT_MODES:
+            raise NidarError(
+                f"unknown IRNet input {self.irnet.input!r}; choose one of " + ", ".join(INPUT_MODES)
+            )
+        if self.stn.num_outputs < 1 or self.stn.num_outputs > self.stn.levels:
+            raise NidarError("stn.num_outputs must lie in [1, stn.levels]")
+        if self.irnet.output_stride not in (2, 4, 8, 16, 32):
+            raise NidarError("irnet.output_stride must be 2, 4, 8, 16 or 32")
+        for name, value in (
+            ("stn.width", self.stn.width),
+            ("stn.levels", self.stn.levels),
+            ("irnet.width", self.irnet.width),
+            ("irnet.unet_depth", self.irnet.unet_depth),
+            ("crop_size", self.crop_size),
+            ("checkpoint_every", self.checkpoint_every),
+            ("keep_checkpoints", self.keep_checkpoints),
+            ("stn_optim.batch_size", self.stn_optim.batch_size),
+            ("irnet_optim.batch_size", self.irnet_optim.batch_size),
+        ):
+            if int(value) < 1:
+                raise NidarError(f"{name} must be a positive integer, got {value}")
+        if any(s <= 0 or s > 1 for s in self.loss.scales):
+            raise NidarError("loss.scales must lie in (0, 1]")
+        if self.device != "auto" and not self.device.startswith(("cpu", "cuda")):
+            raise NidarError(f"device must be 'auto', 'cpu' or 'cuda[:N]', got {self.device!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-compatible nested dict (tuples become lists)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_dict`; missing fields take their defaults.
+
+        Raises:
+            NidarError: on unknown keys or a value of the wrong kind.
+        """
+        return dataclass_from_dict(cls, data, "config")
+
+
+def dataclass_from_dict(kind: type, data: Any, where: str = "config") -> Any:
+    """Build dataclass ``kind`` (nested dataclasses too) from a JSON-compatible dict.
+
+    Missing fields take their defaults; lists become tuples where the default is a tuple.
+
+    Raises:
+        NidarError: ``data`` is not a dict, or has keys ``kind`` does not know (named with
+            ``where``).
+    """
+    if not isinstance(data, dict):
+        raise NidarError(f"{where} must be a JSON object, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(kind)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise NidarError(f"unknown key(s) in {where}: {', '.join(unknown)}")
+    kwargs = {}
+    for name, value in data.items():
+        default = getattr(kind(), name)
+        if dataclasses.is_dataclass(default):
+            kwargs[name] = dataclass_from_dict(type(default), value, f"{where}.{name}")
+        elif isinstance(default, tuple):
+            if not isinstance(value, (list, tuple)):
+                raise NidarError(f"{where}.{name} must be a list")
+            kwargs[name] = tuple(value)
+        else:
+            kwargs[name] = value
+    return kind(**kwargs)

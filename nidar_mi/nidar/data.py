@@ -1,0 +1,221 @@
+"""Reading the NIDAR training data and serving crops to the networks.
+
+Layout (written by the dataset builder)::
+
+    DATA/meta.json                    {"intensity_scale": s, "wavelength_nm": 905, ...}
+    DATA/{train,val,test}/<frame>.npz one per (scene, camera) frame
+
+Keys of a frame (``H x W`` camera pixels):
+
+=============== ============= ======== ================================================
+key             shape         dtype    meaning
+=============== ============= ======== ================================================
+``rgb``         (H, W, 3)     uint8    8-bit sRGB camera image
+``nir``         (H, W)        float32  NIR band radiance at the LiDAR wavelength (linear)
+``intensity``   (H, W)        float32  sparse projected LiDAR intensity, 0 off-mask
+``mask``        (H, W)        bool     pixels with a projected LiDAR return
+``depth``       (H, W)        float32  camera z-depth in m, 0 where no surface
+``K``           (3, 3)        float64  intrinsics (OpenCV, z forward)
+``T_cam_lidar`` (4, 4)        float64  LiDAR frame -> camera frame
+=============== ============= ======== ================================================
+
+Files are opened with ``allow_pickle=False``. Intensity is divided by ``intensity_scale``.
+Crops and flips are drawn from a generator seeded by ``(seed, epoch, index)``, so a sample
+does not depend on worker processes or on where a run was resumed.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from ..errors import NidarError
+from .preprocess import prepare_nir, prepare_rgb
+
+__all__ = [
+    "FRAME_KEYS",
+    "SPLITS",
+    "load_meta",
+    "list_frames",
+    "load_frame",
+    "STNDataset",
+    "IRNetDataset",
+]
+
+SPLITS = ("train", "val", "test")
+
+#: Expected dtype and shape (``None`` = image size) of every frame key.
+FRAME_KEYS = {
+    "rgb": (np.uint8, (None, None, 3)),
+    "nir": (np.float32, (None, None)),
+    "intensity": (np.float32, (None, None)),
+    "mask": (np.bool_, (None, None)),
+    "depth": (np.float32, (None, None)),
+    "K": (np.float64, (3, 3)),
+    "T_cam_lidar": (np.float64, (4, 4)),
+}
+
+
+def load_meta(data_dir: str | Path) -> dict:
+    """Read ``DATA/meta.json``; checks that ``intensity_scale`` is a positive number."""
+    path = Path(data_dir) / "meta.json"
+    try:
+        meta = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise NidarError(f"{path} not found: not a NIDAR training-data directory") from None
+    except (OSError, json.JSONDecodeError) as exc:
+        raise NidarError(f"cannot read {path}: {exc}") from None
+    scale = meta.get("intensity_scale") if isinstance(meta, dict) else None
+    if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not scale > 0:
+        raise NidarError(f"{path}: 'intensity_scale' must be a positive number, got {scale!r}")
+    return meta
+
+
+def list_frames(data_dir: str | Path, split: str) -> list[Path]:
+    """Sorted ``DATA/<split>/*.npz`` paths (empty when the split is absent)."""
+    if split not in SPLITS:
+        raise NidarError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
+    return sorted((Path(data_dir) / split).glob("*.npz"))
+
+
+def load_frame(path: str | Path, keys=tuple(FRAME_KEYS)) -> dict[str, np.ndarray]:
+    """Load and check the given keys of one frame file.
+
+    Raises:
+        NidarError: missing key, wrong dtype or shape, or an unreadable file.
+    """
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            missing = [k for k in keys if k not in npz.files]
+            if missing:
+                raise NidarError(f"{path}: missing key(s) {', '.join(missing)}")
+            arrays = {k: npz[k] for k in keys}
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise NidarError(f"cannot read frame {path}: {exc}") from None
+    size = None
+    for key, arr in arrays.items():
+        dtype, shape = FRAME_KEYS[key]
+        if arr.dtype != dtype:
+            raise NidarError(f"{path}: {key} has dtype {arr.dtype}, expected {np.dtype(dtype)}")
+        if len(shape) >= 2 and shape[0] is None:
+            hw = arr.shape[:2]
+            size = size or hw
+            if arr.ndim != len(shape) or hw != size or arr.shape[2:] != shape[2:]:
+                raise NidarError(f"{path}: {key} has shape {arr.shape}, image size is {size}")
+        elif arr.shape != shape:
+            raise NidarError(f"{path}: {key} has shape {arr.shape}, expected {shape}")
+    return arrays
+
+
+def _crop_box(h: int, w: int, crop: int, rng: np.random.Generator | None):
+    if crop > h or crop > w:
+        raise NidarError(f"crop size {crop} exceeds the frame size {h}x{w}")
+    if rng is None:
+        return (h - crop) // 2, (w - crop) // 2
+    return int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
+
+
+class _FrameDataset(Dataset):
+    def __init__(self, frames, crop_size: int, seed: int = 0, train: bool = True) -> None:
+        self.frames = [Path(f) for f in frames]
+        self.crop_size = int(crop_size)
+        self.seed = int(seed)
+        self.train = bool(train)
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the crops and flips of epoch ``epoch``."""
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def _window(self, index: int, h: int, w: int):
+        """Crop slices and a flip flag for sample ``index``."""
+        rng = np.random.default_rng([self.seed, self.epoch, index]) if self.train else None
+        y, x = _crop_box(h, w, self.crop_size, rng)
+        flip = bool(rng.integers(0, 2)) if rng is not None else False
+        return (slice(y, y + self.crop_size), slice(x, x + self.crop_size)), flip
+
+    @staticmethod
+    def _apply(arr: np.ndarray, window, flip: bool) -> torch.Tensor:
+        """Crop a ``(C, H, W)`` array and flip it horizontally if asked."""
+        out = arr[:, window[0], window[1]]
+        if flip:
+            out = out[..., ::-1]
+        return torch.from_numpy(np.ascontiguousarray(out))
+
+
+class STNDataset(_FrameDataset):
+    """RGB -> NIR pairs for the spectral translation network.
+
+    Args:
+        frames: frame files.
+        crop_size: side of the square crops.
+        seed: seed of crops and flips.
+        train: random crops and flips if True, centre crops otherwise.
+
+    Items: ``{"rgb": (3, c, c), "nir": (1, c, c)}`` float32, both exposure-normalised over
+    the whole frame (:mod:`nidar_mi.nidar.preprocess`).
+    """
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        arrays = load_frame(self.frames[index], ("rgb", "nir"))
+        rgb, nir = prepare_rgb(arrays["rgb"]), prepare_nir(arrays["nir"])
+        window, flip = self._window(index, *rgb.shape[1:])
+        return {"rgb": self._apply(rgb, window, flip), "nir": self._apply(nir, window, flip)}
+
+
+class IRNetDataset(_FrameDataset):
+    """Network input and sparse intensity supervision for IRNet.
+
+    Args:
+        frames: frame files.
+        intensity_scale: divisor of the stored intensity (``meta.json``).
+        crop_size: side of the square crops.
+        seed: seed of crops and flips.
+        train: random crops and flips if True, centre crops otherwise.
+        input_dir: directory with ``<frame>.npy`` pseudo-NIR images ``(1, H, W)`` float32
+            (the frozen STN's output); None gives the prepared RGB image as input.
+
+    Items: ``{"x": (1 or 3, c, c), "intensity": (1, c, c), "mask": (1, c, c)}`` float32
+    (the mask as 0/1).
+    """
+
+    def __init__(
+        self,
+        frames,
+        intensity_scale: float,
+        crop_size: int,
+        seed: int = 0,
+        train: bool = True,
+        input_dir: str | Path | None = None,
+    ) -> None:
+        super().__init__(frames, crop_size, seed, train)
+        self.intensity_scale = float(intensity_scale)
+        self.input_dir = Path(input_dir) if input_dir is not None else None
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        path = self.frames[index]
+        keys = ("intensity", "mask") if self.input_dir is not None else ("rgb", "intensity", "mask")
+        arrays = load_frame(path, keys)
+        if self.input_dir is None:
+            x = prepare_rgb(arrays["rgb"])
+        else:
+            x = np.load(self.input_dir / f"{path.stem}.npy", allow_pickle=False)
+            if x.shape != (1, *arrays["mask"].shape):
+                raise NidarError(f"pseudo-NIR cache of {path.name} has shape {x.shape}")
+        mask = arrays["mask"][None].astype(np.float32)
+        target = (arrays["intensity"][None] / np.float32(self.intensity_scale)) * mask
+        window, flip = self._window(index, *mask.shape[1:])
+        return {
+            "x": self._apply(x.astype(np.float32), window, flip),
+            "intensity": self._apply(target.astype(np.float32), window, flip),
+            "mask": self._apply(mask, window, flip),
+        }

@@ -1,0 +1,278 @@
+"""Losses of NIDAR (paper Sec. III-D) and of the STN; pure functions plus thin modules.
+
+All images are ``(B, C, H, W)`` tensors; masks are ``(B, 1, H, W)`` bool or {0, 1} float.
+"Mean" means the mean over every element unless stated otherwise.
+
+Masked losses (L_int): per image, spatial sums are divided by the number of valid pixels
+plus ``eps`` and the per-image values are averaged over the batch. Before any spatial
+operation (down-sampling, SSIM windows) prediction and target are multiplied by the mask,
+so values at unsupervised pixels never reach the loss. The target is zero there by the data
+format, so this only removes the dense prediction's off-mask values, which would otherwise
+leak into the bilinear pyramid and the SSIM windows.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = [
+    "gaussian_window",
+    "ssim_map",
+    "stn_loss",
+    "reconstruction_loss",
+    "reflectance_smoothness_loss",
+    "shading_prior_loss",
+    "mean_reflectance_loss",
+    "masked_multiscale_l1",
+    "masked_l2",
+    "masked_ssim_loss",
+    "intensity_loss",
+    "linear_warmup",
+    "irnet_objective",
+    "SSIMLoss",
+    "MaskedIntensityLoss",
+]
+
+
+def gaussian_window(size: int = 11, sigma: float = 1.5, dtype=torch.float32, device=None):
+    """Normalised 2-D Gaussian window ``(size, size)`` (sums to 1)."""
+    x = torch.arange(size, dtype=dtype, device=device) - (size - 1) / 2
+    g = torch.exp(-(x**2) / (2 * sigma**2))
+    g = g / g.sum()
+    return g[:, None] * g[None, :]
+
+
+def ssim_map(
+    x: torch.Tensor,
+    y: torch.Tensor,
+    window_size: int = 11,
+    sigma: float = 1.5,
+    data_range: float = 1.0,
+    k1: float = 0.01,
+    k2: float = 0.03,
+) -> torch.Tensor:
+    """Per-pixel SSIM (Wang et al., 2004) with a Gaussian window, reflect-padded borders.
+
+    Args:
+        x, y: ``(B, C, H, W)``; ``H, W > window_size // 2``.
+        window_size, sigma: Gaussian window.
+        data_range: dynamic range ``L``; ``C1 = (k1 L)^2``, ``C2 = (k2 L)^2``.
+
+    Returns:
+        ``(B, C, H, W)`` SSIM map, 1 where the windows agree exactly.
+    """
+    if x.shape != y.shape or x.ndim != 4:
+        raise ValueError(f"x and y must be equal (B, C, H, W), got {x.shape} and {y.shape}")
+    c = x.shape[1]
+    win = gaussian_window(window_size, sigma, x.dtype, x.device).expand(c, 1, -1, -1)
+    pad = window_size // 2
+
+    def filt(t: torch.Tensor) -> torch.Tensor:
+        return F.conv2d(F.pad(t, (pad, pad, pad, pad), mode="reflect"), win, groups=c)
+
+    mu_x, mu_y = filt(x), filt(y)
+    sxx = filt(x * x) - mu_x**2
+    syy = filt(y * y) - mu_y**2
+    sxy = filt(x * y) - mu_x * mu_y
+    c1, c2 = (k1 * data_range) ** 2, (k2 * data_range) ** 2
+    num = (2 * mu_x * mu_y + c1) * (2 * sxy + c2)
+    den = (mu_x**2 + mu_y**2 + c1) * (sxx + syy + c2)
+    return num / den
+
+
+def stn_loss(
+    preds: list[torch.Tensor], targets: list[torch.Tensor], alpha: float = 0.85
+) -> torch.Tensor:
+    """Photometric loss of the STN, summed over pyramid scales.
+
+    Per scale: ``alpha * mean((1 - SSIM) / 2) + (1 - alpha) * mean|pred - target|`` (the
+    photometric term of cs-stereo; the SSIM term is skipped at scales smaller than its
+    window).
+
+    Args:
+        preds, targets: equally long lists of ``(B, 1, h, w)`` tensors.
+    """
+    total = preds[0].new_zeros(())
+    for p, t in zip(preds, targets, strict=True):
+        l1 = (p - t).abs().mean()
+        if min(p.shape[-2:]) > 5:
+            total = total + alpha * ((1 - ssim_map(p, t)) / 2).mean() + (1 - alpha) * l1
+        else:
+            total = total + l1
+    return total
+
+
+def reconstruction_loss(r: torch.Tensor, s: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+    """L_recon = mean |R * S - I|."""
+    return (r * s - image).abs().mean()
+
+
+def reflectance_smoothness_loss(
+    r: torch.Tensor, image: torch.Tensor, gamma: float = 10.0
+) -> torch.Tensor:
+    """L_R = E[w_x |d_x R|] + E[w_y |d_y R|], ``w = exp(-gamma |d I|)``.
+
+    ``d_x`` and ``d_y`` are forward differences; the expectations run over the
+    ``(H, W - 1)`` and ``(H - 1, W)`` difference grids. ``I`` may have several channels; its
+    absolute differences are averaged over them.
+    """
+    gx = (image[..., :, 1:] - image[..., :, :-1]).abs().mean(1, keepdim=True)
+    gy = (image[..., 1:, :] - image[..., :-1, :]).abs().mean(1, keepdim=True)
+    rx = (r[..., :, 1:] - r[..., :, :-1]).abs()
+    ry = (r[..., 1:, :] - r[..., :-1, :]).abs()
+    return (torch.exp(-gamma * gx) * rx).mean() + (torch.exp(-gamma * gy) * ry).mean()
+
+
+def shading_prior_loss(s: torch.Tensor, kernel_size: int = 5) -> torch.Tensor:
+    """L_S = mean |S - AvgPool(S)| (stride 1, same size, borders average valid pixels only)."""
+    pooled = F.avg_pool2d(s, kernel_size, 1, kernel_size // 2, count_include_pad=False)
+    return (s - pooled).abs().mean()
+
+
+def mean_reflectance_loss(r: torch.Tensor, m0: float = 0.5) -> torch.Tensor:
+    """L_med = |mean(R) - m0|, the mean taken per image, the result averaged over the batch."""
+    return (r.flatten(1).mean(1) - m0).abs().mean()
+
+
+def _masked(pred, target, mask):
+    m = mask.to(pred.dtype)
+    return pred * m, target * m, m
+
+
+def masked_multiscale_l1(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    mask: torch.Tensor,
+    scales=(1.0, 0.5, 0.25),
+    eps: float = 1e-6,
+) -> torch.Tensor:
+    """L1^ms = (1/|S|) sum_s ||M_s * E_s||_1 / (||M_s||_1 + eps).
+
+    ``E_s = D_s(M pred) - D_s(M target)`` with bilinear ``D_s`` and ``M_s`` the nearest
+    down-sampled mask; the output size at scale ``s`` is ``floor(s H) x floor(s W)``.
+    """
+    p, t, m = _masked(pred, target, mask)
+    total = pred.new_zeros(())
+    for s in scales:
+        if s != 1.0:
+            size = (int(pred.shape[-2] * s), int(pred.shape[-1] * s))
+            ps = F.interpolate(p, size=size, mode="bilinear", align_corners=False)
+            ts = F.interpolate(t, size=size, mode="bilinear", align_corners=False)
+            ms = F.interpolate(m, size=size, mode="nearest")
+        else:
+            ps, ts, ms = p, t, m
+        num = (ms * (ps - ts).abs()).flatten(1).sum(1)
+        den = ms.flatten(1).sum(1) * ps.shape[1] + eps
+        total = total + (num / den).mean()
+    return total / len(scales)
+
+
+def masked_l2(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, eps: float = 1e-6
+) -> torch.Tensor:
+    """L2 = ||M * E||_2^2 / (||M||_1 + eps)."""
+    p, t, m = _masked(pred, target, mask)
+    num = ((p - t) ** 2).flatten(1).sum(1)
+    return (num / (m.flatten(1).sum(1) * p.shape[1] + eps)).mean()
+
+
+def masked_ssim_loss(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, eps: float = 1e-6
+) -> torch.Tensor:
+    """L_SSIM = 1 - sum(M * SSIM_map(M pred, M target)) / (||M||_1 + eps)."""
+    p, t, m = _masked(pred, target, mask)
+    smap = ssim_map(p, t)
+    num = (m * smap).flatten(1).sum(1)
+    return (1 - num / (m.flatten(1).sum(1) * p.shape[1] + eps)).mean()
+
+
+def intensity_loss(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    mask: torch.Tensor,
+    w1: float = 1.0,
+    w2: float = 0.5,
+    w_ssim: float = 0.2,
+    scales=(1.0, 0.5, 0.25),
+    eps: float = 1e-6,
+) -> torch.Tensor:
+    """L_int = w1 L1^ms + w2 L2 + w_ssim L_SSIM (all masked)."""
+    return (
+        w1 * masked_multiscale_l1(pred, target, mask, scales, eps)
+        + w2 * masked_l2(pred, target, mask, eps)
+        + w_ssim * masked_ssim_loss(pred, target, mask, eps)
+    )
+
+
+def linear_warmup(step: int, warmup_steps: float) -> float:
+    """Factor ``min(1, (step + 1) / warmup_steps)`` of a linear warm-up (1 without warm-up)."""
+    if warmup_steps <= 0:
+        return 1.0
+    return min(1.0, (step + 1) / warmup_steps)
+
+
+def irnet_objective(
+    outputs: dict[str, torch.Tensor],
+    image: torch.Tensor,
+    target: torch.Tensor,
+    mask: torch.Tensor,
+    cfg,
+    int_factor: float = 1.0,
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Total IRNet loss (paper Eq. 8) and its terms.
+
+    Args:
+        outputs: ``R``, ``S``, ``I_hat``, each ``(B, 1, H, W)``.
+        image: ``(B, 1, H, W)`` image the decomposition explains.
+        target: ``(B, 1, H, W)`` sparse LiDAR intensity (0 off-mask).
+        mask: ``(B, 1, H, W)`` valid projected pixels.
+        cfg: a :class:`nidar_mi.nidar.config.LossConfig`.
+        int_factor: warm-up factor applied to ``lambda_int``.
+
+    Returns:
+        The scalar loss and a dict of the unweighted terms (``recon``, ``R``, ``S``, ``med``,
+        ``int``) as floats.
+    """
+    r, s, i_hat = outputs["R"], outputs["S"], outputs["I_hat"]
+    terms = {
+        "recon": reconstruction_loss(r, s, image),
+        "R": reflectance_smoothness_loss(r, image, cfg.gamma),
+        "S": shading_prior_loss(s, cfg.shading_pool),
+        "med": mean_reflectance_loss(r, cfg.m0),
+        "int": intensity_loss(i_hat, target, mask, cfg.w1, cfg.w2, cfg.w_ssim, cfg.scales, cfg.eps),
+    }
+    total = (
+        cfg.lambda_recon * terms["recon"]
+        + cfg.lambda_r * terms["R"]
+        + cfg.lambda_s * terms["S"]
+        + cfg.lambda_med * terms["med"]
+        + cfg.lambda_int * int_factor * terms["int"]
+    )
+    return total, {k: float(v.detach()) for k, v in terms.items()}
+
+
+class SSIMLoss(nn.Module):
+    """``mean((1 - SSIM_map(x, y)) / 2)``; see :func:`ssim_map`."""
+
+    def __init__(self, window_size: int = 11, sigma: float = 1.5, data_range: float = 1.0):
+        super().__init__()
+        self.window_size, self.sigma, self.data_range = window_size, sigma, data_range
+
+    def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        smap = ssim_map(x, y, self.window_size, self.sigma, self.data_range)
+        return ((1 - smap) / 2).mean()
+
+
+class MaskedIntensityLoss(nn.Module):
+    """L_int as a module; see :func:`intensity_loss`."""
+
+    def __init__(self, w1=1.0, w2=0.5, w_ssim=0.2, scales=(1.0, 0.5, 0.25), eps=1e-6):
+        super().__init__()
+        self.w1, self.w2, self.w_ssim, self.scales, self.eps = w1, w2, w_ssim, scales, eps
+
+    def forward(self, pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor):
+        return intensity_loss(
+            pred, target, mask, self.w1, self.w2, self.w_ssim, self.scales, self.eps
+        )

@@ -1,0 +1,119 @@
+"""Training-data reader and datasets, on synthetic frames written in the documented format."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from nidar_mi.errors import NidarError
+from nidar_mi.nidar.data import (
+    FRAME_KEYS,
+    IRNetDataset,
+    STNDataset,
+    list_frames,
+    load_frame,
+    load_meta,
+)
+from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
+from nidar_mi.nidar.synthetic import write_synthetic_dataset
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory):
+    return write_synthetic_dataset(tmp_path_factory.mktemp("data"), height=48, width=64)
+
+
+def test_synthetic_frames_follow_the_format(data_dir):
+    meta = load_meta(data_dir)
+    assert meta["intensity_scale"] == 255.0 and meta["wavelength_nm"] == 905
+    frames = list_frames(data_dir, "train")
+    assert [f.name for f in frames] == [f"frame_{i:04d}.npz" for i in range(4)]
+    assert len(list_frames(data_dir, "val")) == 2 and len(list_frames(data_dir, "test")) == 1
+    f = load_frame(frames[0])
+    shapes = {"rgb": (48, 64, 3), "K": (3, 3), "T_cam_lidar": (4, 4)}
+    for key, (dtype, _) in FRAME_KEYS.items():
+        assert f[key].dtype == dtype
+        assert f[key].shape == shapes.get(key, (48, 64))
+    assert np.all(f["intensity"][~f["mask"]] == 0)
+    # Synthetic intensity is scale * NIR radiance on the scan pattern.
+    np.testing.assert_allclose(f["intensity"][f["mask"]], 255.0 * f["nir"][f["mask"]], rtol=1e-6)
+
+
+def test_reader_errors(tmp_path, data_dir):
+    with pytest.raises(NidarError, match="not found"):
+        load_meta(tmp_path)
+    (tmp_path / "meta.json").write_text(json.dumps({"intensity_scale": -1}))
+    with pytest.raises(NidarError, match="intensity_scale"):
+        load_meta(tmp_path)
+    with pytest.raises(NidarError, match="unknown split"):
+        list_frames(data_dir, "dev")
+    good = load_frame(list_frames(data_dir, "train")[0])
+    np.savez(tmp_path / "missing.npz", **{k: v for k, v in good.items() if k != "mask"})
+    with pytest.raises(NidarError, match="missing key"):
+        load_frame(tmp_path / "missing.npz")
+    np.savez(tmp_path / "dtype.npz", **{**good, "nir": good["nir"].astype(np.float64)})
+    with pytest.raises(NidarError, match="nir has dtype float64"):
+        load_frame(tmp_path / "dtype.npz")
+    np.savez(tmp_path / "shape.npz", **{**good, "mask": good["mask"][:-1]})
+    with pytest.raises(NidarError, match="mask has shape"):
+        load_frame(tmp_path / "shape.npz")
+
+
+def test_object_arrays_are_refused_not_unpickled(tmp_path, data_dir):
+    good = load_frame(list_frames(data_dir, "train")[0])
+    obj = np.empty(1, dtype=object)
+    obj[0] = {"payload": 1}
+    np.savez(tmp_path / "pickled.npz", **{**good, "K": obj})
+    with pytest.raises(NidarError, match="cannot read frame"):
+        load_frame(tmp_path / "pickled.npz")
+
+
+def test_stn_dataset_centre_crop_values(data_dir):
+    frames = list_frames(data_dir, "val")
+    ds = STNDataset(frames, crop_size=32, train=False)
+    item = ds[1]
+    assert item["rgb"].shape == (3, 32, 32) and item["nir"].shape == (1, 32, 32)
+    f = load_frame(frames[1])
+    # Normalised over the whole frame, then the centre crop (rows 8..40, cols 16..48).
+    np.testing.assert_array_equal(item["rgb"].numpy(), prepare_rgb(f["rgb"])[:, 8:40, 16:48])
+    np.testing.assert_array_equal(item["nir"].numpy(), prepare_nir(f["nir"])[:, 8:40, 16:48])
+
+
+def test_random_crops_are_seeded_by_seed_epoch_and_index(data_dir):
+    frames = list_frames(data_dir, "train")
+    a, b = STNDataset(frames, 32, seed=5), STNDataset(frames, 32, seed=5)
+    np.testing.assert_array_equal(a[2]["nir"].numpy(), b[2]["nir"].numpy())
+    seen = set()
+    for epoch in range(6):
+        a.set_epoch(epoch)
+        seen.add(a[2]["nir"].numpy().tobytes())
+    assert len(seen) > 1
+
+
+def test_irnet_dataset_keeps_input_and_supervision_aligned(tmp_path, data_dir):
+    frames = list_frames(data_dir, "train")
+    # A "pseudo-NIR" cache holding the raw NIR radiance: wherever the mask is set, the
+    # target (intensity / scale) must equal the input pixel after the same crop and flip.
+    for f in frames:
+        np.save(tmp_path / f"{f.stem}.npy", load_frame(f, ("nir",))["nir"][None])
+    ds = IRNetDataset(frames, 255.0, 32, seed=1, train=True, input_dir=tmp_path)
+    for epoch in range(3):
+        ds.set_epoch(epoch)
+        for i in range(len(ds)):
+            item = ds[i]
+            m = item["mask"].numpy() > 0
+            assert m.any()
+            np.testing.assert_allclose(
+                item["intensity"].numpy()[m], item["x"].numpy()[m], rtol=1e-6
+            )
+            assert np.all(item["intensity"].numpy()[~m] == 0)
+    rgb = IRNetDataset(frames, 255.0, 32, train=False)[0]
+    assert rgb["x"].shape == (3, 32, 32) and set(np.unique(rgb["mask"].numpy())) <= {0.0, 1.0}
+
+
+def test_crop_larger_than_frame_is_a_user_error(data_dir):
+    ds = STNDataset(list_frames(data_dir, "val"), crop_size=64, train=False)
+    with pytest.raises(NidarError, match="exceeds the frame size"):
+        ds[0]

@@ -1,0 +1,66 @@
+"""Inference: padding to the network stride, cropping back, agreement with a direct pass."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from nidar_mi.errors import NidarError
+from nidar_mi.nidar.infer import pad_to_multiple, predict
+from nidar_mi.nidar.irnet import IRNet
+from nidar_mi.nidar.preprocess import prepare_rgb
+from nidar_mi.nidar.stn import STN
+
+
+@pytest.fixture(scope="module")
+def nets():
+    torch.manual_seed(0)
+    stn = STN(width=4, levels=3, num_outputs=2).eval()
+    irnet = IRNet("unet+deeplabv3", 1, width=4, unet_depth=2, output_stride=4, aspp_rates=(1, 2))
+    return stn, irnet.eval()
+
+
+def _rgb(h, w, seed=0):
+    return np.random.default_rng(seed).integers(0, 256, (h, w, 3), dtype=np.uint8)
+
+
+def test_pad_to_multiple_replicates_the_edge():
+    x = torch.arange(6.0).reshape(1, 1, 2, 3)
+    y = pad_to_multiple(x, 4)
+    assert y.shape == (1, 1, 4, 4)
+    torch.testing.assert_close(y[..., :2, :3], x)
+    torch.testing.assert_close(y[0, 0, :, 3], torch.tensor([2.0, 5.0, 5.0, 5.0]))
+    assert pad_to_multiple(x, 1) is x
+
+
+def test_predict_matches_a_direct_pass_when_no_padding_is_needed(nets):
+    stn, irnet = nets
+    rgb = _rgb(16, 24)
+    out = predict(stn, irnet, rgb)
+    with torch.no_grad():
+        x = torch.from_numpy(prepare_rgb(rgb))[None]
+        p = stn(x)
+        direct = irnet(p)
+    np.testing.assert_allclose(out["pseudo_nir"], p[0, 0].numpy(), rtol=1e-6)
+    for key in ("R", "S", "I_hat"):
+        np.testing.assert_allclose(out[key], direct[key][0, 0].numpy(), rtol=1e-5, atol=1e-6)
+
+
+def test_predict_any_size(nets):
+    stn, irnet = nets
+    out = predict(stn, irnet, _rgb(13, 27))
+    assert {k: v.shape for k, v in out.items()} == {
+        k: (13, 27) for k in ("pseudo_nir", "R", "S", "I_hat")
+    }
+    assert all(v.dtype == np.float32 for v in out.values())
+
+
+def test_predict_keeps_the_training_mode_and_needs_an_stn(nets):
+    stn, irnet = nets
+    irnet.train()
+    predict(stn, irnet, _rgb(16, 16))
+    assert irnet.training
+    irnet.eval()
+    with pytest.raises(NidarError, match="STN is required"):
+        predict(None, irnet, _rgb(16, 16))

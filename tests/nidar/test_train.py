@@ -1,0 +1,143 @@
+"""The real training loop with the reduced configuration: outputs, determinism, resume, CLI."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from safetensors.numpy import load_file
+
+from nidar_mi.errors import NidarError
+from nidar_mi.nidar.config import TrainConfig
+from nidar_mi.nidar.data import list_frames, load_frame
+from nidar_mi.nidar.infer import predict
+from nidar_mi.nidar.model_io import load_pipeline
+from nidar_mi.nidar.synthetic import write_synthetic_dataset
+from nidar_mi.nidar.train import train, train_irnet, train_stn
+from nidar_mi.train import main
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory):
+    return write_synthetic_dataset(tmp_path_factory.mktemp("data"), height=48, width=64)
+
+
+@pytest.fixture(scope="module")
+def trained(data_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    cfg = dataclasses.replace(TrainConfig.reduced(), device="cpu")
+    paths = train(cfg, data_dir, out, progress=False)
+    return cfg, out, paths
+
+
+def _same_weights(a, b) -> bool:
+    ta, tb = load_file(str(a)), load_file(str(b))
+    return ta.keys() == tb.keys() and all(np.array_equal(ta[k], tb[k]) for k in ta)
+
+
+def test_two_iteration_run_writes_everything(trained, data_dir):
+    cfg, out, paths = trained
+    assert paths == {"stn": out / "stn.safetensors", "irnet": out / "irnet.safetensors"}
+    for name in ("stn.safetensors", "irnet.safetensors", "config.json", "train_log.json"):
+        assert (out / name).is_file()
+    log = json.loads((out / "train_log.json").read_text())
+    for stage in ("stn", "irnet"):
+        assert [s["step"] for s in log[stage]["steps"]] == [1, 2]
+        assert log[stage]["done"] is True
+        (epoch,) = log[stage]["epochs"]
+        assert np.isfinite(epoch["val_loss"]) and np.isfinite(epoch["train_loss"])
+    # lambda_int warm-up over one epoch of two steps: factors 1/2, then 1.
+    assert [s["int_factor"] for s in log["irnet"]["steps"]] == [0.5, 1.0]
+    assert set(log["irnet"]["epochs"][0]["val_terms"]) == {"recon", "R", "S", "med", "int"}
+    record = json.loads((out / "config.json").read_text())
+    assert TrainConfig.from_dict(record["train"]) == cfg
+    assert record["data"]["intensity_scale"] == 255.0
+
+
+def test_load_pipeline_and_predict_any_size(trained, data_dir):
+    cfg, out, _ = trained
+    stn, irnet, loaded = load_pipeline(out, device="cpu")
+    assert loaded == cfg and not stn.training and not irnet.training
+    rgb = load_frame(list_frames(data_dir, "test")[0], ("rgb",))["rgb"][:45, :61]
+    result = predict(stn, irnet, rgb)
+    assert set(result) == {"pseudo_nir", "R", "S", "I_hat"}
+    for value in result.values():
+        assert value.shape == (45, 61) and value.dtype == np.float32
+        assert np.all(np.isfinite(value))
+    assert 0 < result["R"].min() and result["R"].max() < 1
+
+
+def test_same_seed_same_weights(trained, data_dir, tmp_path):
+    cfg, out, _ = trained
+    train(cfg, data_dir, tmp_path, progress=False)
+    assert _same_weights(out / "stn.safetensors", tmp_path / "stn.safetensors")
+    assert _same_weights(out / "irnet.safetensors", tmp_path / "irnet.safetensors")
+
+
+def test_resume_continues_exactly(data_dir, tmp_path):
+    base = dataclasses.replace(TrainConfig.reduced(), device="cpu")
+    four = dataclasses.replace(
+        base, stn_optim=dataclasses.replace(base.stn_optim, epochs=2, max_steps=None)
+    )
+    train_stn(four, data_dir, tmp_path / "straight", progress=False)
+    # Interrupted after 1 step (mid-epoch), then resumed to the end: same weights, same log.
+    one = dataclasses.replace(four, stn_optim=dataclasses.replace(four.stn_optim, max_steps=1))
+    train_stn(one, data_dir, tmp_path / "resumed", progress=False)
+    with pytest.raises(NidarError, match="resume it"):
+        train_stn(four, data_dir, tmp_path / "resumed", progress=False)
+    train_stn(four, data_dir, tmp_path / "resumed", resume=True, progress=False)
+    assert _same_weights(
+        tmp_path / "straight/stn.safetensors", tmp_path / "resumed/stn.safetensors"
+    )
+    logs = [
+        json.loads((tmp_path / d / "train_log.json").read_text())["stn"]
+        for d in ("straight", "resumed")
+    ]
+    assert [s["loss"] for s in logs[0]["steps"]] == [s["loss"] for s in logs[1]["steps"]]
+    assert len(logs[0]["steps"]) == 4
+    # A different model in the same directory is refused.
+    other = dataclasses.replace(four, seed=1)
+    with pytest.raises(NidarError, match="different configuration"):
+        train_stn(other, data_dir, tmp_path / "resumed", resume=True, progress=False)
+
+
+def test_rgb_variant_needs_no_stn(data_dir, tmp_path):
+    base = dataclasses.replace(TrainConfig.reduced(), device="cpu")
+    cfg = dataclasses.replace(base, irnet=dataclasses.replace(base.irnet, input="rgb"))
+    paths = train(cfg, data_dir, tmp_path, progress=False)
+    assert set(paths) == {"irnet"} and not (tmp_path / "stn.safetensors").exists()
+    stn, irnet, _ = load_pipeline(tmp_path, device="cpu")
+    assert stn is None and irnet.in_channels == 3
+    rgb = load_frame(list_frames(data_dir, "test")[0], ("rgb",))["rgb"]
+    assert set(predict(None, irnet, rgb)) == {"R", "S", "I_hat"}
+
+
+def test_pseudo_nir_irnet_without_stn_is_a_user_error(data_dir, tmp_path):
+    cfg = dataclasses.replace(TrainConfig.reduced(), device="cpu")
+    with pytest.raises(NidarError, match="needs STN weights"):
+        train_irnet(cfg, data_dir, tmp_path, progress=False)
+
+
+def test_cli_reuses_a_trained_stn(trained, data_dir, tmp_path, capsys):
+    _, out, _ = trained
+    argv = [str(data_dir), str(tmp_path), "--reduced", "--device", "cpu", "--no-progress", "-q"]
+    code = main(
+        argv + ["--variant", "DeepLabV3+3Conv", "--stn-weights", str(out / "stn.safetensors")]
+    )
+    assert code == 0
+    assert _same_weights(out / "stn.safetensors", tmp_path / "stn.safetensors")
+    _, irnet, cfg = load_pipeline(tmp_path, device="cpu")
+    assert cfg.irnet.variant == "deeplabv3+3conv" and irnet.head is not None
+
+
+def test_cli_user_errors_are_one_line(tmp_path, capsys):
+    code = main([str(tmp_path / "missing"), str(tmp_path / "out"), "--reduced", "-q"])
+    err = capsys.readouterr().err
+    assert (
+        code == 2 and err.count("\n") == 1 and err.startswith("error:") and "Traceback" not in err
+    )
+    code = main([str(tmp_path), str(tmp_path / "out"), "--variant", "resnet", "-q"])
+    assert code == 2 and "unknown IRNet variant" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
