@@ -43,6 +43,7 @@ __all__ = [
     "load_meta",
     "list_frames",
     "load_frame",
+    "FrameDataset",
     "STNDataset",
     "IRNetDataset",
 ]
@@ -121,7 +122,16 @@ def _crop_box(h: int, w: int, crop: int, rng: np.random.Generator | None):
     return int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
 
 
-class _FrameDataset(Dataset):
+class FrameDataset(Dataset):
+    """Base of the datasets: frame files, square crops, per-(seed, epoch, index) randomness.
+
+    Args:
+        frames: frame files.
+        crop_size: side of the square crops.
+        seed: seed of crops and flips.
+        train: random crops and horizontal flips if True, centre crops otherwise.
+    """
+
     def __init__(self, frames, crop_size: int, seed: int = 0, train: bool = True) -> None:
         self.frames = [Path(f) for f in frames]
         self.crop_size = int(crop_size)
@@ -152,7 +162,7 @@ class _FrameDataset(Dataset):
         return torch.from_numpy(np.ascontiguousarray(out))
 
 
-class STNDataset(_FrameDataset):
+class STNDataset(FrameDataset):
     """RGB -> NIR pairs for the spectral translation network.
 
     Args:
@@ -172,7 +182,7 @@ class STNDataset(_FrameDataset):
         return {"rgb": self._apply(rgb, window, flip), "nir": self._apply(nir, window, flip)}
 
 
-class IRNetDataset(_FrameDataset):
+class IRNetDataset(FrameDataset):
     """Network input and sparse intensity supervision for IRNet.
 
     Args:

@@ -21,36 +21,27 @@ CPU runs use deterministic algorithms; a resumed run continues with the same bat
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import io
 import json
-import logging
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
-from torch.utils.data import DataLoader
-from tqdm.auto import tqdm
 
 from ..errors import NidarError
-from .checkpoint import atomic_write, latest_checkpoint, prune_checkpoints, save_checkpoint
-from .checkpoint import load_checkpoint as _load_checkpoint
-from .config import OptimConfig, TrainConfig
+from .checkpoint import atomic_write
+from .config import TrainConfig
 from .data import IRNetDataset, STNDataset, list_frames, load_frame, load_meta
 from .infer import pseudo_nir
-from .losses import irnet_objective, linear_warmup, stn_loss
+from .loop import Stage, read_train_log, run_stage, write_stage_log
+from .losses import irnet_objective, stn_loss
 from .model_io import build_irnet, build_stn, load_stn, resolve_device, save_irnet, save_stn
 from .stn import image_pyramid
 
 __all__ = ["train", "train_stn", "train_irnet"]
-
-log = logging.getLogger(__name__)
-
-LossFn = Callable[[nn.Module, dict[str, torch.Tensor], float], tuple[torch.Tensor, dict]]
 
 
 # --------------------------------------------------------------------------- public API
@@ -79,7 +70,7 @@ def train(
     out["irnet"] = train_irnet(
         cfg, data_dir, out_dir, stn_weights, resume=resume, progress=progress
     )
-    if stn_weights is not None:
+    if (Path(out_dir) / "stn.safetensors").is_file():
         out["stn"] = Path(out_dir) / "stn.safetensors"
     return out
 
@@ -107,19 +98,8 @@ def train_stn(
         loss = stn_loss(preds, image_pyramid(batch["nir"], len(preds)), alpha)
         return loss, {}
 
-    _run_stage(
-        "stn",
-        model,
-        cfg.stn_optim,
-        train_set,
-        val_set,
-        loss_fn,
-        0.0,
-        cfg,
-        out_dir,
-        resume,
-        progress,
-    )
+    stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
+    run_stage(stage, cfg, out_dir, resume, progress)
     path = save_stn(out_dir / "stn.safetensors", model, cfg.stn)
     _mark_done(out_dir, "stn")
     return path
@@ -159,6 +139,8 @@ def train_irnet(
         if not stn_weights.is_file():
             raise NidarError(f"STN weights {stn_weights} not found")
         if stn_weights.resolve() != local.resolve():
+            if local.is_file() and local.read_bytes() != stn_weights.read_bytes():
+                raise NidarError(f"{local} exists and differs from {stn_weights}")
             atomic_write(local, stn_weights.read_bytes())
     if cfg.irnet.input == "pseudo_nir":
         if stn_weights is None:
@@ -186,19 +168,9 @@ def train_irnet(
         )
         return loss, {**terms, "int_factor": factor}
 
-    _run_stage(
-        "irnet",
-        model,
-        cfg.irnet_optim,
-        train_set,
-        val_set,
-        loss_fn,
-        cfg.loss.int_warmup_epochs,
-        cfg,
-        out_dir,
-        resume,
-        progress,
-    )
+    warmup = cfg.loss.int_warmup_epochs
+    stage = Stage("irnet", model, cfg.irnet_optim, train_set, val_set, loss_fn, warmup)
+    run_stage(stage, cfg, out_dir, resume, progress)
     path = save_irnet(out_dir / "irnet.safetensors", model, cfg.irnet)
     _mark_done(out_dir, "irnet")
     return path
@@ -219,26 +191,9 @@ def _check_crop(crop: int, stride: int, name: str) -> None:
         raise NidarError(f"crop_size {crop} is not a multiple of the {name} stride {stride}")
 
 
-def _read_log(out_dir: Path) -> dict[str, Any]:
-    path = out_dir / "train_log.json"
-    if not path.is_file():
-        return {}
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise NidarError(f"cannot read {path}: {exc}") from None
-
-
-def _write_stage_log(out_dir: Path, stage: str, stage_log: dict[str, Any]) -> None:
-    full = _read_log(out_dir)
-    full[stage] = stage_log
-    atomic_write(out_dir / "train_log.json", json.dumps(full, indent=1))
-
-
 def _mark_done(out_dir: Path, stage: str) -> None:
-    full = _read_log(out_dir)
-    full.setdefault(stage, {"steps": [], "epochs": []})["done"] = True
-    atomic_write(out_dir / "train_log.json", json.dumps(full, indent=1))
+    stage_log = read_train_log(out_dir).get(stage, {"steps": [], "epochs": []})
+    write_stage_log(out_dir, stage, {**stage_log, "done": True})
 
 
 #: Settings that may change when a run is resumed (they do not change what a step computes).
@@ -282,7 +237,7 @@ def _begin(cfg: TrainConfig, data_dir: Path, out_dir: Path, stage: str, resume: 
             raise NidarError(f"cannot read {cfg_path}: {exc}") from None
         if _comparable(old) != _comparable(record["train"]):
             raise NidarError(f"{out_dir} holds a run with a different configuration")
-    if _read_log(out_dir).get(stage, {}).get("steps") and not resume:
+    if read_train_log(out_dir).get(stage, {}).get("steps") and not resume:
         raise NidarError(f"{out_dir} already holds a {stage} run; resume it or use a new directory")
     atomic_write(cfg_path, json.dumps(record, indent=2))
 
@@ -298,152 +253,3 @@ def _cache_pseudo_nir(stn: nn.Module, frames: list[Path], cache_dir: Path) -> Pa
         np.save(buf, image[None].astype(np.float32), allow_pickle=False)
         atomic_write(target, buf.getvalue())
     return cache_dir
-
-
-@contextlib.contextmanager
-def _deterministic(device: torch.device):
-    """Deterministic algorithms for CPU runs (CUDA runs keep the fast kernels)."""
-    if device.type != "cpu":
-        yield
-        return
-    previous = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(True)
-    try:
-        yield
-    finally:
-        torch.use_deterministic_algorithms(previous)
-
-
-# --------------------------------------------------------------------------- the loop
-
-
-def _run_stage(
-    name: str,
-    model: nn.Module,
-    optim_cfg: OptimConfig,
-    train_set,
-    val_set,
-    loss_fn: LossFn,
-    warmup_epochs: float,
-    cfg: TrainConfig,
-    out_dir: Path,
-    resume: bool,
-    progress: bool,
-) -> dict[str, Any]:
-    device = resolve_device(cfg.device)
-    model.to(device)
-    optimizer = torch.optim.Adam(
-        model.parameters(), lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay
-    )
-    batch = optim_cfg.batch_size
-    steps_per_epoch = len(train_set) // batch
-    if steps_per_epoch == 0:
-        raise NidarError(f"{name}: {len(train_set)} training frames < batch size {batch}")
-    total = optim_cfg.epochs * steps_per_epoch
-    if optim_cfg.max_steps is not None:
-        total = min(total, optim_cfg.max_steps)
-    ckpt_dir = out_dir / "checkpoints"
-    stage_log: dict[str, Any] = {"steps": [], "epochs": [], "done": False}
-    epoch0, skip, step = 0, 0, 0
-    ckpt = latest_checkpoint(ckpt_dir, name) if resume else None
-    if ckpt is not None:
-        side = _load_checkpoint(ckpt, model, optimizer, device)
-        epoch0, skip, step = side["epoch"], side["batch_in_epoch"], side["step"]
-        stage_log = side["log"]
-        log.info("%s: resumed from %s (step %d)", name, ckpt.name, step)
-
-    def checkpoint(epoch: int, in_epoch: int) -> None:
-        state = {
-            "epoch": epoch,
-            "batch_in_epoch": in_epoch,
-            "step": step,
-            "config": cfg.to_dict(),
-            "rng": {"seed": cfg.seed},
-            "log": stage_log,
-        }
-        save_checkpoint(ckpt_dir, name, model, optimizer, state)
-        prune_checkpoints(ckpt_dir, name, cfg.keep_checkpoints)
-
-    log.info("%s: %d steps of batch %d on %s", name, total, batch, device)
-    with _deterministic(device):
-        for epoch in range(epoch0, optim_cfg.epochs):
-            if step >= total:
-                break
-            train_set.set_epoch(epoch)
-            gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + epoch)
-            order = torch.randperm(len(train_set), generator=gen).tolist()
-            batches = [order[i * batch : (i + 1) * batch] for i in range(steps_per_epoch)]
-            loader = DataLoader(
-                train_set,
-                batch_sampler=batches[skip:],
-                num_workers=cfg.num_workers,
-                pin_memory=device.type == "cuda",
-            )
-            model.train()
-            done_in_epoch = skip
-            bar = tqdm(
-                total=steps_per_epoch,
-                initial=skip,
-                disable=not progress,
-                desc=f"{name} {epoch + 1}/{optim_cfg.epochs}",
-            )
-            for item in loader:
-                if step >= total:
-                    break
-                item = {k: v.to(device, non_blocking=True) for k, v in item.items()}
-                factor = linear_warmup(step, warmup_epochs * steps_per_epoch)
-                loss, terms = loss_fn(model, item, factor)
-                if not torch.isfinite(loss):
-                    raise NidarError(f"{name}: the loss became {float(loss)} at step {step}")
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                optimizer.step()
-                step += 1
-                done_in_epoch += 1
-                stage_log["steps"].append(
-                    {"step": step, "epoch": epoch, "loss": float(loss.detach()), **terms}
-                )
-                bar.update(1)
-                bar.set_postfix(loss=f"{stage_log['steps'][-1]['loss']:.4f}")
-                if step % cfg.checkpoint_every == 0 and done_in_epoch < steps_per_epoch:
-                    checkpoint(epoch, done_in_epoch)
-            bar.close()
-            skip = 0
-            complete = done_in_epoch == steps_per_epoch
-            losses = [s["loss"] for s in stage_log["steps"] if s["epoch"] == epoch]
-            val = _validate(model, val_set, loss_fn, batch, device)
-            stage_log["epochs"].append(
-                {
-                    "epoch": epoch,
-                    "step": step,
-                    "complete": complete,
-                    "train_loss": float(np.mean(losses)) if losses else None,
-                    **val,
-                }
-            )
-            log.info("%s: epoch %d, step %d, val loss %s", name, epoch, step, val["val_loss"])
-            _write_stage_log(out_dir, name, stage_log)
-            checkpoint(epoch + 1 if complete else epoch, 0 if complete else done_in_epoch)
-    return stage_log
-
-
-@torch.no_grad()
-def _validate(model, val_set, loss_fn: LossFn, batch: int, device) -> dict[str, Any]:
-    """Mean validation loss (and terms) over centre crops, with full loss weights."""
-    if val_set is None or len(val_set) == 0:
-        log.warning("no validation frames: the validation loss is not computed")
-        return {"val_loss": None, "val_terms": {}}
-    model.eval()
-    totals: dict[str, float] = {}
-    count = 0
-    for item in DataLoader(val_set, batch_size=batch, shuffle=False):
-        item = {k: v.to(device) for k, v in item.items()}
-        loss, terms = loss_fn(model, item, 1.0)
-        n = next(iter(item.values())).shape[0]
-        terms = {k: v for k, v in terms.items() if k != "int_factor"}
-        for key, value in {"loss": float(loss), **terms}.items():
-            totals[key] = totals.get(key, 0.0) + value * n
-        count += n
-    model.train()
-    means = {k: v / count for k, v in totals.items()}
-    return {"val_loss": means.pop("loss"), "val_terms": means}
