@@ -122,6 +122,8 @@ def run_stage(
     ckpt_dir = out_dir / "checkpoints"
     stage_log: dict[str, Any] = {"steps": [], "epochs": [], "done": False}
     epoch0, skip, step = 0, 0, 0
+    if not resume:  # checkpoints of an abandoned run must not be taken for this run's
+        prune_checkpoints(ckpt_dir, name, keep=0)
     ckpt = latest_checkpoint(ckpt_dir, name) if resume else None
     if ckpt is not None:
         side = load_checkpoint(ckpt, model, optimizer, device)

@@ -10,6 +10,7 @@ import pytest
 from safetensors.numpy import load_file
 
 from nidar_mi.errors import NidarError
+from nidar_mi.nidar.checkpoint import latest_checkpoint
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.data import list_frames, load_frame
 from nidar_mi.nidar.infer import predict
@@ -101,6 +102,15 @@ def test_resume_continues_exactly(data_dir, tmp_path):
     other = dataclasses.replace(four, seed=1)
     with pytest.raises(NidarError, match="different configuration"):
         train_stn(other, data_dir, tmp_path / "resumed", resume=True, progress=False)
+
+
+def test_fresh_run_discards_stale_checkpoints(data_dir, tmp_path):
+    stale = tmp_path / "checkpoints" / "stn_step00000099.json"
+    stale.parent.mkdir(parents=True)
+    stale.write_text("{}")
+    cfg = dataclasses.replace(TrainConfig.reduced(), device="cpu")
+    train_stn(cfg, data_dir, tmp_path, progress=False)
+    assert latest_checkpoint(tmp_path / "checkpoints", "stn").name == "stn_step00000002.json"
 
 
 def test_rgb_variant_needs_no_stn(data_dir, tmp_path):
