@@ -151,3 +151,16 @@ def test_cli_user_errors_are_one_line(tmp_path, capsys):
     code = main([str(tmp_path), str(tmp_path / "out"), "--variant", "resnet", "-q"])
     assert code == 2 and "unknown IRNet variant" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_cli_config_file_merges_over_the_reduced_config(tmp_path):
+    from nidar_mi.train import _parser, build_config
+
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"irnet": {"variant": "unet+unet"}, "seed": 4}))
+    args = _parser().parse_args(["d", "o", "--reduced", "--config", str(path), "--max-steps", "7"])
+    cfg = build_config(args)
+    reduced = TrainConfig.reduced()
+    assert cfg.irnet.variant == "unet+unet" and cfg.seed == 4
+    assert cfg.irnet.width == reduced.irnet.width and cfg.crop_size == reduced.crop_size
+    assert cfg.stn_optim.max_steps == cfg.irnet_optim.max_steps == 7
