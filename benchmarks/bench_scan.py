@@ -1,0 +1,437 @@
+"""Scan speed: nidar_mi's full LiDAR scan against Open3D's bare ``RaycastingScene.cast_rays``.
+
+``python benchmarks/bench_scan.py [--repeats 5] [--rings 128 --cols 2048] [--json out.json]``
+
+A procedural city (a height-field terrain of ``2·(grid-1)²`` triangles, 115 200 by default, and
+a grid of box buildings with streets along x and y) is written as two PLY meshes into a temporary
+directory and loaded through :func:`nidar_mi.scene.load_scene` with a diffuse spectral material
+each and a ``lidar`` sensor (``os1_128`` for 128 rings, else uniform rings over the same ±22.5°,
+``cols`` columns) standing 1.8 m above the terrain at the central street crossing, turned by a
+yaw. Open3D gets the same vertex and index arrays and the same rays (origin and unit world
+direction of every beam, from the sensor's pose).
+
+Both sides are warmed up (Dr.Jit compiles its kernels on the first call, Open3D builds its BVH
+on the first cast), then timed ``repeats`` times, interleaved so that both see the same machine
+load; the median is reported. Timed work:
+
+* nidar_mi full scan: :func:`nidar_mi.lidar.raycast.scan` (ray cast with the glass passes,
+  monostatic BSDF at the laser wavelength, return model, detection and noise draws, read back to
+  NumPy). The noise σ are opaque kernel inputs, so the kernels do the same work whatever their
+  values; range noise is 0 here so that ranges can be compared with Open3D's.
+* nidar_mi bare cast (for reference): ``scene.ray_intersect_preliminary`` on the same rays, read
+  back to NumPy.
+* Open3D: ``cast_rays`` on a prepared (N, 6) float32 tensor (its results are host tensors).
+
+Sanity line: median and maximum absolute difference of the hit distances where both hit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+__all__ = ["city_mesh", "scene_xml", "load_city", "world_rays", "run_benchmark", "main"]
+
+#: Sensor height above the terrain at the origin (m) and yaw (deg).
+SENSOR_HEIGHT_M = 1.8
+SENSOR_YAW_DEG = 10.0
+
+
+def _terrain_height(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Gentle rolling ground, in m (amplitude below 0.4 m)."""
+    return 0.25 * np.sin(0.05 * x) * np.cos(0.07 * y) + 0.1 * np.sin(0.31 * x + 0.17 * y)
+
+
+def city_mesh(
+    grid: int = 241, half_size_m: float = 100.0, seed: int = 0
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """A terrain height field and a grid of box buildings.
+
+    Buildings stand on 20 m blocks (14 m footprints, 6 m streets; streets run along x and y through
+    the origin), heights uniform in [8, 40] m, bases sunk 1 m under the terrain. Box faces do not
+    share vertices (flat shading); the bottom face is left out.
+
+    Args:
+        grid: terrain vertices per side; the terrain has ``2·(grid-1)²`` triangles.
+        half_size_m: the terrain covers ``[-half_size_m, half_size_m]²``.
+        seed: seed of the building heights.
+
+    Returns:
+        ``{"terrain": (V, F), "buildings": (V, F)}``: (n, 3) float32 vertices in m and
+        (m, 3) int32 triangle indices, counter-clockwise seen from outside / above.
+    """
+    # ------------------------------------------------------------------ terrain
+    s = np.linspace(-half_size_m, half_size_m, grid)
+    x, y = np.meshgrid(s, s, indexing="xy")
+    tv = np.stack([x, y, _terrain_height(x, y)], axis=-1).reshape(-1, 3)
+    i = np.arange(grid - 1)
+    a = (i[:, None] * grid + i[None, :]).reshape(-1)  # lower-left corner of each cell
+    b, c, d = a + 1, a + grid + 1, a + grid
+    tf = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+    # ------------------------------------------------------------------ buildings
+    rng = np.random.default_rng(seed)
+    pitch, half_fp = 20.0, 7.0
+    centres = np.arange(-half_size_m + pitch / 2, half_size_m, pitch)
+    corners = np.array(
+        [
+            [-1, -1, 0],
+            [1, -1, 0],
+            [1, 1, 0],
+            [-1, 1, 0],
+            [-1, -1, 1],
+            [1, -1, 1],
+            [1, 1, 1],
+            [-1, 1, 1],
+        ],
+        dtype=np.float64,
+    )
+    quads = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]  # top, sides
+    bv, bf = [], []
+    for cx in centres:
+        for cy in centres:
+            h = rng.uniform(8.0, 40.0)
+            z0 = float(_terrain_height(np.array(cx), np.array(cy))) - 1.0
+            box = np.column_stack(
+                [cx + half_fp * corners[:, 0], cy + half_fp * corners[:, 1], z0 + h * corners[:, 2]]
+            )
+            for q in quads:
+                base = sum(len(v) for v in bv)
+                bv.append(box[list(q)])
+                bf.append([[base, base + 1, base + 2], [base, base + 2, base + 3]])
+    return {
+        "terrain": (tv.astype(np.float32), tf.astype(np.int32)),
+        "buildings": (np.concatenate(bv).astype(np.float32), np.concatenate(bf).astype(np.int32)),
+    }
+
+
+def _write_ply(path: str, vertices: np.ndarray, faces: np.ndarray) -> None:
+    from plyfile import PlyData, PlyElement
+
+    v = np.empty(len(vertices), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    v["x"], v["y"], v["z"] = vertices.T
+    f = np.empty(len(faces), dtype=[("vertex_indices", "i4", (3,))])
+    f["vertex_indices"] = faces
+    PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(f, "face")]).write(path)
+
+
+def scene_xml(plys: dict[str, str], rings: int, cols: int) -> str:
+    """Scene XML: the meshes with diffuse spectral materials and the LiDAR.
+
+    Args:
+        plys: mesh name -> PLY path (``terrain``, ``buildings``).
+        rings: LiDAR channels (128 uses the ``os1_128`` preset, else uniform over ±22.5°).
+        cols: columns per scan.
+    """
+    if rings == 128:
+        pattern = '<string name="preset" value="os1_128"/>'
+    else:
+        angles = ", ".join(f"{a:.6f}" for a in np.linspace(22.5, -22.5, rings))
+        pattern = f'<string name="elevation_angles" value="{angles}"/>'
+    z = SENSOR_HEIGHT_M + float(_terrain_height(np.array(0.0), np.array(0.0)))
+    spectra = {  # flat-ish NIR reflectances (asphalt-like, concrete-like)
+        "terrain": "400:0.06, 600:0.08, 800:0.10, 1000:0.12",
+        "buildings": "400:0.25, 600:0.30, 800:0.34, 1000:0.36",
+    }
+    shapes = "\n".join(
+        f"""    <shape type="ply" id="{name}">
+        <string name="filename" value="{path}"/>
+        <boolean name="face_normals" value="true"/>
+        <bsdf type="diffuse" id="{name}_bsdf">
+            <spectrum name="reflectance" value="{spectra[name]}"/>
+        </bsdf>
+    </shape>"""
+        for name, path in plys.items()
+    )
+    return f"""<scene version="3.0.0">
+    <sensor type="lidar" id="lidar">
+        {pattern}
+        <integer name="horizontal_resolution" value="{cols}"/>
+        <float name="wavelength" value="905"/>
+        <float name="range_max" value="400"/>
+        <float name="noise_intensity_std" value="0.0002"/>
+        <float name="noise_range_std" value="0"/>
+        <transform name="to_world">
+            <rotate z="1" angle="{SENSOR_YAW_DEG}"/><translate z="{z}"/>
+        </transform>
+    </sensor>
+{shapes}
+</scene>
+"""
+
+
+def world_rays(sensor) -> np.ndarray:
+    """(R·C, 6) float32 rays ``[origin, unit direction]`` of every beam, in the world frame.
+
+    Same ray order as the scan (ring-major); directions as :func:`nidar_mi.lidar.raycast.scan`
+    computes them (float32 beam directions, rotated by the pose, normalised).
+    """
+    from nidar_mi.lidar.pattern import beam_directions
+
+    cfg = sensor.config
+    T = np.array(sensor.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
+    d = beam_directions(cfg.elevations, cfg.horizontal_resolution, cfg.fov_h)
+    d = d.astype(np.float32).reshape(-1, 3).astype(np.float64) @ T[:3, :3].T
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.broadcast_to(T[:3, 3], d.shape)
+    return np.concatenate([o, d], axis=1).astype(np.float32)
+
+
+def _median(values: list[float]) -> float:
+    return float(statistics.median(values))
+
+
+def load_city(*, rings: int = 128, cols: int = 2048, grid: int = 241, variant: str):
+    """Build the city, write it to a temporary directory and load it with the LiDAR.
+
+    Args:
+        rings, cols: the LiDAR's beam grid.
+        grid: terrain vertices per side (see :func:`city_mesh`).
+        variant: Mitsuba variant.
+
+    Returns:
+        ``(loaded, meshes)``: the :class:`~nidar_mi.scene.LoadedScene` (its only LiDAR is
+        ``loaded.lidars[0]``) and the :func:`city_mesh` arrays it was built from.
+    """
+    from nidar_mi.scene import load_scene
+
+    meshes = city_mesh(grid=grid)
+    with tempfile.TemporaryDirectory(prefix="nidar_bench_") as tmp:
+        plys = {}
+        for name, (v, f) in meshes.items():
+            plys[name] = os.path.join(tmp, f"{name}.ply")
+            _write_ply(plys[name], v, f)
+        xml_path = os.path.join(tmp, "city.xml")
+        with open(xml_path, "w", encoding="utf-8") as fh:
+            fh.write(scene_xml(plys, rings, cols))
+        return load_scene(xml_path, variant=variant), meshes
+
+
+def _kernel_ms(fn) -> float:
+    """Milliseconds the Dr.Jit kernels launched by ``fn()`` spent executing."""
+    import drjit as dr
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()  # drop older entries
+        fn()
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return float(sum(k.get("execution_time", 0.0) for k in history))
+
+
+def run_benchmark(
+    *, repeats: int = 5, rings: int = 128, cols: int = 2048, grid: int = 241, variant: str
+) -> dict:
+    """Build the city, run both ray casters, time them.
+
+    Args:
+        repeats: timed runs of each (median reported); >= 1.
+        rings, cols: the LiDAR's beam grid.
+        grid: terrain vertices per side (see :func:`city_mesh`).
+        variant: Mitsuba variant for nidar_mi.
+
+    Returns:
+        A JSON-safe dict: rays, triangles, rays/s and median seconds of each method, the ratio
+        (full scan rays/s over Open3D's), median stage timings of the scan, the Dr.Jit kernel
+        time of one scan, first-call times, hit fractions, the hit-distance agreement, and the
+        machine and versions.
+    """
+    import drjit as dr
+    import mitsuba as mi
+    import open3d as o3d
+
+    from nidar_mi.lidar.raycast import scan
+
+    loaded, meshes = load_city(rings=rings, cols=cols, grid=grid, variant=variant)
+    scene, sensor = loaded.scene, loaded.lidars[0]
+    rays_np = world_rays(sensor)
+    n = len(rays_np)
+
+    o3d_scene = o3d.t.geometry.RaycastingScene()
+    for v, f in meshes.values():
+        o3d_scene.add_triangles(o3d.core.Tensor(v), o3d.core.Tensor(f.astype(np.uint32)))
+    o3d_rays = o3d.core.Tensor(rays_np)
+    mi_rays = mi.Ray3f(
+        mi.Point3f(*(rays_np[:, k] for k in range(3))),
+        mi.Vector3f(*(rays_np[:, k] for k in range(3, 6))),
+    )
+
+    def run_scan():
+        return scan(scene, sensor)
+
+    def run_bare():
+        pi = scene.ray_intersect_preliminary(mi_rays)
+        dr.eval(pi.t, pi.prim_index, pi.shape_index, pi.prim_uv)
+        return pi.t.numpy()
+
+    def run_o3d():
+        return o3d_scene.cast_rays(o3d_rays)["t_hit"].numpy()
+
+    first: dict[str, float] = {}
+    for key, fn in (("scan", run_scan), ("bare", run_bare), ("open3d", run_o3d)):
+        t0 = time.perf_counter()  # first call: kernel compilation (or cache load), BVH build
+        fn()
+        first[key] = time.perf_counter() - t0
+    res, t_bare, t_o3d = run_scan(), run_bare(), run_o3d()
+
+    secs: dict[str, list[float]] = {"scan": [], "bare": [], "open3d": []}
+    stages: dict[str, list[float]] = {}
+    for _ in range(repeats):
+        for key, fn in (("scan", run_scan), ("bare", run_bare), ("open3d", run_o3d)):
+            t0 = time.perf_counter()
+            out = fn()
+            secs[key].append(time.perf_counter() - t0)
+            if key == "scan":
+                for stage, t in out.timings.items():
+                    stages.setdefault(stage, []).append(t)
+
+    kernel_ms = _kernel_ms(run_scan)
+
+    # ------------------------------------------------------------------ agreement
+    rng_scan = res.range.reshape(-1)
+    both = res.valid.reshape(-1) & np.isfinite(t_o3d)
+    diff = np.abs(rng_scan[both] - t_o3d[both])
+    bare_both = np.isfinite(t_bare) & np.isfinite(t_o3d)
+    bare_diff = np.abs(t_bare[bare_both] - t_o3d[bare_both])
+    med = {k: _median(v) for k, v in secs.items()}
+    return {
+        "rays": n,
+        "rings": rings,
+        "cols": cols,
+        "triangles": int(sum(len(f) for _, f in meshes.values())),
+        "repeats": repeats,
+        "variant": variant,
+        "median_s": med,
+        "rays_per_s": {k: n / v for k, v in med.items()},
+        "ratio_scan_over_open3d": med["open3d"] / med["scan"],
+        "ratio_bare_over_open3d": med["open3d"] / med["bare"],
+        "scan_stage_median_s": {k: _median(v) for k, v in stages.items()},
+        "scan_kernel_s": kernel_ms / 1e3,
+        "first_call_s": first,
+        "all_s": secs,
+        "hit_fraction": {
+            "scan_hit": float(res.hit.mean()),
+            "scan_valid": float(res.valid.mean()),
+            "open3d": float(np.isfinite(t_o3d).mean()),
+        },
+        "agreement_m": {
+            "compared": int(both.sum()),
+            "scan_vs_open3d_median": float(np.median(diff)) if diff.size else None,
+            "scan_vs_open3d_max": float(diff.max()) if diff.size else None,
+            "bare_vs_open3d_median": float(np.median(bare_diff)) if bare_diff.size else None,
+            "hit_mismatch": int((res.hit.reshape(-1) != np.isfinite(t_o3d)).sum()),
+        },
+        "machine": _machine(),
+    }
+
+
+def _machine() -> dict:
+    import drjit
+    import mitsuba
+    import open3d
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "mitsuba": mitsuba.__version__,
+        "drjit": drjit.__version__,
+        "open3d": open3d.__version__,
+    }
+
+
+def _report(r: dict) -> str:
+    rps, med = r["rays_per_s"], r["median_s"]
+    agree = r["agreement_m"]
+    lines = [
+        f"{r['rings']}x{r['cols']} = {r['rays']} rays, {r['triangles']} triangles, "
+        f"median of {r['repeats']}, {r['variant']}, {r['machine']['cpu']} "
+        f"({r['machine']['cores']} cores)",
+        f"  nidar_mi full scan   {med['scan'] * 1e3:8.1f} ms  {rps['scan'] / 1e6:7.2f} Mrays/s",
+        f"  nidar_mi bare cast   {med['bare'] * 1e3:8.1f} ms  {rps['bare'] / 1e6:7.2f} Mrays/s",
+        f"  Open3D cast_rays     {med['open3d'] * 1e3:8.1f} ms  {rps['open3d'] / 1e6:7.2f} Mrays/s",
+        f"  ratio full scan / Open3D (rays/s): {r['ratio_scan_over_open3d']:.2f} (target >= 1: "
+        f"{'met' if r['ratio_scan_over_open3d'] >= 1.0 else 'not met'})",
+        "  scan stages (median ms): "
+        + ", ".join(f"{k} {v * 1e3:.1f}" for k, v in r["scan_stage_median_s"].items()),
+        f"  scan Dr.Jit kernel execution: {r['scan_kernel_s'] * 1e3:.1f} ms "
+        f"(the rest of the scan is host-side work)",
+        f"  hit fraction: scan {r['hit_fraction']['scan_hit']:.3f}, "
+        f"Open3D {r['hit_fraction']['open3d']:.3f}",
+        f"  hit distance |scan - Open3D| over {agree['compared']} returns: "
+        f"median {agree['scan_vs_open3d_median']:.2e} m, max {agree['scan_vs_open3d_max']:.2e} m",
+    ]
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bench_scan.py",
+        description="Time nidar_mi's full LiDAR scan against Open3D's bare cast_rays.",
+    )
+    p.add_argument("--repeats", type=int, default=5, help="timed runs of each (median)")
+    p.add_argument("--rings", type=int, default=128, help="LiDAR channels")
+    p.add_argument("--cols", type=int, default=2048, help="columns per scan")
+    p.add_argument("--grid", type=int, default=241, help="terrain vertices per side")
+    p.add_argument(
+        "--variant", default="llvm_ad_spectral", help="Mitsuba variant (default: llvm_ad_spectral)"
+    )
+    p.add_argument("--json", metavar="PATH", help="also write the results as JSON")
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    from nidar_mi.errors import NidarError
+
+    try:
+        for name in ("repeats", "rings", "cols"):
+            if getattr(args, name) < 1:
+                raise NidarError(f"--{name} must be >= 1 (got {getattr(args, name)})")
+        if args.grid < 2:
+            raise NidarError(f"--grid must be >= 2 (got {args.grid})")
+        try:
+            import open3d  # noqa: F401
+        except ImportError as e:
+            raise NidarError(
+                f"Open3D is not importable ({e}); install it with: pip install -e '.[bench]'"
+            ) from None
+        result = run_benchmark(
+            repeats=args.repeats,
+            rings=args.rings,
+            cols=args.cols,
+            grid=args.grid,
+            variant=args.variant,
+        )
+        if args.json:
+            from nidar_mi.io.atomic import atomic_write_json
+
+            atomic_write_json(args.json, result)
+    except NidarError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(_report(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
