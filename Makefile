@@ -30,6 +30,7 @@ fixtures: setup
 	$(PY) tests/golden/regenerate.py
 
 bench: setup
+	$(PY) -m pip install -q -e ".[bench]"
 	$(PY) benchmarks/bench_scan.py
 
 clean:

@@ -119,6 +119,34 @@ def _bsdf_name(shape) -> str:
     return shape.bsdf().id() or f"{shape.id()}.bsdf"
 
 
+_dir_cache: dict[tuple, tuple[np.ndarray, object]] = {}
+
+
+def _directions(cfg: LidarConfig):
+    """(R, C, 3) float32 beam directions and their Dr.Jit copy, cached per pattern and variant."""
+    import mitsuba as mi
+
+    key = (cfg.elevations_deg, cfg.horizontal_resolution, cfg.fov_h, mi.variant())
+    if key not in _dir_cache:
+        if len(_dir_cache) > 16:
+            _dir_cache.clear()
+        d = beam_directions(cfg.elevations, cfg.horizontal_resolution, cfg.fov_h).astype(np.float32)
+        flat = d.reshape(-1, 3)
+        d.setflags(write=False)
+        _dir_cache[key] = (d, mi.Vector3f(flat[:, 0], flat[:, 1], flat[:, 2]))
+    return _dir_cache[key]
+
+
+def _has_glass(scene) -> bool:
+    """Whether any BSDF of the scene lets a beam through (delta or null transmission)."""
+    import mitsuba as mi
+
+    through = int(mi.BSDFFlags.DeltaTransmission) | int(mi.BSDFFlags.Null)
+    return any(
+        shape.bsdf() is not None and int(shape.bsdf().flags()) & through for shape in scene.shapes()
+    )
+
+
 def _rgb_only(bsdf) -> bool:
     return "SRGBReflectanceSpectrum" in str(bsdf)
 
@@ -144,9 +172,7 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
 
     R, C = cfg.rings, cfg.horizontal_resolution
     n = R * C
-    dirs_np = beam_directions(cfg.elevations, C, cfg.fov_h).astype(np.float32)
-    flat = dirs_np.reshape(-1, 3)
-    d_local = mi.Vector3f(flat[:, 0], flat[:, 1], flat[:, 2])
+    dirs_np, d_local = _directions(cfg)
     if to_world is None:
         T_np = np.array(sensor.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
     else:
@@ -176,7 +202,7 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
         mi.TransportMode.Importance, mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.Null
     )
     spec_wl = mi.UnpolarizedSpectrum(wl)
-    for _ in range(MAX_PASSES):
+    for _ in range(MAX_PASSES if _has_glass(scene) else 0):
         bsdf = si.bsdf(ray)
         flags = bsdf.flags()
         passes = mi.has_flag(flags, mi.BSDFFlags.DeltaTransmission) | mi.has_flag(
@@ -252,7 +278,8 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
                 stacklevel=2,
             )
     rho_np = np.where(np.isfinite(rho_np), rho_np, 0.0)
-    _warn_rgb_materials(scene, names, np.unique(mat[hit_np & (mat >= 0)]), cfg)
+    used = np.flatnonzero(np.bincount(mat[hit_np & (mat >= 0)], minlength=len(names)))
+    _warn_rgb_materials(scene, names, used, cfg)
 
     shape = (R, C)
     result = ScanResult(
