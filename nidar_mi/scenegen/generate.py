@@ -1,0 +1,160 @@
+"""Generate a run of scenes into a folder: per-scene seeds, resumable writing, the index.
+
+Scene ``k`` of a run with seed ``S`` is named ``scene_<S>_<k>`` and drawn from
+``numpy.random.default_rng(SeedSequence(S, spawn_key=(k,)))``: independent streams per scene,
+the same scene for the same (S, k) whatever ``--count`` is. Its XML is written atomically to
+``DIR/scene_<S>_<k>.xml``; a scene whose file already exists is skipped, so an interrupted run
+resumes. ``DIR/index.json`` lists every scene of the folder (entries of earlier runs with other
+seeds are kept), with its seeds, kind, materials and rig calibration.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+
+import numpy as np
+
+from ..errors import NidarError
+from .layout import KINDS, sample_layout
+from .primitives import Layout
+from .xml import scene_xml
+
+__all__ = ["scene_id", "scene_rng", "generate_scene", "generate", "index_entry", "INDEX_NAME"]
+
+INDEX_NAME = "index.json"
+
+
+def scene_id(seed: int, k: int) -> str:
+    """``scene_<seed>_<k>``."""
+    return f"scene_{seed}_{k}"
+
+
+def scene_rng(seed: int, k: int) -> np.random.Generator:
+    """The generator of scene ``k`` of the run seeded ``seed``."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
+
+
+def generate_scene(seed: int, k: int, kind: str | None = None) -> tuple[Layout, str]:
+    """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
+
+    Args:
+        seed: run seed (>= 0).
+        k: scene index in the run (>= 0).
+        kind: ``urban``, ``vegetated`` or None (drawn per scene).
+    """
+    layout = sample_layout(scene_rng(seed, k), kind)
+    name = scene_id(seed, k)
+    text = scene_xml(
+        layout,
+        name=name,
+        description=f"Drawn from SeedSequence({seed}, spawn_key=({k},)); kind {layout.kind}.",
+    )
+    return layout, text
+
+
+def index_entry(seed: int, k: int, layout: Layout, text: str) -> dict:
+    """The ``index.json`` record of one scene (rig matrices as nested lists)."""
+    rig = layout.rig
+    return {
+        "id": scene_id(seed, k),
+        "file": f"{scene_id(seed, k)}.xml",
+        "seed": seed,
+        "index": k,
+        "kind": layout.kind,
+        "sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        "shapes": len(layout.shapes),
+        "materials": layout.materials(),
+        "lidar": {
+            "id": "lidar_top",
+            "preset": rig.lidar_preset,
+            "T_world_lidar": np.round(rig.T_world_lidar(), 9).tolist(),
+        },
+        "camera": {
+            "id": "cam_front",
+            "fov_deg": rig.camera_fov_deg,
+            "fov_axis": "x",
+            "T_world_cam": np.round(rig.T_world_cam(), 9).tolist(),
+            "T_cam_lidar": np.round(rig.T_cam_lidar(), 9).tolist(),
+        },
+        "sun": {
+            "elevation_deg": layout.sun.elevation_deg,
+            "azimuth_deg": layout.sun.azimuth_deg,
+            "scale": layout.sun.scale,
+        },
+        "sky": {"scale": layout.sky.scale},
+    }
+
+
+def _read_index(path: str) -> list[dict]:
+    if not os.path.exists(path):
+        return []
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+        return list(data["scenes"])
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise NidarError(f"{path}: not a scene index ({e}); move it away to regenerate") from None
+
+
+def generate(
+    out_dir: str,
+    count: int,
+    seed: int,
+    *,
+    kind: str | None = None,
+    progress: bool = True,
+) -> dict:
+    """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
+
+    Args:
+        out_dir: destination folder (created).
+        count: number of scenes (>= 1).
+        seed: run seed (>= 0).
+        kind: ``urban``, ``vegetated`` or None for a mix.
+        progress: show a progress bar on stderr.
+
+    Returns:
+        The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
+        scenes written and skipped.
+
+    Raises:
+        NidarError: bad argument, an unreadable index, or a file that cannot be written.
+    """
+    from tqdm.auto import tqdm
+
+    from ..io.atomic import atomic_write_json, atomic_write_text
+
+    if count < 1:
+        raise NidarError(f"--count must be >= 1 (got {count})")
+    if seed < 0:
+        raise NidarError(f"--seed must be >= 0 (got {seed})")
+    if kind is not None and kind not in KINDS:
+        raise NidarError(f"--kind must be one of {', '.join(KINDS)} (got '{kind}')")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise NidarError(f"-o: {out_dir} exists and is not a directory")
+    index_path = os.path.join(out_dir, INDEX_NAME)
+    entries = {e["id"]: e for e in _read_index(index_path)}
+    written = skipped = 0
+    hashes: dict[str, str] = {}
+    for k in tqdm(
+        range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
+    ):
+        layout, text = generate_scene(seed, k, kind)
+        entry = index_entry(seed, k, layout, text)
+        if entry["sha256"] in hashes:  # a repeated layout would leak across a split by scene
+            raise NidarError(f"{entry['id']} repeats {hashes[entry['sha256']]}")
+        hashes[entry["sha256"]] = entry["id"]
+        path = os.path.join(out_dir, entry["file"])
+        if os.path.exists(path):
+            skipped += 1
+        else:
+            atomic_write_text(path, text)
+            written += 1
+        entries[entry["id"]] = entry
+    scenes = sorted(entries.values(), key=lambda e: (e["seed"], e["index"]))
+    index = {"generator": "nidar_mi.scenegen", "scenes": scenes}
+    atomic_write_json(index_path, index)
+    return index | {"run": {"seed": seed, "count": count, "written": written, "skipped": skipped}}
