@@ -276,7 +276,12 @@ def _lpips_model(path: str):
     import torch
 
     model = lpips.LPIPS(net="alex", pretrained=True, pnet_rand=True, spatial=False, verbose=False)
-    state = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # truncated file, or something other than plain tensors
+        raise NidarError(f"{path}: not readable as weights ({type(e).__name__})") from None
+    if not isinstance(state, dict):
+        raise NidarError(f"{path}: not a state dict")
     loaded = {}
     for name, param in model.net.named_parameters():
         _slice, index, kind = name.split(".")  # "slice2.3.weight" holds features[3].weight

@@ -268,3 +268,10 @@ def test_lpips_with_an_incomplete_checkpoint_is_unavailable(fake_lpips):
     torch.save({"features.3.weight": torch.zeros(1)}, fake_lpips)
     value, why = M.lpips_alex(np.zeros((32, 32)), np.zeros((32, 32)))
     assert value is None and "features.0.weight" in why
+
+
+def test_lpips_with_an_unreadable_checkpoint_is_unavailable(fake_lpips):
+    fake_lpips.parent.mkdir(parents=True)
+    fake_lpips.write_bytes(b"not a checkpoint")
+    value, why = M.lpips_alex(np.zeros((32, 32)), np.zeros((32, 32)))
+    assert value is None and "not readable" in why
