@@ -7,7 +7,9 @@
                              [--batch-size N] [--crop-size N] [--no-progress]
 
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
-``OUT/train_log.json`` and resumable checkpoints under ``OUT/checkpoints``. Options given on
+``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
+trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted on the training
+split (:func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). See :mod:`nidar_mi.nidar.train`.
 """
@@ -37,6 +39,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--input", choices=("pseudo_nir", "rgb"), help="IRNet input")
     p.add_argument("--stn-weights", type=Path, help="use this trained STN (skips the STN stage)")
     p.add_argument("--resume", action="store_true", help="continue from the latest checkpoint")
+    p.add_argument(
+        "--no-calibration", action="store_true", help="do not fit calibration.json after training"
+    )
     p.add_argument("--seed", type=int)
     p.add_argument("--device", help="auto (default), cpu, cuda or cuda:N")
     p.add_argument("--epochs", type=int, help="epochs of each stage")
@@ -128,6 +133,13 @@ def main(argv: list[str] | None = None) -> int:
                 stn_weights=args.stn_weights,
                 resume=args.resume,
                 progress=progress,
+            )
+        if args.stage != "stn" and not args.no_calibration:
+            from .nidar.pipeline import NidarModel, fit_dataset_calibration
+
+            model = NidarModel.load(args.out, device=cfg.device)
+            fit_dataset_calibration(model, args.data, "train").save_json(
+                args.out / "calibration.json"
             )
     except NidarError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -68,6 +68,8 @@ def synthetic_frame(
         "intensity": intensity,
         "mask": mask,
         "depth": depth,
+        "range": np.where(mask, depth, 0.0).astype(np.float32),
+        "reflectance": np.where(mask, rho[labels], 0.0).astype(np.float32),
         "K": k,
         "T_cam_lidar": t,
     }

@@ -164,3 +164,29 @@ def test_cli_config_file_merges_over_the_reduced_config(tmp_path):
     assert cfg.irnet.variant == "unet+unet" and cfg.seed == 4
     assert cfg.irnet.width == reduced.irnet.width and cfg.crop_size == reduced.crop_size
     assert cfg.stn_optim.max_steps == cfg.irnet_optim.max_steps == 7
+
+
+def test_cli_fits_calibration_and_pipeline_runs(trained, data_dir, tmp_path):
+    """The CLI writes calibration.json; the whole pipeline then maps points to [0, 1]."""
+    from nidar_mi.nidar.calibration import Calibration
+    from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.nidar.projection import CameraModel
+
+    _, out, _ = trained
+    argv = [str(data_dir), str(tmp_path), "--reduced", "--device", "cpu", "--no-progress", "-q"]
+    assert main(argv + ["--stn-weights", str(out / "stn.safetensors")]) == 0
+    calib = Calibration.load_json(tmp_path / "calibration.json")
+    knots = calib.quantile_map.q_source
+    assert np.all(np.diff(knots) > 0)  # strictly increasing knots
+    model = NidarModel.load(tmp_path, device="cpu")
+    (frame,) = list_frames(data_dir, "val")[:1]
+    f = load_frame(frame)
+    cam = CameraModel(f["K"], f["rgb"].shape[1], f["rgb"].shape[0], f["T_cam_lidar"])
+    # points straight ahead of the camera at 5-20 m, and one behind the LiDAR (never observed)
+    xyz = np.array([[5.0, 0.3, 0.0], [12.0, -0.5, 0.4], [20.0, 2.5, -0.3], [-5.0, 0.0, 0.0]])
+    res = model.point_intensity(xyz, [cam], [f["rgb"]])
+    assert res.observed.tolist() == [True, True, True, False]
+    assert np.all((res.intensity >= 0) & (res.intensity <= 1)) and res.intensity[3] == 0
+    # deterministic: the same inputs give the same output
+    res2 = model.point_intensity(xyz, [cam], [f["rgb"]])
+    np.testing.assert_array_equal(res.intensity, res2.intensity)
