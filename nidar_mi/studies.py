@@ -344,12 +344,19 @@ def panel_scene_xml(
     return "\n".join(lines) + "\n"
 
 
-def load_panel_scene(materials: str | Sequence[str], *, variant: str | None = None, **kwargs):
+def load_panel_scene(
+    materials: str | Sequence[str],
+    *,
+    variant: str | None = None,
+    rgb_twin: bool = False,
+    **kwargs,
+):
     """Build and load a panel scene.
 
     Args:
         materials: as in :func:`panel_scene_xml`.
         variant: Mitsuba variant (None: the default of :func:`nidar_mi.backend.set_variant`).
+        rgb_twin: load the RGB-only twin (every material replaced by its sRGB appearance).
         **kwargs: the keyword arguments of :func:`panel_scene_xml`.
 
     Returns:
@@ -365,18 +372,23 @@ def load_panel_scene(materials: str | Sequence[str], *, variant: str | None = No
         path = os.path.join(tmp, "panels.xml")
         with open(path, "w", encoding="utf-8") as f:
             f.write(xml)
-        loaded = load_scene(path, variant=variant)
+        loaded = load_scene(path, variant=variant, rgb_twin=rgb_twin)
     return loaded, layout
 
 
 def scan_panels(
-    materials: str | Sequence[str], *, variant: str | None = None, **kwargs
+    materials: str | Sequence[str],
+    *,
+    variant: str | None = None,
+    rgb_twin: bool = False,
+    **kwargs,
 ) -> PanelScan:
     """Scan a panel scene and read the return at every panel centre.
 
     Args:
         materials: as in :func:`panel_scene_xml`.
         variant: Mitsuba variant.
+        rgb_twin: scan the RGB-only twin instead.
         **kwargs: the keyword arguments of :func:`panel_scene_xml`.
 
     Returns:
@@ -384,7 +396,7 @@ def scan_panels(
     """
     from .lidar.raycast import scan
 
-    loaded, layout = load_panel_scene(materials, variant=variant, **kwargs)
+    loaded, layout = load_panel_scene(materials, variant=variant, rgb_twin=rgb_twin, **kwargs)
     result = scan(loaded.scene, loaded.lidars[0], seed=0)
     c = layout.columns
     mat = result.material[0, c]

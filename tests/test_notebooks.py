@@ -1,0 +1,64 @@
+"""Every notebook in notebooks/ runs headless with small settings and draws at least one figure."""
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
+#: Seconds a single cell may take (the fast settings keep a whole notebook well under a minute).
+CELL_TIMEOUT_S = 300
+
+
+def test_the_studies_notebooks_are_there():
+    names = {p.name for p in NOTEBOOKS}
+    assert {"01_incidence_angle.ipynb", "02_range.ipynb", "03_spectra.ipynb"} <= names
+
+
+def _figures(nb) -> int:
+    return sum(
+        1
+        for cell in nb.cells
+        if cell.cell_type == "code"
+        for out in cell.get("outputs", [])
+        if out.get("output_type") in ("display_data", "execute_result")
+        and "image/png" in out.get("data", {})
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+def test_notebook_runs_headless(path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+
+    nb = nbformat.read(path, as_version=4)
+    for cell in nb.cells:  # committed with outputs cleared
+        if cell.cell_type == "code":
+            assert not cell.outputs, f"{path.name}: commit the notebook with outputs cleared"
+    monkeypatch.setenv("NIDAR_NOTEBOOK_FAST", "1")
+    monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
+    # the kernel runs this interpreter (jupyter_client maps the python3 kernel's "python" to it)
+    assert Path(sys.executable).exists()
+    client = nbclient.NotebookClient(
+        nb,
+        kernel_name="python3",
+        timeout=CELL_TIMEOUT_S,
+        resources={"metadata": {"path": str(path.parent)}},
+    )
+    client.execute()  # raises CellExecutionError on the first failing cell
+    errors = [
+        out
+        for cell in nb.cells
+        if cell.cell_type == "code"
+        for out in cell.outputs
+        if out.get("output_type") == "error"
+    ]
+    assert not errors
+    assert _figures(nb) >= 1, f"{path.name} drew no figure"
+    out_dir = os.environ.get("NIDAR_NOTEBOOK_OUT")
+    if out_dir:  # keep the executed notebook for inspection
+        os.makedirs(out_dir, exist_ok=True)
+        nbformat.write(nb, os.path.join(out_dir, path.name))
