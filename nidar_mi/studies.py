@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import NidarError
+from .materials import get_material
 
 __all__ = [
     "LIDAR_HEIGHT_M",
@@ -199,13 +200,6 @@ def _f(v: float) -> str:
     return f"{float(v):.10g}"
 
 
-def _per_panel(materials: str | Sequence[str], n: int) -> list[str]:
-    names = [materials] * n if isinstance(materials, str) else [str(m) for m in materials]
-    if len(names) != n:
-        raise NidarError(f"{len(names)} materials given for {n} panels")
-    return names
-
-
 def _material_xml(bsdf_id: str | None, name: str, overrides: Mapping[str, float] | None) -> str:
     extra = "".join(
         f'<float name="{k}" value="{_f(v)}"/>' for k, v in sorted((overrides or {}).items())
@@ -273,7 +267,8 @@ def panel_scene_xml(
         Scene XML for :func:`nidar_mi.scene.load_scene` (``nidar_material`` not yet expanded).
 
     Raises:
-        NidarError: bad layout values or a material count that does not match the panels.
+        NidarError: bad layout values, an unknown material, or a material count that does not
+            match the panels.
     """
     layout = panel_layout(
         distance_m,
@@ -283,7 +278,10 @@ def panel_scene_xml(
         spread_deg=spread_deg,
         count=None if isinstance(materials, str) else len(materials),
     )
-    names = _per_panel(materials, layout.distances_m.size)
+    n = layout.distances_m.size
+    names = [materials] * n if isinstance(materials, str) else [str(m) for m in materials]
+    for name in {*names, *([backdrop] if backdrop is not None else [])}:
+        get_material(name)  # an unknown name fails here, with suggestions
     far = float(layout.distances_m.max())
     r_back = 1.5 * far if backdrop_distance_m is None else float(backdrop_distance_m)
     if backdrop is not None and not r_back > far + panel_size_m:

@@ -65,6 +65,15 @@ def test_scene_xml_checks_the_material_count():
         panel_scene_xml(["grass", "concrete"], incidence_deg=[0.0, 10.0, 20.0])
 
 
+def test_scene_xml_names_an_unknown_material():
+    from nidar_mi.studies import panel_scene_xml
+
+    with pytest.raises(NidarError, match="unknown material 'gras'.*grass"):
+        panel_scene_xml("gras")
+    with pytest.raises(NidarError, match="unknown material"):
+        panel_scene_xml("grass", backdrop="no_such_wall")
+
+
 def test_extinction_from_visibility_hand_values():
     from nidar_mi.studies import extinction_from_visibility
 
