@@ -5,7 +5,8 @@ Scene ``k`` of a run with seed ``S`` is named ``scene_<S>_<k>`` and drawn from
 the same scene for the same (S, k) whatever ``--count`` is. Its XML is written atomically to
 ``DIR/scene_<S>_<k>.xml``; a scene whose file already exists is skipped, so an interrupted run
 resumes. ``DIR/index.json`` lists every scene of the folder (entries of earlier runs with other
-seeds are kept), with its seeds, kind, materials and rig calibration.
+seeds are kept), with its seeds, kind, materials and rig calibration. A layout that repeats one
+already in the folder is an error (it would leak across a split by scene).
 """
 
 from __future__ import annotations
@@ -22,7 +23,15 @@ from .layout import KINDS, sample_layout
 from .primitives import Layout
 from .xml import scene_xml
 
-__all__ = ["scene_id", "scene_rng", "generate_scene", "generate", "index_entry", "INDEX_NAME"]
+__all__ = [
+    "INDEX_NAME",
+    "generate",
+    "generate_scene",
+    "index_entry",
+    "layout_hash",
+    "scene_id",
+    "scene_rng",
+]
 
 INDEX_NAME = "index.json"
 
@@ -55,6 +64,12 @@ def generate_scene(seed: int, k: int, kind: str | None = None) -> tuple[Layout, 
     return layout, text
 
 
+def layout_hash(layout: Layout) -> str:
+    """sha256 of everything a layout places (shapes, light, rig), independent of its name."""
+    text = repr((layout.shapes, layout.sun, layout.sky, layout.rig))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def index_entry(seed: int, k: int, layout: Layout, text: str) -> dict:
     """The ``index.json`` record of one scene (rig matrices as nested lists)."""
     rig = layout.rig
@@ -65,19 +80,20 @@ def index_entry(seed: int, k: int, layout: Layout, text: str) -> dict:
         "index": k,
         "kind": layout.kind,
         "sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        "layout_sha256": layout_hash(layout),
         "shapes": len(layout.shapes),
         "materials": layout.materials(),
         "lidar": {
             "id": "lidar_top",
             "preset": rig.lidar_preset,
-            "T_world_lidar": np.round(rig.T_world_lidar(), 9).tolist(),
+            "T_world_lidar": (np.round(rig.T_world_lidar(), 9) + 0.0).tolist(),
         },
         "camera": {
             "id": "cam_front",
             "fov_deg": rig.camera_fov_deg,
             "fov_axis": "x",
-            "T_world_cam": np.round(rig.T_world_cam(), 9).tolist(),
-            "T_cam_lidar": np.round(rig.T_cam_lidar(), 9).tolist(),
+            "T_world_cam": (np.round(rig.T_world_cam(), 9) + 0.0).tolist(),
+            "T_cam_lidar": (np.round(rig.T_cam_lidar(), 9) + 0.0).tolist(),
         },
         "sun": {
             "elevation_deg": layout.sun.elevation_deg,
@@ -138,15 +154,17 @@ def generate(
     index_path = os.path.join(out_dir, INDEX_NAME)
     entries = {e["id"]: e for e in _read_index(index_path)}
     written = skipped = 0
-    hashes: dict[str, str] = {}
+    # a layout repeated in the folder would leak across a split by scene
+    hashes = {e["layout_sha256"]: e["id"] for e in entries.values() if "layout_sha256" in e}
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
         layout, text = generate_scene(seed, k, kind)
         entry = index_entry(seed, k, layout, text)
-        if entry["sha256"] in hashes:  # a repeated layout would leak across a split by scene
-            raise NidarError(f"{entry['id']} repeats {hashes[entry['sha256']]}")
-        hashes[entry["sha256"]] = entry["id"]
+        other = hashes.get(entry["layout_sha256"], entry["id"])
+        if other != entry["id"]:
+            raise NidarError(f"{entry['id']} repeats the layout of {other}")
+        hashes[entry["layout_sha256"]] = entry["id"]
         path = os.path.join(out_dir, entry["file"])
         if os.path.exists(path):
             skipped += 1

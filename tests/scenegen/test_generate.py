@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.scenegen.generate import generate, generate_scene, scene_id, scene_rng
+from nidar_mi.scenegen.generate import (
+    generate,
+    generate_scene,
+    layout_hash,
+    scene_id,
+    scene_rng,
+)
 
 SMALL = {"width": "48", "height": "27", "cols": "256"}
 
@@ -73,6 +79,17 @@ def test_bad_arguments(tmp_path, kwargs, message):
     with pytest.raises(NidarError, match=message):
         generate(str(tmp_path / "gen"), progress=False, **kwargs)
     assert not (tmp_path / "gen").exists()
+
+
+def test_a_repeated_layout_in_the_folder_is_refused(tmp_path):
+    layout, _ = generate_scene(0, 0)
+    assert layout_hash(layout) == layout_hash(generate_scene(0, 0)[0])
+    assert layout_hash(layout) != layout_hash(generate_scene(0, 1)[0])
+    copy = {"id": "scene_copy", "seed": -1, "index": 0, "layout_sha256": layout_hash(layout)}
+    (tmp_path / "index.json").write_text(json.dumps({"scenes": [copy]}))
+    with pytest.raises(NidarError, match="scene_0_0 repeats the layout of scene_copy"):
+        generate(str(tmp_path), 1, 0, progress=False)
+    assert not (tmp_path / "scene_0_0.xml").exists()
 
 
 def test_corrupt_index_is_reported(tmp_path):
