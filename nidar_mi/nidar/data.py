@@ -19,7 +19,8 @@ key             shape         dtype    meaning
 ``T_cam_lidar`` (4, 4)        float64  LiDAR frame -> camera frame
 =============== ============= ======== ================================================
 
-Files are opened with ``allow_pickle=False``. Intensity is divided by ``intensity_scale``.
+Files are opened with ``allow_pickle=False``. Intensity is divided by ``intensity_scale`` and
+clipped to [0, 1].
 Crops and flips are drawn from a generator seeded by ``(seed, epoch, index)``, so a sample
 does not depend on worker processes or on where a run was resumed.
 """
@@ -187,7 +188,8 @@ class IRNetDataset(FrameDataset):
 
     Args:
         frames: frame files.
-        intensity_scale: divisor of the stored intensity (``meta.json``).
+        intensity_scale: divisor of the stored intensity (``meta.json``); the quotient is
+            clipped to [0, 1].
         crop_size: side of the square crops.
         seed: seed of crops and flips.
         train: random crops and flips if True, centre crops otherwise.
@@ -222,7 +224,9 @@ class IRNetDataset(FrameDataset):
             if x.shape != (1, *arrays["mask"].shape):
                 raise NidarError(f"pseudo-NIR cache of {path.name} has shape {x.shape}")
         mask = arrays["mask"][None].astype(np.float32)
-        target = (arrays["intensity"][None] / np.float32(self.intensity_scale)) * mask
+        # LiDAR4D-style scaling: divide by the stated scale and clip to [0, 1] (retroreflectors
+        # would otherwise dominate every squared loss)
+        target = np.clip(arrays["intensity"][None] / np.float32(self.intensity_scale), 0, 1) * mask
         window, flip = self._window(index, *mask.shape[1:])
         return {
             "x": self._apply(x.astype(np.float32), window, flip),

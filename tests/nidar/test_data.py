@@ -117,3 +117,15 @@ def test_crop_larger_than_frame_is_a_user_error(data_dir):
     ds = STNDataset(list_frames(data_dir, "val"), crop_size=64, train=False)
     with pytest.raises(NidarError, match="exceeds the frame size"):
         ds[0]
+
+
+def test_intensity_is_scaled_and_clipped(data_dir):
+    """intensity / scale, clipped to [0, 1]: a retroreflector's huge return saturates at 1."""
+    frames = list_frames(data_dir, "train")[:1]
+    full = IRNetDataset(frames, 255.0, 32, train=False)[0]
+    small = IRNetDataset(frames, 25.5, 32, train=False)[0]  # everything 10x brighter
+    m = full["mask"] > 0
+    np.testing.assert_allclose(
+        small["intensity"][m], np.minimum(10 * full["intensity"][m], 1.0), rtol=1e-5
+    )
+    assert small["intensity"].max() == 1.0 and full["intensity"].max() <= 1.0
