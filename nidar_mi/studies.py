@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import NidarError
+from .lidar.config import INTENSITY_MODES
 from .materials import get_material
 
 __all__ = [
@@ -167,6 +168,8 @@ def panel_layout(
     if not np.all(np.isfinite(th)) or np.any(th < 0.0) or np.any(th >= 90.0):
         raise NidarError("every incidence angle must be in [0, 90) degrees")
     n = d.size
+    if n == 0:
+        raise NidarError("a panel scene needs at least one panel")
     if int(cols) < 2 * n:
         raise NidarError(f"{n} panels need at least {2 * n} columns, got {cols}")
     cols = int(cols)
@@ -278,6 +281,8 @@ def panel_scene_xml(
         spread_deg=spread_deg,
         count=None if isinstance(materials, str) else len(materials),
     )
+    if intensity_mode not in INTENSITY_MODES:
+        raise NidarError(f"intensity_mode must be one of {', '.join(INTENSITY_MODES)}")
     n = layout.distances_m.size
     names = [materials] * n if isinstance(materials, str) else [str(m) for m in materials]
     for name in {*names, *([backdrop] if backdrop is not None else [])}:

@@ -49,6 +49,7 @@ def test_layout_puts_each_panel_on_a_column_centre():
         {"distance_m": [2.0] * 12},  # 1 m panels at 2 m shadow each other 30 deg apart
         {"distance_m": [10.0] * 3, "cols": 4},
         {"spread_deg": 0.0},
+        {"distance_m": [], "incidence_deg": []},
     ],
 )
 def test_layout_rejects_bad_values(kwargs):
@@ -72,6 +73,8 @@ def test_scene_xml_names_an_unknown_material():
         panel_scene_xml("gras")
     with pytest.raises(NidarError, match="unknown material"):
         panel_scene_xml("grass", backdrop="no_such_wall")
+    with pytest.raises(NidarError, match="intensity_mode"):
+        panel_scene_xml("grass", intensity_mode="linear")
 
 
 def test_extinction_from_visibility_hand_values():
