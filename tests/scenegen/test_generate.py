@@ -142,3 +142,22 @@ def test_generated_scene_renders(tmp_path, variant, kind):
         atol=1e-4,
     )
     assert os.path.getsize(out / "lidar_top" / "points.npz") > 0
+
+
+def test_every_scene_of_a_run_loads_and_scans(tmp_path, variant):
+    """Eight scenes of one run (both kinds, both presets) load and return beams off the ground."""
+    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.scene import load_scene
+
+    index = generate(str(tmp_path), 8, 21, progress=False)
+    seen = set()
+    for e in index["scenes"]:
+        loaded = load_scene(str(tmp_path / e["file"]), variant=variant, params={"cols": "64"})
+        assert [s.id() for s in loaded.lidars] == ["lidar_top"]
+        assert [c.id() for c in loaded.cameras] == ["cam_front"]
+        result = scan(loaded.scene, loaded.lidars[0], seed=0)
+        # at least the beams pointing down (half of a VLP-16's, most of an HDL-64E's) return
+        assert result.valid.mean() > 0.4, e["id"]
+        seen.add((e["kind"], e["lidar"]["preset"]))
+    assert {k for k, _ in seen} == {"urban", "vegetated"}
+    assert {p for _, p in seen} == {"hdl64e", "vlp16"}
