@@ -6,9 +6,9 @@ road or path runs along +x from :data:`X_MIN` to :data:`X_MAX`, the rig stands n
 the right-hand lane (or on the path) looking along +x, z is up.
 
 * ``urban``: a two- or four-lane road (optional parking strips, a cross street, a zebra
-  crossing), lane and edge markings, kerbed sidewalks, ground strips, rows of buildings with
-  windows and doors, parked and moving vehicles, street lights, sign posts, street trees,
-  bushes and clutter.
+  crossing), lane and edge markings, kerbed sidewalks, ground strips and patches, rows of
+  buildings with windows and doors, parked and moving vehicles, street lights, sign posts,
+  street trees, bushes and clutter.
 * ``vegetated``: a path through grass and soil patches, trees, bushes, boulders, benches, lamp
   posts, trail signs, sometimes a shed and a parked car.
 """
@@ -269,12 +269,30 @@ def _urban(rng: np.random.Generator) -> tuple[list[Shape], tuple[float, float]]:
         if placer.take(xv, yv, 2.6):
             shapes += vehicle(rng, f"car_lane_{k}", xv, yv, heading + rng.uniform(-2.0, 2.0))
 
-    # ---- bushes and clutter beside the road
+    # ---- patches of other ground cover behind the sidewalks (2 mm apart, clear of a cross street)
+    for k in range(int(rng.integers(0, 5))):
+        s = 1.0 if rng.random() < 0.5 else -1.0
+        side = "left" if s > 0 else "right"
+        hx, hy = rng.uniform(2.0, 8.0), rng.uniform(1.0, 5.0)
+        xc = rng.uniform(X_MIN + hx, X_MAX - hx)
+        yc = edges[side][0] + s * (widths[side] + hy + rng.uniform(0.0, 8.0))
+        if not cross or xc + hx < cross[0] or xc - hx > cross[1]:
+            shapes.append(
+                Patch(
+                    f"patch_{k}",
+                    pick(rng, "urban_ground"),
+                    (rnd(xc), rnd(yc), rnd(0.002 * (k + 1))),
+                    (rnd(hx), rnd(hy)),
+                )
+            )
+
+    # ---- bushes and clutter beside the road (not on a cross street)
     for k in range(int(rng.integers(2, 12))):
         s = 1.0 if rng.random() < 0.5 else -1.0
         edge = y_hi if s > 0 else y_lo
         xb_, yb_ = rng.uniform(-20.0, 75.0), edge + s * rng.uniform(0.4, 6.0)
-        if placer.take(xb_, yb_, 0.7):
+        on_cross = cross is not None and cross[0] - 1.0 < xb_ < cross[1] + 1.0
+        if not on_cross and placer.take(xb_, yb_, 0.7):
             maker = bush if rng.random() < 0.4 else clutter
             shapes += maker(rng, f"clutter_{k}", xb_, yb_)
     return shapes, rig_xy
