@@ -231,8 +231,10 @@ def tree(rng: np.random.Generator, prefix: str, x: float, y: float) -> list[Shap
     ]
     for i in range(int(rng.integers(1, 4))):
         a = rng.uniform(0, 2 * math.pi)
+        # the first sphere is the crown itself; others bulge out of it
         off = 0.0 if i == 0 else rng.uniform(0.3, 0.6) * crown_r
         r = crown_r * (1.0 if i == 0 else rng.uniform(0.55, 0.8))
+        dz = 0.0 if i == 0 else rng.uniform(-0.3, 0.5)
         shapes.append(
             Sphere(
                 f"{prefix}_crown_{i}",
@@ -240,7 +242,7 @@ def tree(rng: np.random.Generator, prefix: str, x: float, y: float) -> list[Shap
                 _pt(
                     x + off * math.cos(a),
                     y + off * math.sin(a),
-                    trunk_h + crown_r + rng.uniform(-0.3, 0.5) * (i > 0),
+                    trunk_h + crown_r + dz,
                 ),
                 rnd(r),
             )
