@@ -115,9 +115,9 @@ def _write_camera(stage: str, cam, lidar_poses: dict, written: list[str]) -> dic
 
     d = os.path.join(stage, cam.name)
     os.makedirs(d, exist_ok=True)
-    exposure = auto_exposure(cam.rgb)
+    exposure = cam.exposure()
     outputs = {
-        "rgb.png": lambda p: images.write_png(p, _camera_png8(cam)),
+        "rgb.png": lambda p: images.write_png(p, cam.srgb8()),
         "rgb.exr": lambda p: images.write_exr(
             p, {"R": cam.rgb[..., 0], "G": cam.rgb[..., 1], "B": cam.rgb[..., 2]}
         ),
@@ -146,14 +146,6 @@ def _write_camera(stage: str, cam, lidar_poses: dict, written: list[str]) -> dic
     return calib
 
 
-def auto_exposure(rgb: np.ndarray, key: float = 0.85, percentile: float = 99.5) -> float:
-    """Scale that maps the ``percentile`` of an image's luminance to ``key`` (a camera's auto
-    exposure). The same scale is applied to the NIR preview so that RGB and NIR PNGs compare."""
-    lum = rgb[..., 0] * 0.2126 + rgb[..., 1] * 0.7152 + rgb[..., 2] * 0.0722
-    ref = float(np.percentile(lum, percentile)) if lum.size else 0.0
-    return key / ref if ref > 1e-12 else 1.0
-
-
 def _nidar_columns(results: dict, renders: dict, weights: str | None) -> dict:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .nidar.pipeline import NidarModel
@@ -162,21 +154,14 @@ def _nidar_columns(results: dict, renders: dict, weights: str | None) -> dict:
     if not renders:
         raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
     model = NidarModel.load(weights)
-    maps = {cid: model.predict_image(_camera_png8(r)) for cid, (r, _) in renders.items()}
+    maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in renders.items()}
     out = {}
     for lid, result in results.items():
         pts = result.points()
         cams, depth, cam_maps = [], [], []
         for cid, (r, calib) in renders.items():
-            cams.append(
-                CameraModel(
-                    r.K,
-                    calib["width"],
-                    calib["height"],
-                    np.array(calib["T_cam_lidar"][lid]),
-                    name=cid,
-                )
-            )
+            T = np.array(calib["T_cam_lidar"][lid])
+            cams.append(CameraModel(r.K, calib["width"], calib["height"], T, name=cid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
         res = model.point_intensity(
@@ -184,14 +169,6 @@ def _nidar_columns(results: dict, renders: dict, weights: str | None) -> dict:
         )
         out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
     return out
-
-
-def _camera_png8(r) -> np.ndarray:
-    """The 8-bit sRGB image written as rgb.png (the camera image NIDAR sees)."""
-    from .io.images import linear_to_srgb
-
-    rgb = np.clip(r.rgb * auto_exposure(r.rgb), 0.0, 1.0).astype(np.float64)
-    return np.round(np.nan_to_num(linear_to_srgb(rgb), nan=0.0) * 255).astype(np.uint8)
 
 
 def _gray8(img: np.ndarray) -> np.ndarray:
