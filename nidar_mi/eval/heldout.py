@@ -1,0 +1,203 @@
+"""Scene-level pieces of the held-out evaluation: fitting baselines, rendering, scanning twins.
+
+* :func:`fit_class_constant`: baseline (c) on the training scenes' returns, by material name.
+* :func:`fit_pseudo_nir_calibration`: baseline (e)'s calibration (pseudo-NIR in place of R).
+* :func:`twin_prediction`: baseline (a) at a frame's points from the RGB-twin scan.
+* :func:`render_scenes`: cached renders of scene files (the hand-made scenes).
+* :func:`evaluate_renders`: every frame of a set of rendered scenes through
+  :func:`~nidar_mi.eval.evaluate.predict_frame` and :func:`~nidar_mi.eval.evaluate.evaluate_frame`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from ..errors import NidarError
+from .baselines import ClassConstant
+from .evaluate import (
+    FrameData,
+    FrameResult,
+    _read_manifest,
+    evaluate_frame,
+    load_render_frames,
+    predict_frame,
+)
+from .metrics import scale_intensity
+
+__all__ = [
+    "evaluate_renders",
+    "fit_class_constant",
+    "fit_pseudo_nir_calibration",
+    "render_scenes",
+    "twin_prediction",
+]
+
+
+def fit_class_constant(
+    render_dirs: Sequence[str], intensity_scale: float, lidar_id: str | None = None
+) -> ClassConstant:
+    """Baseline (c): mean scaled intensity per material name over every return of the scenes.
+
+    Args:
+        render_dirs: rendered training scenes.
+        intensity_scale: divisor of the metric scale.
+        lidar_id: LiDAR to read; None takes the first by id.
+    """
+    from ..io.points import read_npz
+    from ..nidar.frames import compensate
+
+    labels, values = [], []
+    for rdir in render_dirs:
+        manifest = _read_manifest(rdir)
+        lid = lidar_id or sorted(manifest["lidars"])[0]
+        mode = manifest["lidars"][lid]["parameters"]["intensity_mode"]
+        pts = read_npz(os.path.join(rdir, lid, "points.npz"))
+        names = np.asarray(pts["material_names"]).astype(str)
+        mat = np.asarray(pts["material"], dtype=np.int64)
+        ok = mat >= 0
+        labels.append(names[mat[ok]])
+        inten = compensate(pts["intensity"], pts["range"], mode)
+        values.append(scale_intensity(inten, intensity_scale)[ok])
+    if not labels:
+        raise NidarError("class constant: no training scenes")
+    return ClassConstant.fit(np.concatenate(labels), np.concatenate(values))
+
+
+def fit_pseudo_nir_calibration(model, data_dir: str, split: str = "train"):
+    """Baseline (e)'s calibration: NIDAR's distance encoding + quantile map fitted on pseudo-NIR.
+
+    Same recipe as :func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`, with the STN's
+    pseudo-NIR at the masked pixels in place of the R branch.
+    """
+    from ..nidar.calibration import fit_calibration
+    from ..nidar.data import list_frames, load_meta
+
+    meta = load_meta(data_dir)
+    scale = float(meta.get("intensity_scale", 1.0))
+    preds, dists, refs = [], [], []
+    for path in list_frames(data_dir, split):
+        with np.load(path, allow_pickle=False) as z:
+            rgb, inten, m, rng = z["rgb"], z["intensity"], z["mask"], z["range"]
+        maps = model.predict_image(rgb)
+        if "pseudo_nir" not in maps:
+            raise NidarError("the model has no STN: no pseudo-NIR to calibrate")
+        preds.append(maps["pseudo_nir"][m])
+        dists.append(rng[m])
+        refs.append(scale_intensity(inten[m], scale))
+    if not preds:
+        raise NidarError(f"{data_dir}: no '{split}' frames to fit the pseudo-NIR calibration on")
+    return fit_calibration(
+        np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), branch="pseudo_nir"
+    )
+
+
+def twin_prediction(frame: FrameData, twin, intensity_scale: float) -> np.ndarray:
+    """Baseline (a) at the frame's points from an RGB-twin :class:`ScanResult`.
+
+    The twin's intensity at the same (ring, column), compensated with the twin's own range
+    like the ground truth and put on the metric scale; 0 where the twin has no return.
+    """
+    from ..nidar.frames import compensate
+
+    r, c = frame.ring, frame.column
+    valid = twin.valid[r, c]
+    inten = compensate(
+        twin.intensity[r, c].astype(np.float32),
+        twin.range[r, c].astype(np.float32),
+        twin.config.intensity_mode,
+    )
+    return np.where(valid, scale_intensity(inten, intensity_scale), 0.0)
+
+
+def render_scenes(
+    scene_files: Sequence[str],
+    cache_dir: str,
+    *,
+    params: dict[str, str] | None = None,
+    seed: int = 0,
+    spp: int = 16,
+) -> list[str]:
+    """Render scenes (cached: skipped when ``cache_dir/<name>/manifest.json`` exists).
+
+    Args:
+        scene_files: scene XML files.
+        cache_dir: folder of the renders.
+        params: scene parameters, passed only to scenes that use them (``$name`` in the XML).
+        seed: scan seed.
+        spp: camera samples per pixel.
+
+    Returns:
+        The render folders, in the order of ``scene_files``.
+    """
+    from ..render import render_scene
+
+    out = []
+    for path in scene_files:
+        name = os.path.splitext(os.path.basename(path))[0]
+        rdir = os.path.join(cache_dir, name)
+        if not os.path.isfile(os.path.join(rdir, "manifest.json")):
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+            used = {k: v for k, v in (params or {}).items() if f"${k}" in text}
+            render_scene(
+                path, rdir, formats=("npz",), seed=seed, spp=spp, params=used, progress=False
+            )
+        out.append(rdir)
+    return out
+
+
+def evaluate_renders(
+    render_dirs: Sequence[str],
+    model,
+    intensity_scale: float,
+    *,
+    class_const: ClassConstant | None = None,
+    pseudo_calibration=None,
+    twin: bool = True,
+    lpips: bool = False,
+    lidar_id: str | None = None,
+    on_frame: Callable[[FrameResult], None] | None = None,
+) -> list[FrameResult]:
+    """Predict and score every camera frame of the rendered scenes.
+
+    Args:
+        render_dirs: rendered scenes (see :func:`load_render_frames`).
+        model: :class:`~nidar_mi.nidar.pipeline.NidarModel`, or None for the baselines only.
+        intensity_scale: divisor of the metric scale.
+        class_const: fitted baseline (c).
+        pseudo_calibration: baseline (e)'s calibration.
+        twin: scan each scene's RGB-only twin for baseline (a) (needs Mitsuba and the XML).
+        lpips: compute LPIPS on the camera maps.
+        lidar_id: LiDAR to evaluate.
+        on_frame: called with each result as soon as it is ready (figures, logging).
+    """
+    from .baselines import rgb_twin_scan
+
+    results = []
+    for rdir in render_dirs:
+        frames = load_render_frames(rdir, intensity_scale, lidar_id)
+        twin_scan = None
+        if twin and frames:
+            f0 = frames[0]
+            if not os.path.isfile(f0.scene_path):
+                raise NidarError(f"{rdir}: scene file {f0.scene_path} not found for the RGB twin")
+            twin_scan = rgb_twin_scan(f0.scene_path, params=f0.params, seed=f0.seed, lidar=lidar_id)
+        for frame in frames:
+            if frame.gt.size == 0:
+                continue
+            tp = None if twin_scan is None else twin_prediction(frame, twin_scan, intensity_scale)
+            pred = predict_frame(
+                frame,
+                model,
+                class_const=class_const,
+                pseudo_calibration=pseudo_calibration,
+                twin_pred=tp,
+            )
+            res = evaluate_frame(frame, pred, lpips=lpips)
+            if on_frame is not None:
+                on_frame(res)
+            results.append(res)
+    return results

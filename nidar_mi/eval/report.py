@@ -1,0 +1,305 @@
+"""Result tables as Markdown, CSV and JSON (written atomically).
+
+Rows are flat dicts (see :func:`nidar_mi.eval.evaluate.result_rows`); a table is a list of rows
+plus the columns to show. Missing values (``None``, NaN) print as ``–`` in Markdown and as an
+empty cell in CSV; JSON keeps ``null`` (NaN and inf become ``null``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+__all__ = [
+    "BEST",
+    "MAP_COLUMNS",
+    "SCENE_COLUMNS",
+    "ablation_markdown",
+    "goal_check",
+    "group_markdown",
+    "kitti_markdown",
+    "labelled",
+    "fmt_value",
+    "markdown_table",
+    "write_csv",
+    "write_json",
+    "write_text",
+]
+
+MAP_COLUMNS = (
+    ("map_rmse", "RMSE↓", 4),
+    ("map_medae", "MedAE↓", 4),
+    ("map_psnr", "PSNR↑ (dB)", 2),
+    ("map_ssim", "SSIM↑", 4),
+    ("map_lpips", "LPIPS↓", 4),
+    ("point_rmse", "pt RMSE↓", 4),
+    ("point_mae", "pt MAE↓", 4),
+    ("spearman", "Spearman↑", 3),
+    ("ri_ssim", "RI SSIM↑", 4),
+    ("ri_psnr", "RI PSNR↑", 2),
+)
+"""(key, header, decimals) of the metric columns of the held-out tables."""
+
+
+def fmt_value(v: Any, decimals: int = 4) -> str:
+    """A table cell: numbers with ``decimals`` places, ``–`` for missing/NaN, ``inf`` kept."""
+    if v is None:
+        return "–"
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    if isinstance(v, int):
+        return str(v)
+    if math.isnan(v):
+        return "–"
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return f"{v:.{decimals}f}"
+
+
+def markdown_table(
+    rows: Sequence[Mapping[str, Any]],
+    columns: Sequence[tuple[str, str, int]],
+    *,
+    bold_best: Mapping[str, str] | None = None,
+) -> str:
+    """A GitHub Markdown table.
+
+    Args:
+        rows: the rows.
+        columns: (key, header, decimals) per column; decimals is ignored for text.
+        bold_best: key -> ``"min"`` or ``"max"``: the best value of that column is bold.
+
+    Returns:
+        The table text, ending with a newline.
+    """
+    best: dict[str, float] = {}
+    for key, how in (bold_best or {}).items():
+        vals = [
+            r.get(key)
+            for r in rows
+            if isinstance(r.get(key), (int, float)) and math.isfinite(r.get(key))
+        ]
+        if vals:
+            best[key] = min(vals) if how == "min" else max(vals)
+    lines = [
+        "| " + " | ".join(h for _, h, _ in columns) + " |",
+        "|" + "|".join("---" for _ in columns) + "|",
+    ]
+    for r in rows:
+        cells = []
+        for key, _, dec in columns:
+            v = r.get(key)
+            s = fmt_value(v, dec)
+            if key in best and isinstance(v, (int, float)) and v == best[key]:
+                s = f"**{s}**"
+            cells.append(s)
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _csv_cell(v: Any) -> Any:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return ""
+    return v
+
+
+def write_csv(path: str | os.PathLike, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Rows as CSV; the header is the union of the keys in first-seen order."""
+    keys: list[str] = []
+    for r in rows:
+        keys.extend(k for k in r if k not in keys)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=keys, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: _csv_cell(r.get(k)) for k in keys})
+    write_text(path, buf.getvalue())
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, Mapping):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item") and hasattr(obj, "dtype"):  # NumPy scalar
+        return _clean(obj.item())
+    return obj
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """JSON with NaN/inf as ``null`` (strict JSON), atomically."""
+    from ..io.atomic import atomic_write_json
+
+    atomic_write_json(path, _clean(obj))
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    """UTF-8 text, atomically."""
+    from ..io.atomic import atomic_write_text
+
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    atomic_write_text(path, text)
+
+
+SCENE_COLUMNS = (
+    ("scene", "scene", 0),
+    ("label", "method", 0),
+    ("n_points", "points", 0),
+    ("map_rmse", "RMSE↓", 4),
+    ("map_psnr", "PSNR↑", 2),
+    ("map_ssim", "SSIM↑", 4),
+    ("point_mae", "pt MAE↓", 4),
+    ("spearman", "Spearman↑", 3),
+)
+BEST = {
+    "map_rmse": "min",
+    "map_medae": "min",
+    "map_psnr": "max",
+    "map_ssim": "max",
+    "map_lpips": "min",
+    "point_rmse": "min",
+    "point_mae": "min",
+    "spearman": "max",
+    "ri_ssim": "max",
+    "ri_psnr": "max",
+}
+
+
+def goal_check(
+    mean_rows: Sequence[Mapping[str, Any]],
+    ours: str,
+    rivals: Sequence[str],
+    metrics: Sequence[tuple[str, str]] = (("map_ssim", "max"), ("map_rmse", "min")),
+) -> list[str]:
+    """One line per metric: whether ``ours`` beats every rival in ``mean_rows``, with numbers."""
+    by = {r["method"]: r for r in mean_rows}
+    if ours not in by:
+        return [f"{ours} was not evaluated"]
+    lines = []
+    for key, how in metrics:
+        v = by[ours].get(key)
+        beaten_by = []
+        for k in rivals:
+            if k not in by or by[k].get(key) is None or v is None:
+                continue
+            w = by[k][key]
+            if (how == "max" and w >= v) or (how == "min" and w <= v):
+                beaten_by.append(f"{k} {fmt_value(w)}")
+        verdict = (
+            "ahead of every baseline" if not beaten_by else "NOT ahead of " + ", ".join(beaten_by)
+        )
+        lines.append(
+            f"{key} ({'higher' if how == 'max' else 'lower'} is better): {ours} "
+            f"{fmt_value(v)}, {verdict}"
+        )
+    return lines
+
+
+def labelled(rows: Sequence[Mapping[str, Any]], labels: Mapping[str, str]) -> list[dict]:
+    """Rows with a ``label`` column (the method's display name)."""
+    return [{**r, "label": labels.get(r["method"], r["method"])} for r in rows]
+
+
+def _mean_columns(rows: Sequence[Mapping[str, Any]]) -> list[tuple[str, str, int]]:
+    cols = [("label", "method", 0), ("frames", "frames", 0)]
+    for key, head, dec in MAP_COLUMNS:
+        if any(r.get(key) is not None for r in rows):
+            cols.append((key, head, dec))
+    return cols
+
+
+def group_markdown(title: str, group: Mapping[str, Any], labels: Mapping[str, str]) -> str:
+    """Mean table, goal check and per-scene table of one held-out group."""
+    mean = labelled(group["mean"], labels)
+    parts = [f"## {title}\n", group.get("note", "") + "\n" if group.get("note") else ""]
+    parts.append(
+        f"Mean over {mean[0]['frames'] if mean else 0} frames (scenes: "
+        f"{', '.join(group.get('scenes', []))}). Camera-projection map metrics (RMSE, MedAE, "
+        "PSNR, SSIM, LPIPS), point metrics (pt RMSE, pt MAE, Spearman) and SSIM/PSNR on the "
+        "LiDAR range image (RI); best value in bold.\n\n"
+    )
+    parts.append(markdown_table(mean, _mean_columns(mean), bold_best=BEST))
+    rivals = [r["method"] for r in group["mean"] if r["method"] != "nidar_full"]
+    checks = goal_check(group["mean"], "nidar_full", rivals)
+    parts.append("\nGoal (NIDAR-Full ahead of every baseline on SSIM and RMSE):\n\n")
+    parts.extend(f"- {c}\n" for c in checks)
+    parts.append("\n<details><summary>Per scene</summary>\n\n")
+    parts.append(markdown_table(labelled(group["rows"], labels), SCENE_COLUMNS))
+    parts.append("\n</details>\n")
+    return "".join(parts)
+
+
+def kitti_markdown(kitti: Mapping[str, Any], labels: Mapping[str, str]) -> str:
+    """The KITTI section: mean and per-frame tables, the unavailable baselines, goal check."""
+    if "skipped" in kitti:
+        return f"## Real data: KITTI\n\nSkipped: {kitti['skipped']}\n"
+    mean = labelled(kitti["mean"], labels)
+    cols = [c for c in _mean_columns(mean) if not c[0].startswith("ri_")]
+    parts = [
+        "## Real data: KITTI\n\n",
+        f"Frames {', '.join(kitti['frames'])}; reference: the Velodyne reflectance channel "
+        "(in [0, 1], unscaled) at the returns camera 2 sees. Zero-shot rows use the "
+        "source-domain (synthetic) calibration; `LOO` rows refit the quantile map on the "
+        "other KITTI frames.\n\n",
+        markdown_table(mean, cols, bold_best=BEST),
+        "\nNot available on real data:\n\n",
+    ]
+    parts.extend(f"- {v}\n" for v in kitti["unavailable"].values())
+    parts.append("\nGoal (NIDAR-Full ahead of the available baselines (b), (d)):\n\n")
+    parts.extend(
+        f"- zero-shot: {c}\n"
+        for c in goal_check(kitti["mean"], "nidar_full", ["luminance", "carla"])
+    )
+    parts.extend(
+        f"- leave-one-out: {c}\n"
+        for c in goal_check(kitti["mean"], "nidar_full_loo", ["luminance_loo", "carla_loo"])
+    )
+    parts.append("\n<details><summary>Per frame</summary>\n\n")
+    parts.append(markdown_table(labelled(kitti["rows"], labels), SCENE_COLUMNS))
+    parts.append("\n</details>\n")
+    return "".join(parts)
+
+
+def ablation_markdown(ab: Mapping[str, Any]) -> str:
+    """The two ablation tables with the settings they were trained with."""
+    s = ab["settings"]
+    parts = [
+        "## Ablations\n\n",
+        f"Every run: IRNet width {s['width']}, {s['crop_size']} px crops, batch "
+        f"{s['batch_size']}, {s['epochs']} epochs, Adam lr {s['lr']}, intensity-loss warm-up "
+        f"{s['int_warmup_epochs']} epoch(s), seed {s['seed']}, the shipped STN fixed; scored "
+        f"on the '{ab['split']}' frames' projected intensity (masked pixels, mean over "
+        "frames).\n\n### IRNet structural ablation (Î)\n\n",
+        markdown_table(
+            ab["structural"],
+            [
+                ("variant", "variant", 0),
+                ("val_loss", "val. loss", 4),
+                ("rmse", "RMSE↓", 4),
+                ("mae", "MAE↓", 4),
+                ("ssim", "SSIM↑", 4),
+                ("psnr", "PSNR↑", 2),
+            ],
+            bold_best={"rmse": "min", "mae": "min", "ssim": "max", "psnr": "max"},
+        ),
+        "\n### Pseudo-NIR vs RGB input (unet+deeplabv3)\n\n",
+        markdown_table(
+            ab["input"],
+            [
+                ("input", "input", 0),
+                ("val_loss", "val. loss", 4),
+                ("output", "output", 0),
+                ("post", "post.", 0),
+                ("mae", "MAE↓", 4),
+                ("rmse", "RMSE↓", 4),
+                ("ssim", "SSIM↑", 4),
+            ],
+        ),
+    ]
+    return "".join(parts)
