@@ -217,7 +217,7 @@ def _mean_columns(rows: Sequence[Mapping[str, Any]]) -> list[tuple[str, str, int
 def group_markdown(title: str, group: Mapping[str, Any], labels: Mapping[str, str]) -> str:
     """Mean table, goal check and per-scene table of one held-out group."""
     mean = labelled(group["mean"], labels)
-    parts = [f"## {title}\n", group.get("note", "") + "\n" if group.get("note") else ""]
+    parts = [f"## {title}\n\n", group["note"] + "\n\n" if group.get("note") else ""]
     parts.append(
         f"Mean over {mean[0]['frames'] if mean else 0} frames (scenes: "
         f"{', '.join(group.get('scenes', []))}). Camera-projection map metrics (RMSE, MedAE, "
