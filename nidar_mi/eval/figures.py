@@ -12,6 +12,7 @@ written atomically.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Mapping, Sequence
 
@@ -30,11 +31,17 @@ def _plt():
 
 
 def _save(fig, path: str | os.PathLike, dpi: int) -> None:
+    from PIL import Image
+
     from ..io.atomic import atomic_path
 
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format="png", bbox_inches="tight")
+    # a 256-colour palette keeps the files small (the colormaps have 256 entries anyway)
+    img = Image.open(io.BytesIO(buf.getvalue())).convert("RGB").quantize(256)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight")
+        img.save(tmp, format="PNG", optimize=True)
 
 
 def maps_figure(
