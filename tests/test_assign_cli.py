@@ -1,0 +1,160 @@
+"""``python -m nidar_mi.assign`` with the shipped model: external clouds, KITTI frames, bad input;
+and ``render --intensity nidar``."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from nidar_mi.nidar.pipeline import shipped_weights_dir
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+KITTI = os.environ.get("NIDAR_KITTI_DIR", os.path.join(REPO, "..", "shared", "data", "kitti"))
+pytestmark = pytest.mark.skipif(
+    not (shipped_weights_dir() / "irnet.safetensors").is_file(), reason="no shipped weights"
+)
+
+
+def run(module, *args):
+    return subprocess.run(
+        [sys.executable, "-m", module, *args], capture_output=True, text=True, cwd=REPO, timeout=600
+    )
+
+
+def test_points_image_calib(tmp_path):
+    from nidar_mi.io.images import write_png
+    from nidar_mi.io.points import read_npz, write_ply
+
+    rng = np.random.default_rng(0)
+    # LiDAR frame x forward; the camera looks along +x (OpenCV: x right = -y, y down = -z)
+    xyz = np.column_stack(
+        [rng.uniform(4, 30, 500), rng.uniform(-8, 8, 500), rng.uniform(-1.5, 2, 500)]
+    ).astype(np.float32)
+    behind = np.array([[-10.0, 0.0, 0.0]], dtype=np.float32)
+    xyz = np.vstack([xyz, behind])
+    write_ply(
+        tmp_path / "cloud.ply", {"xyz": xyz, "intensity": np.arange(len(xyz), dtype=np.float32)}
+    )
+    img = (rng.uniform(0, 1, (120, 200, 3)) * 255).astype(np.uint8)
+    write_png(tmp_path / "cam.png", img)
+    T = np.eye(4)
+    T[:3, :3] = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]
+    calib = {
+        "cameras": [
+            {
+                "name": "front",
+                "fx": 120,
+                "fy": 120,
+                "cx": 99.5,
+                "cy": 59.5,
+                "width": 200,
+                "height": 120,
+                "T_cam_lidar": T.tolist(),
+            }
+        ]
+    }
+    (tmp_path / "calib.yaml").write_text(yaml.safe_dump(calib))
+    out = tmp_path / "out"
+    r = run(
+        "nidar_mi.assign",
+        "--points",
+        str(tmp_path / "cloud.ply"),
+        "--image",
+        str(tmp_path / "cam.png"),
+        "--calib",
+        str(tmp_path / "calib.yaml"),
+        "-o",
+        str(out),
+    )
+    assert r.returncode == 0, r.stderr
+    p = read_npz(out / "points.npz")
+    assert sorted(os.listdir(out)) == ["points.las", "points.npz", "points.ply"]
+    np.testing.assert_array_equal(p["xyz"], xyz)
+    np.testing.assert_array_equal(p["intensity"], np.arange(len(xyz), dtype=np.float32))
+    obs = p["nidar_observed"]
+    # observed exactly when the point projects inside the image (no other geometry occludes
+    # except the cloud's own z-buffer, which can only remove points)
+    u = 120 * (-xyz[:, 1]) / xyz[:, 0] + 99.5
+    v = 120 * (-xyz[:, 2]) / xyz[:, 0] + 59.5
+    inside = (xyz[:, 0] > 0) & (u > -0.5) & (u < 199.5) & (v > -0.5) & (v < 119.5)
+    assert not obs[~inside].any() and obs.sum() > 0.5 * inside.sum()
+    assert not obs[-1] and p["intensity_nidar"][-1] == 0
+    assert np.all((p["intensity_nidar"] >= 0) & (p["intensity_nidar"] <= 1))
+    assert np.all(p["intensity_nidar"][~obs] == 0)
+
+
+@pytest.mark.skipif(
+    not os.path.isdir(KITTI), reason="KITTI frames not available (../shared/data/kitti)"
+)
+def test_kitti_frame(tmp_path):
+    from nidar_mi.io.points import read_kitti_bin, read_npz
+
+    out = tmp_path / "k"
+    r = run(
+        "nidar_mi.assign", "--kitti", KITTI, "--frame", "000000", "-o", str(out), "--formats", "npz"
+    )
+    assert r.returncode == 0, r.stderr
+    p = read_npz(out / "points.npz")
+    xyz, refl = read_kitti_bin(os.path.join(KITTI, "velodyne", "000000.bin"))
+    np.testing.assert_array_equal(p["xyz"], xyz)
+    np.testing.assert_array_equal(p["intensity"], refl)  # the real reflectance kept beside
+    frac = p["nidar_observed"].mean()
+    assert 0.05 < frac < 0.5  # the camera sees the front sector of the 360 deg scan
+    assert np.all(p["xyz"][p["nidar_observed"], 0] > 0)  # only points in front of the car
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--kitti", "/nonexistent", "--frame", "000000"], "missing velodyne"),
+        (["--points", "x.ply"], "give --points, --calib and --image"),
+        (["--kitti", "/nonexistent"], "--frame"),
+        (["--kitti", "/nonexistent", "--frame", "1", "--formats", "xyz"], "--formats"),
+    ],
+)
+def test_bad_input(tmp_path, args, needle):
+    r = run("nidar_mi.assign", *args, "-o", str(tmp_path / "o"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0] and "Traceback" not in r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_render_with_nidar_intensity(tmp_path):
+    from nidar_mi.io.points import read_npz, read_ply
+
+    out = tmp_path / "street"
+    r = run(
+        "nidar_mi.render",
+        "scenes/street.xml",
+        "-o",
+        str(out),
+        "--intensity",
+        "nidar",
+        "-q",
+        "-D",
+        "width=96",
+        "-D",
+        "height=64",
+        "-D",
+        "cols=256",
+        "--spp",
+        "2",
+        "--formats",
+        "npz,ply",
+    )
+    assert r.returncode == 0, r.stderr
+    p = read_npz(out / "lidar_top/points.npz")
+    assert p["intensity_nidar"].dtype == np.float32 and p["nidar_observed"].dtype == bool
+    obs = p["nidar_observed"]
+    assert 0 < obs.sum() < len(obs)  # the forward camera sees part of the 360 deg scan
+    assert np.all(p["intensity_nidar"][~obs] == 0)
+    assert np.all((p["intensity_nidar"] >= 0) & (p["intensity_nidar"] <= 1))
+    # the physical intensity is still there, unchanged in meaning
+    assert np.all(p["intensity"] >= 0) and p["intensity"].max() > 0
+    ply = read_ply(out / "lidar_top/points.ply")
+    np.testing.assert_array_equal(ply["intensity_nidar"], p["intensity_nidar"])
+    np.testing.assert_array_equal(ply["nidar_observed"], obs)
