@@ -13,7 +13,12 @@ CELL_TIMEOUT_S = 300
 
 def test_the_studies_notebooks_are_there():
     names = {p.name for p in NOTEBOOKS}
-    assert {"01_incidence_angle.ipynb", "02_range.ipynb", "03_spectra.ipynb"} <= names
+    assert {
+        "01_incidence_angle.ipynb",
+        "02_range.ipynb",
+        "03_spectra.ipynb",
+        "04_nidar_vs_physics.ipynb",
+    } <= names
 
 
 def _figures(nb) -> int:
