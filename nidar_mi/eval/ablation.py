@@ -101,7 +101,9 @@ def train_variant(
 
     out_dir = Path(out_dir)
     if (out_dir / "irnet.safetensors").is_file():
+        log.info("ablation: reusing the finished run %s", out_dir)
         return out_dir
+    log.info("ablation: training %s on %s input", variant, input_mode)
     cfg = ablation_config(settings, variant, input_mode)
     resume = (out_dir / "train_log.json").is_file()
     train_irnet(cfg, data_dir, out_dir, stn_weights, resume=resume, progress=False)
@@ -204,7 +206,6 @@ def run_ablation(
     structural, inputs = [], []
     paper = "unet+deeplabv3"
     for variant in variants:
-        log.info("ablation: training %s", variant)
         run = train_variant(
             data_dir,
             out_dir / f"pseudo_nir__{variant}",
@@ -218,7 +219,6 @@ def run_ablation(
         if variant == paper:
             inputs.extend(_input_rows("pseudo-NIR", res))
     if paper in variants:
-        log.info("ablation: training %s on RGB", paper)
         run = train_variant(
             data_dir, out_dir / f"rgb__{paper}", stn_weights, paper, "rgb", settings
         )
