@@ -122,9 +122,9 @@ def test_crop_larger_than_frame_is_a_user_error(data_dir):
 def test_intensity_is_scaled_and_clipped(data_dir):
     """intensity / scale, clipped to [0, 1]: a retroreflector's huge return saturates at 1."""
     frames = list_frames(data_dir, "train")[:1]
-    full = IRNetDataset(frames, 255.0, 32, train=False)[0]
-    small = IRNetDataset(frames, 25.5, 32, train=False)[0]  # everything 10x brighter
-    m = full["mask"] > 0
+    full = {k: np.asarray(v) for k, v in IRNetDataset(frames, 255.0, 32, train=False)[0].items()}
+    small = {k: np.asarray(v) for k, v in IRNetDataset(frames, 25.5, 32, train=False)[0].items()}
+    m = full["mask"] > 0  # (small: everything 10x brighter)
     np.testing.assert_allclose(
         small["intensity"][m], np.minimum(10 * full["intensity"][m], 1.0), rtol=1e-5
     )
