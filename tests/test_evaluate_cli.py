@@ -34,3 +34,69 @@ def test_user_errors(tmp_path, capsys, case, message):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and message in err
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory, variant):
+    """Three hand-made scenes rendered tiny (one per split) and a reduced model trained on them."""
+    import dataclasses
+    import shutil
+    from pathlib import Path
+
+    from nidar_mi.dataset import build_dataset
+    from nidar_mi.nidar.config import TrainConfig
+    from nidar_mi.nidar.pipeline import NidarModel, fit_dataset_calibration
+    from nidar_mi.nidar.train import train
+
+    root = tmp_path_factory.mktemp("e2e")
+    repo = Path(__file__).resolve().parents[1]
+    (root / "scenes").mkdir()
+    for name in ("street", "park", "warehouse"):
+        shutil.copy(repo / "scenes" / f"{name}.xml", root / "scenes")
+    params = {"width": "64", "height": "48", "cols": "256"}
+    build_dataset(
+        str(root / "scenes"),
+        str(root / "data"),
+        seed=0,
+        spp=1,
+        params=params,
+        progress=False,
+        fractions=(1, 1, 1),
+    )
+    red = TrainConfig.reduced()
+    one = dataclasses.replace(red.stn_optim, batch_size=1)  # a single training frame
+    cfg = dataclasses.replace(red, device="cpu", stn_optim=one, irnet_optim=one)
+    train(cfg, root / "data", root / "run", progress=False)
+    model = NidarModel.load(root / "run", device="cpu")
+    fit_dataset_calibration(model, root / "data").save_json(root / "run" / "calibration.json")
+    return root
+
+
+def test_end_to_end_tables(tiny_run, tmp_path):
+    import csv
+
+    from nidar_mi.eval.evaluate import METHODS
+
+    out = tmp_path / "out"
+    argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]
+    argv += ["--kitti", str(tmp_path / "no_kitti"), "--figures", "1", "-q"]
+    assert main(argv) == 0
+    payload = json.loads((out / "results.json").read_text())
+    (test_scene,) = payload["groups"]["generated"]["scenes"]
+    rows = payload["groups"]["generated"]["rows"]
+    assert [r["method"] for r in rows] == list(METHODS)  # one frame, every method (a)-(g)
+    assert all(r["scene"] == test_scene and r["n_points"] > 0 for r in rows)
+    carla = next(r for r in rows if r["method"] == "carla")
+    mean = next(r for r in payload["groups"]["generated"]["mean"] if r["method"] == "carla")
+    assert mean["map_ssim"] == carla["map_ssim"]  # one frame: the mean is that frame
+    assert "no KITTI frames" in payload["kitti"]["skipped"]
+    with open(out / "results.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == 2 * len(METHODS)  # the frame rows and the mean rows
+    assert float(table[3]["map_rmse"]) == pytest.approx(carla["map_rmse"])
+    md = (out / "results.md").read_text()
+    assert "## Held-out generated scenes" in md and "Skipped: no KITTI frames" in md
+    assert {p.name for p in (out / "figures").iterdir()} == {
+        f"generated_{test_scene}_cam_front_maps.png",
+        "generated_scatter.png",
+    }
