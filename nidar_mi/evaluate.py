@@ -23,7 +23,9 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import shutil
 import sys
+import tempfile
 import time
 
 from .errors import NidarError
@@ -94,19 +96,11 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
 
 def run(args: argparse.Namespace, argv_text: str) -> dict:
     """Everything the command does; returns the results payload (also written to OUT)."""
-    from .eval.heldout import (
-        evaluate_renders,
-        fit_class_constant,
-        fit_pseudo_nir_calibration,
-        render_scenes,
-    )
-    from .eval.metrics import lpips_unavailable_reason
     from .nidar.data import load_meta
     from .nidar.pipeline import NidarModel
 
     t0 = time.perf_counter()
     meta = load_meta(args.data)
-    scale = float(meta.get("intensity_scale", 1.0))
     splits = meta.get("scenes", {})
     if not splits.get(args.split):
         raise NidarError(f"{args.data}: the dataset has no '{args.split}' scenes")
@@ -125,7 +119,39 @@ def run(args: argparse.Namespace, argv_text: str) -> dict:
         from .backend import set_variant
 
         set_variant("llvm_ad_spectral")
-    fig_dir = os.path.join(args.out, "figures")
+    os.makedirs(args.out, exist_ok=True)
+    # figures are staged and moved into OUT/figures only once everything succeeded
+    fig_dir = tempfile.mkdtemp(prefix=".figures.partial-", dir=args.out)
+    try:
+        payload = _evaluate(args, argv_text, meta, model, fig_dir)
+        final = os.path.join(args.out, "figures")
+        os.makedirs(final, exist_ok=True)
+        moved = []
+        for p in payload["figures"]:
+            target = os.path.join(final, os.path.basename(p))
+            os.replace(p, target)
+            moved.append(target)
+        payload["figures"] = moved
+        payload["seconds"] = time.perf_counter() - t0
+        _write(args.out, payload)
+    finally:
+        shutil.rmtree(fig_dir, ignore_errors=True)
+    return payload
+
+
+def _evaluate(args: argparse.Namespace, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
+    """The evaluation proper; figures go to ``fig_dir``."""
+    from .eval.heldout import (
+        evaluate_renders,
+        fit_class_constant,
+        fit_pseudo_nir_calibration,
+        render_scenes,
+    )
+    from .eval.metrics import lpips_unavailable_reason
+
+    scale = float(meta.get("intensity_scale", 1.0))
+    splits = meta["scenes"]
+    renders = os.path.join(args.data, "renders")
     log.info("fitting baselines (c) and (e) on the training split")
     class_const = fit_class_constant([os.path.join(renders, n) for n in splits["train"]], scale)
     pseudo_cal = fit_pseudo_nir_calibration(model, args.data, "train")
@@ -194,8 +220,6 @@ def run(args: argparse.Namespace, argv_text: str) -> dict:
             model.weights_dir / "stn.safetensors",
             split=args.split,
         )
-    payload["seconds"] = time.perf_counter() - t0
-    _write(args.out, payload)
     return payload
 
 

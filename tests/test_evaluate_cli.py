@@ -100,3 +100,19 @@ def test_end_to_end_tables(tiny_run, tmp_path):
         f"generated_{test_scene}_cam_front_maps.png",
         "generated_scatter.png",
     }
+
+
+def test_late_failure_leaves_no_output(tiny_run, tmp_path, capsys):
+    """A broken KITTI frame fails after the figures were drawn: nothing is published."""
+    kitti = tmp_path / "kitti"
+    for sub in ("velodyne", "image_2", "calib"):
+        (kitti / sub).mkdir(parents=True)
+    (kitti / "velodyne" / "000000.bin").write_bytes(b"")
+    (kitti / "image_2" / "000000.png").write_bytes(b"")
+    (kitti / "calib" / "000000.txt").write_text("P2: not numbers\n")
+    out = tmp_path / "out"
+    argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]
+    assert main(argv + ["--kitti", str(kitti), "--no-twin", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1
+    assert sorted(p.name for p in out.iterdir()) == []
