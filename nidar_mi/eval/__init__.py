@@ -5,7 +5,13 @@
 * :mod:`~nidar_mi.eval.baselines`: RGB-asset physics (the RGB-only twin), luminance as ρ,
   a constant per class, CARLA's exponential.
 
-Both are plain functions, so an evaluation command is a loop over frames that calls them.
+* :mod:`~nidar_mi.eval.evaluate` / :mod:`~nidar_mi.eval.heldout`: every method's prediction on
+  the camera-visible returns of rendered frames, and their metric tables.
+* :mod:`~nidar_mi.eval.kitti`: real KITTI frames (zero-shot and leave-one-out remap).
+* :mod:`~nidar_mi.eval.ablation`: the paper's IRNet structure and pseudo-NIR-vs-RGB ablations.
+* :mod:`~nidar_mi.eval.figures`, :mod:`~nidar_mi.eval.report`: figures and tables.
+
+``python -m nidar_mi.evaluate`` is the thin command line over these.
 """
 
 from .baselines import ClassConstant, carla, luminance_rho, rgb_twin_scan
