@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import glob
-import json
 import os
 import sys
 
@@ -88,46 +87,32 @@ def split_scenes(
 
 
 def _frames_of_scene(render_dir: str, lidar_id: str | None):
-    from .io.images import read_exr, read_png
-    from .io.points import read_npz
-    from .nidar.frames import compensate, sparse_maps
-    from .nidar.projection import CameraModel
+    from .nidar.frames import sparse_maps
+    from .rendered import read_render
 
-    with open(os.path.join(render_dir, "manifest.json"), encoding="utf-8") as f:
-        manifest = json.load(f)
-    lidars = sorted(manifest["lidars"])
-    lid = lidar_id or lidars[0]
-    if lid not in manifest["lidars"]:
-        raise NidarError(f"{manifest['scene']}: no lidar '{lid}' (has {', '.join(lidars)})")
-    params = manifest["lidars"][lid]["parameters"]
-    pts = read_npz(os.path.join(render_dir, lid, "points.npz"))
-    inten = compensate(pts["intensity"], pts["range"], params["intensity_mode"])
-    for cam_id, cam in sorted(manifest["cameras"].items()):
-        d = os.path.join(render_dir, cam_id)
-        model = CameraModel(
-            np.array(cam["K"]), cam["width"], cam["height"], np.array(cam["T_cam_lidar"][lid])
-        )
-        depth = next(iter(read_exr(os.path.join(d, "depth.exr")).values()))
+    r = read_render(render_dir, lidar_id)
+    pts = r.points
+    for cam in r.cameras:
         maps, mask = sparse_maps(
             pts["xyz"],
-            {"intensity": inten, "reflectance": pts["reflectance"], "range": pts["range"]},
-            model,
-            depth_image=depth,
+            {"intensity": r.compensated, "reflectance": pts["reflectance"], "range": pts["range"]},
+            cam.model,
+            depth_image=cam.depth,
         )
         yield (
-            cam_id,
+            cam.name,
             {
-                "rgb": read_png(os.path.join(d, "rgb.png"))[..., :3],
-                "nir": next(iter(read_exr(os.path.join(d, "nir.exr")).values())).astype(np.float32),
+                "rgb": cam.rgb8(),
+                "nir": cam.nir(),
                 "intensity": maps["intensity"],
                 "reflectance": maps["reflectance"],
                 "range": maps["range"],
                 "mask": mask,
-                "depth": depth.astype(np.float32),
-                "K": model.K.astype(np.float64),
-                "T_cam_lidar": model.T_cam_lidar.astype(np.float64),
+                "depth": cam.depth,
+                "K": cam.model.K.astype(np.float64),
+                "T_cam_lidar": cam.model.T_cam_lidar.astype(np.float64),
             },
-            params,
+            r.parameters,
         )
 
 

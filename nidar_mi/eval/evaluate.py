@@ -37,7 +37,6 @@ and SSIM/PSNR on the LiDAR range image (rings x columns), restricted to the same
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -146,17 +145,6 @@ class FrameResult:
     maps: dict[str, np.ndarray]
 
 
-def _read_manifest(render_dir: str) -> dict:
-    path = os.path.join(render_dir, "manifest.json")
-    try:
-        with open(path, encoding="utf-8") as f:
-            return json.load(f)
-    except OSError as e:
-        raise NidarError(f"{render_dir}: no readable manifest.json ({e.strerror})") from None
-    except json.JSONDecodeError as e:
-        raise NidarError(f"{path}: not valid JSON ({e})") from None
-
-
 def load_render_frames(
     render_dir: str, intensity_scale: float, lidar_id: str | None = None
 ) -> list[FrameData]:
@@ -171,46 +159,27 @@ def load_render_frames(
     Returns:
         One :class:`FrameData` per camera, sorted by camera id.
     """
-    from ..io.images import read_exr, read_png
-    from ..io.points import read_npz
-    from ..nidar.frames import compensate
-    from ..nidar.projection import CameraModel, project, visible_mask
+    from ..nidar.projection import project, visible_mask
+    from ..rendered import read_render
 
-    manifest = _read_manifest(render_dir)
-    lidars = sorted(manifest.get("lidars", {}))
-    if not lidars:
-        raise NidarError(f"{render_dir}: the manifest lists no lidar")
-    lid = lidar_id or lidars[0]
-    if lid not in manifest["lidars"]:
-        raise NidarError(f"{render_dir}: no lidar '{lid}' (has {', '.join(lidars)})")
-    lparams = manifest["lidars"][lid]["parameters"]
-    pts = read_npz(os.path.join(render_dir, lid, "points.npz"))
-    inten = compensate(pts["intensity"], pts["range"], lparams["intensity_mode"])
-    gt_all = scale_intensity(inten, intensity_scale)
+    r = read_render(render_dir, lidar_id)
+    manifest, lparams, pts = r.manifest, r.parameters, r.points
+    gt_all = scale_intensity(r.compensated, intensity_scale)
     names = np.asarray(pts["material_names"]).astype(str)
     mat = np.asarray(pts["material"], dtype=np.int64)
     mat_name = np.where(mat >= 0, names[np.clip(mat, 0, max(len(names) - 1, 0))], "")
     grid = (int(lparams["rings"]), int(lparams["horizontal_resolution"]))
     scene = os.path.basename(os.path.normpath(render_dir))
+    xyz = np.asarray(pts["xyz"], dtype=np.float64)
     frames = []
-    for cam_id, cam in sorted(manifest.get("cameras", {}).items()):
-        d = os.path.join(render_dir, cam_id)
-        model = CameraModel(
-            np.array(cam["K"]),
-            cam["width"],
-            cam["height"],
-            np.array(cam["T_cam_lidar"][lid]),
-            name=cam_id,
-        )
-        depth = next(iter(read_exr(os.path.join(d, "depth.exr")).values())).astype(np.float32)
-        xyz = np.asarray(pts["xyz"], dtype=np.float64)
-        uv, z, in_front = project(xyz, model)
-        seen = in_front & visible_mask(uv, z, model, depth_image=depth)
+    for cam in r.cameras:
+        uv, z, in_front = project(xyz, cam.model)
+        seen = in_front & visible_mask(uv, z, cam.model, depth_image=cam.depth)
         idx = np.flatnonzero(seen)
         frames.append(
             FrameData(
                 scene=scene,
-                camera=cam_id,
+                camera=cam.name,
                 xyz=xyz[idx],
                 range_m=np.asarray(pts["range"], dtype=np.float64)[idx],
                 gt=gt_all[idx],
@@ -218,9 +187,9 @@ def load_render_frames(
                 column=np.asarray(pts["column"], dtype=np.int64)[idx],
                 material=mat_name[idx],
                 uv=uv[idx],
-                rgb=read_png(os.path.join(d, "rgb.png"))[..., :3],
-                depth=depth,
-                camera_model=model,
+                rgb=cam.rgb8(),
+                depth=cam.depth,
+                camera_model=cam.model,
                 grid_shape=grid,
                 scene_path=manifest.get("scene", ""),
                 params=dict(manifest.get("params", {})),

@@ -20,7 +20,6 @@ from .baselines import ClassConstant
 from .evaluate import (
     FrameData,
     FrameResult,
-    _read_manifest,
     evaluate_frame,
     load_render_frames,
     predict_frame,
@@ -46,21 +45,16 @@ def fit_class_constant(
         intensity_scale: divisor of the metric scale.
         lidar_id: LiDAR to read; None takes the first by id.
     """
-    from ..io.points import read_npz
-    from ..nidar.frames import compensate
+    from ..rendered import read_render
 
     labels, values = [], []
     for rdir in render_dirs:
-        manifest = _read_manifest(rdir)
-        lid = lidar_id or sorted(manifest["lidars"])[0]
-        mode = manifest["lidars"][lid]["parameters"]["intensity_mode"]
-        pts = read_npz(os.path.join(rdir, lid, "points.npz"))
-        names = np.asarray(pts["material_names"]).astype(str)
-        mat = np.asarray(pts["material"], dtype=np.int64)
+        r = read_render(rdir, lidar_id)
+        names = np.asarray(r.points["material_names"]).astype(str)
+        mat = np.asarray(r.points["material"], dtype=np.int64)
         ok = mat >= 0
         labels.append(names[mat[ok]])
-        inten = compensate(pts["intensity"], pts["range"], mode)
-        values.append(scale_intensity(inten, intensity_scale)[ok])
+        values.append(scale_intensity(r.compensated, intensity_scale)[ok])
     if not labels:
         raise NidarError("class constant: no training scenes")
     return ClassConstant.fit(np.concatenate(labels), np.concatenate(values))
