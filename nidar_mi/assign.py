@@ -52,7 +52,7 @@ def load_kitti_frame(kitti_dir: str, frame: str):
 
 
 def assign_intensity(
-    xyz, cameras, images, *, weights=None, occlusion=True
+    xyz, cameras, images, *, weights=None, occlusion=True, branch="R"
 ) -> dict[str, np.ndarray]:
     """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``."""
     from .nidar.pipeline import NidarModel
@@ -64,7 +64,7 @@ def assign_intensity(
                 f"image {im.shape[1]}x{im.shape[0]} does not match camera '{cam.name}' "
                 f"{cam.width}x{cam.height}"
             )
-    res = model.point_intensity(xyz, cameras, images, occlusion=occlusion)
+    res = model.point_intensity(xyz, cameras, images, occlusion=occlusion, branch=branch)
     return {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
 
 
@@ -107,6 +107,12 @@ def main(argv=None) -> int:
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
     p.add_argument("--formats", default=",".join(FORMATS), help="npz,ply,las")
     p.add_argument("--no-occlusion", action="store_true", help="skip the occlusion test")
+    p.add_argument(
+        "--branch",
+        default="R",
+        choices=("R", "I_hat"),
+        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
+    )
     args = p.parse_args(argv)
     try:
         formats = [f.strip() for f in args.formats.split(",") if f.strip()]
@@ -145,6 +151,7 @@ def main(argv=None) -> int:
                 images,
                 weights=args.weights,
                 occlusion=not args.no_occlusion,
+                branch=args.branch,
             )
         )
         out = args.out or os.path.join("out", "assign", name)

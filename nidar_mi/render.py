@@ -146,7 +146,7 @@ def _write_camera(stage: str, cam, lidar_poses: dict, written: list[str]) -> dic
     return calib
 
 
-def _nidar_columns(results: dict, renders: dict, weights: str | None) -> dict:
+def _nidar_columns(results: dict, renders: dict, weights: str | None, branch: str = "R") -> dict:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .nidar.pipeline import NidarModel
     from .nidar.projection import CameraModel
@@ -165,7 +165,7 @@ def _nidar_columns(results: dict, renders: dict, weights: str | None) -> dict:
             depth.append(r.depth)
             cam_maps.append(maps[cid])
         res = model.point_intensity(
-            pts["xyz"], cams, [None] * len(cams), depth_images=depth, maps=cam_maps
+            pts["xyz"], cams, [None] * len(cams), depth_images=depth, maps=cam_maps, branch=branch
         )
         out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
     return out
@@ -191,6 +191,7 @@ def render_scene(
     progress: bool = True,
     intensity: str = "physics",
     weights: str | None = None,
+    nidar_branch: str = "R",
 ) -> dict:
     """Render a scene into ``out_dir`` (see the module docstring for the layout).
 
@@ -276,7 +277,7 @@ def render_scene(
         extra_columns = {}
         if intensity == "nidar":
             t0 = time.perf_counter()
-            extra_columns = _nidar_columns(results, renders, weights)
+            extra_columns = _nidar_columns(results, renders, weights, nidar_branch)
             timings["nidar"] = time.perf_counter() - t0
         for lid, result in results.items():
             t0 = time.perf_counter()
@@ -298,6 +299,7 @@ def render_scene(
             "formats": list(formats),
             "intensity": intensity,
             "nidar_weights": str(weights) if intensity == "nidar" and weights else None,
+            "nidar_branch": nidar_branch if intensity == "nidar" else None,
             "lidars": lidar_entries,
             "cameras": camera_entries,
             "timings_s": timings | {"total": time.perf_counter() - t_start},
@@ -389,6 +391,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--weights", default=None, help="NIDAR weights folder (default: the shipped model)"
     )
+    p.add_argument(
+        "--nidar-branch",
+        default="R",
+        choices=("R", "I_hat"),
+        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
+    )
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
@@ -416,6 +424,7 @@ def main(argv=None) -> int:
                 progress=not args.quiet,
                 intensity=args.intensity,
                 weights=args.weights,
+                nidar_branch=args.nidar_branch,
             )
     except NidarError as e:
         print(f"error: {e}", file=sys.stderr)

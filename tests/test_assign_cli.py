@@ -158,3 +158,27 @@ def test_render_with_nidar_intensity(tmp_path):
     ply = read_ply(out / "lidar_top/points.ply")
     np.testing.assert_array_equal(ply["intensity_nidar"], p["intensity_nidar"])
     np.testing.assert_array_equal(ply["nidar_observed"], obs)
+
+
+def test_i_hat_branch_is_the_head_sampled_at_the_points():
+    """branch="I_hat": Î bilinearly sampled at each observed point, clipped to [0, 1]."""
+    from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.nidar.projection import CameraModel, bilinear_sample, project
+
+    rng = np.random.default_rng(3)
+    img = (rng.uniform(0, 1, (64, 96, 3)) * 255).astype(np.uint8)
+    T = np.eye(4)
+    T[:3, :3] = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]
+    cam = CameraModel(np.array([[60.0, 0, 47.5], [0, 60.0, 31.5], [0, 0, 1]]), 96, 64, T)
+    xyz = np.column_stack([rng.uniform(5, 20, 50), rng.uniform(-2, 2, 50), rng.uniform(-1, 1, 50)])
+    model = NidarModel.load(device="cpu")
+    maps = model.predict_image(img)
+    res = model.point_intensity(xyz, [cam], [img], maps=[maps], branch="I_hat", occlusion=False)
+    uv, _, _ = project(xyz, cam)
+    expected = np.clip(bilinear_sample(maps["I_hat"], uv), 0, 1)
+    assert res.observed.sum() > 40
+    np.testing.assert_allclose(
+        res.intensity[res.observed], expected[res.observed], rtol=1e-5, atol=1e-6
+    )
+    with pytest.raises(Exception, match="branch"):
+        model.point_intensity(xyz, [cam], [img], maps=[maps], branch="S")

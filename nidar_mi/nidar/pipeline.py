@@ -23,7 +23,17 @@ from ..errors import NidarError
 from .calibration import Calibration, fit_calibration
 from .projection import CameraModel, assign
 
-__all__ = ["NidarModel", "shipped_weights_dir", "fit_dataset_calibration", "PointIntensity"]
+__all__ = [
+    "NidarModel",
+    "shipped_weights_dir",
+    "fit_dataset_calibration",
+    "PointIntensity",
+    "BRANCHES",
+]
+
+#: Branches :meth:`NidarModel.point_intensity` can assign: the paper's calibrated reflectance, or
+#: the dense intensity head.
+BRANCHES = ("R", "I_hat")
 
 
 def shipped_weights_dir() -> Path:
@@ -38,7 +48,8 @@ class PointIntensity:
     Attributes:
         intensity: (N,) float32 calibrated intensity in [0, 1], 0 where unobserved.
         observed: (N,) bool, a camera saw the point.
-        raw_R: (N,) float32 R branch sampled at the points (before calibration), 0 where unobserved.
+        raw_R: (N,) float32 branch value sampled at the points (before calibration), 0 where
+            unobserved.
         camera_index: (N,) int64 camera that gave the value, -1 where unobserved.
     """
 
@@ -89,8 +100,15 @@ class NidarModel:
         depth_images: Sequence[np.ndarray | None] | None = None,
         occlusion: bool = True,
         maps: Sequence[dict[str, np.ndarray]] | None = None,
+        branch: str = "R",
     ) -> PointIntensity:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
+
+        ``branch="R"`` (default, the paper's NIDAR-Full): the reflectance branch through the
+        distance encoding and quantile map. ``branch="I_hat"``: IRNet's dense intensity head
+        sampled at the points and clipped to [0, 1], no calibration (it is trained on the
+        range-compensated intensity directly); on the held-out scenes of docs/RESULTS.md it
+        ranks points far better than R (method (f)).
 
         Args:
             xyz_lidar: (N, 3) points in the LiDAR frame, m (the LiDAR sits at the origin).
@@ -100,15 +118,22 @@ class NidarModel:
                 cloud's own z-buffer).
             occlusion: reject points hidden from the camera.
             maps: precomputed :meth:`predict_image` outputs (skips the networks).
+            branch: ``"R"`` or ``"I_hat"``.
         """
+        if branch not in BRANCHES:
+            raise NidarError(f"branch must be one of {', '.join(BRANCHES)} (got '{branch}')")
         xyz = np.asarray(xyz_lidar, dtype=np.float64)
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
         maps = list(maps) if maps is not None else [self.predict_image(im) for im in images]
-        R = [m["R"] for m in maps]
         values, observed, cam_idx = assign(
-            xyz, cameras, R, depth_images=depth_images, occlusion=occlusion
+            xyz, cameras, [m[branch] for m in maps], depth_images=depth_images, occlusion=occlusion
         )
+        if branch == "I_hat":
+            observed = observed & np.isfinite(values)
+            out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)
+            raw = np.where(observed, values, 0.0).astype(np.float32)
+            return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
         if self.calibration is None:
             raise NidarError(f"{self.weights_dir}: no calibration.json beside the weights")
         dist = np.linalg.norm(xyz, axis=1)
