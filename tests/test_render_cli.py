@@ -186,3 +186,39 @@ def test_bad_input_one_line_no_output(tmp_path, content, args, needle):
     assert "Traceback" not in r.stderr
     assert not out.exists()
     assert [p.name for p in tmp_path.iterdir()] == (["bad.xml"] if content is not None else [])
+
+
+def test_two_lidars_in_one_scene(tmp_path):
+    """Several lidar sensors per scene: each gets its own folder, parameters and pose."""
+    from nidar_mi.io.points import read_npz
+
+    scene = tmp_path / "two.xml"
+    scene.write_text(
+        """<scene version="3.0.0">
+        <sensor type="lidar" id="front"><string name="preset" value="vlp16"/>
+            <integer name="horizontal_resolution" value="360"/>
+            <transform name="to_world"><translate x="1" z="1.5"/></transform></sensor>
+        <sensor type="lidar" id="rear"><string name="elevation_angles" value="0, -5"/>
+            <integer name="horizontal_resolution" value="180"/><float name="wavelength" value="1550"/>
+            <transform name="to_world"><rotate z="1" angle="180"/><translate x="-1" z="0.5"/></transform></sensor>
+        <bsdf type="diffuse" id="grey"><spectrum name="reflectance" value="360:0.3, 1700:0.6"/></bsdf>
+        <shape type="sphere" id="dome"><float name="radius" value="20"/><ref id="grey"/>
+            <boolean name="flip_normals" value="true"/></shape>
+    </scene>"""
+    )
+    out = tmp_path / "out"
+    r = run_cli(str(scene), "-o", str(out), "-q", "--formats", "npz")
+    assert r.returncode == 0, r.stderr
+    m = json.loads((out / "manifest.json").read_text())
+    assert set(m["lidars"]) == {"front", "rear"} and m["cameras"] == {}
+    assert m["lidars"]["front"]["rays"] == 16 * 360 and m["lidars"]["rear"]["rays"] == 2 * 180
+    assert m["lidars"]["rear"]["parameters"]["wavelength"] == 1550.0
+    front = read_npz(out / "front/points.npz")
+    rear = read_npz(out / "rear/points.npz")
+    # every beam hits the dome of radius 20 around the origin: world points lie on it
+    for p, n in ((front, 16 * 360), (rear, 2 * 180)):
+        assert len(p["range"]) == n
+        np.testing.assert_allclose(np.linalg.norm(p["xyz_world"], axis=1), 20.0, rtol=1e-4)
+    # ρ at each sensor's wavelength (linear spectrum 0.3 at 360 nm .. 0.6 at 1700 nm)
+    np.testing.assert_allclose(front["reflectance"], 0.3 + 0.3 * (905 - 360) / 1340, rtol=1e-4)
+    np.testing.assert_allclose(rear["reflectance"], 0.3 + 0.3 * (1550 - 360) / 1340, rtol=1e-4)
