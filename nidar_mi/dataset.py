@@ -1,43 +1,158 @@
-"""``python -m nidar_mi.dataset --scenes DIR -o DATA``: training frames from rendered scenes.
+"""NIDAR training data: the frame format, and frames built from rendered scenes.
 
-Every scene XML under ``DIR`` (``DIR/*.xml`` and ``DIR/*/*.xml``) is rendered once with
-:func:`nidar_mi.render.render_scene` into ``DATA/renders/<scene>/`` (skipped when its manifest
-exists, so the command resumes), then every camera becomes one frame
-``DATA/<split>/<scene>__<camera>.npz`` with
+Layout::
 
-==============  ===============  =============================================================
-key             dtype, shape     meaning
-==============  ===============  =============================================================
-rgb             uint8 (H,W,3)    8-bit sRGB as a camera delivers it (rgb.png, auto exposure)
-nir             float32 (H,W)    NIR band radiance at the LiDAR wavelength (linear)
-intensity       float32 (H,W)    sparse range-compensated LiDAR intensity g·ρ·cosθ·exp(-2αd)
-reflectance     float32 (H,W)    sparse ρ at the LiDAR wavelength
-range           float32 (H,W)    sparse LiDAR range, m
-mask            bool (H,W)       M: pixels with a projected, unoccluded return
-depth           float32 (H,W)    camera z-depth, m, 0 where no surface
-K               float64 (3,3)    OpenCV intrinsics
-T_cam_lidar     float64 (4,4)    LiDAR frame -> camera frame
-==============  ===============  =============================================================
+    DATA/meta.json                       splits, wavelength, intensity_scale, render parameters
+    DATA/renders/<scene>/                each scene's render folder (nidar_mi.render_folder)
+    DATA/{train,val,test}/<frame>.npz    one frame per (scene, camera)
 
-Scenes are split into train/val/test **by scene** (a seeded permutation of the sorted scene
-names), so no layout is shared across splits. ``DATA/meta.json`` records the splits, the
-wavelength and ``intensity_scale`` (training divides intensity by it and clips to [0, 1]).
+A frame pairs one camera's images with the LiDAR returns it sees: each return is projected with
+the camera's calibration, kept when the rendered depth does not hide it, and written to its
+nearest pixel (the nearest return wins). Scenes are split into train/val/test **by scene** (a
+seeded permutation of the sorted names), so no layout is shared across splits. Training divides
+``intensity`` by ``meta.json``'s ``intensity_scale`` and clips it to [0, 1]. Files are read with
+``allow_pickle=False``.
+
+``python -m nidar_mi.dataset --scenes DIR -o DATA`` runs :func:`build_dataset`
+(:mod:`nidar_mi.cli.dataset`). The keys of a frame (``H x W`` camera pixels), from
+:data:`FRAME_KEYS`:
+
 """
 
 from __future__ import annotations
 
-import argparse
 import glob
+import json
 import os
-import sys
+import zipfile
+from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from .errors import NidarError
 
-__all__ = ["main", "build_dataset", "split_scenes", "find_scenes"]
+__all__ = [
+    "FRAME_KEYS",
+    "SPLITS",
+    "build_dataset",
+    "find_scenes",
+    "frames_of_render",
+    "list_frames",
+    "load_frame",
+    "load_meta",
+    "scene_params",
+    "split_scenes",
+]
 
 SPLITS = ("train", "val", "test")
+
+
+class FrameKey(NamedTuple):
+    """dtype, shape (``None`` = image size) and meaning of one frame key."""
+
+    dtype: type
+    shape: tuple
+    meaning: str
+
+
+#: Every key of a frame file.
+FRAME_KEYS: dict[str, FrameKey] = {
+    "rgb": FrameKey(np.uint8, (None, None, 3), "8-bit sRGB as a camera delivers it (rgb.png)"),
+    "nir": FrameKey(np.float32, (None, None), "NIR band radiance at the LiDAR wavelength, linear"),
+    "intensity": FrameKey(
+        np.float32, (None, None), "sparse range-compensated LiDAR intensity g·ρ·cosθ·exp(-2αd)"
+    ),
+    "reflectance": FrameKey(np.float32, (None, None), "sparse ρ at the LiDAR wavelength"),
+    "range": FrameKey(np.float32, (None, None), "sparse LiDAR range, m"),
+    "mask": FrameKey(np.bool_, (None, None), "M: pixels with a projected, unoccluded return"),
+    "depth": FrameKey(np.float32, (None, None), "camera z-depth, m, 0 where no surface"),
+    "K": FrameKey(np.float64, (3, 3), "OpenCV intrinsics"),
+    "T_cam_lidar": FrameKey(np.float64, (4, 4), "LiDAR frame -> camera frame"),
+}
+
+
+def _keys_table() -> str:
+    def shape(s):
+        return (
+            "("
+            + ",".join(
+                "H" if i == 0 and d is None else "W" if d is None else str(d)
+                for i, d in enumerate(s)
+            )
+            + ")"
+        )
+
+    rows = [
+        (f"``{k}``", f"{np.dtype(v.dtype).name} {shape(v.shape)}", v.meaning)
+        for k, v in FRAME_KEYS.items()
+    ]
+    widths = [max(len(r[i]) for r in rows) for i in range(3)]
+    rule = "  ".join("=" * w for w in widths)
+    body = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    head = "  ".join(c.ljust(w) for c, w in zip(("key", "dtype, shape", "meaning"), widths))
+    return "\n".join([rule, head.rstrip(), rule, *body, rule]) + "\n"
+
+
+__doc__ += _keys_table()
+
+
+# --------------------------------------------------------------------------- reading frames
+
+
+def load_meta(data_dir: str | Path) -> dict:
+    """Read ``DATA/meta.json``; checks that ``intensity_scale`` is a positive number."""
+    path = Path(data_dir) / "meta.json"
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise NidarError(f"{path} not found: not a NIDAR training-data directory") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise NidarError(f"cannot read {path}: {exc}") from None
+    scale = meta.get("intensity_scale") if isinstance(meta, dict) else None
+    if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not scale > 0:
+        raise NidarError(f"{path}: 'intensity_scale' must be a positive number, got {scale!r}")
+    return meta
+
+
+def list_frames(data_dir: str | Path, split: str) -> list[Path]:
+    """Sorted ``DATA/<split>/*.npz`` paths (empty when the split is absent)."""
+    if split not in SPLITS:
+        raise NidarError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
+    return sorted((Path(data_dir) / split).glob("*.npz"))
+
+
+def load_frame(path: str | Path, keys=tuple(FRAME_KEYS)) -> dict[str, np.ndarray]:
+    """Load and check the given keys of one frame file.
+
+    Raises:
+        NidarError: missing key, wrong dtype or shape, or an unreadable file.
+    """
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            missing = [k for k in keys if k not in npz.files]
+            if missing:
+                raise NidarError(f"{path}: missing key(s) {', '.join(missing)}")
+            arrays = {k: npz[k] for k in keys}
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise NidarError(f"cannot read frame {path}: {exc}") from None
+    size = None
+    for key, arr in arrays.items():
+        dtype, shape, _ = FRAME_KEYS[key]
+        if arr.dtype != dtype:
+            raise NidarError(f"{path}: {key} has dtype {arr.dtype}, expected {np.dtype(dtype)}")
+        if len(shape) >= 2 and shape[0] is None:
+            hw = arr.shape[:2]
+            size = size or hw
+            if arr.ndim != len(shape) or hw != size or arr.shape[2:] != shape[2:]:
+                raise NidarError(f"{path}: {key} has shape {arr.shape}, image size is {size}")
+        elif arr.shape != shape:
+            raise NidarError(f"{path}: {key} has shape {arr.shape}, expected {shape}")
+    return arrays
+
+
+# --------------------------------------------------------------------------- scenes and splits
 
 
 def find_scenes(scene_dir: str) -> list[str]:
@@ -53,6 +168,20 @@ def find_scenes(scene_dir: str) -> list[str]:
     if not files:
         raise NidarError(f"--scenes: no scene XML files in {scene_dir}")
     return files
+
+
+def scene_params(scene_path: str, params: dict[str, str] | None) -> dict[str, str]:
+    """The entries of ``params`` the scene uses (``$name`` in its XML): per-scene defaults.
+
+    Raises:
+        NidarError: the file is not readable as UTF-8 text.
+    """
+    try:
+        with open(scene_path, encoding="utf-8") as f:
+            text = f.read()
+    except (OSError, UnicodeDecodeError) as e:
+        raise NidarError(f"{scene_path}: cannot read ({e})") from None
+    return {k: v for k, v in (params or {}).items() if f"${k}" in text}
 
 
 def split_scenes(
@@ -86,9 +215,13 @@ def split_scenes(
     return out
 
 
-def _frames_of_scene(render_dir: str, lidar_id: str | None):
+# --------------------------------------------------------------------------- building frames
+
+
+def frames_of_render(render_dir: str, lidar_id: str | None = None):
+    """Yield ``(camera id, frame dict, lidar parameters)`` for every camera of a render folder."""
     from .nidar.frames import sparse_maps
-    from .rendered import read_render
+    from .render_folder import read_render
 
     r = read_render(render_dir, lidar_id)
     pts = r.points
@@ -99,21 +232,35 @@ def _frames_of_scene(render_dir: str, lidar_id: str | None):
             cam.model,
             depth_image=cam.depth,
         )
-        yield (
-            cam.name,
-            {
-                "rgb": cam.rgb8(),
-                "nir": cam.nir(),
-                "intensity": maps["intensity"],
-                "reflectance": maps["reflectance"],
-                "range": maps["range"],
-                "mask": mask,
-                "depth": cam.depth,
-                "K": cam.model.K.astype(np.float64),
-                "T_cam_lidar": cam.model.T_cam_lidar.astype(np.float64),
-            },
-            r.parameters,
-        )
+        frame = {
+            "rgb": cam.rgb8(),
+            "nir": cam.nir(),
+            "intensity": maps["intensity"],
+            "reflectance": maps["reflectance"],
+            "range": maps["range"],
+            "mask": mask,
+            "depth": cam.depth,
+            "K": cam.model.K.astype(np.float64),
+            "T_cam_lidar": cam.model.T_cam_lidar.astype(np.float64),
+        }
+        yield cam.name, frame, r.parameters
+
+
+def _write_frame(path: str, frame: dict) -> None:
+    from .io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, **frame)
+
+
+def _remove_stale_frames(out_dir: str, frames: dict[str, list[str]]) -> None:
+    """Delete frame files an earlier run left in a split they no longer belong to."""
+    for split in SPLITS:
+        keep = set(frames[split])
+        for path in list_frames(out_dir, split):
+            if path.stem not in keep:
+                path.unlink()
 
 
 def build_dataset(
@@ -128,18 +275,40 @@ def build_dataset(
     intensity_scale: float = 1.0,
     progress: bool = True,
 ) -> dict:
-    """Render every scene (cached) and write the frames and ``meta.json``; returns the meta."""
+    """Render every scene (cached per request) and write the frames and ``meta.json``.
+
+    Args:
+        scene_dir: folder of scene XML files.
+        out_dir: the dataset folder.
+        fractions: train/val/test fractions of the scenes.
+        seed: split seed, scan seed and sampler seed.
+        spp: camera samples per pixel.
+        params: scene parameters (``-D``); each scene gets those it uses; a name no scene uses
+            is an error.
+        lidar_id: the LiDAR whose returns supervise (None: the first by id).
+        intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
+        progress: show a progress bar.
+
+    Returns:
+        The meta dict (also written to ``DATA/meta.json``).
+    """
     from tqdm.auto import tqdm
 
-    from .io.atomic import atomic_path, atomic_write_json
-    from .render import render_scene
+    from .io.atomic import atomic_write_json
+    from .simulate import ensure_rendered
 
     if not intensity_scale > 0:
         raise NidarError(f"--intensity-scale must be > 0 (got {intensity_scale})")
+    if seed < 0:
+        raise NidarError(f"--seed must be >= 0 (got {seed})")
     files = find_scenes(scene_dir)
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
         raise NidarError(f"{scene_dir}: scene file names must be unique")
+    used = {path: scene_params(path, params) for path in files}
+    unused = sorted(set(params or {}) - {k for u in used.values() for k in u})
+    if unused:
+        raise NidarError(f"-D {', '.join(unused)}: no scene in {scene_dir} has such a parameter")
     splits = split_scenes(names, fractions, seed)
     split_of = {n: s for s, ns in splits.items() for n in ns}
     frames: dict[str, list[str]] = {s: [] for s in SPLITS}
@@ -148,26 +317,18 @@ def build_dataset(
         list(zip(files, names)), desc="dataset", unit="scene", disable=not progress
     ):
         rdir = os.path.join(out_dir, "renders", name)
-        if not os.path.isfile(os.path.join(rdir, "manifest.json")):
-            with open(path, encoding="utf-8") as f:
-                text = f.read()
-            used = {
-                k: v for k, v in (params or {}).items() if f"${k}" in text
-            }  # per-scene defaults
-            render_scene(
-                path, rdir, formats=("npz",), seed=seed, spp=spp, params=used, progress=False
-            )
-        for cam_id, frame, lparams in _frames_of_scene(rdir, lidar_id):
+        opts = dict(formats=("npz",), seed=seed, spp=spp, params=used[path], progress=False)
+        ensure_rendered(path, rdir, **opts)
+        rendered_at = os.path.getmtime(os.path.join(rdir, "manifest.json"))
+        for cam_id, frame, lparams in frames_of_render(rdir, lidar_id):
             wavelength = lparams["wavelength"]
             split = split_of[name]
             fid = f"{name}__{cam_id}"
             target = os.path.join(out_dir, split, fid + ".npz")
-            if not os.path.isfile(target):
-                os.makedirs(os.path.dirname(target), exist_ok=True)
-                with atomic_path(target) as tmp:
-                    with open(tmp, "wb") as f:
-                        np.savez(f, **frame)
+            if not os.path.isfile(target) or os.path.getmtime(target) < rendered_at:
+                _write_frame(target, frame)
             frames[split].append(fid)
+    _remove_stale_frames(out_dir, frames)
     meta = {
         "scenes": splits,
         "frames": frames,
@@ -182,48 +343,9 @@ def build_dataset(
     return meta
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python -m nidar_mi.dataset", description=__doc__.split("\n")[0]
-    )
-    p.add_argument(
-        "--scenes", required=True, help="folder of scene XML files (e.g. from nidar_mi.scenegen)"
-    )
-    p.add_argument("-o", "--out", required=True, help="dataset folder")
-    p.add_argument("--split", default="0.8,0.1,0.1", help="train,val,test fractions of the scenes")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--spp", type=int, default=16)
-    p.add_argument("--lidar", default=None, help="lidar id (default: the first by id)")
-    p.add_argument("--intensity-scale", type=float, default=1.0)
-    p.add_argument("-D", dest="params", action="append", default=[], metavar="NAME=VALUE")
-    p.add_argument("-q", "--quiet", action="store_true")
-    args = p.parse_args(argv)
-    try:
-        from .render import _parse_params
+if __name__ == "__main__":  # ``python -m nidar_mi.dataset``
+    import sys
 
-        try:
-            fractions = tuple(float(x) for x in args.split.split(","))
-        except ValueError:
-            raise NidarError(f"--split: expected three numbers (got '{args.split}')") from None
-        meta = build_dataset(
-            args.scenes,
-            args.out,
-            fractions=fractions,
-            seed=args.seed,
-            spp=args.spp,
-            params=_parse_params(args.params),
-            lidar_id=args.lidar,
-            intensity_scale=args.intensity_scale,
-            progress=not args.quiet,
-        )
-    except NidarError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    if not args.quiet:
-        for s in SPLITS:
-            print(f"{s:5s}  {len(meta['scenes'][s]):4d} scenes  {len(meta['frames'][s]):5d} frames")
-    return 0
+    from nidar_mi.cli.dataset import main
 
-
-if __name__ == "__main__":
     sys.exit(main())

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from nidar_mi.evaluate import main
+from nidar_mi.cli.evaluate import main
 
 
 def _dataset(root, scenes):

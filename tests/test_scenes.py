@@ -32,7 +32,7 @@ def test_scene_renders_small(path, tmp_path, variant):
     from nidar_mi.io.images import read_exr
     from nidar_mi.io.points import read_npz
     from nidar_mi.materials import list_materials
-    from nidar_mi.render import render_scene
+    from nidar_mi.simulate import render_scene
 
     params = {k: v for k, v in SMALL.items() if k in _declared(path)}
     out = tmp_path / "out"

@@ -140,7 +140,7 @@ def evaluate_run(
         ``{"val_loss": last epoch's validation loss, "I_hat": scores, ["R": scores,
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
-    from ..nidar.data import list_frames, load_meta
+    from ..dataset import list_frames, load_meta
     from ..nidar.pipeline import NidarModel, fit_dataset_calibration
 
     run_dir = Path(run_dir)

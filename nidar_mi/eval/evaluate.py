@@ -160,7 +160,7 @@ def load_render_frames(
         One :class:`FrameData` per camera, sorted by camera id.
     """
     from ..nidar.projection import project, visible_mask
-    from ..rendered import read_render
+    from ..render_folder import read_render
 
     r = read_render(render_dir, lidar_id)
     manifest, lparams, pts = r.manifest, r.parameters, r.points

@@ -45,7 +45,7 @@ def fit_class_constant(
         intensity_scale: divisor of the metric scale.
         lidar_id: LiDAR to read; None takes the first by id.
     """
-    from ..rendered import read_render
+    from ..render_folder import read_render
 
     labels, values = [], []
     for rdir in render_dirs:
@@ -66,8 +66,8 @@ def fit_pseudo_nir_calibration(model, data_dir: str, split: str = "train"):
     Same recipe as :func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`, with the STN's
     pseudo-NIR at the masked pixels in place of the R branch.
     """
+    from ..dataset import list_frames, load_meta
     from ..nidar.calibration import fit_calibration
-    from ..nidar.data import list_frames, load_meta
 
     meta = load_meta(data_dir)
     scale = float(meta.get("intensity_scale", 1.0))
@@ -114,7 +114,7 @@ def render_scenes(
     seed: int = 0,
     spp: int = 16,
 ) -> list[str]:
-    """Render scenes (cached: skipped when ``cache_dir/<name>/manifest.json`` exists).
+    """Render scenes into ``cache_dir/<name>`` unless already rendered with the same request.
 
     Args:
         scene_files: scene XML files.
@@ -126,19 +126,22 @@ def render_scenes(
     Returns:
         The render folders, in the order of ``scene_files``.
     """
-    from ..render import render_scene
+    from ..dataset import scene_params
+    from ..simulate import ensure_rendered
 
     out = []
     for path in scene_files:
         name = os.path.splitext(os.path.basename(path))[0]
         rdir = os.path.join(cache_dir, name)
-        if not os.path.isfile(os.path.join(rdir, "manifest.json")):
-            with open(path, encoding="utf-8") as f:
-                text = f.read()
-            used = {k: v for k, v in (params or {}).items() if f"${k}" in text}
-            render_scene(
-                path, rdir, formats=("npz",), seed=seed, spp=spp, params=used, progress=False
-            )
+        ensure_rendered(
+            path,
+            rdir,
+            formats=("npz",),
+            seed=seed,
+            spp=spp,
+            params=scene_params(path, params),
+            progress=False,
+        )
         out.append(rdir)
     return out
 

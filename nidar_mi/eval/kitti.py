@@ -166,7 +166,7 @@ def evaluate_kitti(
     Raises:
         NidarError: no complete frame in ``kitti_dir``, or the model has no calibration.
     """
-    from ..assign import load_kitti_frame
+    from ..cli.assign import load_kitti_frame
     from ..nidar.frames import sparse_maps
 
     ids = kitti_frame_ids(kitti_dir)

@@ -6,6 +6,9 @@ suffix so that libraries which pick a format from the extension still do the rig
 On success the temporary file replaces the target; on any exception it is removed and the
 target is left untouched.
 
+:func:`staged_directory` does the same for a whole output folder: everything is written into a
+hidden sibling folder that takes the target's place only when the ``with`` block succeeds.
+
 :func:`reading` is the read-side counterpart used by every reader of :mod:`nidar_mi.io`: it
 checks that the file exists and turns any failure to parse it into a one-line
 :class:`~nidar_mi.errors.NidarError` naming the file.
@@ -16,6 +19,8 @@ from __future__ import annotations
 import json
 import os
 import secrets
+import shutil
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,7 +30,13 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_json", "reading"]
+__all__ = [
+    "atomic_path",
+    "atomic_write_text",
+    "atomic_write_json",
+    "reading",
+    "staged_directory",
+]
 
 
 def _remove_quietly(path: Path) -> None:
@@ -144,3 +155,66 @@ def reading(path: str | os.PathLike) -> Iterator[Path]:
         raise
     except Exception as e:
         raise NidarError(f"cannot read {p}: {_one_line(e)}") from e
+
+
+def _check_out_dir(target: Path, overwrite: bool, marker: str | None) -> None:
+    if target.exists() and not target.is_dir():
+        raise NidarError(f"cannot write {target}: it exists and is not a folder")
+    if not target.is_dir() or overwrite or (marker and (target / marker).is_file()):
+        return
+    if any(target.iterdir()):
+        raise NidarError(f"{target} is not empty: choose another folder or pass --overwrite")
+
+
+@contextmanager
+def staged_directory(
+    out_dir: str | os.PathLike, *, overwrite: bool = False, marker: str | None = None
+) -> Iterator[Path]:
+    """Yield a hidden staging folder that replaces ``out_dir`` whole when the block succeeds.
+
+    The staging folder is ``<parent>/.<name>.partial-<random>`` (same file system, so the final
+    renames are atomic). On success the previous content of ``out_dir`` (if any) is moved aside
+    and deleted and the staging folder is renamed to ``out_dir``: the result never mixes two runs.
+    On any exception (Ctrl-C and SIGTERM included) the staging folder is removed and ``out_dir``
+    is left as it was.
+
+    Args:
+        out_dir: the final folder.
+        overwrite: allow replacing a non-empty ``out_dir``; without it such a folder is refused
+            before anything is written.
+        marker: name of a file that marks ``out_dir`` as an earlier output of the same kind
+            (e.g. ``manifest.json``); such a folder is replaced without ``overwrite``.
+
+    Yields:
+        The staging folder to write into.
+
+    Raises:
+        NidarError: ``out_dir`` is a file, is non-empty without ``overwrite``, or its parent
+            cannot be created or written.
+    """
+    target = Path(out_dir).absolute()
+    _check_out_dir(target, overwrite, marker)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=target.parent))
+        umask = os.umask(0)
+        os.umask(umask)
+        stage.chmod(0o777 & ~umask)  # mkdtemp makes it private; the result should not be
+    except OSError as e:
+        raise NidarError(f"cannot write {target}: {e.strerror or e}") from None
+    try:
+        yield stage
+        _check_out_dir(target, overwrite, marker)  # another process may have filled it meanwhile
+        old = None
+        if target.exists():
+            old = target.with_name(f".{target.name}.old-{secrets.token_hex(4)}")
+            os.replace(target, old)
+        os.replace(stage, target)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except OSError as e:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise NidarError(f"cannot write {target}: {e.strerror or e}") from None
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise

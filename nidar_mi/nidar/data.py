@@ -1,118 +1,28 @@
-"""Reading the NIDAR training data and serving crops to the networks.
+"""Torch datasets over the training frames: crops, flips and tensors for the networks.
 
-Layout (written by the dataset builder)::
-
-    DATA/meta.json                    {"intensity_scale": s, "wavelength_nm": 905, ...}
-    DATA/{train,val,test}/<frame>.npz one per (scene, camera) frame
-
-Keys of a frame (``H x W`` camera pixels):
-
-=============== ============= ======== ================================================
-key             shape         dtype    meaning
-=============== ============= ======== ================================================
-``rgb``         (H, W, 3)     uint8    8-bit sRGB camera image
-``nir``         (H, W)        float32  NIR band radiance at the LiDAR wavelength (linear)
-``intensity``   (H, W)        float32  sparse projected LiDAR intensity, 0 off-mask
-``mask``        (H, W)        bool     pixels with a projected LiDAR return
-``depth``       (H, W)        float32  camera z-depth in m, 0 where no surface
-``K``           (3, 3)        float64  intrinsics (OpenCV, z forward)
-``T_cam_lidar`` (4, 4)        float64  LiDAR frame -> camera frame
-=============== ============= ======== ================================================
-
-Files are opened with ``allow_pickle=False``. Intensity is divided by ``intensity_scale`` and
-clipped to [0, 1].
+The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.dataset`; these classes only
+read it. Intensity is divided by ``intensity_scale`` and clipped to [0, 1].
 Crops and flips are drawn from a generator seeded by ``(seed, epoch, index)``, so a sample
 does not depend on worker processes or on where a run was resumed.
 """
 
 from __future__ import annotations
 
-import json
-import zipfile
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from ..dataset import load_frame
 from ..errors import NidarError
 from .preprocess import prepare_nir, prepare_rgb
 
 __all__ = [
-    "FRAME_KEYS",
-    "SPLITS",
-    "load_meta",
-    "list_frames",
-    "load_frame",
     "FrameDataset",
     "STNDataset",
     "IRNetDataset",
 ]
-
-SPLITS = ("train", "val", "test")
-
-#: Expected dtype and shape (``None`` = image size) of every frame key.
-FRAME_KEYS = {
-    "rgb": (np.uint8, (None, None, 3)),
-    "nir": (np.float32, (None, None)),
-    "intensity": (np.float32, (None, None)),
-    "mask": (np.bool_, (None, None)),
-    "depth": (np.float32, (None, None)),
-    "K": (np.float64, (3, 3)),
-    "T_cam_lidar": (np.float64, (4, 4)),
-}
-
-
-def load_meta(data_dir: str | Path) -> dict:
-    """Read ``DATA/meta.json``; checks that ``intensity_scale`` is a positive number."""
-    path = Path(data_dir) / "meta.json"
-    try:
-        meta = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise NidarError(f"{path} not found: not a NIDAR training-data directory") from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise NidarError(f"cannot read {path}: {exc}") from None
-    scale = meta.get("intensity_scale") if isinstance(meta, dict) else None
-    if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not scale > 0:
-        raise NidarError(f"{path}: 'intensity_scale' must be a positive number, got {scale!r}")
-    return meta
-
-
-def list_frames(data_dir: str | Path, split: str) -> list[Path]:
-    """Sorted ``DATA/<split>/*.npz`` paths (empty when the split is absent)."""
-    if split not in SPLITS:
-        raise NidarError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
-    return sorted((Path(data_dir) / split).glob("*.npz"))
-
-
-def load_frame(path: str | Path, keys=tuple(FRAME_KEYS)) -> dict[str, np.ndarray]:
-    """Load and check the given keys of one frame file.
-
-    Raises:
-        NidarError: missing key, wrong dtype or shape, or an unreadable file.
-    """
-    path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            missing = [k for k in keys if k not in npz.files]
-            if missing:
-                raise NidarError(f"{path}: missing key(s) {', '.join(missing)}")
-            arrays = {k: npz[k] for k in keys}
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
-        raise NidarError(f"cannot read frame {path}: {exc}") from None
-    size = None
-    for key, arr in arrays.items():
-        dtype, shape = FRAME_KEYS[key]
-        if arr.dtype != dtype:
-            raise NidarError(f"{path}: {key} has dtype {arr.dtype}, expected {np.dtype(dtype)}")
-        if len(shape) >= 2 and shape[0] is None:
-            hw = arr.shape[:2]
-            size = size or hw
-            if arr.ndim != len(shape) or hw != size or arr.shape[2:] != shape[2:]:
-                raise NidarError(f"{path}: {key} has shape {arr.shape}, image size is {size}")
-        elif arr.shape != shape:
-            raise NidarError(f"{path}: {key} has shape {arr.shape}, expected {shape}")
-    return arrays
 
 
 def _crop_box(h: int, w: int, crop: int, rng: np.random.Generator | None):

@@ -151,7 +151,7 @@ def fit_dataset_calibration(
     intensity there (``intensity / intensity_scale`` clipped to [0, 1], the source-domain
     distribution).
     """
-    from .data import list_frames, load_frame, load_meta
+    from ..dataset import list_frames, load_frame, load_meta
 
     meta = load_meta(data_dir)
     scale = float(meta.get("intensity_scale", 1.0))

@@ -31,10 +31,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..dataset import list_frames, load_frame, load_meta
 from ..errors import NidarError
 from .checkpoint import atomic_write
 from .config import TrainConfig
-from .data import IRNetDataset, STNDataset, list_frames, load_frame, load_meta
+from .data import IRNetDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
 from .losses import irnet_objective, stn_loss

@@ -72,7 +72,7 @@ def test_frame_ids(kitti_dir, tmp_path):
 
 
 def test_rows_and_carla_by_hand(kitti_dir, model):
-    from nidar_mi.assign import load_kitti_frame
+    from nidar_mi.cli.assign import load_kitti_frame
 
     res = evaluate_kitti(str(kitti_dir), model)
     assert res["frames"] == ["000000", "000001", "000002"]
@@ -90,7 +90,7 @@ def test_rows_and_carla_by_hand(kitti_dir, model):
 
 
 def test_leave_one_out_uses_only_the_other_frames(kitti_dir, model):
-    from nidar_mi.assign import load_kitti_frame
+    from nidar_mi.cli.assign import load_kitti_frame
     from nidar_mi.eval.kitti import loo_remap
 
     frames = [

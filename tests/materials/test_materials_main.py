@@ -6,8 +6,8 @@ import sys
 
 import numpy as np
 
+from nidar_mi.cli.materials import main
 from nidar_mi.materials import list_materials, reflectance
-from nidar_mi.materials.__main__ import main
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

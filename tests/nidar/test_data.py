@@ -7,15 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from nidar_mi.dataset import FRAME_KEYS, list_frames, load_frame, load_meta
 from nidar_mi.errors import NidarError
-from nidar_mi.nidar.data import (
-    FRAME_KEYS,
-    IRNetDataset,
-    STNDataset,
-    list_frames,
-    load_frame,
-    load_meta,
-)
+from nidar_mi.nidar.data import IRNetDataset, STNDataset
 from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
 from nidar_mi.nidar.synthetic import write_synthetic_dataset
 
@@ -33,7 +27,7 @@ def test_synthetic_frames_follow_the_format(data_dir):
     assert len(list_frames(data_dir, "val")) == 2 and len(list_frames(data_dir, "test")) == 1
     f = load_frame(frames[0])
     shapes = {"rgb": (48, 64, 3), "K": (3, 3), "T_cam_lidar": (4, 4)}
-    for key, (dtype, _) in FRAME_KEYS.items():
+    for key, (dtype, _, _) in FRAME_KEYS.items():
         assert f[key].dtype == dtype
         assert f[key].shape == shapes.get(key, (48, 64))
     assert np.all(f["intensity"][~f["mask"]] == 0)

@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from safetensors.numpy import load_file
 
+from nidar_mi.cli.train import main
+from nidar_mi.dataset import list_frames, load_frame
 from nidar_mi.errors import NidarError
 from nidar_mi.nidar.checkpoint import latest_checkpoint
 from nidar_mi.nidar.config import TrainConfig
-from nidar_mi.nidar.data import list_frames, load_frame
 from nidar_mi.nidar.infer import predict
 from nidar_mi.nidar.model_io import load_pipeline
 from nidar_mi.nidar.synthetic import write_synthetic_dataset
 from nidar_mi.nidar.train import train, train_irnet, train_stn
-from nidar_mi.train import main
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +154,7 @@ def test_cli_user_errors_are_one_line(tmp_path, capsys):
 
 
 def test_cli_config_file_merges_over_the_reduced_config(tmp_path):
-    from nidar_mi.train import _parser, build_config
+    from nidar_mi.cli.train import _parser, build_config
 
     path = tmp_path / "cfg.json"
     path.write_text(json.dumps({"irnet": {"variant": "unet+unet"}, "seed": 4}))

@@ -100,7 +100,7 @@ def test_corrupt_index_is_reported(tmp_path):
 
 @pytest.mark.parametrize("kind", ["urban", "vegetated"])
 def test_generated_scene_renders(tmp_path, variant, kind):
-    from nidar_mi.render import render_scene
+    from nidar_mi.simulate import render_scene
 
     scenes = tmp_path / "gen"
     index = generate(str(scenes), 1, 3, kind=kind, progress=False)

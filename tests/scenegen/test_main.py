@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from nidar_mi.scenegen.__main__ import main
+from nidar_mi.cli.scenegen import main
 from nidar_mi.scenegen.generate import generate_scene
 
 

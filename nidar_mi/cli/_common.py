@@ -1,0 +1,129 @@
+"""What every command shares: one-line errors, exit codes, Ctrl-C and SIGTERM, ``-D``, ``--version``.
+
+A command is ``main(argv=None) -> int``: it parses its arguments, then hands the work to
+:func:`run`, which turns every expected failure into one line on stderr and an exit status:
+
+======  ====================================================================================
+status  meaning
+======  ====================================================================================
+0       success
+2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file)
+130     interrupted by Ctrl-C (SIGINT)
+143     terminated (SIGTERM)
+======  ====================================================================================
+
+Outputs are written through staging folders (:func:`nidar_mi.io.atomic.staged_directory`), so an
+interrupted or failed command leaves nothing behind. Warnings are printed as one
+``warning: ...`` line each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import warnings
+from collections.abc import Callable
+
+from ..errors import NidarError
+
+__all__ = [
+    "EXIT_OK",
+    "EXIT_USER_ERROR",
+    "EXIT_INTERRUPTED",
+    "EXIT_TERMINATED",
+    "Terminated",
+    "parser",
+    "parse_defines",
+    "run",
+]
+
+EXIT_OK = 0
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
+
+
+class Terminated(KeyboardInterrupt):
+    """Raised in the main thread when the process receives SIGTERM.
+
+    A subclass of :class:`KeyboardInterrupt`, so every clean-up path that handles Ctrl-C
+    (staging folders, progress bars) handles SIGTERM alike.
+    """
+
+
+def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
+    raise Terminated()
+
+
+def parser(command: str, description: str, **kwargs) -> argparse.ArgumentParser:
+    """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``."""
+    from .. import __version__
+
+    p = argparse.ArgumentParser(
+        prog=f"python -m nidar_mi.{command}", description=description, **kwargs
+    )
+    p.add_argument("--version", action="version", version=f"nidar_mi {__version__}")
+    return p
+
+
+def parse_defines(items: list[str]) -> dict[str, str]:
+    """``-D NAME=VALUE`` options as a dict (later ones win).
+
+    Raises:
+        NidarError: an item without ``=`` or with an empty name.
+    """
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise NidarError(f"-D expects NAME=VALUE (got '{item}')")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):  # noqa: ARG001
+    print(f"warning: {_one_line(message)}", file=sys.stderr)
+
+
+def run(work: Callable[[], int | None], *, on_interrupt: str = "nothing written") -> int:
+    """Run a command's work and map every expected failure to one line and an exit status.
+
+    Args:
+        work: the command body; returns an exit status or None (success).
+        on_interrupt: what the user is told is left after Ctrl-C or SIGTERM.
+
+    Returns:
+        The exit status (see the module docstring).
+    """
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread: leave SIGTERM alone
+        previous = None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            warnings.showwarning = _show_warning
+            status = work()
+        return EXIT_OK if status is None else int(status)
+    except NidarError as e:
+        print(f"error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except Terminated:
+        print(f"terminated; {on_interrupt}", file=sys.stderr)
+        return EXIT_TERMINATED
+    except KeyboardInterrupt:
+        print(f"interrupted; {on_interrupt}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except OSError as e:
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        print(f"error: {where}{_one_line(e.strerror or e)}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)

@@ -1,0 +1,76 @@
+"""``python -m nidar_mi.dataset --scenes DIR -o DATA``: NIDAR training frames from rendered scenes.
+
+The work and the frame format are :mod:`nidar_mi.dataset`.
+"""
+
+from __future__ import annotations
+
+from ..errors import NidarError
+from ._common import parse_defines, parser, run
+
+__all__ = ["main", "build_parser"]
+
+
+def build_parser():
+    p = parser(
+        "dataset", "Render scenes (cached) and turn every camera into a NIDAR training frame."
+    )
+    p.add_argument(
+        "--scenes", required=True, help="folder of scene XML files (e.g. from nidar_mi.scenegen)"
+    )
+    p.add_argument("-o", "--out", required=True, help="dataset folder")
+    p.add_argument(
+        "--split",
+        default="0.8,0.1,0.1",
+        help="train,val,test fractions of the scenes; scenes are split whole (default 0.8,0.1,0.1)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="split, scan-noise and sampler seed, >= 0 (default 0)"
+    )
+    p.add_argument("--spp", type=int, default=16, help="camera samples per pixel (default 16)")
+    p.add_argument("--lidar", default=None, help="lidar id (default: the first by id)")
+    p.add_argument(
+        "--intensity-scale",
+        type=float,
+        default=1.0,
+        help="training divides the LiDAR intensity by this and clips to [0, 1] (default 1)",
+    )
+    p.add_argument(
+        "-D",
+        dest="params",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="scene parameter for every scene that has it, e.g. -D width=320; repeatable",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+
+    def work():
+        from ..dataset import SPLITS, build_dataset
+
+        try:
+            fractions = tuple(float(x) for x in args.split.split(","))
+        except ValueError:
+            raise NidarError(f"--split: expected three numbers (got '{args.split}')") from None
+        meta = build_dataset(
+            args.scenes,
+            args.out,
+            fractions=fractions,
+            seed=args.seed,
+            spp=args.spp,
+            params=parse_defines(args.params),
+            lidar_id=args.lidar,
+            intensity_scale=args.intensity_scale,
+            progress=not args.quiet,
+        )
+        if not args.quiet:
+            for s in SPLITS:
+                n_scenes, n_frames = len(meta["scenes"][s]), len(meta["frames"][s])
+                print(f"{s:5s}  {n_scenes:4d} scenes  {n_frames:5d} frames")
+
+    return run(work, on_interrupt="the frames written so far are complete; run again to resume")

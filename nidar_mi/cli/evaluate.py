@@ -1,0 +1,72 @@
+"""``python -m nidar_mi.evaluate``: NIDAR and the baselines on held-out scenes, hand-made scenes,
+real KITTI frames, and the ablations.
+
+    python -m nidar_mi.evaluate --data DATA [--weights DIR] [--scenes scenes/]
+                                [--kitti ../shared/data/kitti] [--ablation] -o OUT
+
+* ``DATA`` is a dataset from :mod:`nidar_mi.dataset`: its ``test`` scenes (rendered under
+  ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
+  and (e), ``meta.json`` gives ``intensity_scale``.
+* ``--scenes`` renders the hand-made scene files (cached in ``OUT/renders``) with the dataset's
+  parameters, seed and spp, and evaluates them the same way.
+* ``--kitti`` evaluates the real frames (skipped with a message when the folder is absent).
+* ``--ablation`` trains the IRNet variants and the RGB-input model into ``OUT/ablation``
+  (finished runs are reused) and scores them on the test frames.
+
+Writes ``OUT/results.md``, ``OUT/results.csv`` (one row per frame and method, plus ``mean``
+rows), ``OUT/results.json`` and ``OUT/figures/*.png`` (no figure of KITTI frames). See
+:mod:`nidar_mi.eval.evaluate` for the methods and the metric scale.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+
+from ._common import parser, run
+
+__all__ = ["main"]
+
+log = logging.getLogger("nidar_mi.evaluate")
+
+
+def _parser():
+    p = parser(
+        "evaluate",
+        "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, and the ablations.",
+    )
+    p.add_argument("--data", required=True, help="dataset folder (meta.json, renders/, splits)")
+    p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
+    p.add_argument("--scenes", help="folder of hand-made scene XML files to evaluate too")
+    p.add_argument("--kitti", help="KITTI folder (velodyne/, image_2/, calib/)")
+    p.add_argument("--ablation", action="store_true", help="train and score the ablations")
+    p.add_argument("--split", default="test", help="dataset split of the held-out scenes")
+    p.add_argument("--no-twin", action="store_true", help="skip baseline (a) (no Mitsuba scans)")
+    p.add_argument("--lpips", action="store_true", help="LPIPS (needs cached AlexNet weights)")
+    p.add_argument(
+        "--figures", type=int, default=3, help="frames per group with map figures (default 3)"
+    )
+    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status (2 on a user error)."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.WARNING if args.quiet else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    argv_text = "python -m nidar_mi.evaluate " + " ".join(
+        sys.argv[1:] if argv is None else list(argv)
+    )
+
+    def work():
+        from ..eval.suite import run as evaluate
+
+        payload = evaluate(args, argv_text)
+        log.info("wrote %s in %.0f s", os.path.join(args.out, "results.md"), payload["seconds"])
+
+    return run(work)

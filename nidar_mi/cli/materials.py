@@ -1,0 +1,47 @@
+"""``python -m nidar_mi.materials``: list the material library and plot spectra.
+
+Usage::
+
+    python -m nidar_mi.materials --list
+    python -m nidar_mi.materials --plot asphalt_old grass lane_paint_white -o spectra.png
+
+``--list`` (the default) prints name, kind, reflectance at 550 / 905 / 1550 nm, sRGB colour and
+source of every material. ``--plot`` writes a PNG of the chosen materials' reflectance from 360 to
+1700 nm with the 905 and 1550 nm LiDAR wavelengths marked.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from ..errors import NidarError
+from ._common import parser, run
+
+__all__ = ["main"]
+
+
+def _parser():
+    p = parser("materials", "List the spectral material library and plot material spectra.")
+    p.add_argument("--list", action="store_true", help="print the material table (default)")
+    p.add_argument("--plot", nargs="+", metavar="NAME", help="materials to plot")
+    p.add_argument("-o", "--output", default="spectra.png", help="PNG path for --plot")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the process exit status (2 on a user error)."""
+    args = _parser().parse_args(argv)
+
+    def work():
+        from ..materials.report import format_table, list_materials, plot_spectra
+
+        if args.list or not args.plot:
+            sys.stdout.write(format_table(list_materials()))
+        if args.plot:
+            if not os.path.isdir(os.path.dirname(os.path.abspath(args.output))):
+                raise NidarError(f"output folder does not exist: {os.path.dirname(args.output)}")
+            plot_spectra(args.plot, args.output)
+            sys.stdout.write(f"wrote {args.output}\n")
+
+    return run(work)

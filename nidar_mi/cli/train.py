@@ -1,0 +1,147 @@
+"""Command line: train the NIDAR networks.
+
+    python -m nidar_mi.train DATA OUT [--config cfg.json] [--reduced] [--stage all|stn|irnet]
+                             [--variant unet+deeplabv3] [--input pseudo_nir|rgb]
+                             [--stn-weights stn.safetensors] [--resume] [--seed N]
+                             [--device auto|cpu|cuda] [--epochs N] [--max-steps N]
+                             [--batch-size N] [--crop-size N] [--no-progress]
+
+Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
+``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
+trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted on the training
+split (:func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`; ``--no-calibration`` skips it). Options given on
+the command line override the configuration file (``--epochs``, ``--max-steps`` and
+``--batch-size`` apply to both stages). See :mod:`nidar_mi.nidar.train`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+from pathlib import Path
+
+from ..errors import NidarError
+from ._common import parser, run
+
+__all__ = ["main", "build_config"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = parser("train", __doc__.split("\n")[0])
+    p.add_argument("data", type=Path, help="training-data directory (meta.json, train/, val/)")
+    p.add_argument("out", type=Path, help="output directory for weights, logs, checkpoints")
+    p.add_argument("--config", type=Path, help="JSON file with a TrainConfig (nested dict)")
+    p.add_argument("--reduced", action="store_true", help="start from the tiny test config")
+    p.add_argument("--stage", choices=("all", "stn", "irnet"), default="all")
+    p.add_argument("--variant", help="IRNet variant, e.g. unet+deeplabv3, deeplabv3+3conv")
+    p.add_argument("--input", choices=("pseudo_nir", "rgb"), help="IRNet input")
+    p.add_argument("--stn-weights", type=Path, help="use this trained STN (skips the STN stage)")
+    p.add_argument("--resume", action="store_true", help="continue from the latest checkpoint")
+    p.add_argument(
+        "--no-calibration", action="store_true", help="do not fit calibration.json after training"
+    )
+    p.add_argument("--seed", type=int)
+    p.add_argument("--device", help="auto (default), cpu, cuda or cuda:N")
+    p.add_argument("--epochs", type=int, help="epochs of each stage")
+    p.add_argument("--max-steps", type=int, help="optimiser steps of each stage at most")
+    p.add_argument("--batch-size", type=int, help="batch size of each stage")
+    p.add_argument("--crop-size", type=int, help="side of the square training crops (px)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
+    return p
+
+
+def _merge(base: dict, override: dict) -> dict:
+    """``base`` updated by ``override``, nested dicts merged key by key."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def build_config(args: argparse.Namespace):
+    """The :class:`~nidar_mi.nidar.config.TrainConfig` selected by parsed arguments."""
+    from ..nidar.config import TrainConfig
+
+    if args.config is not None:
+        try:
+            data = json.loads(args.config.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise NidarError(f"cannot read {args.config}: {exc}") from None
+        base = TrainConfig.reduced().to_dict() if args.reduced else {}
+        cfg = TrainConfig.from_dict(_merge(base, data))
+    else:
+        cfg = TrainConfig.reduced() if args.reduced else TrainConfig()
+    irnet = cfg.irnet
+    if args.variant is not None:
+        irnet = dataclasses.replace(irnet, variant=args.variant.strip().lower().replace("-", ""))
+    if args.input is not None:
+        irnet = dataclasses.replace(irnet, input=args.input)
+    optim = {
+        k: v
+        for k, v in (
+            ("epochs", args.epochs),
+            ("max_steps", args.max_steps),
+            ("batch_size", args.batch_size),
+        )
+        if v is not None
+    }
+    top = {
+        k: v
+        for k, v in (("seed", args.seed), ("device", args.device), ("crop_size", args.crop_size))
+        if v is not None
+    }
+    cfg = dataclasses.replace(
+        cfg,
+        irnet=irnet,
+        stn_optim=dataclasses.replace(cfg.stn_optim, **optim),
+        irnet_optim=dataclasses.replace(cfg.irnet_optim, **optim),
+        **top,
+    )
+    cfg.validate()
+    return cfg
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status (2 on a user error)."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.WARNING if args.quiet else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+
+    def work():
+        from ..nidar import train as training
+
+        cfg = build_config(args)
+        progress = not args.no_progress
+        if args.stage == "stn":
+            training.train_stn(cfg, args.data, args.out, resume=args.resume, progress=progress)
+        elif args.stage == "irnet":
+            training.train_irnet(
+                cfg, args.data, args.out, args.stn_weights, resume=args.resume, progress=progress
+            )
+        else:
+            training.train(
+                cfg,
+                args.data,
+                args.out,
+                stn_weights=args.stn_weights,
+                resume=args.resume,
+                progress=progress,
+            )
+        if args.stage != "stn" and not args.no_calibration:
+            from ..nidar.pipeline import NidarModel, fit_dataset_calibration
+
+            model = NidarModel.load(args.out, device=cfg.device)
+            fit_dataset_calibration(model, args.data, "train").save_json(
+                args.out / "calibration.json"
+            )
+        logging.getLogger(__name__).info("weights written to %s", args.out)
+
+    return run(work)

@@ -1,0 +1,343 @@
+"""The render folder: what ``render`` writes, and what the dataset builder and the evaluation read.
+
+One module owns the layout (the table of files is in the README, "Rendering")::
+
+    OUT/manifest.json                           the request, versions, resolved parameters, timings
+    OUT/<lidar_id>/points.{npz,ply,las,bin}     valid returns (schema: nidar_mi.io.points)
+    OUT/<lidar_id>/range_image.exr, range.png, intensity.png
+    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, calib.json
+
+Writers take the in-memory results (:class:`~nidar_mi.lidar.raycast.ScanResult`,
+:class:`~nidar_mi.camera.CameraRender`); :func:`read_render` gives them back as arrays and camera
+models. A :class:`RenderRequest` holds every input that determines a render; it is stored in the
+manifest, and :func:`is_current` tells whether a folder already holds the render of a request
+(the cache key of the dataset builder and the evaluation).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import NidarError
+
+__all__ = [
+    "FORMATS",
+    "MANIFEST",
+    "RenderRequest",
+    "RenderedCamera",
+    "RenderedScan",
+    "is_current",
+    "read_manifest",
+    "read_render",
+    "write_camera",
+    "write_lidar",
+    "write_manifest",
+]
+
+#: Point-cloud formats a LiDAR folder can hold.
+FORMATS = ("npz", "ply", "las", "bin")
+#: The manifest's file name; its presence marks a folder as a render folder.
+MANIFEST = "manifest.json"
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
+@dataclass(frozen=True)
+class RenderRequest:
+    """Every input that determines a render (the cache key of a render folder).
+
+    Attributes:
+        scene: absolute path of the scene XML.
+        scene_sha256: hash of its bytes (an edited scene is a new request).
+        params: the scene's ``<default>`` values given on the command line (``-D``).
+        seed: scan and sampler seed; None keeps each LiDAR's own.
+        spp: camera samples per pixel.
+        formats: point-cloud formats written.
+        cameras: whether the cameras were rendered.
+        rgb_twin: whether the scene's RGB-only twin was loaded.
+        intensity: ``physics`` or ``nidar``.
+        weights: NIDAR weights folder (``nidar`` only; None: the shipped model).
+        nidar_branch: NIDAR branch (``nidar`` only).
+    """
+
+    scene: str
+    scene_sha256: str
+    params: dict[str, str] = field(default_factory=dict)
+    seed: int | None = None
+    spp: int = 16
+    formats: tuple[str, ...] = FORMATS
+    cameras: bool = True
+    rgb_twin: bool = False
+    intensity: str = "physics"
+    weights: str | None = None
+    nidar_branch: str | None = None
+
+    @classmethod
+    def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
+        """The request for a scene file (hashes the file); ``options`` are the fields."""
+        path = os.path.abspath(scene_path)
+        if not os.path.isfile(path):
+            raise NidarError(f"{scene_path}: no such scene file")
+        params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
+        options["formats"] = tuple(options.get("formats", FORMATS))
+        if options.get("intensity", "physics") != "nidar":
+            options["weights"] = options["nidar_branch"] = None
+        elif options.get("weights") is not None:
+            options["weights"] = os.path.abspath(options["weights"])
+        return cls(scene=path, scene_sha256=file_sha256(path), params=params, **options)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict (what the manifest stores under ``request``)."""
+        d = asdict(self)
+        d["formats"] = list(self.formats)
+        return d
+
+
+def write_manifest(folder: str | os.PathLike, manifest: dict) -> None:
+    """Write ``folder/manifest.json`` atomically."""
+    from .io.atomic import atomic_write_json
+
+    atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+
+
+def read_manifest(folder: str | os.PathLike) -> dict:
+    """The manifest of a render folder.
+
+    Raises:
+        NidarError: missing, unreadable or not a JSON object.
+    """
+    path = os.path.join(folder, MANIFEST)
+    try:
+        with open(path, encoding="utf-8") as f:
+            manifest = json.load(f)
+    except OSError as e:
+        raise NidarError(f"{folder}: no readable {MANIFEST} ({e.strerror})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise NidarError(f"{path}: not valid JSON ({e})") from None
+    if not isinstance(manifest, dict):
+        raise NidarError(f"{path}: not a render manifest")
+    return manifest
+
+
+def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
+    """Whether ``folder`` holds a complete render of exactly ``request``."""
+    try:
+        manifest = read_manifest(folder)
+    except NidarError:
+        return False
+    if manifest.get("request") != request.to_dict():
+        return False
+    return all(os.path.isfile(os.path.join(folder, f)) for f in manifest.get("files", []))
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None = None) -> list[str]:
+    """Write one LiDAR's points, range image and previews into ``folder/<lidar id>/``.
+
+    Args:
+        folder: the render folder (or its staging copy).
+        result: a :class:`~nidar_mi.lidar.raycast.ScanResult`.
+        formats: point formats from :data:`FORMATS`.
+        extra: further per-point columns (e.g. ``intensity_nidar``).
+
+    Returns:
+        The paths written.
+    """
+    from .io import images
+    from .io import points as pio
+    from .io.las import write_las
+
+    d = os.path.join(folder, result.config.name)
+    os.makedirs(d, exist_ok=True)
+    pts = result.points() | dict(extra or {})
+    writers = {
+        "npz": lambda p: pio.write_npz(p, pts),
+        "ply": lambda p: pio.write_ply(p, pts),
+        "las": lambda p: write_las(p, pts),
+        "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], pts["intensity"]),
+    }
+    written = []
+    for fmt in formats:
+        path = os.path.join(d, f"points.{fmt}")
+        writers[fmt](path)
+        written.append(path)
+    valid = result.valid
+    channels = {
+        "range": np.where(valid, result.range, 0.0).astype(np.float32),
+        "intensity": np.where(valid, result.intensity, 0.0).astype(np.float32),
+        "reflectance": result.reflectance.astype(np.float32),
+        "valid": valid.astype(np.float32),
+    }
+    path = os.path.join(d, "range_image.exr")
+    images.write_exr(path, channels)
+    written.append(path)
+    for key in ("range", "intensity"):
+        path = os.path.join(d, f"{key}.png")
+        images.write_colormap_png(path, channels[key], invalid=~valid, cmap="turbo")
+        written.append(path)
+    return written
+
+
+def _gray8(img: np.ndarray) -> np.ndarray:
+    from .io.images import linear_to_srgb
+
+    return np.round(linear_to_srgb(np.clip(img, 0.0, 1.0)) * 255.0).astype(np.uint8)
+
+
+def write_camera(
+    folder: str | os.PathLike, render, lidar_poses: dict[str, np.ndarray]
+) -> tuple[dict, list[str]]:
+    """Write one camera's images and calibration into ``folder/<camera id>/``.
+
+    Args:
+        folder: the render folder (or its staging copy).
+        render: a :class:`~nidar_mi.camera.CameraRender`.
+        lidar_poses: LiDAR id -> (4, 4) LiDAR-to-world pose, for ``T_cam_lidar``.
+
+    Returns:
+        ``(calib, paths)``: the calibration written to ``calib.json`` and the paths written.
+    """
+    from .io import atomic, images
+
+    d = os.path.join(folder, render.name)
+    os.makedirs(d, exist_ok=True)
+    exposure = render.exposure()
+    outputs = {
+        "rgb.png": lambda p: images.write_png(p, render.srgb8()),
+        "rgb.exr": lambda p: images.write_exr(
+            p, {"R": render.rgb[..., 0], "G": render.rgb[..., 1], "B": render.rgb[..., 2]}
+        ),
+        "nir.png": lambda p: images.write_png(p, _gray8(render.nir * exposure)),
+        "nir.exr": lambda p: images.write_exr(p, {"Y": render.nir}),
+        "depth.exr": lambda p: images.write_exr(p, {"Z": render.depth}),
+    }
+    written = []
+    for fname, fn in outputs.items():
+        path = os.path.join(d, fname)
+        fn(path)
+        written.append(path)
+    T_cam_world = np.linalg.inv(render.T_world_cam)
+    calib = {
+        "convention": "opencv",
+        "width": int(render.rgb.shape[1]),
+        "height": int(render.rgb.shape[0]),
+        "K": render.K.tolist(),
+        "T_world_cam": render.T_world_cam.tolist(),
+        "T_cam_lidar": {k: (T_cam_world @ T).tolist() for k, T in lidar_poses.items()},
+        "nir_wavelength_nm": render.wavelength,
+        "png_exposure": exposure,
+    }
+    path = os.path.join(d, "calib.json")
+    atomic.atomic_write_json(path, calib)
+    written.append(path)
+    return calib, written
+
+
+# --------------------------------------------------------------------------- reading
+
+
+@dataclass
+class RenderedCamera:
+    """One camera of a render folder.
+
+    Attributes:
+        name: camera id.
+        folder: its output folder (rgb.png, nir.exr, depth.exr, calib.json).
+        model: camera model with ``T_cam_lidar`` of the scan's LiDAR.
+        depth: (H, W) float32 z-depth in m, 0 where no surface.
+    """
+
+    name: str
+    folder: str
+    model: object
+    depth: np.ndarray
+
+    def rgb8(self) -> np.ndarray:
+        """(H, W, 3) uint8 sRGB (rgb.png)."""
+        from .io.images import read_png
+
+        return read_png(os.path.join(self.folder, "rgb.png"))[..., :3]
+
+    def nir(self) -> np.ndarray:
+        """(H, W) float32 NIR band radiance (nir.exr)."""
+        from .io.images import read_exr
+
+        return _single_channel(read_exr(os.path.join(self.folder, "nir.exr")))
+
+
+@dataclass
+class RenderedScan:
+    """A render folder seen from one LiDAR.
+
+    Attributes:
+        folder: the render folder.
+        manifest: its manifest.json.
+        lidar: the LiDAR id.
+        parameters: its resolved parameters.
+        points: its points dict (``points.npz``).
+        compensated: (N,) float32 range-compensated intensity ``g·ρ·cosθ·exp(-2αd)`` (+ noise·d²
+            in ``raw`` mode).
+        cameras: every camera, sorted by id.
+    """
+
+    folder: str
+    manifest: dict
+    lidar: str
+    parameters: dict
+    points: dict
+    compensated: np.ndarray
+    cameras: list[RenderedCamera]
+
+
+def _single_channel(channels: dict[str, np.ndarray]) -> np.ndarray:
+    return next(iter(channels.values())).astype(np.float32)
+
+
+def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> RenderedScan:
+    """Read a render folder (the first LiDAR by id unless ``lidar_id`` names one).
+
+    Raises:
+        NidarError: missing or malformed manifest, or an unknown LiDAR id.
+    """
+    from .io.images import read_exr
+    from .io.points import read_npz
+    from .nidar.frames import compensate
+    from .nidar.projection import CameraModel
+
+    folder = os.fspath(folder)
+    manifest = read_manifest(folder)
+    lidars = sorted(manifest.get("lidars", {}))
+    if not lidars:
+        raise NidarError(f"{folder}: the manifest lists no lidar")
+    lid = lidar_id or lidars[0]
+    if lid not in manifest["lidars"]:
+        raise NidarError(f"{folder}: no lidar '{lid}' (has {', '.join(lidars)})")
+    params = manifest["lidars"][lid]["parameters"]
+    pts = read_npz(os.path.join(folder, lid, "points.npz"))
+    comp = compensate(pts["intensity"], pts["range"], params["intensity_mode"])
+    cameras = []
+    for cam_id, cam in sorted(manifest.get("cameras", {}).items()):
+        cam_dir = os.path.join(folder, cam_id)
+        T = np.array(cam["T_cam_lidar"][lid])
+        model = CameraModel(np.array(cam["K"]), cam["width"], cam["height"], T, name=cam_id)
+        depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
+        cameras.append(RenderedCamera(cam_id, cam_dir, model, depth))
+    return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)
+
+
+def scene_name(folder: str | os.PathLike) -> str:
+    """The name a render folder is known by (its base name)."""
+    return Path(folder).resolve().name

@@ -1,0 +1,291 @@
+"""Render a scene into a render folder: scan every LiDAR, render every camera, write it all.
+
+:func:`render_scene` reads as its algorithm: load the scene -> scan each LiDAR -> render each
+camera -> (optionally) NIDAR's intensity from those cameras -> write the LiDAR files -> write
+the manifest -> publish the folder. Everything is written into a staging folder that replaces
+``OUT`` whole only when every step succeeded (:func:`nidar_mi.io.atomic.staged_directory`).
+:func:`ensure_rendered` is the cached form used by the dataset builder and the evaluation: it
+renders only when the folder does not already hold the same request
+(:func:`nidar_mi.render_folder.is_current`).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import render_folder as rf
+from .errors import NidarError
+
+__all__ = ["INTENSITY_SOURCES", "render_scene", "ensure_rendered"]
+
+#: ``physics``: only the simulated intensity; ``nidar``: also NIDAR's prediction from the cameras.
+INTENSITY_SOURCES = ("physics", "nidar")
+#: NIDAR branches a render can assign.
+NIDAR_BRANCHES = ("R", "I_hat")
+
+
+def _versions() -> dict[str, str]:
+    import drjit
+    import mitsuba
+
+    from . import __version__
+
+    return {
+        "nidar_mi": __version__,
+        "mitsuba": mitsuba.__version__,
+        "drjit": drjit.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def _check_request(req: rf.RenderRequest) -> None:
+    if req.spp < 1:
+        raise NidarError(f"--spp must be >= 1 (got {req.spp})")
+    if req.intensity not in INTENSITY_SOURCES:
+        raise NidarError(
+            f"--intensity must be one of {', '.join(INTENSITY_SOURCES)} (got '{req.intensity}')"
+        )
+    if req.intensity == "nidar" and not req.cameras:
+        raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
+    if req.intensity == "nidar" and req.nidar_branch not in NIDAR_BRANCHES:
+        raise NidarError(f"--nidar-branch must be one of {', '.join(NIDAR_BRANCHES)}")
+    if req.seed is not None and req.seed < 0:
+        raise NidarError(f"--seed must be >= 0 (got {req.seed})")
+    bad = [f for f in req.formats if f not in rf.FORMATS]
+    if bad or not req.formats:
+        raise NidarError(
+            f"--formats: unknown '{','.join(bad)}' (choose from {', '.join(rf.FORMATS)})"
+        )
+
+
+def _load(req: rf.RenderRequest, variant: str | None):
+    from .scene import load_scene
+
+    loaded = load_scene(req.scene, variant=variant, rgb_twin=req.rgb_twin, params=req.params)
+    if not loaded.lidars:
+        raise NidarError(f'{req.scene}: no lidar sensor (add <sensor type="lidar">)')
+    names = [s.id() for s in loaded.lidars + loaded.cameras]
+    dup = {n for n in names if names.count(n) > 1 or not n}
+    if dup:
+        raise NidarError(f"{req.scene}: every sensor needs a unique id (offending: {sorted(dup)})")
+    return loaded
+
+
+@dataclass
+class _Run:
+    """What the steps of one render hand to each other."""
+
+    stage: str
+    results: dict = field(default_factory=dict)  # lidar id -> ScanResult
+    renders: dict = field(default_factory=dict)  # camera id -> (CameraRender, calib)
+    lidars: dict = field(default_factory=dict)  # lidar id -> manifest entry
+    cameras: dict = field(default_factory=dict)  # camera id -> manifest entry
+    written: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+
+
+def _scan_lidars(run: _Run, loaded, seed: int | None, bar) -> None:
+    from .lidar.raycast import scan
+
+    for sensor in loaded.lidars:
+        bar.set_postfix_str(f"lidar {sensor.id()}")
+        t0 = time.perf_counter()
+        result = scan(loaded.scene, sensor, seed=seed)
+        run.results[sensor.id()] = result
+        run.lidars[sensor.id()] = {
+            "parameters": result.config.to_dict() | ({"seed": seed} if seed is not None else {}),
+            "to_world": result.to_world.tolist(),
+            "rays": int(result.valid.size),
+            "hits": int(result.hit.sum()),
+            "returns": int(result.valid.sum()),
+            "materials": result.material_names,
+            "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
+        }
+        bar.update(1)
+
+
+def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
+    from .camera import render_camera
+
+    poses = {lid: r.to_world for lid, r in run.results.items()}
+    wavelength = loaded.lidars[0].config.wavelength
+    for cam in loaded.cameras:
+        bar.set_postfix_str(f"camera {cam.id()}")
+        t0 = time.perf_counter()
+        r = render_camera(loaded, cam, wavelength=wavelength, spp=spp, seed=seed or 0)
+        t_render = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        calib, written = rf.write_camera(run.stage, r, poses)
+        run.written += written
+        run.renders[cam.id()] = (r, calib)
+        run.cameras[cam.id()] = calib | {
+            "spp": spp,
+            "timings_s": r.timings | {"render_total": t_render, "write": time.perf_counter() - t0},
+        }
+        bar.update(1)
+
+
+def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dict]:
+    """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
+    from .nidar.pipeline import NidarModel
+    from .nidar.projection import CameraModel
+
+    if not run.renders:
+        raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
+    model = NidarModel.load(weights)
+    maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in run.renders.items()}
+    out = {}
+    for lid, result in run.results.items():
+        cams, depth, cam_maps = [], [], []
+        for cid, (r, calib) in run.renders.items():
+            T = np.array(calib["T_cam_lidar"][lid])
+            cams.append(CameraModel(r.K, calib["width"], calib["height"], T, name=cid))
+            depth.append(r.depth)
+            cam_maps.append(maps[cid])
+        res = model.point_intensity(
+            result.points()["xyz"],
+            cams,
+            [None] * len(cams),
+            depth_images=depth,
+            maps=cam_maps,
+            branch=branch,
+        )
+        out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
+    return out
+
+
+def _write_lidars(run: _Run, formats, extra: dict[str, dict]) -> None:
+    for lid, result in run.results.items():
+        t0 = time.perf_counter()
+        run.written += rf.write_lidar(run.stage, result, formats, extra.get(lid))
+        entry = run.lidars[lid]
+        entry["timings_s"]["write"] = time.perf_counter() - t0
+        if lid in extra:
+            entry["nidar_observed"] = int(extra[lid]["nidar_observed"].sum())
+
+
+def render_scene(
+    scene_path: str,
+    out_dir: str,
+    *,
+    formats=rf.FORMATS,
+    seed: int | None = None,
+    spp: int = 16,
+    variant: str | None = None,
+    rgb_twin: bool = False,
+    params: dict[str, str] | None = None,
+    cameras: bool = True,
+    progress: bool = True,
+    intensity: str = "physics",
+    weights: str | None = None,
+    nidar_branch: str = "R",
+    overwrite: bool = False,
+) -> dict:
+    """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`).
+
+    Args:
+        scene_path: scene XML.
+        out_dir: the render folder; a non-empty folder that is not an earlier render folder is
+            refused unless ``overwrite``; an earlier render folder is replaced whole.
+        formats: point-cloud formats.
+        seed: overrides every LiDAR's seed; the camera sampler seed.
+        spp: camera samples per pixel.
+        variant: Mitsuba variant (None: CUDA if available, else LLVM).
+        rgb_twin: load the RGB-only twin of the scene.
+        params: values for the scene's ``<default>`` parameters.
+        cameras: render the cameras.
+        progress: show a progress bar on stderr.
+        intensity: ``physics``, or ``nidar`` to add NIDAR's intensity from the cameras.
+        weights: NIDAR weights folder (None: the shipped model).
+        nidar_branch: ``R`` or ``I_hat``.
+        overwrite: replace a non-empty ``out_dir``.
+
+    Returns:
+        The manifest (also written to ``out_dir/manifest.json``).
+
+    Raises:
+        NidarError: bad scene or parameter; ``out_dir`` is then left untouched.
+    """
+    from tqdm.auto import tqdm
+
+    from .io.atomic import staged_directory
+
+    req = rf.RenderRequest.of(
+        scene_path,
+        params=params,
+        seed=seed,
+        spp=spp,
+        formats=tuple(formats),
+        cameras=cameras,
+        rgb_twin=rgb_twin,
+        intensity=intensity,
+        weights=weights,
+        nidar_branch=nidar_branch,
+    )
+    _check_request(req)
+    t_start = time.perf_counter()
+    t0 = time.perf_counter()
+    loaded = _load(req, variant)
+    load_s = time.perf_counter() - t0
+    steps = len(loaded.lidars) + (len(loaded.cameras) if cameras else 0)
+    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
+        run = _Run(stage=str(stage), timings={"load": load_s})
+        bar = tqdm(total=steps, desc="render", unit="sensor", disable=not progress, file=sys.stderr)
+        try:
+            _scan_lidars(run, loaded, seed, bar)
+            if cameras:
+                _render_cameras(run, loaded, spp, seed, bar)
+        finally:
+            bar.close()
+        extra = {}
+        if intensity == "nidar":
+            t0 = time.perf_counter()
+            extra = _nidar_columns(run, weights, nidar_branch)
+            run.timings["nidar"] = time.perf_counter() - t0
+        _write_lidars(run, formats, extra)
+        manifest = {
+            "request": req.to_dict(),
+            "scene": req.scene,
+            "scene_sha256": req.scene_sha256,
+            "variant": loaded.variant,
+            "rgb_twin": rgb_twin,
+            "params": dict(req.params),
+            "versions": _versions(),
+            "seed": seed,
+            "spp": spp,
+            "formats": list(formats),
+            "intensity": intensity,
+            "nidar_weights": req.weights,
+            "nidar_branch": req.nidar_branch,
+            "lidars": run.lidars,
+            "cameras": run.cameras,
+            "timings_s": run.timings | {"total": time.perf_counter() - t_start},
+            "files": sorted(os.path.relpath(p, stage) for p in run.written) + [rf.MANIFEST],
+        }
+        rf.write_manifest(stage, manifest)
+    return manifest
+
+
+def ensure_rendered(scene_path: str, out_dir: str, **options) -> dict:
+    """The manifest of ``out_dir`` when it already holds this render, else :func:`render_scene`.
+
+    ``options`` are :func:`render_scene`'s keyword arguments; every one of them (and the scene
+    file's hash) is part of the cache key, so a folder rendered with other parameters is
+    rendered again (replaced whole).
+    """
+    keys = ("params", "seed", "spp", "formats", "cameras", "rgb_twin", "intensity", "weights")
+    req = rf.RenderRequest.of(
+        scene_path,
+        **{k: options[k] for k in keys if k in options},
+        nidar_branch=options.get("nidar_branch", "R"),
+    )
+    if rf.is_current(out_dir, req):
+        return rf.read_manifest(out_dir)
+    return render_scene(scene_path, out_dir, overwrite=True, **options)
