@@ -22,9 +22,18 @@ def _declared(path: str) -> set[str]:
     return {d.get("name") for d in ET.parse(path).getroot().findall("default")}
 
 
-def test_the_issue_scenes_are_shipped():
+def test_scenes_and_their_documentation_agree():
+    """Every shipped scene is described in docs/SCENES.md, and every scene file named there or in
+    the README exists."""
+    import re
+
     names = {os.path.basename(p) for p in SCENES}
-    assert {"street.xml", "park.xml", "parking_lot.xml", "warehouse.xml", "target.xml"} <= names
+    docs = open(os.path.join(REPO, "docs", "SCENES.md"), encoding="utf-8").read()
+    readme = open(os.path.join(REPO, "README.md"), encoding="utf-8").read()
+    assert names, "no scene files"
+    assert {n for n in names if n not in docs} == set()
+    named = set(re.findall(r"scenes/([A-Za-z0-9_]+\.xml)", docs + readme))
+    assert named and named <= names
 
 
 @pytest.mark.parametrize("path", SCENES, ids=os.path.basename)

@@ -83,3 +83,73 @@ def test_reading_missing_and_failing(tmp_path):
         with reading(f):
             raise ValueError("bad\nheader")
     assert str(info.value) == f"cannot read {f}: bad header"
+
+
+# --- staged_directory ---------------------------------------------------------------------
+
+
+def test_staged_directory_publishes_whole_folder(tmp_path):
+    from nidar_mi.io.atomic import staged_directory
+
+    out = tmp_path / "a" / "out"
+    with staged_directory(out) as stage:
+        assert stage.parent == out.parent and stage.name.startswith(".out.partial-")
+        (stage / "x.txt").write_text("1")
+        assert not out.exists()
+    assert sorted(p.name for p in out.iterdir()) == ["x.txt"]
+    assert [p.name for p in out.parent.iterdir()] == ["out"]
+    assert out.stat().st_mode & 0o777 == 0o777 & ~_umask()
+
+
+def _umask() -> int:
+    import os
+
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
+def test_staged_directory_never_mixes_runs(tmp_path):
+    from nidar_mi.io.atomic import staged_directory
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.txt").write_text("user data")
+    with pytest.raises(NidarError, match="not empty.*--overwrite"):
+        with staged_directory(out) as stage:
+            raise AssertionError("not reached")
+    assert (out / "mine.txt").read_text() == "user data"
+    # an earlier output of the same kind (marker file) is replaced whole
+    (out / "manifest.json").write_text("{}")
+    with staged_directory(out, marker="manifest.json") as stage:
+        (stage / "new.txt").write_text("2")
+    assert sorted(p.name for p in out.iterdir()) == ["new.txt"]
+    with staged_directory(out, overwrite=True) as stage:
+        (stage / "newer.txt").write_text("3")
+    assert sorted(p.name for p in out.iterdir()) == ["newer.txt"]
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+@pytest.mark.parametrize("exc", [RuntimeError, KeyboardInterrupt])
+def test_staged_directory_failure_leaves_target_untouched(tmp_path, exc):
+    from nidar_mi.io.atomic import staged_directory
+
+    out = tmp_path / "out"
+    with pytest.raises(exc):
+        with staged_directory(out) as stage:
+            (stage / "half.txt").write_text("x")
+            raise exc()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_staged_directory_bad_targets(tmp_path):
+    from nidar_mi.io.atomic import staged_directory
+
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(NidarError, match="not a folder"):
+        with staged_directory(f):
+            pass
+    with pytest.raises(NidarError, match="cannot write"):
+        with staged_directory(f / "sub" / "out"):
+            pass

@@ -1,0 +1,115 @@
+"""The shared command-line contract: one line and status 2 on bad input, 130/143 on SIGINT/SIGTERM
+with nothing left behind, ``-D`` parsing, ``--version`` on every command, the command list."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import pytest
+
+from nidar_mi import __version__
+from nidar_mi.cli import COMMANDS
+from nidar_mi.cli._common import (
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    EXIT_USER_ERROR,
+    parse_defines,
+    run,
+)
+from nidar_mi.errors import NidarError
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def test_run_maps_failures_to_one_line_and_a_status(capsys):
+    assert run(lambda: None) == 0
+    assert run(lambda: 3) == 3
+
+    def bad():
+        raise NidarError("scene.xml: line 3,\n  col 4: broken")
+
+    assert run(bad) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err == "error: scene.xml: line 3, col 4: broken\n"
+
+    def missing():
+        open(os.path.join(REPO, "no", "such", "file"))
+
+    assert run(missing) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "no/such/file" in err
+
+    def ctrl_c():
+        raise KeyboardInterrupt
+
+    assert run(ctrl_c, on_interrupt="x kept") == EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "interrupted; x kept\n"
+
+
+def test_warnings_are_one_line(capsys):
+    def warn():
+        warnings.warn("first part\nsecond part", RuntimeWarning, stacklevel=1)
+
+    assert run(warn) == 0
+    assert capsys.readouterr().err == "warning: first part second part\n"
+
+
+def test_parse_defines():
+    assert parse_defines(["a=1", " b = x y ", "a=2", "c="]) == {"a": "2", "b": "x y", "c": ""}
+    for bad in (["a"], ["=1"], [" =1"]):
+        with pytest.raises(NidarError, match="NAME=VALUE"):
+            parse_defines(bad)
+
+
+def _cli(*args, **kw):
+    return subprocess.run(
+        [sys.executable, "-m", *args], capture_output=True, text=True, cwd=REPO, timeout=300, **kw
+    )
+
+
+def test_command_list_and_versions():
+    r = _cli("nidar_mi")
+    assert r.returncode == 0
+    listed = [line.split()[0] for line in r.stdout.splitlines() if line.startswith("  ")]
+    assert listed == list(COMMANDS)
+    for name in COMMANDS:
+        r = _cli(f"nidar_mi.{name}", "--version")
+        assert (r.returncode, r.stdout.strip()) == (0, f"nidar_mi {__version__}"), name
+    r = _cli("nidar_mi", "frobnicate")
+    assert r.returncode == 2 and r.stderr.startswith("error: unknown command 'frobnicate'")
+    r = _cli("nidar_mi", "render", "--help")
+    assert r.returncode == 0 and "python -m nidar_mi.render" in r.stdout
+
+
+@pytest.mark.parametrize(
+    "sig, status, word",
+    [
+        (signal.SIGTERM, EXIT_TERMINATED, "terminated"),
+        (signal.SIGINT, EXIT_INTERRUPTED, "interrupted"),
+    ],
+)
+def test_signal_during_render_leaves_nothing(tmp_path, sig, status, word):
+    """A render stopped while it writes leaves neither OUT nor its staging folder."""
+    out = tmp_path / "street"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nidar_mi.render", "scenes/street.xml", "-o", str(out), "-q"],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not any(p.name.startswith(".street.partial-") for p in tmp_path.iterdir()):
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "the render never started writing"
+        time.sleep(0.05)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == status, err
+    assert err.strip().splitlines()[-1] == f"{word}; nothing written"
+    assert list(tmp_path.iterdir()) == []

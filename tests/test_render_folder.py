@@ -1,0 +1,81 @@
+"""The render folder: request as cache key, reuse, re-render on any change, replaced whole."""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+from nidar_mi import render_folder as rf
+from nidar_mi.errors import NidarError
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TARGET = os.path.join(REPO, "scenes", "target.xml")
+FAST = dict(formats=("npz",), params={"cols": "128"}, cameras=False, progress=False)
+
+
+def test_request_is_the_cache_key(tmp_path, variant):
+    from nidar_mi.simulate import ensure_rendered
+
+    scene = tmp_path / "target.xml"
+    shutil.copy(TARGET, scene)
+    out = tmp_path / "r"
+    m1 = ensure_rendered(str(scene), str(out), seed=1, **FAST)
+    stamp = os.path.getmtime(out / rf.MANIFEST)
+    assert rf.is_current(out, rf.RenderRequest.of(scene, seed=1, **_req(FAST)))
+    assert ensure_rendered(str(scene), str(out), seed=1, **FAST) == m1
+    assert os.path.getmtime(out / rf.MANIFEST) == stamp  # reused
+    # another seed, another parameter, an edited scene: each is rendered again
+    for change in (
+        dict(seed=2),
+        dict(seed=1, params={"cols": "64"}),
+    ):
+        m = ensure_rendered(str(scene), str(out), **(FAST | change))
+        assert m["request"]["seed"] == change["seed"]
+        assert m["request"]["params"] == change.get("params", FAST["params"])
+    rings_cols = m["lidars"]["lidar"]["rays"]
+    scene.write_text(scene.read_text().replace('value="905"', 'value="1550"'))
+    m = ensure_rendered(str(scene), str(out), seed=1, **(FAST | {"params": {"cols": "64"}}))
+    assert m["lidars"]["lidar"]["parameters"]["wavelength"] == 1550.0
+    assert m["lidars"]["lidar"]["rays"] == rings_cols
+    # a half-deleted folder is not current
+    os.unlink(out / "lidar" / "points.npz")
+    req = rf.RenderRequest.of(scene, seed=1, **_req(FAST | {"params": {"cols": "64"}}))
+    assert not rf.is_current(out, req)
+
+
+def _req(options: dict) -> dict:
+    return {k: v for k, v in options.items() if k != "progress"}
+
+
+def test_earlier_render_is_replaced_whole_and_user_folders_refused(tmp_path, variant):
+    from nidar_mi.simulate import render_scene
+
+    out = tmp_path / "r"
+    render_scene(TARGET, str(out), seed=1, **(FAST | {"formats": ("npz", "ply")}))
+    assert (out / "lidar" / "points.ply").is_file()
+    render_scene(TARGET, str(out), seed=1, **FAST)
+    assert not (out / "lidar" / "points.ply").exists()  # nothing stale from the first run
+    assert sorted(rf.read_manifest(out)["files"]) == sorted(
+        str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()
+    )
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "notes.txt").write_text("keep")
+    with pytest.raises(NidarError, match="not empty"):
+        render_scene(TARGET, str(user), seed=1, **FAST)
+    assert [p.name for p in user.iterdir()] == ["notes.txt"]
+    render_scene(TARGET, str(user), seed=1, overwrite=True, **FAST)
+    assert not (user / "notes.txt").exists()
+
+
+def test_read_render_errors(tmp_path):
+    with pytest.raises(NidarError, match="no readable manifest.json"):
+        rf.read_render(tmp_path)
+    (tmp_path / rf.MANIFEST).write_text("{not json")
+    with pytest.raises(NidarError, match="not valid JSON"):
+        rf.read_render(tmp_path)
+    (tmp_path / rf.MANIFEST).write_text('{"lidars": {}}')
+    with pytest.raises(NidarError, match="lists no lidar"):
+        rf.read_render(tmp_path)
