@@ -41,7 +41,6 @@ __all__ = [
     "ALEXNET_CHECKPOINT",
     "LPIPS_MIN_SIDE",
     "alexnet_checkpoint_path",
-    "average_ranks",
     "lpips_alex",
     "lpips_unavailable_reason",
     "mae",
@@ -169,27 +168,8 @@ def ssim(pred: Any, gt: Any, mask: Any = None) -> float:
 # --- rank correlation -------------------------------------------------------------------------
 
 
-def average_ranks(x: Any) -> np.ndarray:
-    """1-based ranks of a 1-D array, tied values sharing the mean of their ranks.
-
-    Example: ``[10, 20, 20, 30] -> [1, 2.5, 2.5, 4]``.
-    """
-    x = np.asarray(x, dtype=np.float64).ravel()
-    n = x.size
-    if n == 0:
-        return np.zeros(0, dtype=np.float64)
-    order = np.argsort(x, kind="mergesort")
-    xs = x[order]
-    starts = np.flatnonzero(np.r_[True, xs[1:] != xs[:-1]])
-    ends = np.r_[starts[1:], n]
-    sorted_ranks = np.repeat((starts + ends + 1) / 2.0, ends - starts)
-    ranks = np.empty(n, dtype=np.float64)
-    ranks[order] = sorted_ranks
-    return ranks
-
-
 def spearman(pred: Any, gt: Any) -> float:
-    """Spearman's rank correlation: Pearson correlation of the average ranks.
+    """Spearman's rank correlation (:func:`scipy.stats.spearmanr`; average ranks for ties).
 
     Args:
         pred: (N,) values.
@@ -198,13 +178,12 @@ def spearman(pred: Any, gt: Any) -> float:
     Returns:
         ρ in [-1, 1]; ``nan`` when either input is constant (or N < 2).
     """
+    from scipy.stats import spearmanr
+
     p, g, _ = _pair(pred, gt, ndim=1)
-    rp = average_ranks(p) - (p.size + 1) / 2.0
-    rg = average_ranks(g) - (g.size + 1) / 2.0
-    den = np.sqrt(np.sum(rp * rp) * np.sum(rg * rg))
-    if den == 0.0:
+    if p.size < 2 or np.all(p == p[0]) or np.all(g == g[0]):
         return float("nan")
-    return float(np.clip(np.sum(rp * rg) / den, -1.0, 1.0))
+    return float(np.clip(spearmanr(p, g).statistic, -1.0, 1.0))
 
 
 # --- LPIPS -------------------------------------------------------------------------------------
