@@ -28,9 +28,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import NidarError
+from ..io.images import linear_to_srgb
 from .optics import fresnel_conductor_normal, fresnel_dielectric_normal, soda_lime_ior
 from .spectra import GRID_NM, Spectrum, check_wavelengths, flat
-from .srgb import encode_srgb, spectrum_to_linear_srgb
+from .srgb import spectrum_to_linear_srgb
 
 __all__ = [
     "KINDS",
@@ -159,4 +160,4 @@ def linear_rgb(name: str) -> np.ndarray:
 
 def srgb(name: str) -> np.ndarray:
     """Encoded sRGB (D65) of the material's :func:`appearance_spectrum`, in [0, 1]. Shape (3,)."""
-    return encode_srgb(linear_rgb(name))
+    return linear_to_srgb(linear_rgb(name))
