@@ -1,4 +1,4 @@
-"""Images: sRGB transfer functions, 8-bit PNG, float32 OpenEXR, false-colour PNG.
+"""Images: sRGB transfer functions, Rec. 709 luma, 8-bit PNG, float32 OpenEXR, false-colour PNG.
 
 Renders are linear (radiance, intensity, depth); :func:`write_srgb_png` encodes a linear RGB
 render for display with the sRGB OETF of IEC 61966-2-1, and :func:`write_colormap_png` maps
@@ -7,7 +7,7 @@ exactly, one named channel per image plane.
 
 This module owns the package's sRGB transfer curves (:func:`linear_to_srgb`,
 :func:`srgb_to_linear`: colour-science's, imported on first use since colour takes about a
-second to import).
+second to import) and its Rec. 709 luma weights (:data:`REC709_LUMA`).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from ..errors import NidarError
 from .atomic import atomic_path, reading
 
 __all__ = [
+    "REC709_LUMA",
     "linear_to_srgb",
     "srgb_to_linear",
     "write_png",
@@ -30,6 +31,10 @@ __all__ = [
     "write_colormap_png",
     "write_srgb_png",
 ]
+
+REC709_LUMA = (0.2126, 0.7152, 0.0722)
+"""Rec. 709 / sRGB luminance weights of linear R, G, B (the Y row of the sRGB-to-XYZ matrix,
+rounded as ITU-R BT.709 states them)."""
 
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from nidar_mi.eval.baselines import REC709_LUMA, ClassConstant
+from nidar_mi.eval.baselines import ClassConstant
 from nidar_mi.eval.evaluate import (
     METHODS,
     FrameData,
@@ -26,7 +26,7 @@ from nidar_mi.eval.evaluate import (
 )
 from nidar_mi.eval.heldout import fit_pseudo_nir_calibration, twin_prediction
 from nidar_mi.eval.report import goal_check, markdown_table, write_csv, write_json
-from nidar_mi.io.images import srgb_to_linear
+from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.projection import CameraModel, bilinear_sample, project
 from nidar_mi.nidar.synthetic import write_synthetic_dataset
@@ -104,7 +104,7 @@ def test_baselines_by_hand(evaluated):
     np.testing.assert_allclose(pred["carla"], np.exp(-0.004 * frame.range_m), rtol=1e-12)
     # points at pixel centres: luminance is the pixel's own Rec. 709 luminance
     r, c = np.rint(frame.uv[:, 1]).astype(int), np.rint(frame.uv[:, 0]).astype(int)
-    lum = srgb_to_linear(frame.rgb[r, c].astype(np.float64) / 255.0) @ REC709_LUMA
+    lum = srgb_to_linear(frame.rgb[r, c].astype(np.float64) / 255.0) @ np.asarray(REC709_LUMA)
     np.testing.assert_allclose(pred["luminance"], lum, rtol=1e-9, atol=1e-12)
     expect = {"a": 0.3, "b": 0.9, "c": 0.1, "zz": 0.4}  # unseen class: global mean 1.6 / 4
     np.testing.assert_allclose(pred["class_const"], [expect[m] for m in frame.material])

@@ -8,6 +8,7 @@ import pytest
 
 from nidar_mi.errors import NidarError
 from nidar_mi.io.images import (
+    REC709_LUMA,
     linear_to_srgb,
     read_exr,
     read_png,
@@ -51,6 +52,23 @@ def test_srgb_curves_take_scalars_and_lists():
     np.testing.assert_allclose(linear_to_srgb([0.0, 1.0, 2.0]), [0.0, 1.0, 1.0])
     np.testing.assert_allclose(srgb_to_linear([0.0, 1.0, -1.0]), [0.0, 1.0, 0.0])
     assert np.isnan(linear_to_srgb(np.array([np.nan]))).all()
+
+
+def test_rec709_luma_is_the_y_row_of_the_srgb_matrix():
+    import colour
+
+    y_row = colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1]
+    np.testing.assert_allclose(REC709_LUMA, y_row, atol=1e-4)
+    assert sum(REC709_LUMA) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_srgb_round_trip_and_dtype():
+    x = np.linspace(0.0, 1.0, 1001)
+    np.testing.assert_allclose(srgb_to_linear(linear_to_srgb(x)), x, rtol=0, atol=1e-12)
+    x32 = x.astype(np.float32)
+    y32 = linear_to_srgb(x32)
+    assert y32.dtype == np.float32
+    np.testing.assert_allclose(srgb_to_linear(y32), x32, rtol=1e-4, atol=1e-6)
 
 
 # --- PNG -----------------------------------------------------------------------------------
