@@ -144,17 +144,17 @@ def _evaluate(args: argparse.Namespace, argv_text: str, meta: dict, model, fig_d
     from .eval.heldout import (
         evaluate_renders,
         fit_class_constant,
-        fit_pseudo_nir_calibration,
         render_scenes,
     )
     from .eval.metrics import lpips_unavailable_reason
+    from .nidar.pipeline import fit_dataset_calibration
 
     scale = float(meta.get("intensity_scale", 1.0))
     splits = meta["scenes"]
     renders = os.path.join(args.data, "renders")
     log.info("fitting baselines (c) and (e) on the training split")
     class_const = fit_class_constant([os.path.join(renders, n) for n in splits["train"]], scale)
-    pseudo_cal = fit_pseudo_nir_calibration(model, args.data, "train")
+    pseudo_cal = fit_dataset_calibration(model, args.data, "train", branch="pseudo_nir")
     common = dict(
         class_const=class_const,
         pseudo_calibration=pseudo_cal,

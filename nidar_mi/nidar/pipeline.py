@@ -29,11 +29,16 @@ __all__ = [
     "fit_dataset_calibration",
     "PointIntensity",
     "BRANCHES",
+    "CALIBRATION_BRANCHES",
 ]
 
 #: Branches :meth:`NidarModel.point_intensity` can assign: the paper's calibrated reflectance, or
 #: the dense intensity head.
 BRANCHES = ("R", "I_hat")
+
+#: Maps :func:`fit_dataset_calibration` can calibrate: the reflectance branch, or the STN's
+#: pseudo-NIR in place of it (a baseline).
+CALIBRATION_BRANCHES = ("R", "pseudo_nir")
 
 
 def shipped_weights_dir() -> Path:
@@ -143,28 +148,52 @@ class NidarModel:
 
 
 def fit_dataset_calibration(
-    model: NidarModel, data_dir: str | os.PathLike, split: str = "train", **kw
+    model: NidarModel,
+    data_dir: str | os.PathLike,
+    split: str = "train",
+    *,
+    branch: str = "R",
+    **kw,
 ) -> Calibration:
     """Fit the distance encoding + quantile map on a dataset split (pixels with a LiDAR return).
 
-    The R branch at every masked pixel is paired with the LiDAR range and the scaled LiDAR
-    intensity there (``intensity / intensity_scale`` clipped to [0, 1], the source-domain
-    distribution).
+    The ``branch`` map of :meth:`NidarModel.predict_image` at every masked pixel is paired with
+    the LiDAR range and the scaled LiDAR intensity there (``intensity / intensity_scale``
+    clipped to [0, 1], the source-domain distribution).
+
+    Args:
+        model: the networks whose maps are calibrated.
+        data_dir: training-data directory (``meta.json`` and the split folders).
+        split: split to fit on.
+        branch: one of :data:`CALIBRATION_BRANCHES`: ``"R"`` (NIDAR-Full) or ``"pseudo_nir"``
+            (the STN's pseudo-NIR in place of R, a baseline); stored with the calibration.
+        **kw: passed to :func:`~nidar_mi.nidar.calibration.fit_calibration`.
+
+    Raises:
+        NidarError: unknown branch, a model without that map, or no frames in the split.
     """
     from .data import list_frames, load_frame, load_meta
 
+    if branch not in CALIBRATION_BRANCHES:
+        raise NidarError(
+            f"calibration branch must be one of {', '.join(CALIBRATION_BRANCHES)} (got '{branch}')"
+        )
     meta = load_meta(data_dir)
     scale = float(meta.get("intensity_scale", 1.0))
     preds, dists, refs = [], [], []
     for path in list_frames(data_dir, split):
         f = load_frame(path, keys=("rgb", "intensity", "mask"))
         with np.load(path, allow_pickle=False) as z:
-            f["range"] = z["range"].astype(np.float32)
+            rng = z["range"].astype(np.float32)
         m = f["mask"]
-        R = model.predict_image(f["rgb"])["R"]
-        preds.append(R[m])
-        dists.append(f["range"][m])
-        refs.append(np.clip(f["intensity"][m] / scale, 0.0, 1.0))
+        maps = model.predict_image(f["rgb"])
+        if branch not in maps:
+            raise NidarError(f"the model gives no '{branch}' map to calibrate")
+        preds.append(maps[branch][m])
+        dists.append(rng[m])
+        refs.append(np.clip(f["intensity"][m].astype(np.float64) / scale, 0.0, 1.0))
     if not preds:
-        raise NidarError(f"{data_dir}: no '{split}' frames to fit the calibration on")
-    return fit_calibration(np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), **kw)
+        raise NidarError(f"{data_dir}: no '{split}' frames to fit the {branch} calibration on")
+    return fit_calibration(
+        np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), branch=branch, **kw
+    )
