@@ -1,7 +1,7 @@
-"""Point sets ("points dicts") and their files: npz, PLY, KITTI ``.bin``, and any format.
+"""Point sets ("points dicts") and their files: npz, PLY and KITTI ``.bin``.
 
-LAS is in :mod:`nidar_mi.io.las` and PCD (read only) in :mod:`nidar_mi.io.pcd`;
-:func:`read_point_cloud` reads all of them.
+LAS is in :mod:`nidar_mi.io.las`, PCD (read only) in :mod:`nidar_mi.io.pcd`, and
+:func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of them.
 
 A points dict maps names to numpy arrays. ``xyz`` is required; every other entry is
 optional. The columns produced by the simulator:
@@ -41,14 +41,12 @@ import json
 import math
 import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import NidarError
 from .atomic import atomic_path, reading
-from .pcd import read_pcd
 
 __all__ = [
     "write_npz",
@@ -57,7 +55,6 @@ __all__ = [
     "read_ply",
     "write_kitti_bin",
     "read_kitti_bin",
-    "read_point_cloud",
 ]
 
 _TAG = "nidar_mi.points"  # marks our JSON in PLY obj_info lines and the LAS VLR
@@ -317,51 +314,3 @@ def read_kitti_bin(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"size {size} B is not a multiple of 16 B (4 float32 per point)")
         rows = np.fromfile(p, dtype="<f4").reshape(-1, 4).astype(np.float32)
         return np.ascontiguousarray(rows[:, :3]), rows[:, 3].copy()
-
-
-# --- any format --------------------------------------------------------------------------
-
-
-def _read_bin(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    xyz, intensity = read_kitti_bin(path)
-    return {"xyz": xyz, "intensity": intensity}
-
-
-def _read_las(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    from .las import read_las  # las.py builds on this module's helpers
-
-    return read_las(path)
-
-
-_READERS = {
-    ".npz": read_npz,
-    ".ply": read_ply,
-    ".las": _read_las,
-    ".laz": _read_las,
-    ".bin": _read_bin,
-    ".pcd": read_pcd,
-}
-
-
-def read_point_cloud(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read a point cloud, choosing the reader from the extension.
-
-    Supported: ``.npz`` ``.ply`` ``.las`` ``.laz`` ``.bin`` (KITTI) ``.pcd``.
-
-    Returns:
-        A points dict with at least ``xyz`` (N, 3) and, when the file has it, ``intensity``.
-
-    Raises:
-        NidarError: unknown extension, or a missing or malformed file.
-    """
-    suffix = Path(path).suffix.lower()
-    if suffix not in _READERS:
-        raise NidarError(
-            f"cannot read {path}: unknown point cloud extension {suffix or '(none)'!r} "
-            f"(expected one of {' '.join(_READERS)})"
-        )
-    points = _READERS[suffix](path)
-    xyz = points.get("xyz")
-    if xyz is None or xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise NidarError(f"cannot read {path}: no (N,3) 'xyz' array")
-    return points
