@@ -4,22 +4,30 @@ LAS is in :mod:`nidar_mi.io.las`, PCD (read only) in :mod:`nidar_mi.io.pcd`, and
 :func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of them.
 
 A points dict maps names to numpy arrays. ``xyz`` is required; every other entry is
-optional. The columns produced by the simulator:
+optional. This table is the schema of the simulator's points (``points.npz`` in a render
+folder holds the valid returns of one scan, N points and M materials); the README links here:
 
-=================  =========  ======  ====  ====================================================
-name               dtype      shape   unit  meaning
-=================  =========  ======  ====  ====================================================
-``xyz``            float32    (N,3)   m     point in the LiDAR frame
-``xyz_world``      float32    (N,3)   m     point in the world frame
-``range``          float32    (N,)    m     distance from the sensor origin
-``intensity``      float32    (N,)    --    LiDAR intensity (simulated return strength)
-``reflectance``    float32    (N,)    --    reflectance rho at the LiDAR wavelength, in [0, 1]
-``cos_incidence``  float32    (N,)    --    cosine of the angle between beam and surface normal
-``ring``           uint16     (N,)    --    beam (laser) index, 0 = lowest elevation
-``column``         uint32     (N,)    --    azimuth column index of the firing
-``material``       int32      (N,)    --    index into ``material_names``; -1 = none
-``material_names`` str (U)    (M,)    --    material names (fixed-width unicode, never object)
-=================  =========  ======  ====  ====================================================
+===================  =========  ======  ====  ==================================================
+name                 dtype      shape   unit  meaning
+===================  =========  ======  ====  ==================================================
+``xyz``              float32    (N,3)   m     point in the LiDAR frame (x forward, y left, z up)
+``xyz_world``        float32    (N,3)   m     point in the world frame
+``range``            float32    (N,)    m     path length along the beam (after range noise)
+``intensity``        float32    (N,)    --    g·ρ·a + η, clipped at 0 (``intensity_mode`` ``raw``:
+                                              1/m²; ``compensated``: unitless)
+``reflectance``      float32    (N,)    --    ρ at the LiDAR wavelength: π × the monostatic BSDF
+                                              value (a Lambertian surface gives its albedo)
+``cos_incidence``    float32    (N,)    --    cosine of the incidence angle on the shading normal
+``ring``             uint16     (N,)    --    beam (channel) index, 0 = highest beam = top row
+                                              of the range image
+``column``           uint32     (N,)    --    azimuth column index of the firing
+``material``         int32      (N,)    --    index into ``material_names``; -1 = none
+``material_names``   str (U)    (M,)    --    BSDF ids (anonymous BSDFs: ``<shape id>.bsdf``);
+                                              fixed-width unicode, never object
+``intensity_nidar``  float32    (N,)    --    with ``--intensity nidar``: NIDAR's calibrated
+                                              intensity in [0, 1], 0 where no camera sees the point
+``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
+===================  =========  ======  ====  ==================================================
 
 Other entries are carried generically by every writer:
 

@@ -171,3 +171,46 @@ def test_kitti_bin_errors(tmp_path):
     with pytest.raises(NidarError, match=r"b\.bin: size 20 B"):
         read_kitti_bin(tmp_path / "b.bin")
 
+
+# --- the documented schema -------------------------------------------------------------------
+
+GOLDEN = os.path.join(os.path.dirname(__file__), "..", "golden", "small_scene_points.npz")
+
+
+def _schema_rows() -> dict[str, str]:
+    """name -> its row of the table in the module docstring (continuation lines joined)."""
+    from nidar_mi.io import points as module
+
+    rows: dict[str, str] = {}
+    name = None
+    for line in module.__doc__.splitlines():
+        if line.startswith("``"):
+            name = line[2 : line.index("``", 2)]
+            rows[name] = line
+        elif name is not None and line.startswith(" ") and line.strip():
+            rows[name] += " " + line.strip()
+        else:
+            name = None
+    return rows
+
+
+def test_documented_schema_matches_a_simulated_scan():
+    rows = _schema_rows()
+    assert {"xyz", "ring", "intensity_nidar", "nidar_observed"} <= set(rows)
+    scan = read_npz(GOLDEN)
+    sizes = {"N": str(len(scan["xyz"])), "M": str(len(scan["material_names"]))}
+    for name, a in scan.items():
+        _, dtype, *rest = rows[name].split()
+        shape = rest[1] if dtype == "str" else rest[0]  # "str (U) (M,)"
+        assert (a.dtype.kind == "U") if dtype == "str" else (a.dtype == np.dtype(dtype)), name
+        want = "".join(sizes.get(c, c) for c in shape)
+        assert str(a.shape).replace(" ", "") == want, name
+
+
+def test_ring_zero_is_the_highest_beam_as_documented():
+    assert "0 = highest beam" in _schema_rows()["ring"]
+    scan = read_npz(GOLDEN)
+    x, y, z = scan["xyz"].astype(np.float64).T
+    elevation = np.arctan2(z, np.hypot(x, y))
+    rings = scan["ring"]
+    assert elevation[rings == rings.min()].mean() > elevation[rings == rings.max()].mean()
