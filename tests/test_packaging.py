@@ -1,4 +1,5 @@
-"""A regular (non-editable) install ships the plugins as nidar_mi.plugins."""
+"""Packaging: a regular (non-editable) install ships the plugins as nidar_mi.plugins, and every
+imported distribution is declared."""
 
 import os
 import subprocess
