@@ -62,7 +62,10 @@ def build_config(args: argparse.Namespace):
             data = json.loads(args.config.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise NidarError(f"cannot read {args.config}: {exc}") from None
-        cfg = TrainConfig.from_dict(data, base=cfg)
+        try:
+            cfg = TrainConfig.from_dict(data, base=cfg)
+        except NidarError as exc:
+            raise NidarError(f"{args.config}: {exc}") from None
     irnet = {}
     if args.variant is not None:
         irnet["variant"] = args.variant.strip().lower().replace("-", "")
