@@ -44,7 +44,7 @@ def test_city_mesh_counts_and_winding():
     assert np.all(n[top, 2] > 0.999)
     outward = np.einsum("ij,ij->i", n[~top, :2], centroid[~top, :2] - axis_xy[~top])
     assert np.all(outward > 0) and np.all(np.abs(n[~top, 2]) < 1e-6)
-    # the default size is the issue's >= 100k triangles
+    # the default grid gives at least 100k triangles
     assert 2 * (241 - 1) ** 2 + 1000 >= 100_000
 
 

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .io.images import REC709_LUMA, linear_to_srgb
+
 __all__ = [
     "CameraRender",
     "auto_exposure",
@@ -68,8 +70,6 @@ class CameraRender:
     def srgb8(self) -> np.ndarray:
         """(H, W, 3) uint8: the image as a camera delivers it (auto exposure, sRGB, 8 bit); what
         ``rgb.png`` holds and what NIDAR sees."""
-        from .io.images import linear_to_srgb
-
         rgb = np.clip(self.rgb * self.exposure(), 0.0, 1.0).astype(np.float64)
         return np.round(np.nan_to_num(linear_to_srgb(rgb), nan=0.0) * 255).astype(np.uint8)
 
@@ -77,7 +77,8 @@ class CameraRender:
 def auto_exposure(rgb: np.ndarray, key: float = 0.85, percentile: float = 99.5) -> float:
     """Scale that maps the ``percentile`` of an image's luminance to ``key`` (a camera's auto
     exposure). The same scale is applied to the NIR preview so that RGB and NIR PNGs compare."""
-    lum = rgb[..., 0] * 0.2126 + rgb[..., 1] * 0.7152 + rgb[..., 2] * 0.0722
+    wr, wg, wb = REC709_LUMA
+    lum = rgb[..., 0] * wr + rgb[..., 1] * wg + rgb[..., 2] * wb
     ref = float(np.percentile(lum, percentile)) if lum.size else 0.0
     return key / ref if ref > 1e-12 else 1.0
 

@@ -45,7 +45,8 @@ def tiny_run(tmp_path_factory, variant):
 
     from nidar_mi.dataset import build_dataset
     from nidar_mi.nidar.config import TrainConfig
-    from nidar_mi.nidar.pipeline import NidarModel, fit_dataset_calibration
+    from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
+    from nidar_mi.nidar.pipeline import NidarModel
     from nidar_mi.nidar.train import train
 
     root = tmp_path_factory.mktemp("e2e")

@@ -1,4 +1,5 @@
-"""A regular (non-editable) install ships the plugins as nidar_mi.plugins."""
+"""Packaging: a regular (non-editable) install ships the plugins as nidar_mi.plugins, and every
+imported distribution is declared."""
 
 import os
 import subprocess
@@ -51,3 +52,37 @@ def test_wheel_install_ships_plugins(tmp_path):
     lines = out.stdout.split()
     assert lines[0].startswith(str(target)) and lines[1].startswith(str(target))
     assert lines[2] == "16"
+
+
+def test_every_imported_distribution_is_declared():
+    """Each third-party module the package imports belongs to a declared dependency."""
+    import ast
+    import importlib.metadata
+    import re
+    from pathlib import Path
+
+    tomllib = pytest.importorskip("tomllib")
+    project = tomllib.loads((Path(REPO) / "pyproject.toml").read_text())["project"]
+    declared = project["dependencies"] + [
+        d for extra in project["optional-dependencies"].values() for d in extra
+    ]
+
+    def norm(name: str) -> str:
+        return re.sub(r"[-_.]+", "-", name).lower()
+
+    declared = {norm(re.split(r"[<>=!~\[; ]", d, maxsplit=1)[0]) for d in declared}
+    imported = set()
+    for root in ("nidar_mi", "plugins"):
+        for path in Path(REPO, root).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Import):
+                    imported |= {a.name.split(".")[0] for a in node.names}
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    imported.add(node.module.split(".")[0])
+    third_party = imported - set(sys.stdlib_module_names) - {"nidar_mi"}
+    assert {"PIL", "yaml", "torch"} <= third_party
+    owners = importlib.metadata.packages_distributions()
+    missing = {
+        m for m in third_party if not ({norm(d) for d in owners.get(m, [])} | {norm(m)}) & declared
+    }
+    assert not missing, f"imported but not declared in pyproject.toml: {sorted(missing)}"

@@ -123,7 +123,7 @@ def _assign(args) -> None:
             if not (args.points and args.calib and args.image):
                 raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
             from ..io.images import read_png
-            from ..io.points import read_point_cloud
+            from ..io.point_cloud import read_point_cloud
             from ..nidar.cameras import load_calib
 
             cloud = read_point_cloud(args.points)

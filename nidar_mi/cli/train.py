@@ -9,7 +9,7 @@
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
 ``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
 trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted on the training
-split (:func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`; ``--no-calibration`` skips it). Options given on
+split (:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). See :mod:`nidar_mi.nidar.train`.
 """
@@ -17,7 +17,6 @@ the command line override the configuration file (``--epochs``, ``--max-steps`` 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -53,35 +52,25 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _merge(base: dict, override: dict) -> dict:
-    """``base`` updated by ``override``, nested dicts merged key by key."""
-    out = dict(base)
-    for key, value in override.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
 def build_config(args: argparse.Namespace):
     """The :class:`~nidar_mi.nidar.config.TrainConfig` selected by parsed arguments."""
     from ..nidar.config import TrainConfig
 
+    cfg = TrainConfig.reduced() if args.reduced else TrainConfig()
     if args.config is not None:
         try:
             data = json.loads(args.config.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise NidarError(f"cannot read {args.config}: {exc}") from None
-        base = TrainConfig.reduced().to_dict() if args.reduced else {}
-        cfg = TrainConfig.from_dict(_merge(base, data))
-    else:
-        cfg = TrainConfig.reduced() if args.reduced else TrainConfig()
-    irnet = cfg.irnet
+        try:
+            cfg = TrainConfig.from_dict(data, base=cfg)
+        except NidarError as exc:
+            raise NidarError(f"{args.config}: {exc}") from None
+    irnet = {}
     if args.variant is not None:
-        irnet = dataclasses.replace(irnet, variant=args.variant.strip().lower().replace("-", ""))
+        irnet["variant"] = args.variant.strip().lower().replace("-", "")
     if args.input is not None:
-        irnet = dataclasses.replace(irnet, input=args.input)
+        irnet["input"] = args.input
     optim = {
         k: v
         for k, v in (
@@ -96,12 +85,8 @@ def build_config(args: argparse.Namespace):
         for k, v in (("seed", args.seed), ("device", args.device), ("crop_size", args.crop_size))
         if v is not None
     }
-    cfg = dataclasses.replace(
-        cfg,
-        irnet=irnet,
-        stn_optim=dataclasses.replace(cfg.stn_optim, **optim),
-        irnet_optim=dataclasses.replace(cfg.irnet_optim, **optim),
-        **top,
+    cfg = TrainConfig.from_dict(
+        {"irnet": irnet, "stn_optim": optim, "irnet_optim": optim, **top}, base=cfg
     )
     cfg.validate()
     return cfg
@@ -136,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
                 progress=progress,
             )
         if args.stage != "stn" and not args.no_calibration:
-            from ..nidar.pipeline import NidarModel, fit_dataset_calibration
+            from ..nidar.dataset_calibration import fit_dataset_calibration
+            from ..nidar.pipeline import NidarModel
 
             model = NidarModel.load(args.out, device=cfg.device)
             fit_dataset_calibration(model, args.data, "train").save_json(

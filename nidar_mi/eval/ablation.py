@@ -8,7 +8,7 @@
 * **Pseudo-NIR vs RGB diagnostic**: the paper's model (``unet+deeplabv3``) trained on
   pseudo-NIR and on RGB input; for each, the final validation loss and MAE/RMSE/SSIM of Î raw,
   R raw and R remapped (R through the distance encoding + quantile map fitted on the training
-  split, :func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`).
+  split, :func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`).
 
 The networks are trained by :func:`nidar_mi.nidar.train.train_irnet` into
 ``OUT/<input>__<variant>/``; a finished run (its ``irnet.safetensors`` exists) is reused, so an
@@ -141,7 +141,8 @@ def evaluate_run(
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
     from ..dataset import list_frames, load_meta
-    from ..nidar.pipeline import NidarModel, fit_dataset_calibration
+    from ..nidar.dataset_calibration import fit_dataset_calibration
+    from ..nidar.pipeline import NidarModel
 
     run_dir = Path(run_dir)
     scale = float(load_meta(data_dir).get("intensity_scale", 1.0))

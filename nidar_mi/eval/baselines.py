@@ -24,7 +24,6 @@ from ..errors import NidarError
 
 __all__ = [
     "CARLA_ATTENUATION_PER_M",
-    "REC709_LUMA",
     "ClassConstant",
     "carla",
     "luminance_rho",
@@ -33,9 +32,6 @@ __all__ = [
 
 CARLA_ATTENUATION_PER_M = 0.004
 """CARLA's default ``atmosphere_attenuation_rate`` (1/m) in ``I = exp(-a d)``."""
-REC709_LUMA = np.array([0.2126, 0.7152, 0.0722])
-"""Rec. 709 / sRGB luminance weights on linear R, G, B."""
-REC709_LUMA.setflags(write=False)
 
 
 def carla(distance_m: Any) -> np.ndarray:
@@ -64,7 +60,7 @@ def luminance_rho(rgb_uint8: Any, uv: Any) -> np.ndarray:
     Returns:
         (N,) float64 ρ in [0, 1]; NaN for points outside the image.
     """
-    from ..io.images import srgb_to_linear
+    from ..io.images import REC709_LUMA, srgb_to_linear
     from ..nidar.projection import bilinear_sample
 
     rgb = np.asarray(rgb_uint8)
@@ -73,7 +69,7 @@ def luminance_rho(rgb_uint8: Any, uv: Any) -> np.ndarray:
             f"luminance_rho: expected a uint8 (H, W, 3) image, got {rgb.dtype} {rgb.shape}"
         )
     linear = srgb_to_linear(rgb.astype(np.float64) / 255.0)
-    return bilinear_sample(linear @ REC709_LUMA, uv)
+    return bilinear_sample(linear @ np.asarray(REC709_LUMA), uv)
 
 
 def _label_kind(a: np.ndarray) -> str:

@@ -11,7 +11,8 @@ sees: in front of it, inside the image and not hidden behind the rendered depth
 ``clip(I / intensity_scale, 0, 1)`` (:func:`nidar_mi.eval.metrics.scale_intensity`, LiDAR4D's
 convention; ``intensity_scale`` comes from the dataset's ``meta.json``).
 
-**Methods** (the issue's §2), each an (N,) prediction on the [0, 1] scale at the same points:
+**Methods** (a)-(g): the baselines and NIDAR variants this evaluation compares (keys in
+:data:`METHODS`), each an (N,) prediction on the [0, 1] scale at the same points:
 
 ==============  ==================================================================================
 key             prediction
@@ -70,7 +71,7 @@ METHODS = (
     "nidar_ihat",
     "nidar_full",
 )
-"""Method keys in the order of the issue (a)-(g)."""
+"""Method keys, in the order of the methods (a)-(g) of the module docstring."""
 
 METHOD_LABELS = {
     "rgb_twin": "(a) RGB-asset physics",

@@ -1,7 +1,6 @@
 """Scene-level pieces of the held-out evaluation: fitting baselines, rendering, scanning twins.
 
 * :func:`fit_class_constant`: baseline (c) on the training scenes' returns, by material name.
-* :func:`fit_pseudo_nir_calibration`: baseline (e)'s calibration (pseudo-NIR in place of R).
 * :func:`twin_prediction`: baseline (a) at a frame's points from the RGB-twin scan.
 * :func:`render_scenes`: cached renders of scene files (the hand-made scenes).
 * :func:`evaluate_renders`: every frame of a set of rendered scenes through
@@ -29,7 +28,6 @@ from .metrics import scale_intensity
 __all__ = [
     "evaluate_renders",
     "fit_class_constant",
-    "fit_pseudo_nir_calibration",
     "render_scenes",
     "twin_prediction",
 ]
@@ -58,34 +56,6 @@ def fit_class_constant(
     if not labels:
         raise NidarError("class constant: no training scenes")
     return ClassConstant.fit(np.concatenate(labels), np.concatenate(values))
-
-
-def fit_pseudo_nir_calibration(model, data_dir: str, split: str = "train"):
-    """Baseline (e)'s calibration: NIDAR's distance encoding + quantile map fitted on pseudo-NIR.
-
-    Same recipe as :func:`nidar_mi.nidar.pipeline.fit_dataset_calibration`, with the STN's
-    pseudo-NIR at the masked pixels in place of the R branch.
-    """
-    from ..dataset import list_frames, load_meta
-    from ..nidar.calibration import fit_calibration
-
-    meta = load_meta(data_dir)
-    scale = float(meta.get("intensity_scale", 1.0))
-    preds, dists, refs = [], [], []
-    for path in list_frames(data_dir, split):
-        with np.load(path, allow_pickle=False) as z:
-            rgb, inten, m, rng = z["rgb"], z["intensity"], z["mask"], z["range"]
-        maps = model.predict_image(rgb)
-        if "pseudo_nir" not in maps:
-            raise NidarError("the model has no STN: no pseudo-NIR to calibrate")
-        preds.append(maps["pseudo_nir"][m])
-        dists.append(rng[m])
-        refs.append(scale_intensity(inten[m], scale))
-    if not preds:
-        raise NidarError(f"{data_dir}: no '{split}' frames to fit the pseudo-NIR calibration on")
-    return fit_calibration(
-        np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), branch="pseudo_nir"
-    )
 
 
 def twin_prediction(frame: FrameData, twin, intensity_scale: float) -> np.ndarray:

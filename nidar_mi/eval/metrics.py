@@ -1,4 +1,4 @@
-"""Intensity metrics on projected maps and on point sets (pure NumPy, LPIPS aside).
+"""Intensity metrics on projected maps and on point sets (NumPy in and out).
 
 Intensities are compared on a common [0, 1] scale, as LiDAR4D does:
 :func:`scale_intensity` divides by a stated scale and clips (the dataset's ``intensity_scale``).
@@ -13,7 +13,8 @@ mask M:
   pixels of both maps set to 0, then averaged over the valid pixels. Within 5 px of the border
   the window is cut at the image edge and renormalised (the local statistics use only pixels
   inside the image), so the map has the input's size; farther in, it is the reference
-  formulation exactly.
+  formulation exactly. It is the training loss's SSIM
+  (:func:`nidar_mi.nidar.losses.ssim_map`), evaluated in float64.
 * LPIPS (AlexNet, via the ``lpips`` package): only with ImageNet AlexNet weights in the torch
   cache (``torch.hub.get_dir()/checkpoints/alexnet-owt-7be5be79.pth``); otherwise ``None`` with
   the reason, never a random backbone. The backbone is loaded from that file with
@@ -39,12 +40,7 @@ from ..errors import NidarError
 __all__ = [
     "ALEXNET_CHECKPOINT",
     "LPIPS_MIN_SIDE",
-    "SSIM_K1",
-    "SSIM_K2",
-    "SSIM_SIGMA",
-    "SSIM_WINDOW",
     "alexnet_checkpoint_path",
-    "average_ranks",
     "lpips_alex",
     "lpips_unavailable_reason",
     "mae",
@@ -59,12 +55,6 @@ __all__ = [
     "ssim_map",
 ]
 
-SSIM_WINDOW = 11
-"""Side of the Gaussian SSIM window (pixels)."""
-SSIM_SIGMA = 1.5
-"""Standard deviation of the Gaussian SSIM window (pixels)."""
-SSIM_K1 = 0.01
-SSIM_K2 = 0.03
 ALEXNET_CHECKPOINT = "alexnet-owt-7be5be79.pth"
 """File name of torchvision's ImageNet AlexNet weights in the torch hub cache."""
 LPIPS_MIN_SIDE = 31
@@ -138,34 +128,11 @@ def psnr(pred: Any, gt: Any, mask: Any = None) -> float:
 # --- SSIM ------------------------------------------------------------------------------------
 
 
-def _gaussian_1d() -> np.ndarray:
-    r = SSIM_WINDOW // 2
-    k = np.arange(-r, r + 1, dtype=np.float64)
-    w = np.exp(-(k**2) / (2.0 * SSIM_SIGMA**2))
-    return w / w.sum()
-
-
-def _filter_axis(x: np.ndarray, w: np.ndarray, axis: int) -> np.ndarray:
-    """Correlate ``x`` with the symmetric kernel ``w`` along ``axis``, zeros outside."""
-    r = len(w) // 2
-    n = x.shape[axis]
-    pad = [(0, 0)] * x.ndim
-    pad[axis] = (r, r)
-    xp = np.pad(x, pad)
-    out = np.zeros_like(x)
-    for i, wi in enumerate(w):
-        out += wi * np.take(xp, np.arange(i, i + n), axis=axis)
-    return out
-
-
-def _local_mean(x: np.ndarray, w: np.ndarray, norm: np.ndarray) -> np.ndarray:
-    return _filter_axis(_filter_axis(x, w, 0), w, 1) / norm
-
-
 def ssim_map(x: Any, y: Any) -> np.ndarray:
-    """Per-pixel SSIM of two (H, W) maps in [0, 1] (data range 1).
+    """Per-pixel SSIM of two (H, W) maps in [0, 1] (data range 1), in float64.
 
-    Local statistics use the 11x11 Gaussian window (σ = 1.5), cut at the image edge and
+    This evaluates the package's one SSIM, :func:`nidar_mi.nidar.losses.ssim_map` (the one the
+    training loss uses): 11x11 Gaussian window (σ = 1.5), cut at the image edge and
     renormalised; variances and covariance are the window-weighted population ones.
 
     Args:
@@ -175,18 +142,14 @@ def ssim_map(x: Any, y: Any) -> np.ndarray:
     Returns:
         (H, W) float64 SSIM values in [-1, 1].
     """
+    import torch
+
+    from ..nidar.losses import ssim_map as _ssim_map
+
     x, y, _ = _pair(x, y, ndim=2)
-    w = _gaussian_1d()
-    H, W = x.shape
-    norm = np.outer(_filter_axis(np.ones(H), w, 0), _filter_axis(np.ones(W), w, 0))
-    mu_x, mu_y = _local_mean(x, w, norm), _local_mean(y, w, norm)
-    var_x = _local_mean(x * x, w, norm) - mu_x**2
-    var_y = _local_mean(y * y, w, norm) - mu_y**2
-    cov = _local_mean(x * y, w, norm) - mu_x * mu_y
-    c1, c2 = SSIM_K1**2, SSIM_K2**2
-    num = (2.0 * mu_x * mu_y + c1) * (2.0 * cov + c2)
-    den = (mu_x**2 + mu_y**2 + c1) * (var_x + var_y + c2)
-    return num / den
+    with torch.no_grad():
+        s = _ssim_map(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])
+    return s[0, 0].numpy()
 
 
 def ssim(pred: Any, gt: Any, mask: Any = None) -> float:
@@ -205,27 +168,8 @@ def ssim(pred: Any, gt: Any, mask: Any = None) -> float:
 # --- rank correlation -------------------------------------------------------------------------
 
 
-def average_ranks(x: Any) -> np.ndarray:
-    """1-based ranks of a 1-D array, tied values sharing the mean of their ranks.
-
-    Example: ``[10, 20, 20, 30] -> [1, 2.5, 2.5, 4]``.
-    """
-    x = np.asarray(x, dtype=np.float64).ravel()
-    n = x.size
-    if n == 0:
-        return np.zeros(0, dtype=np.float64)
-    order = np.argsort(x, kind="mergesort")
-    xs = x[order]
-    starts = np.flatnonzero(np.r_[True, xs[1:] != xs[:-1]])
-    ends = np.r_[starts[1:], n]
-    sorted_ranks = np.repeat((starts + ends + 1) / 2.0, ends - starts)
-    ranks = np.empty(n, dtype=np.float64)
-    ranks[order] = sorted_ranks
-    return ranks
-
-
 def spearman(pred: Any, gt: Any) -> float:
-    """Spearman's rank correlation: Pearson correlation of the average ranks.
+    """Spearman's rank correlation (:func:`scipy.stats.spearmanr`; average ranks for ties).
 
     Args:
         pred: (N,) values.
@@ -234,13 +178,12 @@ def spearman(pred: Any, gt: Any) -> float:
     Returns:
         ρ in [-1, 1]; ``nan`` when either input is constant (or N < 2).
     """
+    from scipy.stats import spearmanr
+
     p, g, _ = _pair(pred, gt, ndim=1)
-    rp = average_ranks(p) - (p.size + 1) / 2.0
-    rg = average_ranks(g) - (g.size + 1) / 2.0
-    den = np.sqrt(np.sum(rp * rp) * np.sum(rg * rg))
-    if den == 0.0:
+    if p.size < 2 or np.all(p == p[0]) or np.all(g == g[0]):
         return float("nan")
-    return float(np.clip(np.sum(rp * rg) / den, -1.0, 1.0))
+    return float(np.clip(spearmanr(p, g).statistic, -1.0, 1.0))
 
 
 # --- LPIPS -------------------------------------------------------------------------------------

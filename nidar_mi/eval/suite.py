@@ -106,10 +106,10 @@ def run(args, argv_text: str) -> dict:
 
 def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
     """The evaluation proper; figures go to ``fig_dir``."""
+    from ..nidar.dataset_calibration import fit_dataset_calibration
     from .heldout import (
         evaluate_renders,
         fit_class_constant,
-        fit_pseudo_nir_calibration,
         render_scenes,
     )
     from .metrics import lpips_unavailable_reason
@@ -119,7 +119,7 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
     renders = os.path.join(args.data, "renders")
     log.info("fitting baselines (c) and (e) on the training split")
     class_const = fit_class_constant([os.path.join(renders, n) for n in splits["train"]], scale)
-    pseudo_cal = fit_pseudo_nir_calibration(model, args.data, "train")
+    pseudo_cal = fit_dataset_calibration(model, args.data, "train", branch="pseudo_nir")
     common = dict(
         class_const=class_const,
         pseudo_calibration=pseudo_cal,

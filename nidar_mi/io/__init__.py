@@ -19,11 +19,11 @@ from .images import (
 )
 from .las import LAS_SCALE_M, read_las, write_las
 from .pcd import read_pcd
+from .point_cloud import read_point_cloud
 from .points import (
     read_kitti_bin,
     read_npz,
     read_ply,
-    read_point_cloud,
     write_kitti_bin,
     write_npz,
     write_ply,

@@ -1,13 +1,18 @@
-"""Images: sRGB transfer functions, 8-bit PNG, float32 OpenEXR, false-colour PNG.
+"""Images: sRGB transfer functions, Rec. 709 luma, 8-bit PNG, float32 OpenEXR, false-colour PNG.
 
 Renders are linear (radiance, intensity, depth); :func:`write_srgb_png` encodes a linear RGB
 render for display with the sRGB OETF of IEC 61966-2-1, and :func:`write_colormap_png` maps
 a scalar image (range, intensity) through a matplotlib colour map. EXR keeps float32 values
 exactly, one named channel per image plane.
+
+This module owns the package's sRGB transfer curves (:func:`linear_to_srgb`,
+:func:`srgb_to_linear`: colour-science's, imported on first use since colour takes about a
+second to import) and its Rec. 709 luma weights (:data:`REC709_LUMA`).
 """
 
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
@@ -16,6 +21,7 @@ from ..errors import NidarError
 from .atomic import atomic_path, reading
 
 __all__ = [
+    "REC709_LUMA",
     "linear_to_srgb",
     "srgb_to_linear",
     "write_png",
@@ -26,10 +32,19 @@ __all__ = [
     "write_srgb_png",
 ]
 
-# IEC 61966-2-1: the linear segment ends at 0.0031308 (linear) = 0.04045 (encoded).
-_LINEAR_END = 0.0031308
-_ENCODED_END = 0.04045
+REC709_LUMA = (0.2126, 0.7152, 0.0722)
+"""Rec. 709 / sRGB luminance weights of linear R, G, B (the Y row of the sRGB-to-XYZ matrix,
+rounded as ITU-R BT.709 states them)."""
+
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+@functools.cache
+def _srgb_curves():
+    """colour-science's sRGB EOTF inverse and EOTF, imported on first use (about a second)."""
+    from colour.models import eotf_inverse_sRGB, eotf_sRGB
+
+    return eotf_inverse_sRGB, eotf_sRGB
 
 
 def _float(x: np.ndarray) -> np.ndarray:
@@ -40,7 +55,8 @@ def _float(x: np.ndarray) -> np.ndarray:
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     """sRGB OETF (IEC 61966-2-1): linear values -> encoded values, both clipped to [0, 1].
 
-    ``12.92 x`` for ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``.
+    ``12.92 x`` for ``x <= 0.0031308``, else ``1.055 x^(1/2.4) - 0.055``
+    (:func:`colour.models.eotf_inverse_sRGB`, evaluated in float64).
 
     Args:
         x: linear values, any shape (NaN stays NaN).
@@ -49,18 +65,28 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
         Encoded values in [0, 1], same shape, as floats (float32 input stays float32).
     """
     x = np.clip(_float(x), 0.0, 1.0)
-    with np.errstate(invalid="ignore"):
-        return np.where(x <= _LINEAR_END, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055).astype(x.dtype)
+    encode, _ = _srgb_curves()
+    return np.asarray(encode(x), dtype=x.dtype)
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
     """Inverse sRGB OETF: encoded values in [0, 1] -> linear values in [0, 1].
 
-    ``x / 12.92`` for ``x <= 0.04045``, else ``((x + 0.055) / 1.055)^2.4``.
+    ``x / 12.92`` below the break, else ``((x + 0.055) / 1.055)^2.4``
+    (:func:`colour.models.eotf_sRGB`, evaluated in float64). The break is the encoded
+    value of 0.0031308, 0.040449936, so that this is the exact inverse of
+    :func:`linear_to_srgb` (the standard rounds it to 0.04045; the segments meet there
+    within 3e-9).
+
+    Args:
+        x: encoded values, any shape (NaN stays NaN).
+
+    Returns:
+        Linear values in [0, 1], same shape, as floats (float32 input stays float32).
     """
     x = np.clip(_float(x), 0.0, 1.0)
-    with np.errstate(invalid="ignore"):
-        return np.where(x <= _ENCODED_END, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(x.dtype)
+    _, decode = _srgb_curves()
+    return np.asarray(decode(x), dtype=x.dtype)
 
 
 def write_png(path: str | os.PathLike, img: np.ndarray) -> None:

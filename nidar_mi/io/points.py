@@ -1,25 +1,33 @@
-"""Point sets ("points dicts") and their files: npz, PLY, KITTI ``.bin``, and any format.
+"""Point sets ("points dicts") and their files: npz, PLY and KITTI ``.bin``.
 
-LAS is in :mod:`nidar_mi.io.las` and PCD (read only) in :mod:`nidar_mi.io.pcd`;
-:func:`read_point_cloud` reads all of them.
+LAS is in :mod:`nidar_mi.io.las`, PCD (read only) in :mod:`nidar_mi.io.pcd`, and
+:func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of them.
 
 A points dict maps names to numpy arrays. ``xyz`` is required; every other entry is
-optional. The columns produced by the simulator:
+optional. This table is the schema of the simulator's points (``points.npz`` in a render
+folder holds the valid returns of one scan, N points and M materials); the README links here:
 
-=================  =========  ======  ====  ====================================================
-name               dtype      shape   unit  meaning
-=================  =========  ======  ====  ====================================================
-``xyz``            float32    (N,3)   m     point in the LiDAR frame
-``xyz_world``      float32    (N,3)   m     point in the world frame
-``range``          float32    (N,)    m     distance from the sensor origin
-``intensity``      float32    (N,)    --    LiDAR intensity (simulated return strength)
-``reflectance``    float32    (N,)    --    reflectance rho at the LiDAR wavelength, in [0, 1]
-``cos_incidence``  float32    (N,)    --    cosine of the angle between beam and surface normal
-``ring``           uint16     (N,)    --    beam (laser) index, 0 = lowest elevation
-``column``         uint32     (N,)    --    azimuth column index of the firing
-``material``       int32      (N,)    --    index into ``material_names``; -1 = none
-``material_names`` str (U)    (M,)    --    material names (fixed-width unicode, never object)
-=================  =========  ======  ====  ====================================================
+===================  =========  ======  ====  ==================================================
+name                 dtype      shape   unit  meaning
+===================  =========  ======  ====  ==================================================
+``xyz``              float32    (N,3)   m     point in the LiDAR frame (x forward, y left, z up)
+``xyz_world``        float32    (N,3)   m     point in the world frame
+``range``            float32    (N,)    m     path length along the beam (after range noise)
+``intensity``        float32    (N,)    --    g·ρ·a + η, clipped at 0 (``intensity_mode`` ``raw``:
+                                              1/m²; ``compensated``: unitless)
+``reflectance``      float32    (N,)    --    ρ at the LiDAR wavelength: π × the monostatic BSDF
+                                              value (a Lambertian surface gives its albedo)
+``cos_incidence``    float32    (N,)    --    cosine of the incidence angle on the shading normal
+``ring``             uint16     (N,)    --    beam (channel) index, 0 = highest beam = top row
+                                              of the range image
+``column``           uint32     (N,)    --    azimuth column index of the firing
+``material``         int32      (N,)    --    index into ``material_names``; -1 = none
+``material_names``   str (U)    (M,)    --    BSDF ids (anonymous BSDFs: ``<shape id>.bsdf``);
+                                              fixed-width unicode, never object
+``intensity_nidar``  float32    (N,)    --    with ``--intensity nidar``: NIDAR's calibrated
+                                              intensity in [0, 1], 0 where no camera sees the point
+``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
+===================  =========  ======  ====  ==================================================
 
 Other entries are carried generically by every writer:
 
@@ -41,14 +49,12 @@ import json
 import math
 import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import NidarError
 from .atomic import atomic_path, reading
-from .pcd import read_pcd
 
 __all__ = [
     "write_npz",
@@ -57,7 +63,6 @@ __all__ = [
     "read_ply",
     "write_kitti_bin",
     "read_kitti_bin",
-    "read_point_cloud",
 ]
 
 _TAG = "nidar_mi.points"  # marks our JSON in PLY obj_info lines and the LAS VLR
@@ -317,51 +322,3 @@ def read_kitti_bin(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"size {size} B is not a multiple of 16 B (4 float32 per point)")
         rows = np.fromfile(p, dtype="<f4").reshape(-1, 4).astype(np.float32)
         return np.ascontiguousarray(rows[:, :3]), rows[:, 3].copy()
-
-
-# --- any format --------------------------------------------------------------------------
-
-
-def _read_bin(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    xyz, intensity = read_kitti_bin(path)
-    return {"xyz": xyz, "intensity": intensity}
-
-
-def _read_las(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    from .las import read_las  # las.py builds on this module's helpers
-
-    return read_las(path)
-
-
-_READERS = {
-    ".npz": read_npz,
-    ".ply": read_ply,
-    ".las": _read_las,
-    ".laz": _read_las,
-    ".bin": _read_bin,
-    ".pcd": read_pcd,
-}
-
-
-def read_point_cloud(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read a point cloud, choosing the reader from the extension.
-
-    Supported: ``.npz`` ``.ply`` ``.las`` ``.laz`` ``.bin`` (KITTI) ``.pcd``.
-
-    Returns:
-        A points dict with at least ``xyz`` (N, 3) and, when the file has it, ``intensity``.
-
-    Raises:
-        NidarError: unknown extension, or a missing or malformed file.
-    """
-    suffix = Path(path).suffix.lower()
-    if suffix not in _READERS:
-        raise NidarError(
-            f"cannot read {path}: unknown point cloud extension {suffix or '(none)'!r} "
-            f"(expected one of {' '.join(_READERS)})"
-        )
-    points = _READERS[suffix](path)
-    xyz = points.get("xyz")
-    if xyz is None or xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise NidarError(f"cannot read {path}: no (N,3) 'xyz' array")
-    return points

@@ -17,7 +17,7 @@ from types import MappingProxyType
 import numpy as np
 
 from .earthlib_data import EARTHLIB_LICENSE, earthlib_notes, earthlib_spectrum
-from .library import Material
+from .material import Material
 from .metals import METAL_SOURCES, METALS_LICENSE, metal_nk, metal_reflectance
 from .optics import SODA_LIME_SOURCE, soda_lime_ior
 from .spectra import GRID_NM, Spectrum, absorption_band, flat, logistic

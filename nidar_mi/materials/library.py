@@ -1,8 +1,9 @@
 """The named material registry: lookup, spectral reflectance and sRGB appearance.
 
-A :class:`Material` is a frozen record: its kind (which Mitsuba BSDF renders it), its physical
-parameters (spectra on the 360-1700 nm grid, roughness, ...) and its provenance (``source``,
-``license``, ``notes``). The materials themselves are defined in :mod:`.catalog`.
+A :class:`~nidar_mi.materials.material.Material` is a frozen record: its kind (which Mitsuba BSDF
+renders it), its physical parameters (spectra on the 360-1700 nm grid, roughness, ...) and its
+provenance (``source``, ``license``, ``notes``). The materials themselves are defined in
+:mod:`.catalog`.
 
 Kinds and what :func:`reflectance` returns for them:
 
@@ -21,16 +22,16 @@ from __future__ import annotations
 
 import difflib
 import functools
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from ..errors import NidarError
+from ..io.images import linear_to_srgb
+from .catalog import build_catalog
+from .material import KINDS, Material
 from .optics import fresnel_conductor_normal, fresnel_dielectric_normal, soda_lime_ior
 from .spectra import GRID_NM, Spectrum, check_wavelengths, flat
-from .srgb import encode_srgb, spectrum_to_linear_srgb
+from .srgb import spectrum_to_linear_srgb
 
 __all__ = [
     "KINDS",
@@ -43,47 +44,9 @@ __all__ = [
     "srgb",
 ]
 
-KINDS = ("diffuse", "plastic", "conductor", "dielectric", "retroreflector")
-
-
-@dataclass(frozen=True)
-class Material:
-    """A named material.
-
-    Attributes:
-        name: lowercase snake_case identifier.
-        kind: one of :data:`KINDS`.
-        description: one line for people.
-        source: provenance: ``earthlib:<LEVEL_2>/<LEVEL_3>/<NAME>`` for a measured spectrum, or
-            ``model:<citation>`` for a modelled one.
-        license: licence of the data the material is built from.
-        params: physical parameters, by kind: ``reflectance`` (Spectrum) for diffuse, plastic and
-            retroreflector; ``alpha`` (roughness), ``int_ior`` for plastic and dielectric;
-            ``metal``, ``eta``, ``k`` (Spectrum) and ``alpha`` for conductor; ``transmittance``
-            (Spectrum or None) for dielectric; ``lobe_width`` (deg) and ``diffuse_fraction``
-            for retroreflector.
-        notes: how the data were chosen or processed.
-    """
-
-    name: str
-    kind: str
-    description: str
-    source: str
-    license: str
-    params: Mapping[str, Any]
-    notes: str = ""
-
-    def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ValueError(f"material '{self.name}': unknown kind '{self.kind}'")
-        if not self.source.startswith(("earthlib:", "model:")):
-            raise ValueError(f"material '{self.name}': source must start with earthlib: or model:")
-
 
 @functools.lru_cache(maxsize=1)
 def _catalog() -> dict[str, Material]:
-    from .catalog import build_catalog
-
     return build_catalog()
 
 
@@ -159,4 +122,4 @@ def linear_rgb(name: str) -> np.ndarray:
 
 def srgb(name: str) -> np.ndarray:
     """Encoded sRGB (D65) of the material's :func:`appearance_spectrum`, in [0, 1]. Shape (3,)."""
-    return encode_srgb(linear_rgb(name))
+    return linear_to_srgb(linear_rgb(name))

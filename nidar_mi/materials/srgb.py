@@ -4,7 +4,7 @@
 2-degree observer (``colour.sd_to_XYZ``), then IEC 61966-2-1 sRGB (its white point is D65, so no
 chromatic adaptation happens). A spectrally flat ``rho`` gives linear RGB ``(rho, rho, rho)``.
 Linear values are clipped to [0, 1] (out-of-gamut colours are saturated pigments) before the
-sRGB transfer curve is applied.
+sRGB transfer curve (:func:`nidar_mi.io.images.linear_to_srgb`) is applied.
 
 colour-science is imported on first use (it takes about a second).
 """
@@ -16,13 +16,13 @@ import warnings
 
 import numpy as np
 
+from ..io.images import linear_to_srgb
 from .spectra import Spectrum
 
 __all__ = [
     "spectrum_to_xyz",
     "spectrum_to_linear_srgb",
     "spectrum_to_srgb",
-    "encode_srgb",
     "srgb_hex",
 ]
 
@@ -68,15 +68,9 @@ def spectrum_to_linear_srgb(spectrum: Spectrum) -> np.ndarray:
     return np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
 
 
-def encode_srgb(linear: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 transfer curve: linear [0, 1] -> encoded sRGB [0, 1]."""
-    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
 def spectrum_to_srgb(spectrum: Spectrum) -> np.ndarray:
     """Encoded sRGB in [0, 1] of a reflectance spectrum under D65. Shape (3,)."""
-    return encode_srgb(spectrum_to_linear_srgb(spectrum))
+    return linear_to_srgb(spectrum_to_linear_srgb(spectrum))
 
 
 def srgb_hex(encoded: np.ndarray) -> str:

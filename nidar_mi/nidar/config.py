@@ -1,8 +1,9 @@
 """Configuration of the NIDAR networks and their training.
 
 Plain dataclasses, one per component; every field is documented where it is declared.
-:class:`TrainConfig` gathers them, converts to and from JSON-compatible dicts (the resolved
-configuration is written next to every set of weights) and offers :meth:`TrainConfig.reduced`,
+:class:`TrainConfig` gathers them, converts to and from JSON-compatible dicts (validated by
+pydantic against the type hints: unknown keys and values of the wrong type are errors; the
+resolved configuration is written next to every set of weights) and offers :meth:`TrainConfig.reduced`,
 a tiny configuration that runs the real training loop in seconds on a CPU (used by the tests).
 
 Defaults follow the paper (Sec. IV, "Implementation Details") where it states a value: Adam,
@@ -16,6 +17,8 @@ pool size, warm-up length, crop size) are this package's choices and marked as s
 from __future__ import annotations
 
 import dataclasses
+import functools
+import json
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,9 +55,15 @@ IRNET_VARIANTS = (
 INPUT_MODES = ("pseudo_nir", "rgb")
 
 
+#: pydantic configuration of every config dataclass: unknown keys are errors.
+_STRICT = {"extra": "forbid"}
+
+
 @dataclass
 class STNConfig:
     """Spectral translation network (cs-stereo encoder-decoder)."""
+
+    __pydantic_config__ = _STRICT
 
     width: int = 16
     """Base channel count; encoder level ``i`` has ``width * 2**min(i, 5)`` channels
@@ -70,6 +79,8 @@ class STNConfig:
 @dataclass
 class IRNetConfig:
     """Intrinsic reflectance network: decomposition backbone and intensity head."""
+
+    __pydantic_config__ = _STRICT
 
     variant: str = "unet+deeplabv3"
     """One of :data:`IRNET_VARIANTS`; the paper's model is ``unet+deeplabv3``."""
@@ -91,6 +102,8 @@ class IRNetConfig:
 @dataclass
 class LossConfig:
     """Weights and constants of the STN and IRNet objectives."""
+
+    __pydantic_config__ = _STRICT
 
     lambda_recon: float = 1.0
     """Weight of L_recon = ||R*S - I||_1."""
@@ -129,6 +142,8 @@ class LossConfig:
 class OptimConfig:
     """Adam optimiser and schedule of one training stage."""
 
+    __pydantic_config__ = _STRICT
+
     lr: float = 1e-4
     """Learning rate."""
     weight_decay: float = 1e-5
@@ -144,6 +159,8 @@ class OptimConfig:
 @dataclass
 class TrainConfig:
     """Everything that determines a NIDAR training run."""
+
+    __pydantic_config__ = _STRICT
 
     stn: STNConfig = field(default_factory=STNConfig)
     """Spectral translation network."""
@@ -221,39 +238,76 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; missing fields take their defaults.
+    def from_dict(cls, data: Any, base: TrainConfig | None = None) -> TrainConfig:
+        """Inverse of :meth:`to_dict`: a configuration from a JSON-compatible nested dict.
+
+        Args:
+            data: nested dict; keys it leaves out keep their value in ``base``.
+            base: the configuration ``data`` changes (nested objects are merged key by key);
+                default: the class defaults.
 
         Raises:
-            NidarError: on unknown keys or a value of the wrong kind.
+            NidarError: on unknown keys or a value of the wrong JSON type (one line naming
+                every offending key).
         """
+        if base is not None:
+            if not isinstance(data, dict):
+                raise NidarError(f"config must be a JSON object, got {type(data).__name__}")
+            data = _merged(base.to_dict(), data)
         return dataclass_from_dict(cls, data, "config")
 
 
-def dataclass_from_dict(kind: type, data: Any, where: str = "config") -> Any:
-    """Build dataclass ``kind`` (nested dataclasses too) from a JSON-compatible dict.
+def _merged(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """``base`` updated by ``override``, nested dicts merged key by key."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = value
+    return out
 
-    Missing fields take their defaults; lists become tuples where the default is a tuple.
+
+@functools.cache
+def _adapter(kind: type):
+    from pydantic import TypeAdapter
+
+    return TypeAdapter(kind)
+
+
+def _problem(error: dict[str, Any]) -> str:
+    """One pydantic validation error in words."""
+    kind = error["type"]
+    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
+        return "unknown key"
+    if kind in ("dataclass_type", "dict_type", "model_type"):
+        return "must be a JSON object"
+    return f"{error['msg'].replace('Input should', 'should')} (got {error['input']!r})"
+
+
+def dataclass_from_dict(kind: type, data: Any, where: str = "config") -> Any:
+    """Build config dataclass ``kind`` (nested dataclasses too) from a JSON-compatible dict.
+
+    Validated by pydantic against the dataclass's type hints, with JSON's types taken strictly
+    (an int field takes no ``2.5``, ``"2"`` or ``true``; a float field takes an int; a tuple
+    field takes a list). Missing fields take their defaults.
 
     Raises:
-        NidarError: ``data`` is not a dict, or has keys ``kind`` does not know (named with
-            ``where``).
+        NidarError: ``data`` is not a dict, has keys ``kind`` does not know, or values of the
+            wrong type; one line naming each offending key under ``where``.
     """
+    from pydantic import ValidationError
+
     if not isinstance(data, dict):
         raise NidarError(f"{where} must be a JSON object, got {type(data).__name__}")
-    fields = {f.name: f for f in dataclasses.fields(kind)}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise NidarError(f"unknown key(s) in {where}: {', '.join(unknown)}")
-    kwargs = {}
-    for name, value in data.items():
-        default = getattr(kind(), name)
-        if dataclasses.is_dataclass(default):
-            kwargs[name] = dataclass_from_dict(type(default), value, f"{where}.{name}")
-        elif isinstance(default, tuple):
-            if not isinstance(value, (list, tuple)):
-                raise NidarError(f"{where}.{name} must be a list")
-            kwargs[name] = tuple(value)
-        else:
-            kwargs[name] = value
-    return kind(**kwargs)
+    try:
+        text = json.dumps(data, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise NidarError(f"{where} is not JSON data: {exc}") from None
+    try:
+        return _adapter(kind).validate_json(text, strict=True)
+    except ValidationError as exc:
+        problems = [
+            f"{'.'.join([where, *map(str, e['loc'])])}: {_problem(e)}" for e in exc.errors()
+        ]
+        raise NidarError("; ".join(problems)) from None

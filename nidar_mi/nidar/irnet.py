@@ -10,6 +10,7 @@ hierarchical structure of the paper). Variants are named ``backbone`` or ``backb
 Output ranges: ``R = sigmoid(.)`` in ``(0, 1)``; ``S = softplus(.)`` and
 ``I_hat = softplus(.)`` non-negative. With ``in_channels = 3`` (the RGB-input diagnostic)
 the image the decomposition explains is the Rec. 709 luminance of the input
+(:data:`nidar_mi.io.images.REC709_LUMA`)
 (:meth:`IRNet.intrinsic_target`), so that ``R`` stays single-channel and comparable.
 """
 
@@ -19,15 +20,13 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..io.images import REC709_LUMA
 from .aspp import DeepLabV3
 from .config import IRNET_VARIANTS
 from .heads import ConvHead
 from .unet import UNet
 
-__all__ = ["IRNet", "parse_variant", "REC709_LUMA"]
-
-#: Rec. 709 / sRGB luminance weights of linear R, G, B.
-REC709_LUMA = (0.2126, 0.7152, 0.0722)
+__all__ = ["IRNet", "parse_variant"]
 
 
 def parse_variant(name: str) -> tuple[str, str | None]:

@@ -18,6 +18,10 @@ import torch.nn.functional as F
 from torch import nn
 
 __all__ = [
+    "SSIM_K1",
+    "SSIM_K2",
+    "SSIM_SIGMA",
+    "SSIM_WINDOW",
     "gaussian_window",
     "ssim_map",
     "stn_loss",
@@ -36,46 +40,82 @@ __all__ = [
 ]
 
 
-def gaussian_window(size: int = 11, sigma: float = 1.5, dtype=torch.float32, device=None):
+SSIM_WINDOW = 11
+"""Side of the Gaussian SSIM window (pixels)."""
+SSIM_SIGMA = 1.5
+"""Standard deviation of the Gaussian SSIM window (pixels)."""
+SSIM_K1 = 0.01
+"""SSIM luminance constant: ``C1 = (K1 L)^2``."""
+SSIM_K2 = 0.03
+"""SSIM contrast constant: ``C2 = (K2 L)^2``."""
+
+
+def gaussian_window(
+    size: int = SSIM_WINDOW, sigma: float = SSIM_SIGMA, dtype=torch.float32, device=None
+):
     """Normalised 2-D Gaussian window ``(size, size)`` (sums to 1)."""
+    g = _gaussian_1d(size, sigma, dtype, device)
+    return g[:, None] * g[None, :]
+
+
+def _gaussian_1d(size: int, sigma: float, dtype, device) -> torch.Tensor:
     x = torch.arange(size, dtype=dtype, device=device) - (size - 1) / 2
     g = torch.exp(-(x**2) / (2 * sigma**2))
-    g = g / g.sum()
-    return g[:, None] * g[None, :]
+    return g / g.sum()
 
 
 def ssim_map(
     x: torch.Tensor,
     y: torch.Tensor,
-    window_size: int = 11,
-    sigma: float = 1.5,
+    window_size: int = SSIM_WINDOW,
+    sigma: float = SSIM_SIGMA,
     data_range: float = 1.0,
-    k1: float = 0.01,
-    k2: float = 0.03,
+    k1: float = SSIM_K1,
+    k2: float = SSIM_K2,
 ) -> torch.Tensor:
-    """Per-pixel SSIM (Wang et al., 2004) with a Gaussian window, reflect-padded borders.
+    """Per-pixel SSIM (Wang et al., 2004): Gaussian window, renormalised at the image edge.
+
+    The local means, variances and covariance are Gaussian-weighted population statistics.
+    Near the border the window is cut at the image edge and its weights are renormalised to
+    sum to 1, so the statistics use only pixels inside the image and the map keeps the
+    input's size; where the window fits (``window_size // 2`` pixels and more from the edge)
+    this is the reference formulation exactly. This is the one SSIM of the package: the
+    training losses use it, and :func:`nidar_mi.eval.metrics.ssim_map` evaluates it in
+    float64, so the loss and the reported metric agree at every pixel. The renormalised
+    border (rather than padding the image with reflected or constant values) invents no
+    image content, and works for any image size. Differentiable in ``x`` and ``y``.
 
     Args:
-        x, y: ``(B, C, H, W)``; ``H, W > window_size // 2``.
-        window_size, sigma: Gaussian window.
+        x, y: ``(B, C, H, W)`` images, any ``H, W >= 1``.
+        window_size, sigma: Gaussian window (odd side, pixels).
         data_range: dynamic range ``L``; ``C1 = (k1 L)^2``, ``C2 = (k2 L)^2``.
 
     Returns:
-        ``(B, C, H, W)`` SSIM map, 1 where the windows agree exactly.
+        ``(B, C, H, W)`` SSIM map in [-1, 1], 1 where the windows agree exactly.
     """
     if x.shape != y.shape or x.ndim != 4:
         raise ValueError(f"x and y must be equal (B, C, H, W), got {x.shape} and {y.shape}")
-    c = x.shape[1]
-    win = gaussian_window(window_size, sigma, x.dtype, x.device).expand(c, 1, -1, -1)
+    if window_size < 1 or window_size % 2 == 0:
+        raise ValueError(f"window_size must be a positive odd number, got {window_size}")
+    c, (h, w) = x.shape[1], x.shape[-2:]
+    g = _gaussian_1d(window_size, sigma, x.dtype, x.device)
     pad = window_size // 2
+    # window weight inside the image, per row and per column (the window is separable)
+    norm_h = F.conv1d(x.new_ones(1, 1, h), g.view(1, 1, -1), padding=pad).view(h, 1)
+    norm_w = F.conv1d(x.new_ones(1, 1, w), g.view(1, 1, -1), padding=pad).view(1, w)
+    norm = norm_h * norm_w
 
-    def filt(t: torch.Tensor) -> torch.Tensor:
-        return F.conv2d(F.pad(t, (pad, pad, pad, pad), mode="reflect"), win, groups=c)
+    def local_mean(*maps: torch.Tensor) -> list[torch.Tensor]:
+        t = torch.cat(maps, 1)  # zero padding: the weights outside the image are dropped
+        k = t.shape[1]
+        t = F.conv2d(t, g.view(1, 1, 1, -1).expand(k, 1, 1, -1), padding=(0, pad), groups=k)
+        t = F.conv2d(t, g.view(1, 1, -1, 1).expand(k, 1, -1, 1), padding=(pad, 0), groups=k)
+        return list((t / norm).split(c, 1))
 
-    mu_x, mu_y = filt(x), filt(y)
-    sxx = filt(x * x) - mu_x**2
-    syy = filt(y * y) - mu_y**2
-    sxy = filt(x * y) - mu_x * mu_y
+    mu_x, mu_y, exx, eyy, exy = local_mean(x, y, x * x, y * y, x * y)
+    sxx = exx - mu_x**2
+    syy = eyy - mu_y**2
+    sxy = exy - mu_x * mu_y
     c1, c2 = (k1 * data_range) ** 2, (k2 * data_range) ** 2
     num = (2 * mu_x * mu_y + c1) * (2 * sxy + c2)
     den = (mu_x**2 + mu_y**2 + c1) * (sxx + syy + c2)
@@ -256,7 +296,9 @@ def irnet_objective(
 class SSIMLoss(nn.Module):
     """``mean((1 - SSIM_map(x, y)) / 2)``; see :func:`ssim_map`."""
 
-    def __init__(self, window_size: int = 11, sigma: float = 1.5, data_range: float = 1.0):
+    def __init__(
+        self, window_size: int = SSIM_WINDOW, sigma: float = SSIM_SIGMA, data_range: float = 1.0
+    ):
         super().__init__()
         self.window_size, self.sigma, self.data_range = window_size, sigma, data_range
 

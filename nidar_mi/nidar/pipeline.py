@@ -7,7 +7,7 @@ and ``observed = False``.
 
 A weights folder holds ``stn.safetensors``, ``irnet.safetensors``, ``config.json`` (written by
 ``python -m nidar_mi.train``) and ``calibration.json`` (written by
-:func:`fit_dataset_calibration`). The package ships one in ``nidar_mi/nidar/weights``.
+:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`). The package ships one in ``nidar_mi/nidar/weights``.
 """
 
 from __future__ import annotations
@@ -20,13 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from .calibration import Calibration, fit_calibration
+from .calibration import Calibration
 from .projection import CameraModel, assign
 
 __all__ = [
     "NidarModel",
     "shipped_weights_dir",
-    "fit_dataset_calibration",
     "PointIntensity",
     "BRANCHES",
 ]
@@ -140,31 +139,3 @@ class NidarModel:
         intensity, observed = self.calibration.apply(values, dist, observed)
         raw = np.where(observed, values, 0.0).astype(np.float32)
         return PointIntensity(intensity.astype(np.float32), observed, raw, cam_idx)
-
-
-def fit_dataset_calibration(
-    model: NidarModel, data_dir: str | os.PathLike, split: str = "train", **kw
-) -> Calibration:
-    """Fit the distance encoding + quantile map on a dataset split (pixels with a LiDAR return).
-
-    The R branch at every masked pixel is paired with the LiDAR range and the scaled LiDAR
-    intensity there (``intensity / intensity_scale`` clipped to [0, 1], the source-domain
-    distribution).
-    """
-    from ..dataset import list_frames, load_frame, load_meta
-
-    meta = load_meta(data_dir)
-    scale = float(meta.get("intensity_scale", 1.0))
-    preds, dists, refs = [], [], []
-    for path in list_frames(data_dir, split):
-        f = load_frame(path, keys=("rgb", "intensity", "mask"))
-        with np.load(path, allow_pickle=False) as z:
-            f["range"] = z["range"].astype(np.float32)
-        m = f["mask"]
-        R = model.predict_image(f["rgb"])["R"]
-        preds.append(R[m])
-        dists.append(f["range"][m])
-        refs.append(np.clip(f["intensity"][m] / scale, 0.0, 1.0))
-    if not preds:
-        raise NidarError(f"{data_dir}: no '{split}' frames to fit the calibration on")
-    return fit_calibration(np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), **kw)

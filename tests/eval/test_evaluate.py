@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from nidar_mi.eval.baselines import REC709_LUMA, ClassConstant
+from nidar_mi.errors import NidarError
+from nidar_mi.eval.baselines import ClassConstant
 from nidar_mi.eval.evaluate import (
     METHODS,
     FrameData,
@@ -24,10 +25,11 @@ from nidar_mi.eval.evaluate import (
     predict_frame,
     result_rows,
 )
-from nidar_mi.eval.heldout import fit_pseudo_nir_calibration, twin_prediction
+from nidar_mi.eval.heldout import twin_prediction
 from nidar_mi.eval.report import goal_check, markdown_table, write_csv, write_json
-from nidar_mi.io.images import srgb_to_linear
+from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
+from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
 from nidar_mi.nidar.projection import CameraModel, bilinear_sample, project
 from nidar_mi.nidar.synthetic import write_synthetic_dataset
 
@@ -39,7 +41,7 @@ def data_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def model(data_dir, tmp_path_factory):
-    from nidar_mi.nidar.pipeline import NidarModel, fit_dataset_calibration
+    from nidar_mi.nidar.pipeline import NidarModel
     from nidar_mi.nidar.train import train
 
     out = tmp_path_factory.mktemp("run")
@@ -86,13 +88,13 @@ def _frame(seed: int = 0, n: int = 40) -> FrameData:
 def evaluated(model, data_dir):
     frame = _frame()
     cc = ClassConstant.fit(np.array(["a", "a", "b", "c"]), np.array([0.2, 0.4, 0.9, 0.1]))
-    pcal = fit_pseudo_nir_calibration(model, str(data_dir))
+    pcal = fit_dataset_calibration(model, str(data_dir), branch="pseudo_nir")
     twin = np.linspace(0.0, 1.0, frame.gt.size)
     pred = predict_frame(frame, model, class_const=cc, pseudo_calibration=pcal, twin_pred=twin)
     return frame, pred, evaluate_frame(frame, pred), pcal
 
 
-def test_every_method_in_issue_order(evaluated):
+def test_every_method_in_the_listed_order(evaluated):
     frame, pred, _, _ = evaluated
     assert tuple(pred) == METHODS
     for v in pred.values():
@@ -104,7 +106,7 @@ def test_baselines_by_hand(evaluated):
     np.testing.assert_allclose(pred["carla"], np.exp(-0.004 * frame.range_m), rtol=1e-12)
     # points at pixel centres: luminance is the pixel's own Rec. 709 luminance
     r, c = np.rint(frame.uv[:, 1]).astype(int), np.rint(frame.uv[:, 0]).astype(int)
-    lum = srgb_to_linear(frame.rgb[r, c].astype(np.float64) / 255.0) @ REC709_LUMA
+    lum = srgb_to_linear(frame.rgb[r, c].astype(np.float64) / 255.0) @ np.asarray(REC709_LUMA)
     np.testing.assert_allclose(pred["luminance"], lum, rtol=1e-9, atol=1e-12)
     expect = {"a": 0.3, "b": 0.9, "c": 0.1, "zz": 0.4}  # unseen class: global mean 1.6 / 4
     np.testing.assert_allclose(pred["class_const"], [expect[m] for m in frame.material])
@@ -122,6 +124,31 @@ def test_nidar_rows_are_the_model_outputs(evaluated, model):
     pn = bilinear_sample(maps["pseudo_nir"], frame.uv)
     np.testing.assert_allclose(pred["nidar_no_irnet"], pcal.apply(pn, frame.range_m)[0], rtol=1e-6)
     assert pcal.branch == "pseudo_nir"
+
+
+@pytest.mark.parametrize("branch", ["R", "pseudo_nir"])
+def test_dataset_calibration_pools_the_named_map_at_masked_pixels(model, data_dir, branch):
+    from nidar_mi.dataset import list_frames, load_meta
+    from nidar_mi.nidar.calibration import fit_calibration
+
+    scale = load_meta(data_dir)["intensity_scale"]
+    preds, dists, refs = [], [], []
+    for path in list_frames(data_dir, "train"):
+        with np.load(path) as z:
+            m = z["mask"]
+            preds.append(model.predict_image(z["rgb"])[branch][m])
+            dists.append(z["range"][m])
+            refs.append(np.clip(z["intensity"][m].astype(np.float64) / scale, 0.0, 1.0))
+    expect = fit_calibration(
+        np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), branch=branch
+    )
+    got = fit_dataset_calibration(model, data_dir, branch=branch)
+    assert got.to_dict() == expect.to_dict()
+
+
+def test_dataset_calibration_rejects_an_unknown_branch(model, data_dir):
+    with pytest.raises(NidarError, match="calibration branch"):
+        fit_dataset_calibration(model, data_dir, branch="S")
 
 
 def test_carla_row_recomputed_by_hand(evaluated):

@@ -27,7 +27,8 @@ H, W, F = 48, 64, 50.0
 
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):
-    from nidar_mi.nidar.pipeline import NidarModel, fit_dataset_calibration
+    from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
+    from nidar_mi.nidar.pipeline import NidarModel
     from nidar_mi.nidar.train import train
 
     data = write_synthetic_dataset(tmp_path_factory.mktemp("data"), height=H, width=W)

@@ -146,11 +146,6 @@ def test_ssim_interior_equals_the_reference_formulation():
 # --- Spearman --------------------------------------------------------------------------------------
 
 
-def test_average_ranks_share_ties():
-    np.testing.assert_allclose(M.average_ranks([10, 20, 20, 30]), [1, 2.5, 2.5, 4])
-    np.testing.assert_allclose(M.average_ranks([3, 1, 3, 3]), [3, 1, 3, 3])
-
-
 def test_spearman_of_monotone_and_reversed():
     x = np.random.default_rng(2).random(50)
     assert M.spearman(np.exp(3 * x), x) == pytest.approx(1.0)
@@ -165,6 +160,8 @@ def test_spearman_with_ties_by_hand():
 
 def test_spearman_of_a_constant_is_nan():
     assert np.isnan(M.spearman([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]))
+    assert np.isnan(M.spearman([1.0, 2.0, 3.0], [2.0, 2.0, 2.0]))
+    assert np.isnan(M.spearman([1.0], [2.0]))
 
 
 # --- bundles ------------------------------------------------------------------------------------

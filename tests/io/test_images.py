@@ -8,6 +8,7 @@ import pytest
 
 from nidar_mi.errors import NidarError
 from nidar_mi.io.images import (
+    REC709_LUMA,
     linear_to_srgb,
     read_exr,
     read_png,
@@ -38,10 +39,27 @@ def test_srgb_branches_meet_at_the_boundary():
 
 
 def test_srgb_to_linear_reference_values():
-    y = np.array([0.0, 0.04045, 0.735356983, 1.0, 1.5])
+    # the break is the encoded value of 0.0031308 (0.040449936), so the two curves invert
+    y = np.array([0.0, 0.04, 0.040449936, 0.735356983, 1.0, 1.5])
     np.testing.assert_allclose(
-        srgb_to_linear(y), [0.0, 0.04045 / 12.92, 0.5, 1.0, 1.0], rtol=0, atol=1e-9
+        srgb_to_linear(y), [0.0, 0.04 / 12.92, 0.0031308, 0.5, 1.0, 1.0], rtol=0, atol=1e-9
     )
+
+
+def test_srgb_curves_take_scalars_and_lists():
+    assert np.ndim(linear_to_srgb(0.5)) == 0
+    np.testing.assert_allclose(linear_to_srgb(0.5), 1.055 * 0.5 ** (1 / 2.4) - 0.055)
+    np.testing.assert_allclose(linear_to_srgb([0.0, 1.0, 2.0]), [0.0, 1.0, 1.0])
+    np.testing.assert_allclose(srgb_to_linear([0.0, 1.0, -1.0]), [0.0, 1.0, 0.0])
+    assert np.isnan(linear_to_srgb(np.array([np.nan]))).all()
+
+
+def test_rec709_luma_is_the_y_row_of_the_srgb_matrix():
+    import colour
+
+    y_row = colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1]
+    np.testing.assert_allclose(REC709_LUMA, y_row, atol=1e-4)
+    assert sum(REC709_LUMA) == pytest.approx(1.0, abs=1e-12)
 
 
 def test_srgb_round_trip_and_dtype():

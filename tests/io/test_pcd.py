@@ -7,7 +7,7 @@ import pytest
 
 from nidar_mi.errors import NidarError
 from nidar_mi.io.pcd import read_pcd
-from nidar_mi.io.points import read_point_cloud
+from nidar_mi.io.point_cloud import read_point_cloud
 
 ASCII_PCD = """\
 # .PCD v0.7 - Point Cloud Data file format

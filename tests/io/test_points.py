@@ -11,7 +11,6 @@ from nidar_mi.io.points import (
     read_kitti_bin,
     read_npz,
     read_ply,
-    read_point_cloud,
     write_kitti_bin,
     write_npz,
     write_ply,
@@ -173,31 +172,45 @@ def test_kitti_bin_errors(tmp_path):
         read_kitti_bin(tmp_path / "b.bin")
 
 
-# --- read_point_cloud ----------------------------------------------------------------------
+# --- the documented schema -------------------------------------------------------------------
+
+GOLDEN = os.path.join(os.path.dirname(__file__), "..", "golden", "small_scene_points.npz")
 
 
-@pytest.mark.parametrize("suffix", [".npz", ".ply", ".las", ".bin", ".PLY"])
-def test_read_point_cloud_dispatch(tmp_path, points, suffix):
-    path = tmp_path / f"scan{suffix}"
-    if suffix == ".bin":
-        write_kitti_bin(path, points["xyz"], points["intensity"])
-    elif suffix == ".las":
-        from nidar_mi.io.las import write_las
+def _schema_rows() -> dict[str, str]:
+    """name -> its row of the table in the module docstring (continuation lines joined)."""
+    from nidar_mi.io import points as module
 
-        write_las(path, points)
-    else:
-        (write_npz if suffix == ".npz" else write_ply)(path, points)
-    got = read_point_cloud(path)
-    np.testing.assert_allclose(got["xyz"], points["xyz"], atol=1e-4)
-    np.testing.assert_allclose(got["intensity"], points["intensity"], atol=1e-5)
-    assert got["xyz"].dtype == np.float32
+    rows: dict[str, str] = {}
+    name = None
+    for line in module.__doc__.splitlines():
+        if line.startswith("``"):
+            name = line[2 : line.index("``", 2)]
+            rows[name] = line
+        elif name is not None and line.startswith(" ") and line.strip():
+            rows[name] += " " + line.strip()
+        else:
+            name = None
+    return rows
 
 
-def test_read_point_cloud_errors(tmp_path):
-    with pytest.raises(NidarError, match=r"scan\.xyz.*unknown point cloud extension '\.xyz'"):
-        read_point_cloud(tmp_path / "scan.xyz")
-    with pytest.raises(NidarError, match=r"missing\.ply: no such file"):
-        read_point_cloud(tmp_path / "missing.ply")
-    np.savez(tmp_path / "noxyz.npz", intensity=np.zeros(3))
-    with pytest.raises(NidarError, match=r"noxyz\.npz: no \(N,3\) 'xyz'"):
-        read_point_cloud(tmp_path / "noxyz.npz")
+def test_documented_schema_matches_a_simulated_scan():
+    rows = _schema_rows()
+    assert {"xyz", "ring", "intensity_nidar", "nidar_observed"} <= set(rows)
+    scan = read_npz(GOLDEN)
+    sizes = {"N": str(len(scan["xyz"])), "M": str(len(scan["material_names"]))}
+    for name, a in scan.items():
+        _, dtype, *rest = rows[name].split()
+        shape = rest[1] if dtype == "str" else rest[0]  # "str (U) (M,)"
+        assert (a.dtype.kind == "U") if dtype == "str" else (a.dtype == np.dtype(dtype)), name
+        want = "".join(sizes.get(c, c) for c in shape)
+        assert str(a.shape).replace(" ", "") == want, name
+
+
+def test_ring_zero_is_the_highest_beam_as_documented():
+    assert "0 = highest beam" in _schema_rows()["ring"]
+    scan = read_npz(GOLDEN)
+    x, y, z = scan["xyz"].astype(np.float64).T
+    elevation = np.arctan2(z, np.hypot(x, y))
+    rings = scan["ring"]
+    assert elevation[rings == rings.min()].mean() > elevation[rings == rings.max()].mean()

@@ -35,10 +35,64 @@ def test_json_round_trip():
 def test_partial_dict_takes_defaults_and_unknown_keys_fail():
     cfg = TrainConfig.from_dict({"seed": 3, "irnet": {"variant": "deeplabv3+unet"}})
     assert cfg.seed == 3 and cfg.irnet.variant == "deeplabv3+unet" and cfg.irnet.width == 16
-    with pytest.raises(NidarError, match=r"config.irnet: wdith"):
+    with pytest.raises(NidarError, match=r"^config\.irnet\.wdith: unknown key$"):
         TrainConfig.from_dict({"irnet": {"wdith": 3}})
-    with pytest.raises(NidarError, match="must be a JSON object"):
+    with pytest.raises(NidarError, match=r"^config\.loss: must be a JSON object$"):
         TrainConfig.from_dict({"loss": 3})
+    with pytest.raises(NidarError, match="config must be a JSON object"):
+        TrainConfig.from_dict([1, 2])
+
+
+@pytest.mark.parametrize(
+    "data,where",
+    [
+        ({"crop_size": "64"}, "config.crop_size"),
+        ({"crop_size": 2.5}, "config.crop_size"),
+        ({"seed": True}, "config.seed"),
+        ({"irnet": {"aspp_rates": "6,12"}}, "config.irnet.aspp_rates"),
+        ({"loss": {"scales": [1.0, "half"]}}, "config.loss.scales.1"),
+        ({"stn_optim": {"lr": None}}, "config.stn_optim.lr"),
+        ({"device": 0}, "config.device"),
+    ],
+)
+def test_values_of_the_wrong_type_fail_with_their_key(data, where):
+    with pytest.raises(NidarError, match=f"^{where}: should be") as info:
+        TrainConfig.from_dict(data)
+    assert "\n" not in str(info.value)
+
+
+def test_every_offending_key_is_named_on_one_line():
+    with pytest.raises(NidarError) as info:
+        TrainConfig.from_dict({"seed": "x", "irnet": {"wdith": 3}})
+    msg = str(info.value)
+    assert "config.seed: should be" in msg and "config.irnet.wdith: unknown key" in msg
+    assert "\n" not in msg
+
+
+def test_json_numbers_fit_float_fields_and_lists_fit_tuples():
+    cfg = TrainConfig.from_dict({"loss": {"gamma": 5, "scales": [1, 0.5]}})
+    assert cfg.loss.gamma == 5.0 and isinstance(cfg.loss.gamma, float)
+    assert cfg.loss.scales == (1.0, 0.5)
+    assert TrainConfig.from_dict({"irnet_optim": {"max_steps": None}}).irnet_optim.max_steps is None
+
+
+def test_from_dict_over_a_base_merges_nested_objects():
+    base = TrainConfig.reduced()
+    cfg = TrainConfig.from_dict({"irnet": {"variant": "unet+unet"}, "seed": 9}, base=base)
+    assert cfg.irnet.variant == "unet+unet" and cfg.seed == 9
+    assert cfg.irnet.width == base.irnet.width and cfg.stn == base.stn
+    assert TrainConfig.from_dict({}, base=base) == base
+    with pytest.raises(NidarError, match=r"config\.stn\.wdith: unknown key"):
+        TrainConfig.from_dict({"stn": {"wdith": 1}}, base=base)
+
+
+def test_shipped_config_json_loads():
+    from nidar_mi.nidar.pipeline import shipped_weights_dir
+
+    record = json.loads((shipped_weights_dir() / "config.json").read_text())
+    cfg = TrainConfig.from_dict(record["train"])
+    cfg.validate()
+    assert json.loads(json.dumps(cfg.to_dict())) == record["train"]
 
 
 @pytest.mark.parametrize(

@@ -5,9 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 
+from nidar_mi.io.images import REC709_LUMA
 from nidar_mi.nidar.config import IRNET_VARIANTS
 from nidar_mi.nidar.heads import ConvHead
-from nidar_mi.nidar.irnet import REC709_LUMA, IRNet, parse_variant
+from nidar_mi.nidar.irnet import IRNet, parse_variant
 
 KW = {"width": 4, "unet_depth": 2, "output_stride": 4, "aspp_rates": (1, 2)}
 

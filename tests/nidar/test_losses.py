@@ -28,15 +28,19 @@ def _mask(*shape, p=0.4, seed=1):
 
 
 def _ssim_reference(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """SSIM map of two (H, W) images by explicit windows (whole-sample reflected borders)."""
+    """SSIM map of two (H, W) images by explicit windows, each cut at the image edge and its
+    weights renormalised to sum to 1."""
     r = np.arange(11) - 5
     g = np.exp(-(r**2) / (2 * 1.5**2))
-    w = np.outer(g, g) / np.outer(g, g).sum()
-    xp, yp = np.pad(x, 5, mode="reflect"), np.pad(y, 5, mode="reflect")
+    full = np.outer(g, g)
+    H, W = x.shape
     out = np.empty_like(x)
-    for i in range(x.shape[0]):
-        for j in range(x.shape[1]):
-            a, b = xp[i : i + 11, j : j + 11], yp[i : i + 11, j : j + 11]
+    for i in range(H):
+        for j in range(W):
+            rows, cols = slice(max(i - 5, 0), min(i + 6, H)), slice(max(j - 5, 0), min(j + 6, W))
+            w = full[rows.start - i + 5 : rows.stop - i + 5, cols.start - j + 5 : cols.stop - j + 5]
+            w = w / w.sum()
+            a, b = x[rows, cols], y[rows, cols]
             mx, my = (w * a).sum(), (w * b).sum()
             vx, vy = (w * (a - mx) ** 2).sum(), (w * (b - my) ** 2).sum()
             cxy = (w * (a - mx) * (b - my)).sum()
@@ -58,6 +62,65 @@ def test_ssim_map_matches_explicit_window_reference():
     x, y = _rand(1, 1, 12, 14, seed=3, dtype=torch.float64), _rand(1, 1, 12, 14, seed=4).double()
     ref = _ssim_reference(x[0, 0].numpy(), y[0, 0].numpy())
     np.testing.assert_allclose(L.ssim_map(x, y)[0, 0].numpy(), ref, rtol=1e-9, atol=1e-12)
+
+
+def test_ssim_map_interior_matches_scikit_image():
+    skimage_metrics = pytest.importorskip("skimage.metrics")
+    rng = np.random.default_rng(7)
+    x = rng.random((24, 27))
+    y = np.clip(x + 0.3 * rng.standard_normal(x.shape), 0.0, 1.0)
+    _, ref = skimage_metrics.structural_similarity(
+        x,
+        y,
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
+        data_range=1.0,
+        full=True,
+    )
+    got = L.ssim_map(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])[0, 0]
+    # scikit-image truncates its Gaussian at 3.5 sigma (the same 11x11 window) and leaves the
+    # 5 px border to padding; only the pixels whose window fits are compared
+    np.testing.assert_allclose(got.numpy()[5:-5, 5:-5], ref[5:-5, 5:-5], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("shape", [(1, 2), (3, 4), (5, 17)])
+def test_ssim_map_works_on_images_smaller_than_the_window(shape):
+    x = _rand(1, 1, *shape, seed=8, dtype=torch.float64)
+    y = _rand(1, 1, *shape, seed=9, dtype=torch.float64)
+    ref = _ssim_reference(x[0, 0].numpy(), y[0, 0].numpy())
+    np.testing.assert_allclose(L.ssim_map(x, y)[0, 0].numpy(), ref, rtol=1e-9, atol=1e-12)
+
+
+def test_ssim_map_is_per_channel_and_per_image():
+    x, y = _rand(2, 3, 9, 10, seed=10), _rand(2, 3, 9, 10, seed=11)
+    got = L.ssim_map(x, y)
+    for b in range(2):
+        for c in range(3):
+            one = L.ssim_map(x[b : b + 1, c : c + 1], y[b : b + 1, c : c + 1])
+            torch.testing.assert_close(got[b : b + 1, c : c + 1], one, rtol=1e-4, atol=1e-5)
+
+
+def test_ssim_map_rejects_bad_inputs():
+    with pytest.raises(ValueError, match="equal"):
+        L.ssim_map(torch.zeros(1, 1, 4, 4), torch.zeros(1, 1, 4, 5))
+    with pytest.raises(ValueError, match="odd"):
+        L.ssim_map(torch.zeros(1, 1, 4, 4), torch.zeros(1, 1, 4, 4), window_size=4)
+
+
+def test_masked_ssim_loss_is_one_minus_the_reported_metric():
+    from nidar_mi.eval.metrics import ssim
+
+    pred = _rand(1, 1, 20, 23, seed=12, dtype=torch.float64)
+    target = _rand(1, 1, 20, 23, seed=13, dtype=torch.float64)
+    mask = _mask(1, 1, 20, 23, p=0.5, seed=14)
+    mask[0, 0, 0, :] = True  # border pixels take part
+    loss = L.masked_ssim_loss(pred, target, mask, eps=0.0)
+    metric = ssim(pred[0, 0].numpy(), target[0, 0].numpy(), mask[0, 0].numpy())
+    assert float(loss) == pytest.approx(1.0 - metric, rel=1e-12, abs=1e-12)
+    # float32 training precision
+    loss32 = L.masked_ssim_loss(pred.float(), target.float(), mask, eps=0.0)
+    assert float(loss32) == pytest.approx(1.0 - metric, abs=1e-5)
 
 
 def test_ssim_of_constant_images_is_the_luminance_term():
@@ -247,6 +310,7 @@ def test_stn_loss_single_scale_value():
         ("ms_l1", lambda p, t, m: L.masked_multiscale_l1(p, t, m)),
         ("l2", lambda p, t, m: L.masked_l2(p, t, m)),
         ("ssim", lambda p, t, m: L.masked_ssim_loss(p, t, m)),
+        ("ssim_map", lambda p, t, m: L.ssim_map(p, t)),
         ("int", lambda p, t, m: L.intensity_loss(p, t, m)),
         ("smooth", lambda p, t, m: L.reflectance_smoothness_loss(p, t, 10.0)),
         ("shading", lambda p, t, m: L.shading_prior_loss(p, 3)),

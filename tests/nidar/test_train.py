@@ -166,6 +166,18 @@ def test_cli_config_file_merges_over_the_reduced_config(tmp_path):
     assert cfg.stn_optim.max_steps == cfg.irnet_optim.max_steps == 7
 
 
+def test_cli_config_file_errors_name_the_file_and_the_key(tmp_path, capsys):
+    from nidar_mi.cli.train import main
+
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"irnet": {"wdith": 4}, "seed": "one"}))
+    code = main([str(tmp_path), str(tmp_path / "out"), "--config", str(path), "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert str(path) in err and "config.irnet.wdith: unknown key" in err and "config.seed" in err
+    assert not (tmp_path / "out").exists()
+
+
 def test_cli_fits_calibration_and_pipeline_runs(trained, data_dir, tmp_path):
     """The CLI writes calibration.json; the whole pipeline then maps points to [0, 1]."""
     from nidar_mi.nidar.calibration import Calibration

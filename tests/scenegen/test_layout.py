@@ -78,7 +78,7 @@ def test_nothing_stands_on_the_rig(kind):
             assert d > 1.0, (seed, s.id)
 
 
-def test_urban_layouts_hold_the_issue_objects():
+def test_urban_layouts_hold_every_street_object():
     found = set()
     for seed in range(8):
         ids = " ".join(s.id for s in _layout(seed, "urban").shapes)
