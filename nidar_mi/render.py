@@ -205,7 +205,7 @@ def render_scene(
 
     from .camera import render_camera
     from .io.atomic import atomic_write_json
-    from .lidar.raycast import scan
+    from .lidar.scan import scan
     from .scene import load_scene
 
     if spp < 1:

@@ -34,10 +34,9 @@ from typing import Any
 import numpy as np
 
 from .pattern import PRESETS, parse_angles
+from .return_model import INTENSITY_MODES
 
 __all__ = ["LidarConfig", "PARAMETERS", "INTENSITY_MODES"]
-
-INTENSITY_MODES = ("raw", "compensated")
 
 #: XML parameter names a ``lidar`` sensor reads (``to_world`` is read by Mitsuba itself).
 PARAMETERS = (

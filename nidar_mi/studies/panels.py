@@ -354,7 +354,7 @@ def scan_panels(
     Returns:
         The returns at the panel centres, in layout order.
     """
-    from ..lidar.raycast import scan
+    from ..lidar.scan import scan
 
     loaded, layout = load_panel_scene(materials, variant=variant, rgb_twin=rgb_twin, **kwargs)
     result = scan(loaded.scene, loaded.lidars[0], seed=0)
