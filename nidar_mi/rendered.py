@@ -78,7 +78,7 @@ def read_render(render_dir: str, lidar_id: str | None = None) -> RenderedScan:
     """
     from .io.images import read_exr
     from .io.points import read_npz
-    from .nidar.frames import compensate
+    from .lidar.return_model import compensate
     from .nidar.projection import CameraModel
 
     path = os.path.join(render_dir, "manifest.json")
