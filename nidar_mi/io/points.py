@@ -15,7 +15,7 @@ name               dtype      shape   unit  meaning
 ``intensity``      float32    (N,)    --    LiDAR intensity (simulated return strength)
 ``reflectance``    float32    (N,)    --    reflectance rho at the LiDAR wavelength, in [0, 1]
 ``cos_incidence``  float32    (N,)    --    cosine of the angle between beam and surface normal
-``ring``           uint16     (N,)    --    beam (laser) index, 0 = lowest elevation
+``ring``           uint16     (N,)    --    beam (laser) index, 0 = highest elevation
 ``column``         uint32     (N,)    --    azimuth column index of the firing
 ``material``       int32      (N,)    --    index into ``material_names``; -1 = none
 ``material_names`` str (U)    (M,)    --    material names (fixed-width unicode, never object)
