@@ -12,7 +12,7 @@ Both sides are warmed up (Dr.Jit compiles its kernels on the first call, Open3D 
 on the first cast), then timed ``repeats`` times, interleaved so that both see the same machine
 load; the median is reported. Timed work:
 
-* nidar_mi full scan: :func:`nidar_mi.lidar.raycast.scan` (ray cast with the glass passes,
+* nidar_mi full scan: :func:`nidar_mi.lidar.scan.scan` (ray cast with the glass passes,
   monostatic BSDF at the laser wavelength, return model, detection and noise draws, read back to
   NumPy). The noise σ are opaque kernel inputs, so the kernels do the same work whatever their
   values; range noise is 0 here so that ranges can be compared with Open3D's.
@@ -81,7 +81,7 @@ def run_benchmark(
     import mitsuba as mi
     import open3d as o3d
 
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
 
     loaded, meshes = load_city(rings=rings, cols=cols, grid=grid, variant=variant)
     scene, sensor = loaded.scene, loaded.lidars[0]

@@ -157,7 +157,7 @@ def scene_xml(plys: dict[str, str], rings: int, cols: int) -> str:
 def world_rays(sensor) -> np.ndarray:
     """(R·C, 6) float32 rays ``[origin, unit direction]`` of every beam, in the world frame.
 
-    Same ray order as the scan (ring-major); directions as :func:`nidar_mi.lidar.raycast.scan`
+    Same ray order as the scan (ring-major); directions as :func:`nidar_mi.lidar.scan.scan`
     computes them (float32 beam directions, rotated by the pose, normalised).
     """
     from nidar_mi.lidar.pattern import beam_directions

@@ -68,7 +68,7 @@ def test_world_rays_hand_computed(small_city):
 
 def test_scan_ranges_match_the_height_field(small_city):
     """Lowest ring (-22.5 deg) on the street: range from bisection on the analytic terrain."""
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
 
     loaded, _ = small_city
     sensor = loaded.lidars[0]

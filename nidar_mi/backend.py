@@ -7,7 +7,8 @@ imported, before Dr.Jit initialises its LLVM back end.
 
 :func:`set_variant` picks ``cuda_ad_spectral`` when a CUDA device works, else
 ``llvm_ad_spectral``, and registers this package's Mitsuba plugins for that variant
-(Python plugin classes are bound to the variant active when they are defined).
+(Python plugin classes are bound to the variant active when they are defined; see
+:mod:`nidar_mi.plugins`).
 """
 
 from __future__ import annotations
@@ -111,9 +112,6 @@ def default_variant() -> str:
     return "cuda_ad_spectral" if _cuda_available() else "llvm_ad_spectral"
 
 
-_registered: set[str] = set()
-
-
 def set_variant(variant: str | None = None) -> str:
     """Activate a Mitsuba variant and register this package's plugins for it.
 
@@ -146,11 +144,9 @@ def set_variant(variant: str | None = None) -> str:
         )
     if mi.variant() != variant:
         mi.set_variant(variant)
-    if variant not in _registered:
-        from . import plugins
+    from . import plugins
 
-        plugins.register_all()
-        _registered.add(variant)
+    plugins.register_all()  # once per variant; makes nidar_mi.plugins.<name> this variant's
     return variant
 
 

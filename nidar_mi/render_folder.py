@@ -7,7 +7,7 @@ One module owns the layout (the table of files is in the README, "Rendering")::
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
     OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, calib.json
 
-Writers take the in-memory results (:class:`~nidar_mi.lidar.raycast.ScanResult`,
+Writers take the in-memory results (:class:`~nidar_mi.lidar.scan.ScanResult`,
 :class:`~nidar_mi.camera.CameraRender`); :func:`read_render` gives them back as arrays and camera
 models. A :class:`RenderRequest` holds every input that determines a render; it is stored in the
 manifest, and :func:`is_current` tells whether a folder already holds the render of a request
@@ -149,7 +149,7 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
 
     Args:
         folder: the render folder (or its staging copy).
-        result: a :class:`~nidar_mi.lidar.raycast.ScanResult`.
+        result: a :class:`~nidar_mi.lidar.scan.ScanResult`.
         formats: point formats from :data:`FORMATS`.
         extra: further per-point columns (e.g. ``intensity_nidar``).
 
@@ -314,7 +314,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     """
     from .io.images import read_exr
     from .io.points import read_npz
-    from .nidar.frames import compensate
+    from .lidar.return_model import compensate
     from .nidar.projection import CameraModel
 
     folder = os.fspath(folder)

@@ -85,7 +85,8 @@ def load_scene(
         params: values for the scene's ``<default name=...>`` parameters (``$name`` in the XML).
 
     Raises:
-        NidarError: missing/unreadable/malformed file or an invalid sensor parameter.
+        NidarError: missing/unreadable/malformed file or an invalid plugin parameter (the
+            plugin's one-line message, :func:`nidar_mi.plugins.parameter_error`).
     """
     if not os.path.isfile(path):
         raise NidarError(f"{path}: no such scene file")
@@ -97,7 +98,7 @@ def load_scene(
     variant = set_variant(variant)
     import mitsuba as mi
 
-    from .plugins import lidar as lidar_plugin
+    from . import plugins
 
     try:
         xml = _expand(xml, rgb_twin)
@@ -109,17 +110,12 @@ def load_scene(
     resolver = mi.file_resolver()
     scene_dir = os.path.dirname(os.path.abspath(path))
     resolver.prepend(scene_dir)
-    lidar_plugin.LOAD_ERRORS.clear()
     try:
         scene = mi.load_string(xml, **{k: str(v) for k, v in (params or {}).items()})
     except Exception as e:
-        if lidar_plugin.LOAD_ERRORS:
-            raise NidarError(f"{path}: {lidar_plugin.LOAD_ERRORS[-1]}") from None
-        raise NidarError(f"{path}: {_one_line(e)}") from None
-    finally:
-        lidar_plugin.LOAD_ERRORS.clear()
+        raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
 
-    lidar_cls = lidar_plugin.lidar_class()
+    lidar_cls = plugins.plugin_module("lidar", variant).LidarSensor
     sensors = sorted(scene.sensors(), key=lambda s: s.id())
     lidars = [s for s in sensors if isinstance(s, lidar_cls)]
     cameras = [s for s in sensors if s.class_name() == "PerspectiveCamera"]

@@ -92,7 +92,7 @@ class _Run:
 
 
 def _scan_lidars(run: _Run, loaded, seed: int | None, bar) -> None:
-    from .lidar.raycast import scan
+    from .lidar.scan import scan
 
     for sensor in loaded.lidars:
         bar.set_postfix_str(f"lidar {sensor.id()}")

@@ -49,11 +49,63 @@ def test_default_variant_is_spectral(variant):
     assert backend.default_variant() in backend.SUPPORTED_VARIANTS
 
 
-def test_plugins_ship_inside_the_package():
+def test_plugins_ship_inside_the_package(variant):
+    import sys
+
+    import mitsuba as mi
     import nidar_mi.plugins as plugins
 
     assert plugins.__name__ == "nidar_mi.plugins"
     assert "lidar" in plugins.PLUGIN_MODULES
     for name in plugins.PLUGIN_MODULES:
-        mod = __import__(f"nidar_mi.plugins.{name}", fromlist=["register"])
-        assert callable(mod.register)
+        mod = __import__(f"nidar_mi.plugins.{name}", fromlist=["VARIANT"])
+        assert mod is plugins.plugin_module(name) is sys.modules[f"nidar_mi.plugins.{name}"]
+        assert mod.VARIANT == variant == mi.variant()
+    assert issubclass(plugins.plugin_module("lidar").LidarSensor, mi.Sensor)
+    assert issubclass(plugins.plugin_module("retroreflector").Retroreflector, mi.BSDF)
+
+
+def test_plugins_are_defined_once_per_variant(variant):
+    """Each variant gets its own plugin classes, derived from that variant's Mitsuba classes."""
+    import sys
+
+    import mitsuba as mi
+    import nidar_mi.plugins as plugins
+
+    other = "llvm_ad_spectral_polarized"
+    if other not in mi.variants():
+        pytest.skip(f"Mitsuba built without {other}")
+    mine = plugins.plugin_module("lidar")
+    try:
+        mi.set_variant(other)
+        plugins.register_all()
+        theirs = plugins.plugin_module("lidar", other)
+        assert theirs is not mine and theirs.VARIANT == other
+        assert issubclass(theirs.LidarSensor, mi.Sensor)
+        assert not issubclass(mine.LidarSensor, mi.Sensor)
+        s = mi.load_dict({"type": "scene", "l": {"type": "lidar", "preset": "hdl32e"}})
+        assert isinstance(s.sensors()[0], theirs.LidarSensor)
+        assert sys.modules["nidar_mi.plugins.lidar"] is theirs
+    finally:
+        backend.set_variant(variant)
+    assert plugins.plugin_module("lidar") is mine is sys.modules["nidar_mi.plugins.lidar"]
+    assert plugins.plugin_module("lidar", other) is theirs  # executed once per variant
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (
+            "[parser.cpp:1718] At string (line 3, col 5): failed to instantiate sensor plugin of "
+            'type "lidar": Traceback (most recent call last):\n  File "x.py", line 9, in __init__'
+            "\nPluginParameterError: lidar 'top': parameter 'gain' must be > 0 (got 0)",
+            "lidar 'top': parameter 'gain' must be > 0 (got 0)",
+        ),
+        ("[parser.cpp:12] unreferenced property 'wavelenght'", None),
+    ],
+)
+def test_parameter_error_reads_the_plugin_message(text, message):
+    from nidar_mi.plugins import PluginParameterError, parameter_error
+
+    assert parameter_error(RuntimeError(text)) == message
+    assert parameter_error(PluginParameterError("x: parameter 'y' bad")) == "x: parameter 'y' bad"

@@ -168,7 +168,7 @@ def test_max_detection_range_without_extinction_and_off_normal(variant):
 
 
 def test_retroreflective_sheeting_stays_far_above_lambertian(variant):
-    from nidar_mi.plugins.retroreflector import monostatic_gain
+    from nidar_mi.plugins.vmf import monostatic_gain
 
     from nidar_mi.materials import reflectance
     from nidar_mi.studies import incidence_sweep

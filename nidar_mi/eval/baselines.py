@@ -159,12 +159,12 @@ def rgb_twin_scan(
         variant: Mitsuba variant; None picks the default.
 
     Returns:
-        :class:`nidar_mi.lidar.raycast.ScanResult` of the twin.
+        :class:`nidar_mi.lidar.scan.ScanResult` of the twin.
 
     Raises:
         NidarError: bad scene, no LiDAR, or no LiDAR with id ``lidar``.
     """
-    from ..lidar.raycast import scan
+    from ..lidar.scan import scan
     from ..scene import load_scene
 
     loaded = load_scene(scene_path, variant=variant, rgb_twin=True, params=params)

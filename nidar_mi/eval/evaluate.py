@@ -7,7 +7,7 @@ sees: in front of it, inside the image and not hidden behind the rendered depth
 :func:`nidar_mi.nidar.frames.sparse_maps` writes into the training frames.
 
 **Ground truth** is the range-compensated physical intensity ``g·ρ·cosθ·exp(-2αd)``
-(:func:`nidar_mi.nidar.frames.compensate`) on the metric scale
+(:func:`nidar_mi.lidar.return_model.compensate`) on the metric scale
 ``clip(I / intensity_scale, 0, 1)`` (:func:`nidar_mi.eval.metrics.scale_intensity`, LiDAR4D's
 convention; ``intensity_scale`` comes from the dataset's ``meta.json``).
 

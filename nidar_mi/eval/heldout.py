@@ -64,7 +64,7 @@ def twin_prediction(frame: FrameData, twin, intensity_scale: float) -> np.ndarra
     The twin's intensity at the same (ring, column), compensated with the twin's own range
     like the ground truth and put on the metric scale; 0 where the twin has no return.
     """
-    from ..nidar.frames import compensate
+    from ..lidar.return_model import compensate
 
     r, c = frame.ring, frame.column
     valid = twin.valid[r, c]

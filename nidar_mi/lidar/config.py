@@ -1,27 +1,8 @@
 """Validated parameters of a ``lidar`` sensor (the public scene-XML interface).
 
-=========================  =========  =====================================================  ==========
-XML name                   type       meaning                                                default
-=========================  =========  =====================================================  ==========
-``preset``                 string     ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_128``,         ``vlp16``
-                                      ``waymo_top`` (see :mod:`nidar_mi.lidar.pattern`)
-``elevation_angles``       string     comma-separated ring elevations in degrees; overrides  preset's
-                                      the preset's table and implies the channel count
-``horizontal_resolution``  integer    columns per scan                                       preset's
-``fov_h``                  float      horizontal field of view, degrees, (0, 360]            360
-``wavelength``             float      laser wavelength in nm, [360, 1700]                    905
-``gain``                   float      g in I = g·ρ·a(d,θ) + η, > 0                           1
-``range_min``              float      minimum range in m, >= 0                               preset's
-``range_max``              float      maximum range in m, > range_min                        preset's
-``atmospheric_extinction`` float      α in 1/m (two-way loss exp(-2αd)), >= 0                0
-``intensity_mode``         string     ``raw`` (with 1/d²) or ``compensated`` (without)        ``raw``
-``noise_intensity_std``    float      σ of additive Gaussian intensity noise η, >= 0         0
-``noise_range_std``        float      σ of Gaussian range noise in m, >= 0                   0
-``detection_threshold``    float      returns with g·ρ·a below it are dropped, >= 0          0
-``dropout``                float      probability of dropping a return at random, [0, 1]     0
-``seed``                   integer    seed of the noise and dropout draws                    0
-``to_world``               transform  LiDAR pose (x forward, y left, z up)                   identity
-=========================  =========  =====================================================  ==========
+The parameters, their types, meanings, ranges and defaults are tabled in the docstring of the
+plugin class, :class:`nidar_mi.plugins.lidar.LidarSensor`; :meth:`LidarConfig.from_mapping`
+enforces them.
 """
 
 from __future__ import annotations
@@ -34,10 +15,9 @@ from typing import Any
 import numpy as np
 
 from .pattern import PRESETS, parse_angles
+from .return_model import INTENSITY_MODES
 
 __all__ = ["LidarConfig", "PARAMETERS", "INTENSITY_MODES"]
-
-INTENSITY_MODES = ("raw", "compensated")
 
 #: XML parameter names a ``lidar`` sensor reads (``to_world`` is read by Mitsuba itself).
 PARAMETERS = (
@@ -61,7 +41,10 @@ PARAMETERS = (
 
 @dataclass(frozen=True)
 class LidarConfig:
-    """Resolved parameters of one LiDAR (see the module docstring for meanings and units)."""
+    """Resolved parameters of one LiDAR.
+
+    Meanings, units and ranges: :class:`nidar_mi.plugins.lidar.LidarSensor`.
+    """
 
     name: str
     preset: str | None

@@ -105,105 +105,162 @@ def run_stage(
     stage: Stage, cfg: TrainConfig, out_dir: Path, resume: bool, progress: bool
 ) -> dict[str, Any]:
     """Optimise ``stage.model`` in place; returns the stage log."""
-    name, model, optim_cfg = stage.name, stage.model, stage.optim
-    train_set, val_set, loss_fn = stage.train_set, stage.val_set, stage.loss_fn
-    device = resolve_device(cfg.device)
-    model.to(device)
-    optimizer = torch.optim.Adam(
-        model.parameters(), lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay
+    run = _StageRun(stage, cfg, out_dir)
+    epoch0, skip = run.restore(resume)
+    log.info(
+        "%s: %d steps of batch %d on %s", stage.name, run.total, stage.optim.batch_size, run.device
     )
-    batch = optim_cfg.batch_size
-    steps_per_epoch = len(train_set) // batch
-    if steps_per_epoch == 0:
-        raise NidarError(f"{name}: {len(train_set)} training frames < batch size {batch}")
-    total = optim_cfg.epochs * steps_per_epoch
-    if optim_cfg.max_steps is not None:
-        total = min(total, optim_cfg.max_steps)
-    ckpt_dir = out_dir / "checkpoints"
-    stage_log: dict[str, Any] = {"steps": [], "epochs": [], "done": False}
-    epoch0, skip, step = 0, 0, 0
-    if not resume:  # checkpoints of an abandoned run must not be taken for this run's
-        prune_checkpoints(ckpt_dir, name, keep=0)
-    ckpt = latest_checkpoint(ckpt_dir, name) if resume else None
-    if ckpt is not None:
-        side = load_checkpoint(ckpt, model, optimizer, device)
-        epoch0, skip, step = side["epoch"], side["batch_in_epoch"], side["step"]
-        stage_log = side["log"]
-        log.info("%s: resumed from %s (step %d)", name, ckpt.name, step)
+    with deterministic(run.device):
+        for epoch in range(epoch0, stage.optim.epochs):
+            if run.step >= run.total:
+                break
+            done_in_epoch = run.train_epoch(epoch, skip, progress)
+            skip = 0
+            run.end_epoch(epoch, done_in_epoch)
+    return run.log
 
-    def checkpoint(epoch: int, in_epoch: int) -> None:
+
+class _StageRun:
+    """One stage's optimisation: the optimiser, the step count and log, and their checkpoints.
+
+    Attributes:
+        steps_per_epoch: full batches per epoch (a last partial batch is dropped).
+        total: steps of the whole run (``epochs × steps_per_epoch``, capped by ``max_steps``).
+        step: steps taken so far.
+        log: the stage log (``steps``, ``epochs``, ``done``).
+    """
+
+    def __init__(self, stage: Stage, cfg: TrainConfig, out_dir: Path) -> None:
+        self.stage, self.cfg, self.out_dir = stage, cfg, out_dir
+        self.device = resolve_device(cfg.device)
+        stage.model.to(self.device)
+        self.optimizer = torch.optim.Adam(
+            stage.model.parameters(), lr=stage.optim.lr, weight_decay=stage.optim.weight_decay
+        )
+        batch = stage.optim.batch_size
+        self.steps_per_epoch = len(stage.train_set) // batch
+        if self.steps_per_epoch == 0:
+            raise NidarError(
+                f"{stage.name}: {len(stage.train_set)} training frames < batch size {batch}"
+            )
+        self.total = stage.optim.epochs * self.steps_per_epoch
+        if stage.optim.max_steps is not None:
+            self.total = min(self.total, stage.optim.max_steps)
+        self.ckpt_dir = out_dir / "checkpoints"
+        self.step = 0
+        self.log: dict[str, Any] = {"steps": [], "epochs": [], "done": False}
+
+    def restore(self, resume: bool) -> tuple[int, int]:
+        """Continue from the latest checkpoint when resuming, else drop the stage's checkpoints
+        (those of an abandoned run must not be taken for this run's).
+
+        Returns:
+            (epoch to start in, batches of it already done).
+        """
+        name = self.stage.name
+        if not resume:
+            prune_checkpoints(self.ckpt_dir, name, keep=0)
+            return 0, 0
+        ckpt = latest_checkpoint(self.ckpt_dir, name)
+        if ckpt is None:
+            return 0, 0
+        side = load_checkpoint(ckpt, self.stage.model, self.optimizer, self.device)
+        self.step, self.log = side["step"], side["log"]
+        log.info("%s: resumed from %s (step %d)", name, ckpt.name, self.step)
+        return side["epoch"], side["batch_in_epoch"]
+
+    def checkpoint(self, epoch: int, in_epoch: int) -> None:
+        """Save weights, optimiser and progress (resume at batch ``in_epoch`` of ``epoch``)."""
         state = {
             "epoch": epoch,
             "batch_in_epoch": in_epoch,
-            "step": step,
-            "config": cfg.to_dict(),
-            "rng": {"seed": cfg.seed},
-            "log": stage_log,
+            "step": self.step,
+            "config": self.cfg.to_dict(),
+            "rng": {"seed": self.cfg.seed},
+            "log": self.log,
         }
-        save_checkpoint(ckpt_dir, name, model, optimizer, state)
-        prune_checkpoints(ckpt_dir, name, cfg.keep_checkpoints)
+        save_checkpoint(self.ckpt_dir, self.stage.name, self.stage.model, self.optimizer, state)
+        prune_checkpoints(self.ckpt_dir, self.stage.name, self.cfg.keep_checkpoints)
 
-    log.info("%s: %d steps of batch %d on %s", name, total, batch, device)
-    with deterministic(device):
-        for epoch in range(epoch0, optim_cfg.epochs):
-            if step >= total:
+    def batches(self, epoch: int) -> list[list[int]]:
+        """The epoch's batches: a permutation of the training frames seeded by (seed, epoch)."""
+        batch = self.stage.optim.batch_size
+        gen = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + epoch)
+        order = torch.randperm(len(self.stage.train_set), generator=gen).tolist()
+        return [order[i * batch : (i + 1) * batch] for i in range(self.steps_per_epoch)]
+
+    def train_epoch(self, epoch: int, skip: int, progress: bool) -> int:
+        """Train on the epoch's batches after the first ``skip``, until :attr:`total` steps.
+
+        Returns:
+            Batches of the epoch done (including the skipped ones).
+        """
+        stage, cfg = self.stage, self.cfg
+        stage.train_set.set_epoch(epoch)
+        loader = DataLoader(
+            stage.train_set,
+            batch_sampler=self.batches(epoch)[skip:],
+            num_workers=cfg.num_workers,
+            pin_memory=self.device.type == "cuda",
+        )
+        stage.model.train()
+        done_in_epoch = skip
+        bar = tqdm(
+            total=self.steps_per_epoch,
+            initial=skip,
+            disable=not progress,
+            desc=f"{stage.name} {epoch + 1}/{stage.optim.epochs}",
+        )
+        for item in loader:
+            if self.step >= self.total:
                 break
-            train_set.set_epoch(epoch)
-            gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + epoch)
-            order = torch.randperm(len(train_set), generator=gen).tolist()
-            batches = [order[i * batch : (i + 1) * batch] for i in range(steps_per_epoch)]
-            loader = DataLoader(
-                train_set,
-                batch_sampler=batches[skip:],
-                num_workers=cfg.num_workers,
-                pin_memory=device.type == "cuda",
-            )
-            model.train()
-            done_in_epoch = skip
-            bar = tqdm(
-                total=steps_per_epoch,
-                initial=skip,
-                disable=not progress,
-                desc=f"{name} {epoch + 1}/{optim_cfg.epochs}",
-            )
-            for item in loader:
-                if step >= total:
-                    break
-                item = {k: v.to(device, non_blocking=True) for k, v in item.items()}
-                factor = linear_warmup(step, stage.warmup_epochs * steps_per_epoch)
-                loss, terms = loss_fn(model, item, factor)
-                if not torch.isfinite(loss):
-                    raise NidarError(f"{name}: the loss became {float(loss)} at step {step}")
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                optimizer.step()
-                step += 1
-                done_in_epoch += 1
-                stage_log["steps"].append(
-                    {"step": step, "epoch": epoch, "loss": float(loss.detach()), **terms}
-                )
-                bar.update(1)
-                bar.set_postfix(loss=f"{stage_log['steps'][-1]['loss']:.4f}")
-                if step % cfg.checkpoint_every == 0 and done_in_epoch < steps_per_epoch:
-                    checkpoint(epoch, done_in_epoch)
-            bar.close()
-            skip = 0
-            complete = done_in_epoch == steps_per_epoch
-            losses = [s["loss"] for s in stage_log["steps"] if s["epoch"] == epoch]
-            val = validate(model, val_set, loss_fn, batch, device)
-            stage_log["epochs"].append(
-                {
-                    "epoch": epoch,
-                    "step": step,
-                    "complete": complete,
-                    "train_loss": float(np.mean(losses)) if losses else None,
-                    **val,
-                }
-            )
-            log.info("%s: epoch %d, step %d, val loss %s", name, epoch, step, val["val_loss"])
-            write_stage_log(out_dir, name, stage_log)
-            checkpoint(epoch + 1 if complete else epoch, 0 if complete else done_in_epoch)
-    return stage_log
+            loss, terms = self.optimisation_step(item)
+            self.step += 1
+            done_in_epoch += 1
+            self.log["steps"].append({"step": self.step, "epoch": epoch, "loss": loss, **terms})
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss:.4f}")
+            if self.step % cfg.checkpoint_every == 0 and done_in_epoch < self.steps_per_epoch:
+                self.checkpoint(epoch, done_in_epoch)
+        bar.close()
+        return done_in_epoch
+
+    def optimisation_step(self, item: dict[str, torch.Tensor]) -> tuple[float, dict]:
+        """One Adam step on a batch, the loss warmed up by the step count; returns the loss
+        and its terms."""
+        stage = self.stage
+        item = {k: v.to(self.device, non_blocking=True) for k, v in item.items()}
+        factor = linear_warmup(self.step, stage.warmup_epochs * self.steps_per_epoch)
+        loss, terms = stage.loss_fn(stage.model, item, factor)
+        if not torch.isfinite(loss):
+            raise NidarError(f"{stage.name}: the loss became {float(loss)} at step {self.step}")
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        return float(loss.detach()), terms
+
+    def end_epoch(self, epoch: int, done_in_epoch: int) -> None:
+        """Validate, log the epoch, write the stage log and checkpoint where to go on."""
+        stage = self.stage
+        complete = done_in_epoch == self.steps_per_epoch
+        losses = [s["loss"] for s in self.log["steps"] if s["epoch"] == epoch]
+        val = validate(
+            stage.model, stage.val_set, stage.loss_fn, stage.optim.batch_size, self.device
+        )
+        self.log["epochs"].append(
+            {
+                "epoch": epoch,
+                "step": self.step,
+                "complete": complete,
+                "train_loss": float(np.mean(losses)) if losses else None,
+                **val,
+            }
+        )
+        log.info(
+            "%s: epoch %d, step %d, val loss %s", stage.name, epoch, self.step, val["val_loss"]
+        )
+        write_stage_log(self.out_dir, stage.name, self.log)
+        self.checkpoint(epoch + 1 if complete else epoch, 0 if complete else done_in_epoch)
 
 
 @torch.no_grad()

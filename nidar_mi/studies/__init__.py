@@ -7,9 +7,10 @@ and incidence angle asked for. A panel faces the LiDAR and is turned about its v
 its incidence angle. Noise, dropout and ray drop are off; the scene has no ground.
 
 The scene is loaded with :func:`nidar_mi.scene.load_scene` and scanned with
-:func:`nidar_mi.lidar.raycast.scan`, so what comes back is what the sensor reports: the return
-model ``I = g · ρ(m, λ, θ) · a(d, θ)`` of :mod:`nidar_mi.lidar.return_model` applied to the BSDF
-of the material evaluated monostatically at the laser wavelength.
+:func:`nidar_mi.lidar.scan.scan`, so what comes back is what the sensor reports: the return
+model ``I = g · ρ(m, λ, θ) · T² · a(d, θ)`` of :mod:`nidar_mi.lidar.return_model`, with ρ the BSDF
+of the material evaluated monostatically at the laser wavelength (``T² = 1`` unless the beam
+passes a glass panel on its way to the backdrop).
 
 * :func:`incidence_sweep`: intensity against incidence angle at a fixed distance.
 * :func:`range_sweep`: intensity against distance (``1/d²`` and ``exp(-2αd)``).

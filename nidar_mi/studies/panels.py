@@ -240,23 +240,59 @@ def panel_scene_xml(
     )
     if intensity_mode not in INTENSITY_MODES:
         raise NidarError(f"intensity_mode must be one of {', '.join(INTENSITY_MODES)}")
-    n = layout.distances_m.size
-    names = [materials] * n if isinstance(materials, str) else [str(m) for m in materials]
-    for name in {*names, *([backdrop] if backdrop is not None else [])}:
-        get_material(name)  # an unknown name fails here, with suggestions
+    names = _panel_materials(materials, layout.distances_m.size, backdrop)
     far = float(layout.distances_m.max())
     r_back = 1.5 * far if backdrop_distance_m is None else float(backdrop_distance_m)
     if backdrop is not None and not r_back > far + panel_size_m:
         raise NidarError(f"the backdrop ({r_back:g} m) must lie behind the farthest panel")
     range_max = (r_back if backdrop is not None else far) * 1.5 + 1.0
-    h = LIDAR_HEIGHT_M
     lines = [
         '<?xml version="1.0" encoding="utf-8"?>',
         '<scene version="3.0.0">',
         '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
+        *_lidar_xml(
+            layout.cols,
+            wavelength_nm=wavelength_nm,
+            intensity_mode=intensity_mode,
+            alpha_per_m=alpha_per_m,
+            gain=gain,
+            detection_threshold=detection_threshold,
+            range_max=range_max,
+        ),
+    ]
+    if camera_size is not None:
+        lines += [*_camera_xml(camera_size, camera_fov_deg), _emitters_xml()]
+    lines += [_material_xml(name, name, overrides) for name in sorted(set(names))]
+    lines += _panels_xml(names, layout)
+    if backdrop is not None:
+        lines.append(_backdrop_xml(backdrop, r_back))
+    lines.append("</scene>")
+    return "\n".join(lines) + "\n"
+
+
+def _panel_materials(materials: str | Sequence[str], n: int, backdrop: str | None) -> list[str]:
+    """The material of each of the ``n`` panels; every name (and the backdrop's) must exist."""
+    names = [materials] * n if isinstance(materials, str) else [str(m) for m in materials]
+    for name in {*names, *([backdrop] if backdrop is not None else [])}:
+        get_material(name)  # an unknown name fails here, with suggestions
+    return names
+
+
+def _lidar_xml(
+    cols: int,
+    *,
+    wavelength_nm: float,
+    intensity_mode: str,
+    alpha_per_m: float,
+    gain: float,
+    detection_threshold: float,
+    range_max: float,
+) -> list[str]:
+    """The ``lidar`` sensor: one horizontal ring of ``cols`` columns at :data:`LIDAR_HEIGHT_M`."""
+    return [
         '<sensor type="lidar" id="lidar">',
         '  <string name="elevation_angles" value="0"/>',
-        f'  <integer name="horizontal_resolution" value="{layout.cols}"/>',
+        f'  <integer name="horizontal_resolution" value="{cols}"/>',
         f'  <float name="wavelength" value="{_f(wavelength_nm)}"/>',
         f'  <string name="intensity_mode" value="{intensity_mode}"/>',
         f'  <float name="atmospheric_extinction" value="{_f(alpha_per_m)}"/>',
@@ -264,44 +300,54 @@ def panel_scene_xml(
         f'  <float name="detection_threshold" value="{_f(detection_threshold)}"/>',
         '  <float name="range_min" value="0"/>',
         f'  <float name="range_max" value="{_f(range_max)}"/>',
-        f'  <transform name="to_world"><translate z="{_f(h)}"/></transform>',
+        f'  <transform name="to_world"><translate z="{_f(LIDAR_HEIGHT_M)}"/></transform>',
         "</sensor>",
     ]
-    if camera_size is not None:
-        w, hgt = (int(v) for v in camera_size)
-        lines += [
-            '<sensor type="perspective" id="camera">',
-            f'  <float name="fov" value="{_f(camera_fov_deg)}"/>',
-            '  <string name="fov_axis" value="x"/>',
-            f'  <transform name="to_world"><lookat origin="0, 0, {_f(h)}" '
-            f'target="1, 0, {_f(h)}" up="0, 0, 1"/></transform>',
-            '  <sampler type="independent"><integer name="sample_count" value="4"/></sampler>',
-            f'  <film type="hdrfilm"><integer name="width" value="{w}"/>'
-            f'<integer name="height" value="{hgt}"/></film>',
-            "</sensor>",
-            _emitters_xml(),
-        ]
-    for name in sorted(set(names)):
-        lines.append(_material_xml(name, name, overrides))
+
+
+def _camera_xml(size: tuple[int, int], fov_deg: float) -> list[str]:
+    """A perspective camera at the LiDAR looking along +x; ``size`` is (width, height)."""
+    w, h = (int(v) for v in size)
+    z = _f(LIDAR_HEIGHT_M)
+    return [
+        '<sensor type="perspective" id="camera">',
+        f'  <float name="fov" value="{_f(fov_deg)}"/>',
+        '  <string name="fov_axis" value="x"/>',
+        f'  <transform name="to_world"><lookat origin="0, 0, {z}" '
+        f'target="1, 0, {z}" up="0, 0, 1"/></transform>',
+        '  <sampler type="independent"><integer name="sample_count" value="4"/></sampler>',
+        f'  <film type="hdrfilm"><integer name="width" value="{w}"/>'
+        f'<integer name="height" value="{h}"/></film>',
+        "</sensor>",
+    ]
+
+
+def _panels_xml(names: Sequence[str], layout: PanelLayout) -> list[str]:
+    """One rectangle per panel: faces the LiDAR, turned by its incidence angle about z."""
+    h, half = LIDAR_HEIGHT_M, 0.5 * layout.panel_size_m
+    lines = []
     for i, (name, d, th, az) in enumerate(
         zip(names, layout.distances_m, layout.incidences_deg, layout.azimuths_deg)
     ):
         a = math.radians(az)
         lines.append(
             f'<shape type="rectangle" id="panel_{i:03d}"><transform name="to_world">'
-            f'<scale value="{_f(0.5 * panel_size_m)}"/><rotate y="1" angle="-90"/>'
+            f'<scale value="{_f(half)}"/><rotate y="1" angle="-90"/>'
             f'<rotate z="1" angle="{_f(th)}"/><rotate z="1" angle="{_f(az)}"/>'
             f'<translate x="{_f(d * math.cos(a))}" y="{_f(d * math.sin(a))}" z="{_f(h)}"/>'
             f'</transform><ref id="{name}"/></shape>'
         )
-    if backdrop is not None:
-        lines.append(
-            f'<shape type="sphere" id="backdrop"><point name="center" x="0" y="0" z="{_f(h)}"/>'
-            f'<float name="radius" value="{_f(r_back)}"/><bsdf type="twosided" id="backdrop_{backdrop}">'
-            f"{_material_xml(None, backdrop, None)}</bsdf></shape>"
-        )
-    lines.append("</scene>")
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _backdrop_xml(material: str, radius_m: float) -> str:
+    """A two-sided sphere of ``material`` around the LiDAR."""
+    return (
+        f'<shape type="sphere" id="backdrop"><point name="center" x="0" y="0" '
+        f'z="{_f(LIDAR_HEIGHT_M)}"/><float name="radius" value="{_f(radius_m)}"/>'
+        f'<bsdf type="twosided" id="backdrop_{material}">'
+        f"{_material_xml(None, material, None)}</bsdf></shape>"
+    )
 
 
 def load_panel_scene(
@@ -354,7 +400,7 @@ def scan_panels(
     Returns:
         The returns at the panel centres, in layout order.
     """
-    from ..lidar.raycast import scan
+    from ..lidar.scan import scan
 
     loaded, layout = load_panel_scene(materials, variant=variant, rgb_twin=rgb_twin, **kwargs)
     result = scan(loaded.scene, loaded.lidars[0], seed=0)

@@ -130,8 +130,10 @@ def detection_range(
 ) -> float:
     """Largest range at which a return is still detected: ``g·ρ·cosθ·exp(-2αd)/d² = threshold``.
 
-    The left side falls strictly with ``d``, so the root is unique; it is found by bisection on
-    ``log`` of both sides. With ``α = 0`` it is ``sqrt(g·ρ·cosθ / threshold)``.
+    The left side is the return model's ``raw`` intensity
+    (:func:`nidar_mi.lidar.return_model.expected_intensity`, no glass); it falls strictly with
+    ``d``, so the root is unique; it is found by bisection on ``log`` of both sides. With
+    ``α = 0`` it is ``sqrt(g·ρ·cosθ / threshold)``.
 
     Args:
         rho: monostatic reflectance ρ (π × BSDF) at the laser wavelength, > 0.
@@ -179,8 +181,9 @@ def max_detection_range(
 ) -> float:
     """Maximum detection range of a library material, with ρ·cosθ measured through the LiDAR.
 
-    One ``compensated`` scan of a panel at :data:`REFERENCE_DISTANCE_M` without extinction
-    gives ``g·ρ(θ)·cosθ``; :func:`detection_range` then solves the return model for the range.
+    One ``compensated`` scan of a panel at :data:`REFERENCE_DISTANCE_M`, with gain 1 and
+    without extinction, measures ``ρ(θ)·cosθ``; :func:`detection_range` then solves the return
+    model ``g·ρ(θ)·cosθ·exp(-2αd)/d² = threshold`` for the range.
 
     Args:
         material: library material name.
@@ -204,10 +207,10 @@ def max_detection_range(
         overrides=overrides,
         variant=variant,
     )
-    g_rho_cos = float(s.intensity[0])
-    if not (s.valid[0] and g_rho_cos > 0.0):
+    rho_cos = float(s.intensity[0])
+    if not (s.valid[0] and rho_cos > 0.0):
         return 0.0
-    return detection_range(g_rho_cos, threshold, gain=gain, alpha_per_m=alpha_per_m)
+    return detection_range(rho_cos, threshold, gain=gain, alpha_per_m=alpha_per_m)
 
 
 def extinction_from_visibility(visibility_km: float, wavelength_nm: float) -> float:

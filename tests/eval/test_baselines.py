@@ -87,7 +87,7 @@ DOME = """
 
 
 def test_rgb_twin_sees_the_visible_albedo_not_the_nir_one(write_scene, variant):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     path = write_scene(DOME)
@@ -103,7 +103,7 @@ def test_rgb_twin_sees_the_visible_albedo_not_the_nir_one(write_scene, variant):
 
 
 def test_rgb_twin_keeps_the_dropout_draws_of_the_same_seed(write_scene, variant):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     path = write_scene(DOME)
@@ -118,15 +118,15 @@ def test_rgb_twin_keeps_the_dropout_draws_of_the_same_seed(write_scene, variant)
 
 
 def test_rgb_twin_scan_silences_only_the_rgb_material_warning(write_scene, variant, monkeypatch):
-    from nidar_mi.lidar import raycast
+    from nidar_mi.lidar import scan as scan_module
     from nidar_mi.scene import load_scene
 
     path = write_scene(DOME)
-    monkeypatch.setattr(raycast, "_warned_rgb", set())
+    monkeypatch.setattr(scan_module, "_warned_rgb", set())
     loaded = load_scene(path, variant=variant, rgb_twin=True)
     with pytest.warns(RuntimeWarning, match="RGB-only"):
-        raycast.scan(loaded.scene, loaded.lidars[0])
-    monkeypatch.setattr(raycast, "_warned_rgb", set())
+        scan_module.scan(loaded.scene, loaded.lidars[0])
+    monkeypatch.setattr(scan_module, "_warned_rgb", set())
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         B.rgb_twin_scan(path, variant=variant)

@@ -12,7 +12,7 @@ GOLDEN = os.path.join(HERE, "small_scene_points.npz")
 
 def scan_golden_scene():
     """Scan the golden scene in the CPU variant; returns the points dict."""
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     loaded = load_scene(SCENE, variant="llvm_ad_spectral")

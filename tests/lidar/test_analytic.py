@@ -96,7 +96,7 @@ def _expected(wavelength, mode):
 @pytest.mark.parametrize("wavelength", [905.0, 1550.0])
 @pytest.mark.parametrize("mode", ["raw", "compensated"])
 def test_panels_match_return_model(variant, write_scene, wavelength, mode):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     hit, t, I, margin = _expected(wavelength, mode)
@@ -122,7 +122,7 @@ def test_panels_match_return_model(variant, write_scene, wavelength, mode):
 
 
 def test_detection_threshold_and_range_limits(variant, write_scene):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     hit, t, I, _ = _expected(905.0, "raw")
@@ -142,7 +142,7 @@ def test_detection_threshold_and_range_limits(variant, write_scene):
 
 def test_pose_moves_points_not_frame(variant, write_scene):
     """A translated sensor sees the same world points; xyz stays in the LiDAR frame."""
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     loaded = load_scene(write_scene(_scene_xml(905.0, "raw")))

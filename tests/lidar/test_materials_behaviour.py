@@ -37,7 +37,7 @@ def _glass_scene(glass_type):
 
 @pytest.mark.parametrize("glass_type", ["thindielectric", "dielectric"])
 def test_glass_passes_with_two_way_fresnel(variant, write_scene, glass_type):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     L = load_scene(write_scene(_glass_scene(glass_type)))
@@ -93,7 +93,7 @@ def _register_nan_bsdf():
 
 
 def test_nan_reflectance_is_dropped_with_one_warning(variant, write_scene):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     _register_nan_bsdf()
@@ -119,7 +119,7 @@ def test_nan_reflectance_is_dropped_with_one_warning(variant, write_scene):
 
 
 def test_rgb_material_warns(variant, write_scene):
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     body = """
@@ -139,7 +139,7 @@ def test_new_pose_and_seed_reuse_kernels(variant, write_scene):
     """Poses and seeds are opaque: scanning another frame launches the same kernels."""
     import drjit as dr
 
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     body = """

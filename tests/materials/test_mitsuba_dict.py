@@ -14,10 +14,8 @@ WAVELENGTH_SETS = ([360.0, 550.0, 660.0, 830.0], [905.0, 1064.0, 1550.0, 1700.0]
 @pytest.fixture(scope="module")
 def mi(variant):
     import mitsuba
-    from nidar_mi.plugins import retroreflector
 
-    retroreflector.register()
-    return mitsuba
+    return mitsuba  # the variant fixture registered the plugins (retroreflector)
 
 
 def monostatic_rho(mi, bsdf, theta_deg: float = 20.0) -> np.ndarray:

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from nidar_mi.plugins.retroreflector import lobe_concentration, monostatic_gain
+from nidar_mi.plugins.vmf import lobe_concentration, monostatic_gain
 
 RHO = 0.8
 
@@ -12,9 +12,7 @@ RHO = 0.8
 @pytest.fixture(scope="module")
 def mi(variant):
     import mitsuba
-    from nidar_mi.plugins import retroreflector
 
-    retroreflector.register()
     return mitsuba
 
 
@@ -172,11 +170,43 @@ def test_below_the_surface_returns_nothing(mi):
 @pytest.mark.parametrize(
     "props, match",
     [
-        ({"lobe_width": 0.0}, "lobe_width must be in"),
-        ({"diffuse_fraction": 1.5}, "diffuse_fraction must be in"),
+        ({"lobe_width": 0.0}, "parameter 'lobe_width' must be in"),
+        ({"lobe_width": 95.0}, "parameter 'lobe_width' must be in"),
+        ({"diffuse_fraction": 1.5}, "parameter 'diffuse_fraction' must be in"),
+        ({"diffuse_fraction": -0.1}, "parameter 'diffuse_fraction' must be in"),
         ({"lobe_widht": 2.0}, "unreferenced property"),
     ],
 )
 def test_bad_parameters_are_rejected(mi, props, match):
     with pytest.raises(RuntimeError, match=match):
         mi.load_dict({"type": "retroreflector", **props})
+
+
+@pytest.mark.parametrize(
+    "prop, message",
+    [
+        (
+            '<float name="lobe_width" value="0"/>',
+            "retroreflector 'sheet': parameter 'lobe_width' must be in (0, 90] degrees (got 0)",
+        ),
+        (
+            '<float name="diffuse_fraction" value="2"/>',
+            "retroreflector 'sheet': parameter 'diffuse_fraction' must be in [0, 1] (got 2)",
+        ),
+        (
+            '<string name="lobe_width" value="wide"/>',
+            "retroreflector 'sheet': parameter 'lobe_width' must be a number (got 'wide')",
+        ),
+    ],
+)
+def test_invalid_parameter_in_a_scene_gives_one_line(variant, write_scene, prop, message):
+    from nidar_mi.errors import NidarError
+    from nidar_mi.scene import load_scene
+
+    path = write_scene(
+        f'<bsdf type="retroreflector" id="sheet">{prop}</bsdf>'
+        '<shape type="rectangle"><ref id="sheet"/></shape>'
+    )
+    with pytest.raises(NidarError) as e:
+        load_scene(path)
+    assert str(e.value) == f"{path}: {message}"

@@ -146,7 +146,7 @@ def test_generated_scene_renders(tmp_path, variant, kind):
 
 def test_every_scene_of_a_run_loads_and_scans(tmp_path, variant):
     """Eight scenes of one run (both kinds, both presets) load and return beams off the ground."""
-    from nidar_mi.lidar.raycast import scan
+    from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     index = generate(str(tmp_path), 8, 21, progress=False)
