@@ -198,10 +198,11 @@ def _evaluate(args: argparse.Namespace, argv_text: str, meta: dict, model, fig_d
         payload["groups"]["handmade"] = _group(res, "handmade", names, note)
         payload["figures"] += _figures(res, "handmade", fig_dir, args.figures)
     if args.kitti:
+        from .datasets.kitti import frame_ids
         from .eval.evaluate import mean_table
-        from .eval.kitti import evaluate_kitti, kitti_frame_ids
+        from .eval.kitti import evaluate_kitti
 
-        if not kitti_frame_ids(args.kitti):
+        if not frame_ids(args.kitti):
             msg = f"no KITTI frames at {args.kitti}"
             log.warning("skipping the real-data evaluation: %s", msg)
             payload["kitti"] = {"skipped": msg}

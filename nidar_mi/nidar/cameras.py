@@ -1,4 +1,4 @@
-"""Camera calibration files: a small YAML/JSON schema and KITTI object ``calib/*.txt``.
+"""Camera calibration files: a small YAML/JSON schema.
 
 **YAML / JSON schema** (:func:`load_calib`, :func:`save_calib`). Either a top-level list of
 cameras or a mapping with key ``cameras`` holding that list. Each camera::
@@ -15,12 +15,7 @@ Matrices are row-major, nested (3x3, 4x4 or 3x4 with ``[0, 0, 0, 1]`` implied) o
 (9, 16 or 12 numbers). Intrinsics follow the pixel convention of
 :mod:`nidar_mi.nidar.projection` (pixel centres at integer coordinates).
 
-**KITTI** (:func:`load_kitti_calib`): the object-detection calib files with ``P0..P3``
-(3x4), ``R0_rect`` (3x3) and ``Tr_velo_to_cam`` (3x4). The rectified camera ``n`` maps
-``x_img ~ P_n R0_rect Tr_velo_to_cam x_velo``. ``P_n = [K | p]`` carries the stereo baseline
-in ``p``; since ``K`` is invertible, ``P_n = K [I | K^{-1} p]``, so the model is exactly
-``K`` with extrinsic ``[I | K^{-1} p] R0_rect Tr_velo_to_cam`` (and the depth equals the
-homogeneous coordinate of ``P_n R0_rect Tr_velo_to_cam x_velo``).
+KITTI calib files are read by :func:`nidar_mi.datasets.kitti.load_kitti_calib`.
 """
 
 from __future__ import annotations
@@ -38,17 +33,7 @@ from nidar_mi.errors import NidarError
 from nidar_mi.io.atomic import atomic_write_text
 from nidar_mi.nidar.projection import CameraModel
 
-__all__ = [
-    "KITTI_IMAGE_SIZE",
-    "camera_from_dict",
-    "camera_to_dict",
-    "load_calib",
-    "load_kitti_calib",
-    "save_calib",
-]
-
-KITTI_IMAGE_SIZE = (1242, 375)
-"""(width, height) of most KITTI object ``image_2`` frames; some are a few pixels smaller."""
+__all__ = ["camera_from_dict", "camera_to_dict", "load_calib", "save_calib"]
 
 
 def _matrix(value: Any, shapes: Sequence[tuple[int, int]], what: str) -> np.ndarray:
@@ -166,76 +151,3 @@ def save_calib(path: str | os.PathLike[str], cameras: Sequence[CameraModel]) -> 
     else:
         text = yaml.safe_dump(data, sort_keys=False)
     atomic_write_text(path, text)
-
-
-_KITTI_ALIASES = {"R_rect": "R0_rect", "Tr_velo_cam": "Tr_velo_to_cam"}
-
-
-def _parse_kitti(path: Path) -> dict[str, np.ndarray]:
-    try:
-        lines = path.read_text(encoding="ascii").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise NidarError(f"{path}: cannot read KITTI calibration: {exc}") from None
-    entries: dict[str, np.ndarray] = {}
-    for n, line in enumerate(lines, start=1):
-        if not line.strip():
-            continue
-        key, sep, rest = line.partition(":")
-        if not sep:
-            raise NidarError(f"{path}:{n}: expected 'KEY: numbers'")
-        try:
-            values = np.array([float(x) for x in rest.split()])
-        except ValueError:
-            raise NidarError(f"{path}:{n}: non-numeric value in {key.strip()!r}") from None
-        key = key.strip()
-        entries[_KITTI_ALIASES.get(key, key)] = values
-    return entries
-
-
-def load_kitti_calib(
-    path: str | os.PathLike[str],
-    camera: str = "P2",
-    *,
-    width: int = KITTI_IMAGE_SIZE[0],
-    height: int = KITTI_IMAGE_SIZE[1],
-) -> CameraModel:
-    """Rectified KITTI camera model from an object-detection ``calib/*.txt`` file.
-
-    Args:
-        path: the calib file.
-        camera: ``"P0"``..``"P3"`` (``"P2"`` is the left colour camera, ``image_2``).
-        width: image width in pixels (KITTI frames vary slightly; read it from the image).
-        height: image height in pixels.
-
-    Returns:
-        An ``"opencv"`` :class:`CameraModel` whose projection equals
-        ``P_camera R0_rect Tr_velo_to_cam`` exactly (see the module docstring).
-
-    Raises:
-        NidarError: missing keys, wrong sizes or a ``P`` matrix that is not ``[K | p]``.
-    """
-    path = Path(path)
-    if camera not in ("P0", "P1", "P2", "P3"):
-        raise NidarError(f"load_kitti_calib: camera must be P0..P3, not {camera!r}")
-    entries = _parse_kitti(path)
-    sizes = {camera: 12, "R0_rect": 9, "Tr_velo_to_cam": 12}
-    for key, size in sizes.items():
-        if key not in entries:
-            raise NidarError(f"{path}: missing {key!r}")
-        if entries[key].size != size:
-            raise NidarError(f"{path}: {key} has {entries[key].size} numbers, expected {size}")
-    P = entries[camera].reshape(3, 4)
-    K = P[:, :3]
-    if not (np.array_equal(K[2], [0.0, 0.0, 1.0]) and K[1, 0] == 0.0):
-        raise NidarError(f"{path}: {camera} is not of the form [K | p] with K upper triangular")
-    R0 = np.eye(4)
-    R0[:3, :3] = entries["R0_rect"].reshape(3, 3)
-    Tr = _homogeneous(entries["Tr_velo_to_cam"].reshape(3, 4))
-    baseline = np.eye(4)
-    baseline[:3, 3] = np.linalg.solve(K, P[:, 3])
-    T = baseline @ R0 @ Tr
-    T[3] = [0.0, 0.0, 0.0, 1.0]
-    try:
-        return CameraModel(K=K, width=width, height=height, T_cam_lidar=T, name=camera)
-    except NidarError as exc:
-        raise NidarError(f"{path}: {exc}") from None
