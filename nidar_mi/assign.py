@@ -6,8 +6,8 @@ Two ways in::
     python -m nidar_mi.assign --kitti DIR --frame 000003 -o OUT
 
 ``--points`` reads .ply/.pcd/.las/.bin (KITTI float32 x,y,z,i)/.npz; ``--calib`` is YAML/JSON with one
-entry per camera (schema: :mod:`nidar_mi.nidar.cameras`), one ``--image`` per camera in
-the same order. ``--kitti`` reads ``velodyne/ID.bin``, ``image_2/ID.png``
+entry per camera (schema: :mod:`nidar_mi.io.calib`; a renderer ``calib.json`` works too), one
+``--image`` per camera in the same order. ``--kitti`` reads ``velodyne/ID.bin``, ``image_2/ID.png``
 and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti.load_frame`).
 
 Output in OUT: ``points.npz`` with ``xyz`` (N,3 float32), the input's own ``intensity`` when it has
@@ -110,9 +110,9 @@ def main(argv=None) -> int:
         else:
             if not (args.points and args.calib and args.image):
                 raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
+            from .io.calib import load_calib
             from .io.images import read_png
             from .io.points import read_point_cloud
-            from .nidar.cameras import load_calib
 
             cloud = read_point_cloud(args.points)
             cameras = load_calib(args.calib)

@@ -1,10 +1,10 @@
-"""Camera calibration files: a small YAML/JSON schema.
+"""Camera-calibration files: a small YAML/JSON schema, and the renderer's own ``calib.json``.
 
 **YAML / JSON schema** (:func:`load_calib`, :func:`save_calib`). Either a top-level list of
 cameras or a mapping with key ``cameras`` holding that list. Each camera::
 
     name: front                 # optional label
-    K: [[fx, s, cx], [0, fy, cy], [0, 0, 1]]   # or the keys fx, fy, cx, cy (+ optional skew)
+    K: [[fx, s, cx], [0, fy, cy], [0, 0, 1]]   # pixels; or the keys fx, fy, cx, cy (+ optional skew)
     width: 1920                 # pixels
     height: 1280
     T_cam_lidar: [[...], [...], [...], [0, 0, 0, 1]]  # LiDAR -> camera, metres
@@ -13,7 +13,14 @@ cameras or a mapping with key ``cameras`` holding that list. Each camera::
 
 Matrices are row-major, nested (3x3, 4x4 or 3x4 with ``[0, 0, 0, 1]`` implied) or flat
 (9, 16 or 12 numbers). Intrinsics follow the pixel convention of
-:mod:`nidar_mi.nidar.projection` (pixel centres at integer coordinates).
+:mod:`nidar_mi.geometry.camera_model` (pixel centres at integer coordinates).
+
+**Renderer calib.json** (:func:`load_calib` only). ``python -m nidar_mi.render`` writes
+``OUT/<camera>/calib.json``: one camera as a mapping with ``convention``, ``width``,
+``height``, ``K``, ``T_world_cam`` and ``T_cam_lidar`` mapping each LiDAR id of the scene to
+its (4, 4) LiDAR -> camera transform (plus ``nir_wavelength_nm`` and ``png_exposure``, not
+used here). Its camera takes the name of the folder holding the file and the
+``T_cam_lidar`` of the scene's only LiDAR, or of the one named by ``lidar=``.
 
 KITTI calib files are read by :func:`nidar_mi.datasets.kitti.load_kitti_calib`.
 """
@@ -30,8 +37,8 @@ import numpy as np
 import yaml
 
 from nidar_mi.errors import NidarError
+from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.atomic import atomic_write_text
-from nidar_mi.nidar.projection import CameraModel
 
 __all__ = ["camera_from_dict", "camera_to_dict", "load_calib", "save_calib"]
 
@@ -112,13 +119,52 @@ def camera_to_dict(cam: CameraModel) -> dict[str, Any]:
     }
 
 
-def load_calib(path: str | os.PathLike[str]) -> list[CameraModel]:
+def _is_render_calib(data: Any) -> bool:
+    return (
+        isinstance(data, Mapping)
+        and "cameras" not in data
+        and isinstance(data.get("T_cam_lidar"), Mapping)
+    )
+
+
+def _render_camera(data: Mapping[str, Any], path: Path, lidar: str | None) -> CameraModel:
+    """The camera of a renderer ``calib.json`` (see the module docstring)."""
+    poses = data["T_cam_lidar"]
+    ids = sorted(str(k) for k in poses)
+    if lidar is None:
+        if len(ids) != 1:
+            listed = ", ".join(ids) if ids else "none"
+            raise NidarError(
+                f"{path}: T_cam_lidar has {len(ids)} LiDARs ({listed}); choose one with lidar="
+            )
+        lidar = ids[0]
+    elif lidar not in poses:
+        raise NidarError(f"{path}: no LiDAR {lidar!r} in T_cam_lidar (has {', '.join(ids)})")
+    entry = {k: data[k] for k in ("K", "width", "height", "convention") if k in data}
+    entry["T_cam_lidar"] = poses[lidar]
+    entry["name"] = path.parent.name
+    return camera_from_dict(entry, f"{path}: LiDAR {lidar!r}")
+
+
+def load_calib(path: str | os.PathLike[str], *, lidar: str | None = None) -> list[CameraModel]:
     """Read cameras from a YAML or JSON file (schema in the module docstring).
 
-    ``.json`` files are parsed as JSON, anything else with ``yaml.safe_load``.
+    ``.json`` files are parsed as JSON, anything else with ``yaml.safe_load``. A renderer
+    ``calib.json`` (a mapping whose ``T_cam_lidar`` maps LiDAR ids to transforms) gives one
+    camera, named after the file's folder, with the extrinsic of its only LiDAR or of
+    ``lidar``.
+
+    Args:
+        path: the calibration file.
+        lidar: LiDAR id, for a renderer ``calib.json`` of a scene with several LiDARs.
+
+    Returns:
+        The cameras, in file order.
 
     Raises:
-        NidarError: unreadable file, syntax error or schema violation (one-line message).
+        NidarError: unreadable file, syntax error, schema violation, ``lidar`` given for a
+            file that is not a renderer ``calib.json``, or a LiDAR that is missing or
+            ambiguous (one-line message).
     """
     path = Path(path)
     try:
@@ -130,6 +176,10 @@ def load_calib(path: str | os.PathLike[str]) -> list[CameraModel]:
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
         msg = " ".join(str(exc).split())
         raise NidarError(f"{path}: cannot parse camera calibration: {msg}") from None
+    if _is_render_calib(data):
+        return [_render_camera(data, path, lidar)]
+    if lidar is not None:
+        raise NidarError(f"{path}: lidar= applies to a renderer calib.json only")
     if isinstance(data, Mapping):
         data = data.get("cameras")
     if not isinstance(data, list) or not data:
