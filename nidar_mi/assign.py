@@ -6,9 +6,10 @@ Two ways in::
     python -m nidar_mi.assign --kitti DIR --frame 000003 -o OUT
 
 ``--points`` reads .ply/.pcd/.las/.bin (KITTI float32 x,y,z,i)/.npz; ``--calib`` is YAML/JSON with one
-entry per camera (schema: :mod:`nidar_mi.io.calib`; a renderer ``calib.json`` works too), one
-``--image`` per camera in the same order. ``--kitti`` reads ``velodyne/ID.bin``, ``image_2/ID.png``
-and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti.load_frame`).
+entry per camera (schema: :mod:`nidar_mi.io.calib`; the render command's ``calib.json`` of a scene
+with one LiDAR works too), one ``--image`` per camera in the same order. ``--kitti`` reads
+``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2;
+:func:`nidar_mi.datasets.kitti.load_frame`).
 
 Output in OUT: ``points.npz`` with ``xyz`` (N,3 float32), the input's own ``intensity`` when it has
 one, ``intensity_nidar`` (N float32, 0 where unobserved) and ``nidar_observed`` (N bool); plus

@@ -87,13 +87,13 @@ def split_scenes(
 
 
 def _frames_of_scene(render_dir: str, lidar_id: str | None):
-    from .nidar.frames import sparse_maps
+    from .geometry import splat_points
     from .rendered import read_render
 
     r = read_render(render_dir, lidar_id)
     pts = r.points
     for cam in r.cameras:
-        maps, mask = sparse_maps(
+        maps, mask = splat_points(
             pts["xyz"],
             {"intensity": r.compensated, "reflectance": pts["reflectance"], "range": pts["range"]},
             cam.model,

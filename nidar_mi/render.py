@@ -148,8 +148,8 @@ def _write_camera(stage: str, cam, lidar_poses: dict, written: list[str]) -> dic
 
 def _nidar_columns(results: dict, renders: dict, weights: str | None, branch: str = "R") -> dict:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
+    from .geometry import CameraModel
     from .nidar.pipeline import NidarModel
-    from .nidar.projection import CameraModel
 
     if not renders:
         raise NidarError("--intensity nidar needs at least one perspective camera in the scene")

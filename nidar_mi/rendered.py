@@ -24,7 +24,7 @@ class RenderedCamera:
     Attributes:
         name: camera id.
         folder: its output folder (rgb.png, nir.exr, depth.exr, calib.json).
-        model: :class:`nidar_mi.nidar.projection.CameraModel` with ``T_cam_lidar`` of the scan's LiDAR.
+        model: :class:`nidar_mi.geometry.CameraModel` with ``T_cam_lidar`` of the scan's LiDAR.
         depth: (H, W) float32 z-depth in m, 0 where no surface.
     """
 
@@ -76,10 +76,10 @@ def read_render(render_dir: str, lidar_id: str | None = None) -> RenderedScan:
     Raises:
         NidarError: missing or malformed manifest, or an unknown LiDAR id.
     """
+    from .geometry import CameraModel
     from .io.images import read_exr
     from .io.points import read_npz
     from .nidar.frames import compensate
-    from .nidar.projection import CameraModel
 
     path = os.path.join(render_dir, "manifest.json")
     try:
