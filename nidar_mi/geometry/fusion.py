@@ -3,7 +3,7 @@
 Points are in the LiDAR frame, in metres; depths are camera-forward distances in metres;
 pixel coordinates follow :mod:`nidar_mi.geometry.camera_model` (pixel centres at integer
 coordinates). This is the "point cloud intensity assignment" step of the NIDAR paper
-(§III.E), plus the occlusion test of :mod:`nidar_mi.geometry.visibility`, which the paper
+(§III.F), plus the occlusion test of :mod:`nidar_mi.geometry.visibility`, which the paper
 does not have.
 
 **Fusion rules** (:data:`FUSION_RULES`), among the cameras that see a point:
