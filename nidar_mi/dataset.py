@@ -220,13 +220,13 @@ def split_scenes(
 
 def frames_of_render(render_dir: str, lidar_id: str | None = None):
     """Yield ``(camera id, frame dict, lidar parameters)`` for every camera of a render folder."""
-    from .nidar.frames import sparse_maps
+    from .geometry import splat_points
     from .render_folder import read_render
 
     r = read_render(render_dir, lidar_id)
     pts = r.points
     for cam in r.cameras:
-        maps, mask = sparse_maps(
+        maps, mask = splat_points(
             pts["xyz"],
             {"intensity": r.compensated, "reflectance": pts["reflectance"], "range": pts["range"]},
             cam.model,

@@ -315,7 +315,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     from .io.images import read_exr
     from .io.points import read_npz
     from .lidar.return_model import compensate
-    from .nidar.projection import CameraModel
+    from .geometry import CameraModel
 
     folder = os.fspath(folder)
     manifest = read_manifest(folder)

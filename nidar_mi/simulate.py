@@ -135,7 +135,7 @@ def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
 def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dict]:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .nidar.pipeline import NidarModel
-    from .nidar.projection import CameraModel
+    from .geometry import CameraModel
 
     if not run.renders:
         raise NidarError("--intensity nidar needs at least one perspective camera in the scene")

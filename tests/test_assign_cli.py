@@ -162,8 +162,8 @@ def test_render_with_nidar_intensity(tmp_path):
 
 def test_i_hat_branch_is_the_head_sampled_at_the_points():
     """branch="I_hat": Î bilinearly sampled at each observed point, clipped to [0, 1]."""
+    from nidar_mi.geometry import CameraModel, bilinear_sample, project
     from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.projection import CameraModel, bilinear_sample, project
 
     rng = np.random.default_rng(3)
     img = (rng.uniform(0, 1, (64, 96, 3)) * 255).astype(np.uint8)

@@ -6,8 +6,10 @@ Two ways in::
     python -m nidar_mi.assign --kitti DIR --frame 000003 -o OUT
 
 ``--points`` reads .ply/.pcd/.las/.bin (KITTI float32 x,y,z,i)/.npz; ``--calib`` is YAML/JSON with one
-entry per camera (schema: :mod:`nidar_mi.nidar.cameras`), one ``--image`` per camera in the same
-order. ``--kitti`` reads ``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2).
+entry per camera (schema: :mod:`nidar_mi.io.calib`; the render command's ``calib.json`` of a scene
+with one LiDAR works too), one ``--image`` per camera in the same order. ``--kitti`` reads
+``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2;
+:func:`nidar_mi.datasets.kitti.load_frame`).
 
 Output in OUT: ``points.npz`` with ``xyz`` (N,3 float32), the input's own ``intensity`` when it has
 one, ``intensity_nidar`` (N float32, 0 where unobserved) and ``nidar_observed`` (N bool); plus
@@ -23,29 +25,9 @@ import numpy as np
 from ..errors import NidarError
 from ._common import parser, run
 
-__all__ = ["main", "assign_intensity", "load_kitti_frame"]
+__all__ = ["main", "assign_intensity"]
 
 FORMATS = ("npz", "ply", "las")
-
-
-def load_kitti_frame(kitti_dir: str, frame: str):
-    """(xyz (N,3) float32, intensity (N,) float32, rgb (H,W,3) uint8, CameraModel) of a KITTI frame."""
-    from ..io.images import read_png
-    from ..io.points import read_kitti_bin
-    from ..nidar.cameras import load_kitti_calib
-
-    paths = {
-        "velodyne": os.path.join(kitti_dir, "velodyne", f"{frame}.bin"),
-        "image": os.path.join(kitti_dir, "image_2", f"{frame}.png"),
-        "calib": os.path.join(kitti_dir, "calib", f"{frame}.txt"),
-    }
-    for what, p in paths.items():
-        if not os.path.isfile(p):
-            raise NidarError(f"--kitti: missing {what} file {p}")
-    xyz, inten = read_kitti_bin(paths["velodyne"])
-    rgb = read_png(paths["image"])[..., :3]
-    cam = load_kitti_calib(paths["calib"], "P2", width=rgb.shape[1], height=rgb.shape[0])
-    return xyz, inten, rgb, cam
 
 
 def assign_intensity(
@@ -116,15 +98,17 @@ def _assign(args) -> None:
         if args.kitti:
             if not args.frame:
                 raise NidarError("--kitti needs --frame")
-            xyz, inten, rgb, cam = load_kitti_frame(args.kitti, args.frame)
-            cameras, images, name = [cam], [rgb], f"kitti_{args.frame}"
-            points = {"xyz": xyz, "intensity": inten}
+            from ..datasets.kitti import load_frame
+
+            frame = load_frame(args.kitti, args.frame)
+            cameras, images, name = [frame.camera], [frame.rgb], f"kitti_{args.frame}"
+            points = {"xyz": frame.xyz, "intensity": frame.intensity}
         else:
             if not (args.points and args.calib and args.image):
                 raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
+            from ..io.calib import load_calib
             from ..io.images import read_png
             from ..io.point_cloud import read_point_cloud
-            from ..nidar.cameras import load_calib
 
             cloud = read_point_cloud(args.points)
             cameras = load_calib(args.calib)

@@ -55,13 +55,13 @@ def luminance_rho(rgb_uint8: Any, uv: Any) -> np.ndarray:
     Args:
         rgb_uint8: (H, W, 3) uint8 sRGB image (the camera frame).
         uv: (N, 2) pixel coordinates of the projected points (pixel centres at integers, as in
-            :mod:`nidar_mi.nidar.projection`).
+            :mod:`nidar_mi.geometry.camera_model`).
 
     Returns:
         (N,) float64 ρ in [0, 1]; NaN for points outside the image.
     """
+    from ..geometry import bilinear_sample
     from ..io.images import REC709_LUMA, srgb_to_linear
-    from ..nidar.projection import bilinear_sample
 
     rgb = np.asarray(rgb_uint8)
     if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:

@@ -3,8 +3,8 @@
 One *frame* is a (scene, camera) pair of a rendered scene (``DATA/renders/<scene>/``, written by
 :func:`nidar_mi.render.render_scene`). Its evaluation points are the LiDAR returns the camera
 sees: in front of it, inside the image and not hidden behind the rendered depth
-(:func:`nidar_mi.nidar.projection.visible_mask`), exactly the returns that
-:func:`nidar_mi.nidar.frames.sparse_maps` writes into the training frames.
+(:func:`nidar_mi.geometry.visibility.visible_mask`), exactly the returns that
+:func:`nidar_mi.geometry.visibility.splat_points` writes into the training frames.
 
 **Ground truth** is the range-compensated physical intensity ``g·ρ·cosθ·exp(-2αd)``
 (:func:`nidar_mi.lidar.return_model.compensate`) on the metric scale
@@ -100,7 +100,7 @@ class FrameData:
         uv: (N, 2) float64 pixel coordinates.
         rgb: (H, W, 3) uint8 camera image.
         depth: (H, W) float32 camera z-depth, m.
-        camera_model: the :class:`~nidar_mi.nidar.projection.CameraModel`.
+        camera_model: the :class:`~nidar_mi.geometry.CameraModel`.
         grid_shape: (rings, columns) of the LiDAR range image.
         scene_path: scene XML (for the RGB-twin scan).
         params: scene parameters the render used.
@@ -160,7 +160,7 @@ def load_render_frames(
     Returns:
         One :class:`FrameData` per camera, sorted by camera id.
     """
-    from ..nidar.projection import project, visible_mask
+    from ..geometry import project, visible_mask
     from ..render_folder import read_render
 
     r = read_render(render_dir, lidar_id)
@@ -222,7 +222,7 @@ def predict_frame(
     Returns:
         method key -> (N,) float64, in :data:`METHODS` order.
     """
-    from ..nidar.projection import bilinear_sample
+    from ..geometry import bilinear_sample
 
     out: dict[str, np.ndarray] = {}
     if twin_pred is not None:
@@ -254,9 +254,9 @@ def predict_frame(
 
 
 def _camera_maps(frame: FrameData, values: dict[str, np.ndarray]):
-    from ..nidar.frames import sparse_maps
+    from ..geometry import splat_points
 
-    return sparse_maps(frame.xyz, values, frame.camera_model, depth_image=frame.depth)
+    return splat_points(frame.xyz, values, frame.camera_model, depth_image=frame.depth)
 
 
 def _range_image(frame: FrameData, values: np.ndarray) -> np.ndarray:

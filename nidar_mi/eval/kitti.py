@@ -1,7 +1,7 @@
 """Real-data evaluation on KITTI frames: zero-shot NIDAR and the baselines vs the real intensity.
 
 For each frame (``velodyne/ID.bin``, ``image_2/ID.png``, ``calib/ID.txt``; loaded with
-:func:`nidar_mi.assign.load_kitti_frame`) the evaluation points are the Velodyne returns that
+:func:`nidar_mi.datasets.kitti.load_frame`) the evaluation points are the Velodyne returns that
 camera 2 sees: :meth:`NidarModel.point_intensity` on the whole cloud (in front of the camera,
 inside the image, not hidden in the cloud's own z-buffer; KITTI has no rendered depth) marks
 them ``observed``. The reference is the Velodyne reflectance channel as stored in the ``.bin``
@@ -27,7 +27,6 @@ nearest pixel, nearest point wins).
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
@@ -39,7 +38,6 @@ from .metrics import map_metrics, point_metrics
 __all__ = [
     "KITTI_METHODS",
     "KITTI_UNAVAILABLE",
-    "kitti_frame_ids",
     "kitti_predictions",
     "loo_remap",
     "evaluate_kitti",
@@ -64,23 +62,6 @@ KITTI_UNAVAILABLE = {
 }
 
 
-def kitti_frame_ids(kitti_dir: str) -> list[str]:
-    """Frame ids with a Velodyne scan, a camera-2 image and a calibration file, sorted."""
-    vel = os.path.join(kitti_dir, "velodyne")
-    if not os.path.isdir(vel):
-        return []
-    ids = []
-    for name in sorted(os.listdir(vel)):
-        stem, ext = os.path.splitext(name)
-        if ext != ".bin":
-            continue
-        if os.path.isfile(os.path.join(kitti_dir, "image_2", stem + ".png")) and os.path.isfile(
-            os.path.join(kitti_dir, "calib", stem + ".txt")
-        ):
-            ids.append(stem)
-    return ids
-
-
 def kitti_predictions(
     xyz: np.ndarray, intensity: np.ndarray, rgb: np.ndarray, cam, model, pseudo_calibration=None
 ) -> dict[str, Any]:
@@ -90,7 +71,7 @@ def kitti_predictions(
         xyz: (N, 3) Velodyne points, m.
         intensity: (N,) Velodyne reflectance in [0, 1].
         rgb: (H, W, 3) uint8 camera-2 image.
-        cam: camera-2 :class:`~nidar_mi.nidar.projection.CameraModel`.
+        cam: camera-2 :class:`~nidar_mi.geometry.CameraModel`.
         model: :class:`~nidar_mi.nidar.pipeline.NidarModel` with its source calibration.
         pseudo_calibration: baseline (e)'s calibration (None skips it).
 
@@ -99,7 +80,7 @@ def kitti_predictions(
         M visible points; ``raw`` holds the uncalibrated branch values (``R``, ``I_hat``,
         ``luminance``, ``carla``) that the leave-one-out remap starts from.
     """
-    from ..nidar.projection import bilinear_sample, project
+    from ..geometry import bilinear_sample, project
 
     xyz = np.asarray(xyz, dtype=np.float64)
     maps = model.predict_image(rgb)
@@ -166,24 +147,26 @@ def evaluate_kitti(
     Raises:
         NidarError: no complete frame in ``kitti_dir``, or the model has no calibration.
     """
-    from ..cli.assign import load_kitti_frame
-    from ..nidar.frames import sparse_maps
+    from ..datasets.kitti import frame_ids, load_frame
+    from ..geometry import splat_points
 
-    ids = kitti_frame_ids(kitti_dir)
+    ids = frame_ids(kitti_dir)
     if not ids:
         raise NidarError(f"{kitti_dir}: no KITTI frame (velodyne/ID.bin + image_2 + calib)")
     if model.calibration is None:
         raise NidarError(f"{model.weights_dir}: no calibration.json beside the weights")
     frames, cams = [], []
     for fid in ids:
-        xyz, inten, rgb, cam = load_kitti_frame(kitti_dir, fid)
-        frames.append(kitti_predictions(xyz, inten, rgb, cam, model, pseudo_calibration))
-        cams.append(cam)
+        fr = load_frame(kitti_dir, fid)
+        frames.append(
+            kitti_predictions(fr.xyz, fr.intensity, fr.rgb, fr.camera, model, pseudo_calibration)
+        )
+        cams.append(fr.camera)
     loo_remap(frames, model.calibration)
     rows = []
     for fid, f, cam in zip(ids, frames, cams):
         keys = [k for k in KITTI_METHODS if k in f["pred"]]
-        maps, mask = sparse_maps(f["xyz"], {"gt": f["gt"], **{k: f["pred"][k] for k in keys}}, cam)
+        maps, mask = splat_points(f["xyz"], {"gt": f["gt"], **{k: f["pred"][k] for k in keys}}, cam)
         for k in keys:
             pm = point_metrics(f["pred"][k], f["gt"])
             mm = map_metrics(maps[k], maps["gt"], mask, lpips=lpips)

@@ -163,10 +163,11 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
         payload["groups"]["handmade"] = _group(res, "handmade", names, note)
         payload["figures"] += _figures(res, "handmade", fig_dir, args.figures)
     if args.kitti:
+        from ..datasets.kitti import frame_ids
         from .evaluate import mean_table
-        from .kitti import evaluate_kitti, kitti_frame_ids
+        from .kitti import evaluate_kitti
 
-        if not kitti_frame_ids(args.kitti):
+        if not frame_ids(args.kitti):
             msg = f"no KITTI frames at {args.kitti}"
             log.warning("skipping the real-data evaluation: %s", msg)
             payload["kitti"] = {"skipped": msg}

@@ -1,4 +1,4 @@
-"""File writers and readers: point sets, images, and atomic output.
+"""File writers and readers: point sets, images, camera calibration, and atomic output.
 
 Every writer creates parent directories and writes atomically (a temporary file renamed
 onto the target), so a failure never leaves a half-written file. Every reader raises
@@ -7,6 +7,7 @@ is missing or malformed. The points-dict schema is documented in :mod:`nidar_mi.
 """
 
 from .atomic import atomic_path, atomic_write_json, atomic_write_text, reading
+from .calib import camera_from_dict, camera_to_dict, load_calib, save_calib
 from .images import (
     linear_to_srgb,
     read_exr,
@@ -34,6 +35,10 @@ __all__ = [
     "atomic_write_json",
     "atomic_write_text",
     "reading",
+    "load_calib",
+    "save_calib",
+    "camera_from_dict",
+    "camera_to_dict",
     "linear_to_srgb",
     "srgb_to_linear",
     "write_png",

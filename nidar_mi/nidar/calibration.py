@@ -1,7 +1,7 @@
 """Source-domain distribution calibration: distance encoding and quantile remapping.
 
 This is §III.D of the NIDAR paper. A per-point branch value ``i`` (the reflectance-like ``R``
-branch sampled at the point; see :mod:`nidar_mi.nidar.projection`) is turned into an
+branch sampled at the point; see :mod:`nidar_mi.geometry.fusion`) is turned into an
 intensity in two steps, both fitted offline on the training split and then held fixed:
 
 1. **Distance encoding** (paper Eq. dist_encode), a first-order range attenuation::

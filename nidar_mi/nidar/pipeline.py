@@ -1,9 +1,9 @@
 """NIDAR end to end: camera images -> per-point LiDAR intensity.
 
 RGB -> STN pseudo-NIR -> IRNet (R, S, Î) -> the R branch sampled at each point by calibrated
-projection (:func:`nidar_mi.nidar.projection.assign`, occlusion test on) -> distance encoding and
-quantile remapping (:class:`nidar_mi.nidar.calibration.Calibration`). Points no camera sees get 0
-and ``observed = False``.
+projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on) -> distance
+encoding and quantile remapping (:class:`nidar_mi.nidar.calibration.Calibration`). Points no
+camera sees get 0 and ``observed = False``.
 
 A weights folder holds ``stn.safetensors``, ``irnet.safetensors``, ``config.json`` (written by
 ``python -m nidar_mi.train``) and ``calibration.json`` (written by
@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from ..geometry import CameraModel, sample_cameras
 from .calibration import Calibration
-from .projection import CameraModel, assign
 
 __all__ = [
     "NidarModel",
@@ -125,7 +125,7 @@ class NidarModel:
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
         maps = list(maps) if maps is not None else [self.predict_image(im) for im in images]
-        values, observed, cam_idx = assign(
+        values, observed, cam_idx = sample_cameras(
             xyz, cameras, [m[branch] for m in maps], depth_images=depth_images, occlusion=occlusion
         )
         if branch == "I_hat":

@@ -27,10 +27,10 @@ from nidar_mi.eval.evaluate import (
 )
 from nidar_mi.eval.heldout import twin_prediction
 from nidar_mi.eval.report import goal_check, markdown_table, write_csv, write_json
+from nidar_mi.geometry import CameraModel, bilinear_sample, project
 from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
-from nidar_mi.nidar.projection import CameraModel, bilinear_sample, project
 from nidar_mi.nidar.synthetic import write_synthetic_dataset
 
 

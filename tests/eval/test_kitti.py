@@ -13,7 +13,6 @@ from nidar_mi.eval.kitti import (
     KITTI_METHODS,
     KITTI_UNAVAILABLE,
     evaluate_kitti,
-    kitti_frame_ids,
     kitti_predictions,
 )
 from nidar_mi.io.images import write_png
@@ -67,22 +66,17 @@ def kitti_dir(tmp_path_factory):
     return root
 
 
-def test_frame_ids(kitti_dir, tmp_path):
-    assert kitti_frame_ids(str(kitti_dir)) == ["000000", "000001", "000002"]
-    assert kitti_frame_ids(str(tmp_path / "absent")) == []
-
-
 def test_rows_and_carla_by_hand(kitti_dir, model):
-    from nidar_mi.cli.assign import load_kitti_frame
+    from nidar_mi.datasets.kitti import load_frame
 
     res = evaluate_kitti(str(kitti_dir), model)
     assert res["frames"] == ["000000", "000001", "000002"]
     assert set(res["unavailable"]) == set(KITTI_UNAVAILABLE) == {"rgb_twin", "class_const"}
     methods = [k for k in KITTI_METHODS if k != "nidar_no_irnet"]  # no pseudo calibration
     assert [r["method"] for r in res["rows"] if r["scene"] == "000001"] == methods
-    xyz, inten, rgb, cam = load_kitti_frame(str(kitti_dir), "000001")
-    f = kitti_predictions(xyz, inten, rgb, cam, model)
-    assert f["gt"].size < xyz.shape[0]  # the point behind the camera is not evaluated
+    fr = load_frame(str(kitti_dir), "000001")
+    f = kitti_predictions(fr.xyz, fr.intensity, fr.rgb, fr.camera, model)
+    assert f["gt"].size < fr.xyz.shape[0]  # the point behind the camera is not evaluated
     d = np.exp(-0.004 * np.linalg.norm(f["xyz"], axis=1)) - f["gt"]
     row = next(r for r in res["rows"] if r["scene"] == "000001" and r["method"] == "carla")
     assert row["n_points"] == f["gt"].size
@@ -91,12 +85,11 @@ def test_rows_and_carla_by_hand(kitti_dir, model):
 
 
 def test_leave_one_out_uses_only_the_other_frames(kitti_dir, model):
-    from nidar_mi.cli.assign import load_kitti_frame
+    from nidar_mi.datasets.kitti import load_frame
     from nidar_mi.eval.kitti import loo_remap
 
-    frames = [
-        kitti_predictions(*load_kitti_frame(str(kitti_dir), f"{k:06d}"), model) for k in range(3)
-    ]
+    loaded = [load_frame(str(kitti_dir), f"{k:06d}") for k in range(3)]
+    frames = [kitti_predictions(fr.xyz, fr.intensity, fr.rgb, fr.camera, model) for fr in loaded]
     loo_remap(frames, model.calibration)
     enc = [model.calibration.encode(f["raw"]["R"], f["range"]) for f in frames]
     qmap = QuantileMap.fit(np.concatenate(enc[1:]), np.concatenate([f["gt"] for f in frames[1:]]))

@@ -1,10 +1,10 @@
-"""Camera calibration files: a small YAML/JSON schema and KITTI object ``calib/*.txt``.
+"""Camera-calibration files: a small YAML/JSON schema, and the renderer's own ``calib.json``.
 
 **YAML / JSON schema** (:func:`load_calib`, :func:`save_calib`). Either a top-level list of
 cameras or a mapping with key ``cameras`` holding that list. Each camera::
 
     name: front                 # optional label
-    K: [[fx, s, cx], [0, fy, cy], [0, 0, 1]]   # or the keys fx, fy, cx, cy (+ optional skew)
+    K: [[fx, s, cx], [0, fy, cy], [0, 0, 1]]   # pixels; or the keys fx, fy, cx, cy (+ optional skew)
     width: 1920                 # pixels
     height: 1280
     T_cam_lidar: [[...], [...], [...], [0, 0, 0, 1]]  # LiDAR -> camera, metres
@@ -13,14 +13,16 @@ cameras or a mapping with key ``cameras`` holding that list. Each camera::
 
 Matrices are row-major, nested (3x3, 4x4 or 3x4 with ``[0, 0, 0, 1]`` implied) or flat
 (9, 16 or 12 numbers). Intrinsics follow the pixel convention of
-:mod:`nidar_mi.nidar.projection` (pixel centres at integer coordinates).
+:mod:`nidar_mi.geometry.camera_model` (pixel centres at integer coordinates).
 
-**KITTI** (:func:`load_kitti_calib`): the object-detection calib files with ``P0..P3``
-(3x4), ``R0_rect`` (3x3) and ``Tr_velo_to_cam`` (3x4). The rectified camera ``n`` maps
-``x_img ~ P_n R0_rect Tr_velo_to_cam x_velo``. ``P_n = [K | p]`` carries the stereo baseline
-in ``p``; since ``K`` is invertible, ``P_n = K [I | K^{-1} p]``, so the model is exactly
-``K`` with extrinsic ``[I | K^{-1} p] R0_rect Tr_velo_to_cam`` (and the depth equals the
-homogeneous coordinate of ``P_n R0_rect Tr_velo_to_cam x_velo``).
+**Renderer calib.json** (:func:`load_calib` only). ``python -m nidar_mi.render`` writes
+``OUT/<camera>/calib.json``: one camera as a mapping with ``convention``, ``width``,
+``height``, ``K``, ``T_world_cam`` and ``T_cam_lidar`` mapping each LiDAR id of the scene to
+its (4, 4) LiDAR -> camera transform (plus ``nir_wavelength_nm`` and ``png_exposure``, not
+used here). Its camera takes the name of the folder holding the file and the
+``T_cam_lidar`` of the scene's only LiDAR, or of the one named by ``lidar=``.
+
+KITTI calib files are read by :func:`nidar_mi.datasets.kitti.load_kitti_calib`.
 """
 
 from __future__ import annotations
@@ -35,20 +37,10 @@ import numpy as np
 import yaml
 
 from nidar_mi.errors import NidarError
+from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.atomic import atomic_write_text
-from nidar_mi.nidar.projection import CameraModel
 
-__all__ = [
-    "KITTI_IMAGE_SIZE",
-    "camera_from_dict",
-    "camera_to_dict",
-    "load_calib",
-    "load_kitti_calib",
-    "save_calib",
-]
-
-KITTI_IMAGE_SIZE = (1242, 375)
-"""(width, height) of most KITTI object ``image_2`` frames; some are a few pixels smaller."""
+__all__ = ["camera_from_dict", "camera_to_dict", "load_calib", "save_calib"]
 
 
 def _matrix(value: Any, shapes: Sequence[tuple[int, int]], what: str) -> np.ndarray:
@@ -127,13 +119,52 @@ def camera_to_dict(cam: CameraModel) -> dict[str, Any]:
     }
 
 
-def load_calib(path: str | os.PathLike[str]) -> list[CameraModel]:
+def _is_render_calib(data: Any) -> bool:
+    return (
+        isinstance(data, Mapping)
+        and "cameras" not in data
+        and isinstance(data.get("T_cam_lidar"), Mapping)
+    )
+
+
+def _render_camera(data: Mapping[str, Any], path: Path, lidar: str | None) -> CameraModel:
+    """The camera of a renderer ``calib.json`` (see the module docstring)."""
+    poses = data["T_cam_lidar"]
+    ids = sorted(str(k) for k in poses)
+    if lidar is None:
+        if len(ids) != 1:
+            listed = ", ".join(ids) if ids else "none"
+            raise NidarError(
+                f"{path}: T_cam_lidar has {len(ids)} LiDARs ({listed}); choose one with lidar="
+            )
+        lidar = ids[0]
+    elif lidar not in poses:
+        raise NidarError(f"{path}: no LiDAR {lidar!r} in T_cam_lidar (has {', '.join(ids)})")
+    entry = {k: data[k] for k in ("K", "width", "height", "convention") if k in data}
+    entry["T_cam_lidar"] = poses[lidar]
+    entry["name"] = path.parent.name
+    return camera_from_dict(entry, f"{path}: LiDAR {lidar!r}")
+
+
+def load_calib(path: str | os.PathLike[str], *, lidar: str | None = None) -> list[CameraModel]:
     """Read cameras from a YAML or JSON file (schema in the module docstring).
 
-    ``.json`` files are parsed as JSON, anything else with ``yaml.safe_load``.
+    ``.json`` files are parsed as JSON, anything else with ``yaml.safe_load``. A renderer
+    ``calib.json`` (a mapping whose ``T_cam_lidar`` maps LiDAR ids to transforms) gives one
+    camera, named after the file's folder, with the extrinsic of its only LiDAR or of
+    ``lidar``.
+
+    Args:
+        path: the calibration file.
+        lidar: LiDAR id, for a renderer ``calib.json`` of a scene with several LiDARs.
+
+    Returns:
+        The cameras, in file order.
 
     Raises:
-        NidarError: unreadable file, syntax error or schema violation (one-line message).
+        NidarError: unreadable file, syntax error, schema violation, ``lidar`` given for a
+            file that is not a renderer ``calib.json``, or a LiDAR that is missing or
+            ambiguous (one-line message).
     """
     path = Path(path)
     try:
@@ -145,6 +176,10 @@ def load_calib(path: str | os.PathLike[str]) -> list[CameraModel]:
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
         msg = " ".join(str(exc).split())
         raise NidarError(f"{path}: cannot parse camera calibration: {msg}") from None
+    if _is_render_calib(data):
+        return [_render_camera(data, path, lidar)]
+    if lidar is not None:
+        raise NidarError(f"{path}: lidar= applies to a renderer calib.json only")
     if isinstance(data, Mapping):
         data = data.get("cameras")
     if not isinstance(data, list) or not data:
@@ -166,76 +201,3 @@ def save_calib(path: str | os.PathLike[str], cameras: Sequence[CameraModel]) -> 
     else:
         text = yaml.safe_dump(data, sort_keys=False)
     atomic_write_text(path, text)
-
-
-_KITTI_ALIASES = {"R_rect": "R0_rect", "Tr_velo_cam": "Tr_velo_to_cam"}
-
-
-def _parse_kitti(path: Path) -> dict[str, np.ndarray]:
-    try:
-        lines = path.read_text(encoding="ascii").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise NidarError(f"{path}: cannot read KITTI calibration: {exc}") from None
-    entries: dict[str, np.ndarray] = {}
-    for n, line in enumerate(lines, start=1):
-        if not line.strip():
-            continue
-        key, sep, rest = line.partition(":")
-        if not sep:
-            raise NidarError(f"{path}:{n}: expected 'KEY: numbers'")
-        try:
-            values = np.array([float(x) for x in rest.split()])
-        except ValueError:
-            raise NidarError(f"{path}:{n}: non-numeric value in {key.strip()!r}") from None
-        key = key.strip()
-        entries[_KITTI_ALIASES.get(key, key)] = values
-    return entries
-
-
-def load_kitti_calib(
-    path: str | os.PathLike[str],
-    camera: str = "P2",
-    *,
-    width: int = KITTI_IMAGE_SIZE[0],
-    height: int = KITTI_IMAGE_SIZE[1],
-) -> CameraModel:
-    """Rectified KITTI camera model from an object-detection ``calib/*.txt`` file.
-
-    Args:
-        path: the calib file.
-        camera: ``"P0"``..``"P3"`` (``"P2"`` is the left colour camera, ``image_2``).
-        width: image width in pixels (KITTI frames vary slightly; read it from the image).
-        height: image height in pixels.
-
-    Returns:
-        An ``"opencv"`` :class:`CameraModel` whose projection equals
-        ``P_camera R0_rect Tr_velo_to_cam`` exactly (see the module docstring).
-
-    Raises:
-        NidarError: missing keys, wrong sizes or a ``P`` matrix that is not ``[K | p]``.
-    """
-    path = Path(path)
-    if camera not in ("P0", "P1", "P2", "P3"):
-        raise NidarError(f"load_kitti_calib: camera must be P0..P3, not {camera!r}")
-    entries = _parse_kitti(path)
-    sizes = {camera: 12, "R0_rect": 9, "Tr_velo_to_cam": 12}
-    for key, size in sizes.items():
-        if key not in entries:
-            raise NidarError(f"{path}: missing {key!r}")
-        if entries[key].size != size:
-            raise NidarError(f"{path}: {key} has {entries[key].size} numbers, expected {size}")
-    P = entries[camera].reshape(3, 4)
-    K = P[:, :3]
-    if not (np.array_equal(K[2], [0.0, 0.0, 1.0]) and K[1, 0] == 0.0):
-        raise NidarError(f"{path}: {camera} is not of the form [K | p] with K upper triangular")
-    R0 = np.eye(4)
-    R0[:3, :3] = entries["R0_rect"].reshape(3, 3)
-    Tr = _homogeneous(entries["Tr_velo_to_cam"].reshape(3, 4))
-    baseline = np.eye(4)
-    baseline[:3, 3] = np.linalg.solve(K, P[:, 3])
-    T = baseline @ R0 @ Tr
-    T[3] = [0.0, 0.0, 0.0, 1.0]
-    try:
-        return CameraModel(K=K, width=width, height=height, T_cam_lidar=T, name=camera)
-    except NidarError as exc:
-        raise NidarError(f"{path}: {exc}") from None

@@ -1,8 +1,7 @@
-"""Tests for nidar_mi.nidar.cameras (YAML/JSON camera files, KITTI calib files)."""
+"""Tests for nidar_mi.datasets.kitti (calib files, frame ids, whole frames)."""
 
 from __future__ import annotations
 
-import json
 import os
 import struct
 from pathlib import Path
@@ -10,9 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nidar_mi.datasets.kitti import (
+    KITTI_IMAGE_SIZE,
+    KittiFrame,
+    frame_ids,
+    load_frame,
+    load_kitti_calib,
+)
 from nidar_mi.errors import NidarError
-from nidar_mi.nidar.cameras import load_calib, load_kitti_calib, save_calib
-from nidar_mi.nidar.projection import CameraModel, in_image, project
+from nidar_mi.geometry import in_image, project
+from nidar_mi.io.images import write_png
+from nidar_mi.io.points import write_kitti_bin
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -31,124 +38,7 @@ def _png_size(path: Path) -> tuple[int, int]:
     return struct.unpack(">II", header[16:24])
 
 
-def _rot_z(deg: float) -> np.ndarray:
-    c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-# --- YAML / JSON ------------------------------------------------------------------------
-
-
-def test_load_calib_yaml_with_matrices(tmp_path):
-    path = tmp_path / "rig.yaml"
-    path.write_text(
-        """
-cameras:
-  - name: front
-    K: [[700, 0, 640], [0, 710, 360], [0, 0, 1]]
-    width: 1280
-    height: 720
-    T_cam_lidar: [[0, -1, 0, 0.1], [0, 0, -1, 0.2], [1, 0, 0, 0.3], [0, 0, 0, 1]]
-"""
-    )
-    (cam,) = load_calib(path)
-    assert (cam.name, cam.width, cam.height, cam.convention) == ("front", 1280, 720, "opencv")
-    assert cam.K[1, 1] == 710.0 and cam.K[0, 2] == 640.0
-    # a point 10 m ahead of the LiDAR: camera coordinates (0.1, 0.2, 10.3)
-    uv, depth, _ = project(np.array([[10.0, 0.0, 0.0]]), cam)
-    assert depth[0] == pytest.approx(10.3)
-    np.testing.assert_allclose(uv[0], [640 + 700 * 0.1 / 10.3, 360 + 710 * 0.2 / 10.3])
-
-
-def test_load_calib_json_intrinsics_and_inverse_extrinsic(tmp_path):
-    R = _rot_z(30.0)
-    T_lidar_cam = np.eye(4)
-    T_lidar_cam[:3, :3], T_lidar_cam[:3, 3] = R, [1.5, -0.2, 2.0]
-    data = [
-        {
-            "fx": 2000.0,
-            "fy": 2001.0,
-            "cx": 960.0,
-            "cy": 640.0,
-            "width": 1920,
-            "height": 1280,
-            "T_lidar_cam": T_lidar_cam[:3].ravel().tolist(),  # flat 3x4
-            "convention": "waymo",
-        }
-    ]
-    path = tmp_path / "rig.json"
-    path.write_text(json.dumps(data))
-    (cam,) = load_calib(path)
-    assert cam.convention == "waymo" and cam.name == ""
-    np.testing.assert_allclose(cam.K, [[2000, 0, 960], [0, 2001, 640], [0, 0, 1]])
-    np.testing.assert_allclose(cam.T_cam_lidar @ T_lidar_cam, np.eye(4), atol=1e-12)
-    # the camera centre sits at the translation of T_lidar_cam: depth of a point 10 m
-    # along the camera's forward axis (LiDAR x rotated by 30 deg) is 10 m
-    p = T_lidar_cam[:3, 3] + 10.0 * R[:, 0]
-    uv, depth, _ = project(p[None], cam)
-    assert depth[0] == pytest.approx(10.0)
-    np.testing.assert_allclose(uv[0], [960.0, 640.0], atol=1e-9)
-
-
-@pytest.mark.parametrize("suffix", [".yaml", ".json"])
-def test_save_load_round_trip(tmp_path, suffix):
-    rng = np.random.default_rng(0)
-    cams = []
-    for k, conv in enumerate(["opencv", "waymo"]):
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = _rot_z(rng.uniform(0, 360)), rng.normal(size=3)
-        K = [[rng.uniform(300, 900), 0.5, 320.25], [0, rng.uniform(300, 900), 240.75], [0, 0, 1]]
-        cams.append(CameraModel(K, 640 + k, 480, T, conv, f"cam{k}"))
-    path = tmp_path / f"rig{suffix}"
-    save_calib(path, cams)
-    back = load_calib(path)
-    assert [c.name for c in back] == ["cam0", "cam1"]
-    for a, b in zip(cams, back, strict=True):
-        np.testing.assert_array_equal(a.K, b.K)
-        np.testing.assert_array_equal(a.T_cam_lidar, b.T_cam_lidar)
-        assert (a.width, a.height, a.convention) == (b.width, b.height, b.convention)
-
-
-@pytest.mark.parametrize(
-    ("text", "message"),
-    [
-        (
-            "cameras: [{K: [[1,0,0],[0,1,0],[0,0,1]], height: 2, T_cam_lidar: "
-            "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]",
-            "missing 'width'",
-        ),
-        (
-            "- {fx: 1, fy: 1, cx: 0, width: 2, height: 2, T_cam_lidar: [1,0,0,0,0,1,0,0,0,0,1,0]}",
-            "missing cy",
-        ),
-        ("- {fx: 1, fy: 1, cx: 0, cy: 0, width: 2, height: 2}", "exactly one"),
-        (
-            "- {fx: 1, fy: 1, cx: 0, cy: 0, width: 2, height: 2, T_cam_lidar: [1, 2, 3]}",
-            "4x4 or 3x4",
-        ),
-        (
-            "- {fx: 1, fy: 1, cx: 0, cy: 0, width: 2, height: 2, convention: ros, "
-            "T_cam_lidar: [1,0,0,0,0,1,0,0,0,0,1,0]}",
-            "convention",
-        ),
-        ("cameras: {front: 1}", "non-empty list"),
-        ("cameras: [\n  {a: 1\n", "cannot parse"),
-    ],
-)
-def test_load_calib_errors_are_one_line(tmp_path, text, message):
-    path = tmp_path / "rig.yaml"
-    path.write_text(text)
-    with pytest.raises(NidarError, match=message) as info:
-        load_calib(path)
-    assert "\n" not in str(info.value) and str(path) in str(info.value)
-
-
-def test_load_calib_missing_file(tmp_path):
-    with pytest.raises(NidarError, match="cannot read"):
-        load_calib(tmp_path / "nope.yaml")
-
-
-# --- KITTI ------------------------------------------------------------------------------
+# --- calib files ------------------------------------------------------------------------
 
 _SYNTHETIC_KITTI = """P0: 7.0e+02 0 6.0e+02 0 0 7.0e+02 1.8e+02 0 0 0 1 0
 P1: 7.0e+02 0 6.0e+02 -3.8e+02 0 7.0e+02 1.8e+02 0 0 0 1 0
@@ -232,10 +122,20 @@ def test_kitti_real_frames_project_into_image_2():
         pts = scan[:, :3].astype(np.float64)
         uv, depth, in_front = project(pts, cam)
         inside = in_image(uv, cam) & in_front
-        # HDL-64E (360 deg) vs a ~82 deg camera: measured 15.5-17.6 % of a scan lands in
-        # image_2, i.e. about 1/3 of the points in front of the camera.
-        assert 0.12 < inside.mean() < 0.22, frame
+        # a ~82 deg camera sees about 1/3 of the points in front of it: measured 30.5-36.3 %
+        # on the six shared frames, full scans and front halves alike
         assert 0.25 < inside.sum() / in_front.sum() < 0.45, frame
+        if pts[:, 0].min() > 0:
+            # a KITTI raw frame whose cloud was cut to LiDAR x > 0 (see the data's README):
+            # nothing is left behind the camera, so the share of the whole cloud in image_2
+            # is the share of the points in front of it (33 % measured), twice a full scan's
+            assert in_front.all(), frame
+            assert 0.25 < inside.mean() < 0.45, frame
+        else:
+            # a full HDL-64E scan (360 deg): about half of it is in front of the camera
+            # (46-53 % measured) and 15.5-17.6 % lands in image_2
+            assert 0.4 < in_front.mean() < 0.6, frame
+            assert 0.12 < inside.mean() < 0.22, frame
         # the points that land in the image are ahead of the car (LiDAR x > 0)
         assert (pts[inside, 0] > 0).all()
         # independent check against P2 . R0_rect . Tr_velo_to_cam
@@ -245,3 +145,75 @@ def test_kitti_real_frames_project_into_image_2():
         np.testing.assert_allclose(depth_s, w_ref, rtol=1e-9, atol=1e-9)
         ok = w_ref > 0.5
         np.testing.assert_allclose(uv_s[ok], uv_ref[ok], rtol=1e-9, atol=1e-6)
+
+
+def test_kitti_real_frames_load_whole():
+    root = _kitti_dir()
+    ids = frame_ids(root)
+    assert ids == sorted(p.stem for p in (root / "calib").glob("*.txt"))
+    for fid in ids:
+        frame = load_frame(root, fid)
+        n = (root / "velodyne" / f"{fid}.bin").stat().st_size // 16
+        assert frame.frame_id == fid and frame.camera.name == "P2"
+        assert frame.xyz.shape == (n, 3) and frame.xyz.dtype == np.float32
+        assert frame.intensity.shape == (n,) and frame.intensity.dtype == np.float32
+        assert 0.0 <= frame.intensity.min() and frame.intensity.max() <= 1.0
+        width, height = _png_size(root / "image_2" / f"{fid}.png")
+        assert frame.rgb.shape == (height, width, 3) and frame.rgb.dtype == np.uint8
+        assert (frame.camera.width, frame.camera.height) == (width, height)
+
+
+# --- frames -----------------------------------------------------------------------------
+
+
+@pytest.fixture()
+def kitti_dir(tmp_path):
+    """Two complete frames (an image of a non-default size), and three incomplete ones."""
+    root = tmp_path / "kitti"
+    for sub in ("velodyne", "image_2", "calib"):
+        (root / sub).mkdir(parents=True)
+    rng = np.random.default_rng(5)
+    for fid, (h, w) in (("000004", (12, 20)), ("000001", (10, 16))):
+        xyz = rng.uniform(-20.0, 20.0, (50, 3)).astype(np.float32)
+        write_kitti_bin(root / "velodyne" / f"{fid}.bin", xyz, rng.uniform(0.0, 1.0, 50))
+        write_png(root / "image_2" / f"{fid}.png", rng.integers(0, 256, (h, w, 3), np.uint8))
+        (root / "calib" / f"{fid}.txt").write_text(_SYNTHETIC_KITTI)
+    one = (np.zeros((1, 3), np.float32), np.zeros(1))
+    write_kitti_bin(root / "velodyne" / "000002.bin", *one)  # no image, no calib
+    write_kitti_bin(root / "velodyne" / "000003.bin", *one)  # no calib
+    write_png(root / "image_2" / "000003.png", np.zeros((10, 16, 3), np.uint8))
+    (root / "calib" / "000005.txt").write_text(_SYNTHETIC_KITTI)  # no scan
+    (root / "velodyne" / "notes.txt").write_text("not a scan")
+    return root
+
+
+def test_frame_ids_lists_complete_frames_sorted(kitti_dir, tmp_path):
+    assert frame_ids(kitti_dir) == ["000001", "000004"]
+    assert frame_ids(str(kitti_dir)) == ["000001", "000004"]
+    assert frame_ids(tmp_path / "absent") == []
+
+
+def test_load_frame(kitti_dir):
+    from nidar_mi.io.points import read_kitti_bin
+
+    frame = load_frame(kitti_dir, "000004")
+    assert isinstance(frame, KittiFrame) and frame.frame_id == "000004"
+    xyz, intensity = read_kitti_bin(kitti_dir / "velodyne" / "000004.bin")
+    np.testing.assert_array_equal(frame.xyz, xyz)
+    np.testing.assert_array_equal(frame.intensity, intensity)
+    assert frame.rgb.shape == (12, 20, 3) and frame.rgb.dtype == np.uint8
+    # camera P2 at the image's size, not the default KITTI size
+    assert (frame.camera.width, frame.camera.height) == (20, 12) != KITTI_IMAGE_SIZE
+    reference = load_kitti_calib(kitti_dir / "calib" / "000004.txt", "P2", width=20, height=12)
+    np.testing.assert_array_equal(frame.camera.K, reference.K)
+    np.testing.assert_array_equal(frame.camera.T_cam_lidar, reference.T_cam_lidar)
+
+
+@pytest.mark.parametrize(
+    ("frame_id", "message"),
+    [("000002", "missing image file"), ("000003", "missing calib file"), ("000005", "velodyne")],
+)
+def test_load_frame_names_the_missing_file(kitti_dir, frame_id, message):
+    with pytest.raises(NidarError, match=message) as info:
+        load_frame(kitti_dir, frame_id)
+    assert f"KITTI frame {frame_id}" in str(info.value) and "\n" not in str(info.value)

@@ -1,0 +1,42 @@
+"""Camera geometry shared by simulation, learning and evaluation.
+
+* :mod:`~nidar_mi.geometry.camera_model`: :class:`CameraModel` (pinhole intrinsics ``K`` in
+  pixels, LiDAR-to-camera extrinsic in metres) and the camera-axis and pixel conventions.
+* :mod:`~nidar_mi.geometry.projection`: :func:`project`, :func:`unproject`,
+  :func:`in_image`, :func:`bilinear_sample`.
+* :mod:`~nidar_mi.geometry.visibility`: :func:`visible_mask` (occlusion against a rendered
+  depth image or the cloud's own z-buffer) and :func:`splat_points` (points to a sparse
+  pixel map, nearest point wins).
+* :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
+  cameras, fused by a rule).
+
+Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are in metres.
+"""
+
+from .camera_model import CONVENTIONS, R_OPENCV_FROM_WAYMO, CameraModel
+from .fusion import FUSION_RULES, sample_cameras
+from .projection import bilinear_sample, in_image, project, unproject
+from .visibility import (
+    DEFAULT_ABS_TOL,
+    DEFAULT_REL_TOL,
+    DEFAULT_ZBUFFER_CELL,
+    splat_points,
+    visible_mask,
+)
+
+__all__ = [
+    "CONVENTIONS",
+    "DEFAULT_ABS_TOL",
+    "DEFAULT_REL_TOL",
+    "DEFAULT_ZBUFFER_CELL",
+    "FUSION_RULES",
+    "R_OPENCV_FROM_WAYMO",
+    "CameraModel",
+    "bilinear_sample",
+    "in_image",
+    "project",
+    "sample_cameras",
+    "splat_points",
+    "unproject",
+    "visible_mask",
+]
