@@ -134,8 +134,8 @@ def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
 
 def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dict]:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
+    from .io.calib import render_camera
     from .nidar.pipeline import NidarModel
-    from .geometry import CameraModel
 
     if not run.renders:
         raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
@@ -145,8 +145,7 @@ def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dic
     for lid, result in run.results.items():
         cams, depth, cam_maps = [], [], []
         for cid, (r, calib) in run.renders.items():
-            T = np.array(calib["T_cam_lidar"][lid])
-            cams.append(CameraModel(r.K, calib["width"], calib["height"], T, name=cid))
+            cams.append(render_camera(calib, cid, lid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
         res = model.point_intensity(

@@ -1,4 +1,5 @@
-"""The import graph of the package: no module imports itself back through others.
+"""The import graph of the package: no module imports itself back through others, and every
+import points down the layers of docs/ARCHITECTURE.md.
 
 Every ``import`` statement counts, at module level or inside a function (a deferred import is
 still a dependency), except those under ``if TYPE_CHECKING:`` and a module's
@@ -131,3 +132,51 @@ def test_cycle_finder_finds_a_cycle():
 
 def test_no_import_cycles_in_the_package():
     assert cycles(import_graph()) == []
+
+
+#: First component below ``nidar_mi`` -> layer (0 low, 1 middle, 2 top); docs/ARCHITECTURE.md.
+LAYERS = {
+    **dict.fromkeys(
+        ("errors", "backend", "illumination", "io", "geometry", "lidar", "materials"), 0
+    ),
+    **dict.fromkeys(("datasets", "plugins"), 0),
+    **dict.fromkeys(
+        ("scene", "camera", "render_folder", "simulate", "dataset", "nidar", "scenegen"), 1
+    ),
+    "studies": 1,
+    **dict.fromkeys(("eval", "cli"), 2),
+}
+#: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
+SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate"}
+
+
+def _component(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def _is_entry_point(module: str) -> bool:
+    return _component(module) in SHIMS or module.endswith("__main__") or module == "nidar_mi"
+
+
+def test_every_module_has_a_layer():
+    graph = import_graph()
+    assert {_component(m) for m in graph if not _is_entry_point(m)} - set(LAYERS) == set()
+
+
+def test_imports_point_down_the_layers():
+    offences = []
+    for module, deps in import_graph().items():
+        if _is_entry_point(module):
+            continue
+        own = LAYERS[_component(module)]
+        for dep in deps:
+            if dep == "nidar_mi" or not _component(dep):
+                continue
+            if _is_entry_point(dep):
+                offences.append(f"{module} imports the entry point {dep}")
+            elif _component(dep) == "cli" and _component(module) != "cli":
+                offences.append(f"{module} imports the command line ({dep})")
+            elif LAYERS[_component(dep)] > own:
+                offences.append(f"{module} (layer {own}) imports {dep}")
+    assert offences == []

@@ -91,50 +91,49 @@ def main(argv=None) -> int:
 
 
 def _assign(args) -> None:
-    if True:
-        formats = [f.strip() for f in args.formats.split(",") if f.strip()]
-        if not formats or any(f not in FORMATS for f in formats):
-            raise NidarError(f"--formats: choose from {', '.join(FORMATS)} (got '{args.formats}')")
-        if args.kitti:
-            if not args.frame:
-                raise NidarError("--kitti needs --frame")
-            from ..datasets.kitti import load_frame
+    formats = [f.strip() for f in args.formats.split(",") if f.strip()]
+    if not formats or any(f not in FORMATS for f in formats):
+        raise NidarError(f"--formats: choose from {', '.join(FORMATS)} (got '{args.formats}')")
+    if args.kitti:
+        if not args.frame:
+            raise NidarError("--kitti needs --frame")
+        from ..datasets.kitti import load_frame
 
-            frame = load_frame(args.kitti, args.frame)
-            cameras, images, name = [frame.camera], [frame.rgb], f"kitti_{args.frame}"
-            points = {"xyz": frame.xyz, "intensity": frame.intensity}
-        else:
-            if not (args.points and args.calib and args.image):
-                raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
-            from ..io.calib import load_calib
-            from ..io.images import read_png
-            from ..io.point_cloud import read_point_cloud
+        frame = load_frame(args.kitti, args.frame)
+        cameras, images, name = [frame.camera], [frame.rgb], f"kitti_{args.frame}"
+        points = {"xyz": frame.xyz, "intensity": frame.intensity}
+    else:
+        if not (args.points and args.calib and args.image):
+            raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
+        from ..io.calib import load_calib
+        from ..io.images import read_png
+        from ..io.point_cloud import read_point_cloud
 
-            cloud = read_point_cloud(args.points)
-            cameras = load_calib(args.calib)
-            if len(cameras) != len(args.image):
-                raise NidarError(
-                    f"{args.calib} has {len(cameras)} cameras but {len(args.image)} --image given"
-                )
-            images = [read_png(im)[..., :3] for im in args.image]
-            if any(im.dtype != np.uint8 for im in images):
-                raise NidarError("--image: 8-bit images expected")
-            points = {"xyz": np.asarray(cloud["xyz"], dtype=np.float32)}
-            if "intensity" in cloud:
-                points["intensity"] = np.asarray(cloud["intensity"], dtype=np.float32)
-            name = os.path.splitext(os.path.basename(args.points))[0]
-        points.update(
-            assign_intensity(
-                points["xyz"],
-                cameras,
-                images,
-                weights=args.weights,
-                occlusion=not args.no_occlusion,
-                branch=args.branch,
+        cloud = read_point_cloud(args.points)
+        cameras = load_calib(args.calib)
+        if len(cameras) != len(args.image):
+            raise NidarError(
+                f"{args.calib} has {len(cameras)} cameras but {len(args.image)} --image given"
             )
+        images = [read_png(im)[..., :3] for im in args.image]
+        if any(im.dtype != np.uint8 for im in images):
+            raise NidarError("--image: 8-bit images expected")
+        points = {"xyz": np.asarray(cloud["xyz"], dtype=np.float32)}
+        if "intensity" in cloud:
+            points["intensity"] = np.asarray(cloud["intensity"], dtype=np.float32)
+        name = os.path.splitext(os.path.basename(args.points))[0]
+    points.update(
+        assign_intensity(
+            points["xyz"],
+            cameras,
+            images,
+            weights=args.weights,
+            occlusion=not args.no_occlusion,
+            branch=args.branch,
         )
-        out = args.out or os.path.join("out", "assign", name)
-        written = _write(out, points, formats, args.overwrite)
+    )
+    out = args.out or os.path.join("out", "assign", name)
+    written = _write(out, points, formats, args.overwrite)
     n, seen = len(points["xyz"]), int(points["nidar_observed"].sum())
     print(
         f"{seen} of {n} points seen by a camera ({100.0 * seen / max(n, 1):.1f} %); wrote {', '.join(written)}"

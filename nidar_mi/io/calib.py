@@ -40,7 +40,7 @@ from nidar_mi.errors import NidarError
 from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.atomic import atomic_write_text
 
-__all__ = ["camera_from_dict", "camera_to_dict", "load_calib", "save_calib"]
+__all__ = ["render_camera", "camera_from_dict", "camera_to_dict", "load_calib", "save_calib"]
 
 
 def _matrix(value: Any, shapes: Sequence[tuple[int, int]], what: str) -> np.ndarray:
@@ -127,8 +127,21 @@ def _is_render_calib(data: Any) -> bool:
     )
 
 
-def _render_camera(data: Mapping[str, Any], path: Path, lidar: str | None) -> CameraModel:
-    """The camera of a renderer ``calib.json`` (see the module docstring)."""
+def render_camera(
+    data: Mapping[str, Any], name: str, lidar: str | None = None, where: str | None = None
+) -> CameraModel:
+    """The camera model of a renderer ``calib.json`` (or its manifest entry) for one LiDAR.
+
+    Args:
+        data: the calib.json mapping (``K``, ``width``, ``height``, ``T_cam_lidar`` per LiDAR).
+        name: the camera's name (its folder).
+        lidar: the LiDAR whose extrinsic is used; None: the only one.
+        where: what to name in error messages (default: ``name``).
+
+    Raises:
+        NidarError: no such LiDAR, several without ``lidar``, or a malformed entry.
+    """
+    path = where or name
     poses = data["T_cam_lidar"]
     ids = sorted(str(k) for k in poses)
     if lidar is None:
@@ -142,7 +155,7 @@ def _render_camera(data: Mapping[str, Any], path: Path, lidar: str | None) -> Ca
         raise NidarError(f"{path}: no LiDAR {lidar!r} in T_cam_lidar (has {', '.join(ids)})")
     entry = {k: data[k] for k in ("K", "width", "height", "convention") if k in data}
     entry["T_cam_lidar"] = poses[lidar]
-    entry["name"] = path.parent.name
+    entry["name"] = name
     return camera_from_dict(entry, f"{path}: LiDAR {lidar!r}")
 
 
@@ -177,7 +190,7 @@ def load_calib(path: str | os.PathLike[str], *, lidar: str | None = None) -> lis
         msg = " ".join(str(exc).split())
         raise NidarError(f"{path}: cannot parse camera calibration: {msg}") from None
     if _is_render_calib(data):
-        return [_render_camera(data, path, lidar)]
+        return [render_camera(data, path.parent.name, lidar, str(path))]
     if lidar is not None:
         raise NidarError(f"{path}: lidar= applies to a renderer calib.json only")
     if isinstance(data, Mapping):
