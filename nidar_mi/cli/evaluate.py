@@ -15,7 +15,7 @@ real KITTI frames, and the ablations.
 
 Writes ``OUT/results.md``, ``OUT/results.csv`` (one row per frame and method, plus ``mean``
 rows), ``OUT/results.json`` and ``OUT/figures/*.png`` (no figure of KITTI frames). See
-:mod:`nidar_mi.eval.evaluate` for the methods and the metric scale.
+:mod:`nidar_mi.eval.frames` for the methods and the metric scale.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
 * :mod:`~nidar_mi.eval.baselines`: RGB-asset physics (the RGB-only twin), luminance as ρ,
   a constant per class, CARLA's exponential.
 
-* :mod:`~nidar_mi.eval.evaluate` / :mod:`~nidar_mi.eval.heldout`: every method's prediction on
+* :mod:`~nidar_mi.eval.frames` / :mod:`~nidar_mi.eval.heldout`: every method's prediction on
   the camera-visible returns of rendered frames, and their metric tables.
 * :mod:`~nidar_mi.eval.kitti`: real KITTI frames (zero-shot and leave-one-out remap).
 * :mod:`~nidar_mi.eval.ablation`: the paper's IRNet structure and pseudo-NIR-vs-RGB ablations.

@@ -4,7 +4,7 @@
 * :func:`twin_prediction`: baseline (a) at a frame's points from the RGB-twin scan.
 * :func:`render_scenes`: cached renders of scene files (the hand-made scenes).
 * :func:`evaluate_renders`: every frame of a set of rendered scenes through
-  :func:`~nidar_mi.eval.evaluate.predict_frame` and :func:`~nidar_mi.eval.evaluate.evaluate_frame`.
+  :func:`~nidar_mi.eval.frames.predict_frame` and :func:`~nidar_mi.eval.frames.evaluate_frame`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import NidarError
 from .baselines import ClassConstant
-from .evaluate import (
+from .frames import (
     FrameData,
     FrameResult,
     evaluate_frame,

@@ -1,7 +1,7 @@
 """The whole evaluation behind ``python -m nidar_mi.evaluate``: every group, tables, figures.
 
 Held-out generated scenes (a dataset's ``test`` split), hand-made scene files, real KITTI frames
-and the IRNet ablations, each scored with :mod:`nidar_mi.eval.evaluate`; the results are written
+and the IRNet ablations, each scored with :mod:`nidar_mi.eval.frames`; the results are written
 as ``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of KITTI frames).
 """
 
@@ -21,7 +21,7 @@ log = logging.getLogger("nidar_mi.evaluate")
 
 
 def _group(results, name: str, scenes: list[str], note: str = "") -> dict:
-    from .evaluate import mean_table, result_rows
+    from .frames import mean_table, result_rows
 
     rows = result_rows(results, name)
     return {"scenes": scenes, "rows": rows, "mean": mean_table(rows), "note": note}
@@ -30,7 +30,7 @@ def _group(results, name: str, scenes: list[str], note: str = "") -> dict:
 def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     import numpy as np
 
-    from .evaluate import METHOD_LABELS
+    from .frames import METHOD_LABELS
     from .figures import maps_figure, scatter_figure
 
     paths = []
@@ -164,7 +164,7 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
         payload["figures"] += _figures(res, "handmade", fig_dir, args.figures)
     if args.kitti:
         from ..datasets.kitti import frame_ids
-        from .evaluate import mean_table
+        from .frames import mean_table
         from .kitti import evaluate_kitti
 
         if not frame_ids(args.kitti):
@@ -199,7 +199,7 @@ KITTI_LABELS = {
 
 def _write(out: str, payload: dict) -> None:
     from . import report
-    from .evaluate import METHOD_LABELS
+    from .frames import METHOD_LABELS
 
     labels = METHOD_LABELS | KITTI_LABELS
     titles = {"generated": "Held-out generated scenes", "handmade": "Hand-made scenes"}

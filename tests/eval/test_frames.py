@@ -17,7 +17,7 @@ from scipy.stats import spearmanr
 
 from nidar_mi.errors import NidarError
 from nidar_mi.eval.baselines import ClassConstant
-from nidar_mi.eval.evaluate import (
+from nidar_mi.eval.frames import (
     METHODS,
     FrameData,
     evaluate_frame,
