@@ -144,7 +144,9 @@ def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
 # --------------------------------------------------------------------------- writing
 
 
-def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None = None) -> list[str]:
+def write_lidar(
+    folder: str | os.PathLike, result, formats, extra: dict | None = None, *, deskew: bool = False
+) -> list[str]:
     """Write one LiDAR's points, range image and previews into ``folder/<lidar id>/``.
 
     Args:
@@ -152,6 +154,7 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
         result: a :class:`~nidar_mi.lidar.scan.ScanResult`.
         formats: point formats from :data:`FORMATS`.
         extra: further per-point columns (e.g. ``intensity_nidar``).
+        deskew: add ``xyz_deskewed`` (the points in the LiDAR frame at the sweep's start).
 
     Returns:
         The paths written.
@@ -162,7 +165,7 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
 
     d = os.path.join(folder, result.config.name)
     os.makedirs(d, exist_ok=True)
-    pts = result.points() | dict(extra or {})
+    pts = result.points(deskew=deskew) | dict(extra or {})
     writers = {
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),

@@ -91,20 +91,31 @@ class _Run:
     timings: dict = field(default_factory=dict)
 
 
-def _scan_lidars(run: _Run, loaded, seed: int | None, bar) -> None:
+def _check_memory(loaded, cameras: bool, spp: int, max_memory: int | None) -> None:
+    """Refuse, before any work, a scan or render estimated to need more than ``max_memory``."""
+    from .camera import check_render_memory
+    from .lidar.memory import check_scan_memory
+
+    for sensor in loaded.lidars:
+        check_scan_memory(sensor.config, max_memory)
+    for cam in loaded.cameras if cameras else []:
+        check_render_memory(cam, spp, max_memory)
+
+
+def _scan_lidars(run: _Run, loaded, seed: int | None, bar, max_memory: int | None = None) -> None:
     from .lidar.scan import scan
 
     for sensor in loaded.lidars:
         bar.set_postfix_str(f"lidar {sensor.id()}")
         t0 = time.perf_counter()
-        result = scan(loaded.scene, sensor, seed=seed)
+        result = scan(loaded.scene, sensor, seed=seed, max_memory=max_memory)
         run.results[sensor.id()] = result
         run.lidars[sensor.id()] = {
             "parameters": result.config.to_dict() | ({"seed": seed} if seed is not None else {}),
             "to_world": result.to_world.tolist(),
             "rays": int(result.valid.size),
             "hits": int(result.hit.sum()),
-            "returns": int(result.valid.sum()),
+            "returns": int(sum(layer.valid.sum() for layer in result.returns)),
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
         }
@@ -160,10 +171,10 @@ def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dic
     return out
 
 
-def _write_lidars(run: _Run, formats, extra: dict[str, dict]) -> None:
+def _write_lidars(run: _Run, formats, extra: dict[str, dict], deskew: bool = False) -> None:
     for lid, result in run.results.items():
         t0 = time.perf_counter()
-        run.written += rf.write_lidar(run.stage, result, formats, extra.get(lid))
+        run.written += rf.write_lidar(run.stage, result, formats, extra.get(lid), deskew=deskew)
         entry = run.lidars[lid]
         entry["timings_s"]["write"] = time.perf_counter() - t0
         if lid in extra:
@@ -186,6 +197,8 @@ def render_scene(
     weights: str | None = None,
     nidar_branch: str = "R",
     overwrite: bool = False,
+    max_memory: int | None = None,
+    deskew: bool = False,
 ) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`).
 
@@ -205,6 +218,10 @@ def render_scene(
         weights: NIDAR weights folder (None: the shipped model).
         nidar_branch: ``R`` or ``I_hat``.
         overwrite: replace a non-empty ``out_dir``.
+        max_memory: bytes a scan or camera render may use (None:
+            :func:`nidar_mi.lidar.memory.default_limit`); larger requests are refused before
+            anything runs.
+        deskew: add ``xyz_deskewed`` to the points (equal to ``xyz`` for a scan from one pose).
 
     Returns:
         The manifest (also written to ``out_dir/manifest.json``).
@@ -233,12 +250,13 @@ def render_scene(
     t0 = time.perf_counter()
     loaded = _load(req, variant)
     load_s = time.perf_counter() - t0
+    _check_memory(loaded, cameras, spp, max_memory)
     steps = len(loaded.lidars) + (len(loaded.cameras) if cameras else 0)
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
         run = _Run(stage=str(stage), timings={"load": load_s})
         bar = tqdm(total=steps, desc="render", unit="sensor", disable=not progress, file=sys.stderr)
         try:
-            _scan_lidars(run, loaded, seed, bar)
+            _scan_lidars(run, loaded, seed, bar, max_memory)
             if cameras:
                 _render_cameras(run, loaded, spp, seed, bar)
         finally:
@@ -248,7 +266,7 @@ def render_scene(
             t0 = time.perf_counter()
             extra = _nidar_columns(run, weights, nidar_branch)
             run.timings["nidar"] = time.perf_counter() - t0
-        _write_lidars(run, formats, extra)
+        _write_lidars(run, formats, extra, deskew)
         manifest = {
             "request": req.to_dict(),
             "scene": req.scene,
