@@ -32,6 +32,7 @@ def test_wheel_install_ships_plugins(tmp_path):
     )
     assert r.returncode == 0, r.stderr[-2000:]
     assert (target / "nidar_mi" / "plugins" / "lidar.py").is_file()
+    assert (target / "nidar_mi" / "lidar" / "data" / "hdl64e_s2_sztaki.csv").is_file()
     code = (
         "import nidar_mi, nidar_mi.plugins as p; print(nidar_mi.__file__); print(p.__file__);"
         "from nidar_mi.backend import set_variant; set_variant('llvm_ad_spectral');"

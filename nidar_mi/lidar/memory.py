@@ -34,7 +34,7 @@ RAY_BYTES = 200
 #: Per beam: directions, origins, firing time, hit flag and the range image, bytes.
 BEAM_BYTES = 80
 #: Per beam and return: the return's arrays, its points-dict columns and the file writers, bytes.
-RETURN_BYTES = 100
+RETURN_BYTES = 170
 
 
 def default_limit() -> int:

@@ -252,9 +252,22 @@ class BeamPattern:
                 [cos_el[ring] * cos_az[col], cos_el[ring] * sin_az[col], sin_el[ring]], axis=-1
             )
             return d, None
+        return self.rays_at(ring, self.column_azimuth_deg()[col])
+
+    def rays_at(self, ring: np.ndarray, column_azimuth_deg: np.ndarray):
+        """Directions and origins of lasers ``ring`` fired in columns at ``column_azimuth_deg``.
+
+        Args:
+            ring: (n,) int ring indices.
+            column_azimuth_deg: (n,) azimuth of the column (the head's angle), degrees.
+
+        Returns:
+            ``(directions, origins)``: (n, 3) float64, origins None when every beam starts at
+            the origin.
+        """
         t = self.table
         drift = self.spin * 360.0 * self.rotation_rate * t.array("firing_offset_s")
-        phi_c = np.deg2rad(self.column_azimuth_deg())[col]
+        phi_c = np.deg2rad(np.asarray(column_azimuth_deg, dtype=np.float64))
         phi = phi_c + np.deg2rad(t.array("azimuth_offset_deg") + drift)[ring]
         theta = np.deg2rad(t.array("elevation_deg"))[ring]
         cp, sp, ct, st = np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta)
