@@ -24,6 +24,11 @@ name                 dtype      shape   unit  meaning
 ``material``         int32      (N,)    --    index into ``material_names``; -1 = none
 ``material_names``   str (U)    (M,)    --    BSDF ids (anonymous BSDFs: ``<shape id>.bsdf``);
                                               fixed-width unicode, never object
+``label``            uint16     (N,)    --    semantic class, SemanticKITTI id (0 = unlabeled;
+                                              table: :mod:`nidar_mi.labels.classes`)
+``instance``         uint32     (N,)    --    instance (object) id, 1..K; 0 = none
+``instance_names``   str (U)    (K+1,)  --    ``instance_names[k]`` names instance k (the
+                                              scene's ``instance`` or the shape id); ``[0]`` ""
 ``intensity_nidar``  float32    (N,)    --    with ``--intensity nidar``: NIDAR's calibrated
                                               intensity in [0, 1], 0 where no camera sees the point
 ``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
@@ -71,7 +76,7 @@ _PLY_TYPES = frozenset({"i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8"})
 _KNOWN_SHAPES = {
     "xyz_world": 3,
     **dict.fromkeys(("range", "intensity", "reflectance", "cos_incidence"), None),
-    **dict.fromkeys(("ring", "column", "material"), None),
+    **dict.fromkeys(("ring", "column", "material", "label", "instance"), None),
 }
 
 
