@@ -174,7 +174,7 @@ def render_scene(
     scene_path: str,
     out_dir: str,
     *,
-    formats=rf.FORMATS,
+    formats=rf.DEFAULT_FORMATS,
     seed: int | None = None,
     spp: int = 16,
     variant: str | None = None,

@@ -1,6 +1,6 @@
 """Point sets ("points dicts") and their files: npz, PLY and KITTI ``.bin``.
 
-LAS is in :mod:`nidar_mi.io.las`, PCD (read only) in :mod:`nidar_mi.io.pcd`, and
+LAS is in :mod:`nidar_mi.io.las`, PCD in :mod:`nidar_mi.io.pcd`, and
 :func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of them.
 
 A points dict maps names to numpy arrays. ``xyz`` is required; every other entry is
@@ -42,7 +42,8 @@ Other entries are carried generically by every writer:
 * *metadata* is everything else: string arrays (``material_names``) and numeric scalars or
   arrays of another length. PLY keeps them in an ``obj_info`` line and LAS in a VLR
   (user id ``nidar_mi``, record 1), as JSON that also records each column's dtype and shape
-  so that the readers restore the dict exactly (bool, for example, is stored as uint8).
+  so that the readers restore the dict exactly (bool, for example, is stored as uint8);
+  PCD keeps the same JSON in a ``# nidar_mi.points`` header comment.
 
 Readers accept files from other tools too: they return ``xyz`` (float32) and, when the file
 has it, ``intensity`` (float32), plus the file's other per-point fields.
