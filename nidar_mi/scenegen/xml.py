@@ -87,6 +87,16 @@ def _shape(s) -> str:
     return f'    <shape type="{kind}" id="{s.id}"{tags}>{body}{ref}</shape>'
 
 
+def _threshold(preset: str) -> list[str]:
+    """The detection threshold line: none where the preset has a calibrated default
+    (:mod:`nidar_mi.lidar.calibration`), else 5e-5."""
+    from ..lidar.pattern import PRESETS
+
+    if PRESETS[preset].detection_threshold > 0:
+        return []
+    return ['        <float name="detection_threshold" value="0.00005"/>']
+
+
 def _rig(rig: Rig) -> list[str]:
     d = rig.camera_direction
     o = rig.camera_position
@@ -103,7 +113,7 @@ def _rig(rig: Rig) -> list[str]:
         '        <string name="intensity_mode" value="raw"/>',
         '        <float name="noise_intensity_std" value="0.0002"/>',
         '        <float name="noise_range_std" value="0.01"/>',
-        '        <float name="detection_threshold" value="0.00005"/>',
+        *_threshold(rig.lidar_preset),
         '        <float name="dropout" value="0.01"/>',
         '        <integer name="seed" value="0"/>',
         f'        <transform name="to_world">{lidar_ops}</transform>',
