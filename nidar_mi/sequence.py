@@ -17,6 +17,15 @@ Layout (``OUT``)::
                         first LiDAR's pose at the frame's start relative to frame 0
     times.txt           per frame its start time t_k - t_0, s
     frames/000000/ ...  one render folder per frame (:mod:`nidar_mi.render_folder`)
+    kitti/              with sequence format ``kitti``: the first LiDAR's sweeps in the KITTI
+                        odometry layout (:func:`nidar_mi.io.kitti_odometry.write_sequence`)
+    rosbag/             with ``rosbag``: a ROS 2 bag of the first LiDAR's sweeps and the camera
+                        images (:func:`nidar_mi.io.rosbag.write_ros2_bag`), stamped in trajectory
+                        time
+
+The ``kitti`` and ``rosbag`` outputs are written once every frame is rendered: the first LiDAR's
+points (x, y, z, intensity, ring, t, label, instance) and the camera images stay in memory until
+then.
 """
 
 from __future__ import annotations
@@ -30,7 +39,12 @@ import numpy as np
 from . import render_folder as rf
 from .errors import NidarError
 
-__all__ = ["render_sequence", "camera_trigger_time"]
+__all__ = ["SEQUENCE_FORMATS", "render_sequence", "camera_trigger_time"]
+
+#: Whole-sequence outputs beside the frame folders.
+SEQUENCE_FORMATS = ("kitti", "rosbag")
+#: Points columns kept per frame for the sequence outputs.
+_SEQUENCE_COLUMNS = ("xyz", "intensity", "ring", "t", "label", "instance")
 
 
 def camera_trigger_time(lidar_config, T_lidar_mount: np.ndarray, T_camera_mount: np.ndarray):
@@ -90,6 +104,7 @@ def render_sequence(
     rate: float | None = None,
     frames: int | None = None,
     formats=rf.FORMATS,
+    sequence_formats=(),
     seed: int | None = None,
     spp: int = 16,
     variant: str | None = None,
@@ -111,6 +126,7 @@ def render_sequence(
             of a KITTI odometry pose file.
         frames: number of frames (default: as many as the trajectory holds).
         formats: point formats of each frame.
+        sequence_formats: whole-sequence outputs, from :data:`SEQUENCE_FORMATS`.
         seed: base seed; frame ``k`` uses ``seed + k`` (each LiDAR's own seed + k without it).
         spp: camera samples per pixel.
         variant: Mitsuba variant.
@@ -135,6 +151,12 @@ def render_sequence(
         raise NidarError(f"--rate must be > 0 Hz (got {rate})")
     if frames is not None and frames < 1:
         raise NidarError(f"--frames must be >= 1 (got {frames})")
+    bad = [f for f in sequence_formats if f not in SEQUENCE_FORMATS]
+    if bad:
+        raise NidarError(
+            f"--sequence-formats: unknown '{','.join(bad)}' "
+            f"(choose from {', '.join(SEQUENCE_FORMATS)})"
+        )
     req = rf.RenderRequest.of(
         scene_path, params=params, seed=seed, spp=spp, formats=tuple(formats), cameras=cameras
     )
@@ -163,9 +185,11 @@ def render_sequence(
         "rate_hz": rate,
         "frames": len(times),
         "deskew": deskew,
+        "sequence_formats": list(sequence_formats),
     }
     frame_log = []
     start_poses = []
+    keep: list[dict] = []  # per frame what the sequence outputs need
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
         written: list[str] = []
         bar = tqdm(
@@ -191,6 +215,7 @@ def render_sequence(
                     request=req.to_dict() | {"frame": k},
                     variant=loaded.variant,
                     versions=_versions(),
+                    keep=keep if sequence_formats else None,
                 )
                 written += [os.path.join(folder, f) for f in entry.pop("files")]
                 start_poses.append(entry.pop("lidar_start_pose"))
@@ -202,6 +227,9 @@ def render_sequence(
         write_kitti_poses(os.path.join(stage, "poses.txt"), [P0_inv @ P for P in start_poses])
         write_times(os.path.join(stage, "times.txt"), times - times[0])
         written += [os.path.join(stage, "poses.txt"), os.path.join(stage, "times.txt")]
+        written += _sequence_outputs(
+            stage, sequence_formats, keep, np.asarray(start_poses), times, lead.id()
+        )
         total = time.perf_counter() - t_start
         render_s = sum(f["timings_s"]["frame_total"] for f in frame_log)
         manifest = {
@@ -223,6 +251,31 @@ def render_sequence(
     return manifest
 
 
+def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> list[str]:
+    """Write the KITTI odometry layout and the ROS 2 bag of the kept frames."""
+    written = []
+    if "kitti" in sequence_formats:
+        from .io.kitti_odometry import write_sequence
+
+        clouds = [f["points"] for f in keep]
+        written += write_sequence(os.path.join(stage, "kitti"), clouds, poses, times - times[0])
+    if "rosbag" in sequence_formats:
+        from .io.rosbag import BagCamera, BagFrame, write_ros2_bag
+
+        frames = [
+            BagFrame(
+                stamp_s=float(t),
+                T_world_lidar=P,
+                points=f["points"],
+                cameras={cid: BagCamera(**c) for cid, c in f["cameras"].items()},
+            )
+            for f, P, t in zip(keep, poses, times)
+        ]
+        bag = write_ros2_bag(os.path.join(stage, "rosbag"), frames, lidar=lidar)
+        written += [os.path.join(root, n) for root, _, names in os.walk(bag) for n in names]
+    return written
+
+
 def _render_frame(
     loaded,
     folder,
@@ -241,15 +294,17 @@ def _render_frame(
     request,
     variant,
     versions,
+    keep=None,
 ) -> dict:
-    """Scan every LiDAR and render every camera of frame ``k``; write its render folder."""
+    """Scan every LiDAR and render every camera of frame ``k``; write its render folder.
+    With ``keep`` (a list), append what the sequence outputs need of this frame."""
     from .camera import render_camera
     from .lidar.scan import scan
 
     t0 = time.perf_counter()
     os.makedirs(folder, exist_ok=True)
     lidar_entries, camera_entries, files = {}, {}, []
-    results = {}
+    results, images = {}, {}
     for sensor in loaded.lidars:
         lid = sensor.id()
         cfg = sensor.config
@@ -265,6 +320,7 @@ def _render_frame(
             to_world=start,
             poses_per_column=columns,
             max_memory=max_memory,
+            labels=loaded.labels,
         )
         scan_s = time.perf_counter() - ts
         results[lid] = result
@@ -292,6 +348,9 @@ def _render_frame(
         render_s = time.perf_counter() - ts
         lidar_poses = {lid: rig @ mounts[lid] for lid in results}
         calib, written = rf.write_camera(folder, r, lidar_poses)
+        if keep is not None:
+            images[cid] = {"rgb": r.srgb8(), "K": r.K, "T_world_cam": r.T_world_cam}
+            images[cid]["stamp_s"] = float(t_cam)
         files += written
         camera_entries[cid] = calib | {
             "spp": spp,
@@ -320,6 +379,11 @@ def _render_frame(
     }
     rf.write_manifest(folder, manifest)
     lead = loaded.lidars[0].id()
+    if keep is not None:
+        pts = results[lead].points()
+        keep.append(
+            {"points": {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}, "cameras": images}
+        )
     return {
         "frame": k,
         "time_s": float(t_k),

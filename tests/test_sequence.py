@@ -37,7 +37,8 @@ def trajectory(tmp_path_factory):
 def sequence_out(tmp_path_factory, trajectory):
     out = tmp_path_factory.mktemp("seq") / "drive"
     r = run_cli(STREET, "-o", str(out), "--trajectory", trajectory, "--frames", "3",
-                "--formats", "npz,bin", "--deskew", "--seed", "2", "-q", *SMALL)  # fmt: skip
+                "--formats", "npz,bin", "--deskew", "--seed", "2", "-q",
+                "--sequence-formats", "kitti,rosbag", *SMALL)  # fmt: skip
     assert r.returncode == 0, r.stderr
     return out
 
@@ -77,6 +78,28 @@ def test_frames_are_render_folders_with_time(sequence_out):
         assert pose[0, 3] == pytest.approx(SPEED * (10.0 + 0.1 * k), abs=1e-5)
 
 
+def test_kitti_and_rosbag_sequence_outputs(sequence_out):
+    from rosbags.highlevel import AnyReader
+
+    from nidar_mi.io.points import read_kitti_bin, read_npz
+
+    kitti = sequence_out / "kitti"
+    np.testing.assert_allclose(
+        np.loadtxt(kitti / "poses.txt"), np.loadtxt(sequence_out / "poses.txt")
+    )
+    np.testing.assert_allclose(np.loadtxt(kitti / "times.txt"), [0.0, 0.1, 0.2], atol=1e-9)
+    for k in range(3):
+        xyz, _ = read_kitti_bin(kitti / "velodyne" / f"{k:06d}.bin")
+        p = read_npz(sequence_out / "frames" / f"{k:06d}" / "lidar_top" / "points.npz")
+        np.testing.assert_array_equal(xyz, p["xyz"])
+        assert (kitti / "labels" / f"{k:06d}.label").stat().st_size == 4 * len(xyz)
+    with AnyReader([sequence_out / "rosbag"]) as reader:
+        topics = {c.topic: c.msgcount for c in reader.connections}
+        stamps = [t / 1e9 for c, t, _ in reader.messages() if c.topic == "/lidar_top/points"]
+    assert topics["/lidar_top/points"] == 3 and topics["/cam_front/image_raw"] == 3
+    np.testing.assert_allclose(stamps, [10.0, 10.1, 10.2], atol=1e-6)
+
+
 def test_noise_differs_between_frames(sequence_out):
     from nidar_mi.io.points import read_npz
 
@@ -95,6 +118,7 @@ def test_noise_differs_between_frames(sequence_out):
         (["--frames", "20"], "holds 10 frames"),
         (["--rate", "0"], "--rate must be > 0"),
         (["--frames", "0"], "--frames must be >= 1"),
+        (["--sequence-formats", "kitti,mcap"], "unknown 'mcap'"),
     ],
 )
 def test_bad_sequence_requests(tmp_path, trajectory, extra, needle):
@@ -106,6 +130,8 @@ def test_bad_sequence_requests(tmp_path, trajectory, extra, needle):
 
 def test_rate_without_trajectory(tmp_path):
     r = run_cli(STREET, "-o", str(tmp_path / "o"), "--rate", "5", *SMALL)
+    assert r.returncode == 2 and "need --trajectory" in r.stderr
+    r = run_cli(STREET, "-o", str(tmp_path / "o"), "--sequence-formats", "kitti", *SMALL)
     assert r.returncode == 2 and "need --trajectory" in r.stderr
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 
-from ..render_folder import FORMATS
+from ..render_folder import DEFAULT_FORMATS, FORMATS
 from ..simulate import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ._common import parse_defines, parser, run
 
@@ -73,7 +73,11 @@ def build_parser():
     )
     p.add_argument("scene", help="scene XML file")
     p.add_argument("-o", "--out", help="output directory (default: out/<scene name>)")
-    p.add_argument("--formats", default=",".join(FORMATS), help="point formats: npz,ply,las,bin")
+    p.add_argument(
+        "--formats",
+        default=",".join(DEFAULT_FORMATS),
+        help=f"point formats, from {','.join(FORMATS)} (default {','.join(DEFAULT_FORMATS)})",
+    )
     p.add_argument(
         "--seed", type=int, default=None, help="overrides every lidar's seed; camera sampler seed"
     )
@@ -136,6 +140,13 @@ def build_parser():
     seq.add_argument(
         "--frames", type=int, default=None, help="number of frames (default: all that fit)"
     )
+    seq.add_argument(
+        "--sequence-formats",
+        default="",
+        metavar="LIST",
+        help="whole-sequence outputs beside the frame folders: kitti (KITTI odometry layout), "
+        "rosbag (ROS 2 bag); comma-separated",
+    )
     p.add_argument(
         "--deskew",
         action="store_true",
@@ -153,8 +164,10 @@ def main(argv=None) -> int:
         from ..errors import NidarError
         from ..simulate import render_scene
 
-        if args.trajectory is None and (args.rate is not None or args.frames is not None):
-            raise NidarError("--rate and --frames need --trajectory")
+        if args.trajectory is None and (
+            args.rate is not None or args.frames is not None or args.sequence_formats
+        ):
+            raise NidarError("--rate, --frames and --sequence-formats need --trajectory")
         if args.trajectory is not None:
             if args.intensity != "physics" or args.rgb_twin:
                 raise NidarError("--trajectory renders physics intensity of the scene itself")
@@ -167,6 +180,9 @@ def main(argv=None) -> int:
                 rate=args.rate,
                 frames=args.frames,
                 formats=_parse_formats(args.formats),
+                sequence_formats=tuple(
+                    f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
+                ),
                 seed=args.seed,
                 spp=args.spp,
                 variant=args.variant,

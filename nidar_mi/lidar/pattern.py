@@ -62,6 +62,9 @@ class Preset:
         range_min: minimum range in m.
         range_max: maximum range in m.
         reference: datasheet or paper the table comes from.
+        detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
+            the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
+            datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.calibration`).
     """
 
     elevations_deg: tuple[float, ...]
@@ -69,6 +72,7 @@ class Preset:
     range_min: float
     range_max: float
     reference: str
+    detection_threshold: float = 0.0
 
 
 def _desc(values: np.ndarray) -> tuple[float, ...]:
@@ -96,6 +100,7 @@ PRESETS: dict[str, Preset] = {
         0.9,
         120.0,
         "Velodyne HDL-64E S2 datasheet (KITTI, Geiger et al. IJRR 2013)",
+        4.0e-5,  # 0.10 / 50 m²: 10 % at normal incidence detected to 50 m (datasheet)
     ),
     "os1_64": Preset(
         _desc(np.linspace(16.6, -16.6, 64)),

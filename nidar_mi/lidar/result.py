@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..labels import ShapeLabels
 from .config import LidarConfig
 
 __all__ = ["ReturnLayer", "ScanResult"]
@@ -61,7 +62,10 @@ class ScanResult:
         hit: bool, the beam (or one of its sub-rays) hit a surface (before range, threshold and
             dropout tests).
         timings: seconds per stage (``pattern``, ``raycast``, ``bsdf``, ``detect``, ``readback``).
-        shape_index: int32 index into ``shape_names`` of the surface returning; -1 where no hit.
+        shape_index: int32 index into ``scene.shapes()`` of the surface returning; -1 where no
+            hit.
+        shape_labels: per-shape class and instance tables (:class:`nidar_mi.labels.ShapeLabels`)
+            that :meth:`points` turns into ``label`` and ``instance``.
         shape_names: ids of ``scene.shapes()`` in that order (anonymous shapes: ``""``).
         time: float32 s, firing time of each beam since the sweep's start.
         origins: (R, C, 3) float32 beam origins in the LiDAR frame, m; None when every beam
@@ -84,6 +88,7 @@ class ScanResult:
     hit: np.ndarray
     timings: dict[str, float] = field(default_factory=dict)
     shape_index: np.ndarray | None = None
+    shape_labels: ShapeLabels | None = None
     shape_names: list[str] = field(default_factory=list)
     time: np.ndarray | None = None
     origins: np.ndarray | None = None
@@ -136,6 +141,8 @@ class ScanResult:
             "column": cols.astype(np.uint32),
             "material": layer.material[m].astype(np.int32),
         }
+        if self.shape_labels is not None:
+            pts["label"], pts["instance"] = self.shape_labels.lookup(layer.shape_index[m])
         if self.time is not None:
             pts["t"] = self.time[m].astype(np.float32)
         pts["return_index"] = np.full(len(rng), index, dtype=np.uint8)
@@ -158,4 +165,6 @@ class ScanResult:
             else {k: np.concatenate([p[k] for p in layers]) for k in layers[0]}
         )
         pts["material_names"] = np.asarray(self.material_names, dtype=np.str_)
+        if self.shape_labels is not None:
+            pts["instance_names"] = self.shape_labels.instance_names
         return pts

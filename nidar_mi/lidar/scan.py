@@ -32,6 +32,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..labels import SceneLabels, shape_labels
 from .config import LidarConfig
 from .echoes import group_echoes, select_returns
 from .footprint import subray_offsets
@@ -52,6 +53,7 @@ def scan(
     to_world=None,
     poses_per_column=None,
     max_memory: int | None = None,
+    labels: SceneLabels | None = None,
 ) -> ScanResult:
     """Cast every beam of ``sensor`` and compute its returns.
 
@@ -64,6 +66,8 @@ def scan(
         poses_per_column: optional (C, 4, 4) world pose at each column's firing time (a moving
             sensor: every column is cast from its own pose; motion distortion).
         max_memory: bytes the scan may use (None: :func:`.memory.default_limit`).
+        labels: the scene's label declaration (:attr:`nidar_mi.scene.LoadedScene.labels`);
+            None: every point ``unlabeled``, every shape its own instance.
 
     Returns:
         The scan on the (ring, column) grid.
@@ -136,6 +140,7 @@ def scan(
             hit=out.hit.reshape(shape),
             timings=timings,
             shape_index=first.shape_index,
+            shape_labels=shape_labels(scene, labels),
             shape_names=shape_names,
             time=pattern.time_s().astype(np.float32).reshape(shape),
             origins=None if origins is None else origins.reshape(*shape, 3),

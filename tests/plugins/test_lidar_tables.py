@@ -18,8 +18,15 @@ def _norm(default: str) -> str:
 def _readme_table() -> list[tuple[str, str, str]]:
     text = README.read_text(encoding="utf-8")
     section = text.split("## The `lidar` sensor", 1)[1].split("\n## ", 1)[0]
+    lines = section.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("| parameter |"))
+    table = []
+    for line in lines[start:]:  # the first table of the section: the parameters
+        if not line.startswith("|"):
+            break
+        table.append(line)
     rows = []
-    for line in section.splitlines():
+    for line in table:
         m = re.match(r"^\| `([a-z_0-9]+)`(?:, `([a-z_0-9]+)`)? \| (\w+) \| .* \| (.+) \|$", line)
         if m:
             for name in filter(None, (m.group(1), m.group(2))):
