@@ -94,7 +94,8 @@ def check_scan_memory(cfg: LidarConfig, limit: int | None = None) -> None:
     if need > limit:
         raise NidarError(
             f"lidar '{cfg.name}': the scan needs about {format_size(need)} "
-            f"({cfg.rings} x {cfg.horizontal_resolution} beams x {cfg.subrays} rays), more than "
+            f"({cfg.rings} rings x {cfg.horizontal_resolution} columns x {cfg.subrays} rays per "
+            "beam), more than "
             f"the limit of {format_size(limit)}; lower horizontal_resolution or raise the limit "
             "with --max-memory (or NIDAR_MAX_MEMORY)"
         )
