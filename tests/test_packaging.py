@@ -31,7 +31,12 @@ def test_wheel_install_ships_plugins(tmp_path):
         timeout=600,
     )
     assert r.returncode == 0, r.stderr[-2000:]
+    # the metadata is clean: no deprecated license table, no data folder outside `packages`
+    assert "project.license" not in r.stderr and "absent from the `packages`" not in r.stderr
     assert (target / "nidar_mi" / "plugins" / "lidar.py").is_file()
+    for data in ("nidar/weights/irnet.safetensors", "nidar/weights/MODEL_CARD.md"):
+        assert (target / "nidar_mi" / data).is_file(), data
+    assert list((target / "nidar_mi" / "materials" / "data").glob("*.csv"))
     code = (
         "import nidar_mi, nidar_mi.plugins as p; print(nidar_mi.__file__); print(p.__file__);"
         "from nidar_mi.backend import set_variant; set_variant('llvm_ad_spectral');"
