@@ -234,7 +234,7 @@ def frames_of_render(render_dir: str, lidar_id: str | None = None):
         )
         frame = {
             "rgb": cam.rgb8(),
-            "nir": cam.nir(),
+            "nir": cam.nir(r.parameters["wavelength"]),
             "intensity": maps["intensity"],
             "reflectance": maps["reflectance"],
             "range": maps["range"],

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 
 from .backend import set_variant
@@ -30,7 +31,8 @@ class LoadedScene:
         scene: the ``mi.Scene``.
         variant: the Mitsuba variant it was loaded in.
         lidars: ``lidar`` sensors.
-        cameras: ``perspective`` sensors.
+        cameras: ``perspective`` and ``thinlens`` sensors (other sensor types are not rendered:
+            a warning names them).
         rgb_twin: whether materials were replaced by their RGB appearance.
     """
 
@@ -115,10 +117,26 @@ def load_scene(
     except Exception as e:
         raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
 
+    from .camera import CAMERA_CLASSES
+
     lidar_cls = plugins.plugin_module("lidar", variant).LidarSensor
     sensors = sorted(scene.sensors(), key=lambda s: s.id())
     lidars = [s for s in sensors if isinstance(s, lidar_cls)]
-    cameras = [s for s in sensors if s.class_name() == "PerspectiveCamera"]
+    cameras = [s for s in sensors if s.class_name() in CAMERA_CLASSES]
+    others = [f"'{s.id()}' ({s.class_name()})" for s in sensors if s not in lidars + cameras]
+    if others:
+        warnings.warn(
+            f"{path}: sensor(s) {', '.join(others)} not rendered: only lidar, perspective and "
+            "thinlens sensors are",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    for cam in cameras:
+        W, H = (int(v) for v in cam.film().crop_size())
+        if W < 1 or H < 1:
+            raise NidarError(
+                f"{path}: camera '{cam.id()}' has a {W}x{H} film (width and height must be >= 1)"
+            )
     return LoadedScene(
         path=path, scene=scene, variant=variant, lidars=lidars, cameras=cameras, rgb_twin=rgb_twin
     )
