@@ -110,12 +110,19 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):  #
     print(f"warning: {_one_line(message)}", file=sys.stderr)
 
 
-def run(work: Callable[[], int | None], *, on_interrupt: str = "nothing written") -> int:
+def _left(on_interrupt: str | Callable[[], str]) -> str:
+    return _one_line(on_interrupt() if callable(on_interrupt) else on_interrupt)
+
+
+def run(
+    work: Callable[[], int | None], *, on_interrupt: str | Callable[[], str] = "nothing written"
+) -> int:
     """Run a command's work and map every expected failure to one line and an exit status.
 
     Args:
         work: the command body; returns an exit status or None (success).
-        on_interrupt: what the user is told is left after Ctrl-C or SIGTERM.
+        on_interrupt: what the user is told is left after Ctrl-C or SIGTERM (or a function
+            that says it, called after the work was stopped).
 
     Returns:
         The exit status (see the module docstring).
@@ -135,10 +142,10 @@ def run(work: Callable[[], int | None], *, on_interrupt: str = "nothing written"
         print(f"error: {_one_line(e)}", file=sys.stderr)
         return EXIT_USER_ERROR
     except Terminated:
-        print(f"terminated; {on_interrupt}", file=sys.stderr)
+        print(f"terminated; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_TERMINATED
     except KeyboardInterrupt:
-        print(f"interrupted; {on_interrupt}", file=sys.stderr)
+        print(f"interrupted; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     except OSError as e:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
