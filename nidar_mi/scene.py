@@ -67,7 +67,9 @@ def _one_line(err: Exception) -> str:
     lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
     text = " ".join(lines) if lines else type(err).__name__
     text = re.sub(r"\[[a-z_]+\.cpp:\d+\]\s*", "", text)  # drop "[parser.cpp:123]"
-    text = re.sub(r"While loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text)
+    text = re.sub(
+        r"(?:Error w|W)hile loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text
+    )
     return text
 
 

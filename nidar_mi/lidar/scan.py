@@ -144,7 +144,7 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
         shape = (cfg.rings, cfg.horizontal_resolution)
         hit = beams.hit.numpy().astype(bool)
         names, material = _materials(scene, bsdf_id.numpy(), hit)
-        _warn_nonfinite(cfg, names, material[hit & ~finite.numpy().astype(bool)])
+        bad = _warn_nonfinite(cfg, names, material[hit & ~finite.numpy().astype(bool)])
         _warn_rgb_materials(scene, cfg, names, material[hit & (material >= 0)])
         rho_np = rho.numpy()
         rho_np = np.where(np.isfinite(rho_np), rho_np, 0.0)
@@ -162,7 +162,7 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
             hit=hit.reshape(shape),
             timings=timings,
         )
-    return result
+    return _drop_materials(result, bad)
 
 
 # ---------------------------------------------------------------- kernel inputs
@@ -296,8 +296,22 @@ def _materials(scene, bsdf_ids: np.ndarray, hit: np.ndarray) -> tuple[list[str],
     return names, material
 
 
-def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -> None:
-    """One warning per material among ``materials`` (indices) whose returns were not finite."""
+def _drop_materials(result: ScanResult, bad: np.ndarray) -> ScanResult:
+    """``result`` without any return of the materials ``bad`` (indices): a material with no
+    data at the laser wavelength gives no trustworthy return anywhere, even where its
+    evaluation happens to be finite (Mitsuba's conductor presets read η = k = 0 past their
+    table, a perfect mirror at exactly normal incidence and NaN elsewhere)."""
+    drop = np.isin(result.material, bad) & result.valid
+    if drop.any():
+        result.valid = result.valid & ~drop
+        result.range = np.where(drop, 0.0, result.range).astype(np.float32)
+        result.intensity = np.where(drop, 0.0, result.intensity).astype(np.float32)
+    return result
+
+
+def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -> np.ndarray:
+    """One warning per material among ``materials`` (indices) whose returns were not finite;
+    returns those materials (the scan drops every return of them)."""
     for idx in np.unique(materials):
         name = names[idx] if idx >= 0 else "?"
         warnings.warn(
@@ -307,6 +321,7 @@ def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -
             RuntimeWarning,
             stacklevel=3,
         )
+    return np.unique(materials)
 
 
 _warned_rgb: set[tuple[str, str]] = set()
