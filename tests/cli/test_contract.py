@@ -275,3 +275,84 @@ def test_every_option_has_help_and_the_description_is_whole(command):
         if action.dest in ("help", "version"):
             continue
         assert action.help and action.help.strip(), f"{command}: {action.option_strings}"
+
+
+# ------------------------------------------------------------------------ 7: dataset cache key
+
+
+def test_dataset_rebuilds_frames_when_a_parameter_changes(tmp_path, call, tiny_scene, variant):
+    data = tmp_path / "data"
+    base = ["--scenes", os.path.dirname(tiny_scene), "-o", data, "-q", "--spp", "1"]
+    base += ["--split", "1,0,0"]
+    for width, height in ((16, 12), (24, 18)):
+        argv = base + ["-D", f"width={width}", "-D", f"height={height}"]
+        assert call("dataset", argv)[0] == 0
+        meta = json.loads((data / "meta.json").read_text())
+        assert meta["params"] == {"width": str(width), "height": str(height)}
+        import numpy as np
+
+        frame = np.load(data / "train" / "tiny__cam.npz")
+        assert frame["rgb"].shape == (height, width, 3)  # the frame is the new render's
+    assert sorted(p.name for p in data.iterdir()) == ["meta.json", "renders", "train"]
+
+
+def test_dataset_refuses_a_foreign_folder_without_overwrite(
+    tmp_path, call, one_error_line, snapshot, tiny_scene, variant
+):
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "notes.txt").write_text("mine")
+    argv = ["--scenes", os.path.dirname(tiny_scene), "-o", data, "-q", "--spp", "1"]
+    status, _, err = call("dataset", argv)
+    one_error_line(status, err, "is not empty")
+    assert snapshot(data) == {"notes.txt": b"mine"}
+    assert call("dataset", argv + ["--overwrite"])[0] == 0
+    assert not (data / "notes.txt").exists() and (data / "meta.json").is_file()
+
+
+# ------------------------------------------------------------------------ 8: scenegen index
+
+
+def test_scenegen_rerun_with_another_kind_keeps_index_and_files_in_step(
+    tmp_path, call, one_error_line, snapshot
+):
+    import hashlib
+
+    out = tmp_path / "gen"
+    assert call("scenegen", ["--count", "2", "--kind", "urban", "-o", out, "-q"])[0] == 0
+    before = snapshot(out)
+    status, _, err = call("scenegen", ["--count", "3", "--kind", "vegetated", "-o", out, "-q"])
+    one_error_line(status, err, "--overwrite")
+    assert snapshot(out) == before  # nothing written, not even scene 2
+    argv = ["--count", "3", "--kind", "vegetated", "-o", out, "-q", "--overwrite"]
+    assert call("scenegen", argv)[0] == 0
+    index = json.loads((out / "index.json").read_text())
+    assert [e["kind"] for e in index["scenes"]] == ["vegetated"] * 3
+    for e in index["scenes"]:  # every entry describes the file beside it
+        assert hashlib.sha256((out / e["file"]).read_bytes()).hexdigest() == e["sha256"]
+
+
+# ------------------------------------------------------------------------ 11: train inputs
+
+
+def test_train_with_a_file_that_is_no_stn_copies_nothing(
+    tmp_path, call, one_error_line, synthetic_data
+):
+    out = tmp_path / "run"
+    argv = [synthetic_data, out, "--reduced", "--device", "cpu", "--no-progress", "-q"]
+    argv += ["--stage", "irnet", "--stn-weights", os.path.join(REPO, "README.md")]
+    status, _, err = call("train", argv)
+    one_error_line(status, err, "README.md")
+    assert not out.exists()
+
+
+def test_train_into_a_foreign_folder_is_refused(
+    tmp_path, call, one_error_line, snapshot, synthetic_data
+):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    argv = [synthetic_data, out, "--reduced", "--device", "cpu", "--no-progress", "-q"]
+    status, _, err = call("train", argv)
+    one_error_line(status, err, "is not empty")
+    assert snapshot(out) == {"notes.txt": b"mine"}
