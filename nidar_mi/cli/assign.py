@@ -60,9 +60,11 @@ def finite_points(points: dict, where: str) -> dict:
     Warns with the count when points are dropped.
 
     Raises:
-        NidarError: no finite point is left.
+        NidarError: the cloud is empty, or no finite point is left.
     """
     n = len(points["xyz"])
+    if n == 0:
+        raise NidarError(f"{where}: the point cloud holds no points")
     keep = np.ones(n, dtype=bool)
     for value in points.values():
         a = np.asarray(value)
