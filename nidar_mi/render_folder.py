@@ -3,7 +3,7 @@
 One module owns the layout (the table of files is in the README, "Rendering")::
 
     OUT/manifest.json                           the request, versions, resolved parameters, timings
-    OUT/<lidar_id>/points.{npz,ply,las,bin}     valid returns (schema: nidar_mi.io.points)
+    OUT/<lidar_id>/points.{npz,ply,las,bin,pcd} valid returns (schema: nidar_mi.io.points)
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
     OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, calib.json
     OUT/<camera_id>/nir_<λ>nm.{png,exr}          further NIR bands (LiDARs at other wavelengths)
@@ -30,6 +30,7 @@ from .errors import NidarError
 
 __all__ = [
     "BIN_INTENSITY",
+    "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
     "RenderRequest",
@@ -44,7 +45,9 @@ __all__ = [
 ]
 
 #: Point-cloud formats a LiDAR folder can hold.
-FORMATS = ("npz", "ply", "las", "bin")
+FORMATS = ("npz", "ply", "las", "bin", "pcd")
+#: The formats written when none are asked for.
+DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
 #: ``bin_intensity`` values: KITTI's [0, 1] convention, or the simulator's own intensity.
 BIN_INTENSITY = ("unit", "raw")
 #: The manifest's file name; its presence marks a folder as a render folder.
@@ -81,7 +84,7 @@ class RenderRequest:
     params: dict[str, str] = field(default_factory=dict)
     seed: int | None = None
     spp: int = 16
-    formats: tuple[str, ...] = FORMATS
+    formats: tuple[str, ...] = DEFAULT_FORMATS
     cameras: bool = True
     rgb_twin: bool = False
     intensity: str = "physics"
@@ -96,7 +99,7 @@ class RenderRequest:
         if not os.path.isfile(path):
             raise NidarError(f"{scene_path}: no such scene file")
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
-        options["formats"] = tuple(options.get("formats", FORMATS))
+        options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
             options["weights"] = options["nidar_branch"] = None
         elif options.get("weights") is not None:
@@ -180,6 +183,7 @@ def write_lidar(
     from .io.las import write_las
     from .io.range_preview import write_range_preview
     from .lidar.return_model import full_scale_intensity
+    from .io.pcd import write_pcd
 
     if bin_intensity not in BIN_INTENSITY:
         raise NidarError(f"--bin-intensity must be one of {', '.join(BIN_INTENSITY)}")
@@ -194,6 +198,7 @@ def write_lidar(
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
         "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], bin_i),
+        "pcd": lambda p: write_pcd(p, pts),
     }
     written = []
     for fmt in formats:
