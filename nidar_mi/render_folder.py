@@ -181,9 +181,9 @@ def write_lidar(
     from .io import images
     from .io import points as pio
     from .io.las import write_las
+    from .io.pcd import write_pcd
     from .io.range_preview import write_range_preview
     from .lidar.return_model import full_scale_intensity
-    from .io.pcd import write_pcd
 
     if bin_intensity not in BIN_INTENSITY:
         raise NidarError(f"--bin-intensity must be one of {', '.join(BIN_INTENSITY)}")
