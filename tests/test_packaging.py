@@ -91,3 +91,23 @@ def test_every_imported_distribution_is_declared():
         m for m in third_party if not ({norm(d) for d in owners.get(m, [])} | {norm(m)}) & declared
     }
     assert not missing, f"imported but not declared in pyproject.toml: {sorted(missing)}"
+
+
+def test_every_package_folder_is_listed():
+    """A folder of nidar_mi (code or data) missing from `packages` would be left out of wheels,
+    and setuptools warns about data folders outside it."""
+    tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+    from pathlib import Path
+
+    root = Path(REPO)
+    listed = set(
+        tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    folders = {
+        "nidar_mi." + ".".join(p.relative_to(root / "nidar_mi").parts)
+        if p != root / "nidar_mi"
+        else "nidar_mi"
+        for p in [root / "nidar_mi", *(root / "nidar_mi").rglob("*")]
+        if p.is_dir() and p.name != "__pycache__" and any(f.is_file() for f in p.iterdir())
+    }
+    assert folders | {"nidar_mi.plugins"} == listed
