@@ -1,7 +1,8 @@
 """``python -m nidar_mi.scenegen --count N --seed S -o DIR``: random urban and vegetated scenes.
 
 Writes ``DIR/scene_<S>_<k>.xml`` for k = 0 .. N-1 (scenes already there are skipped, so a run
-resumes; a file holding another scene is refused unless ``--overwrite``) and ``DIR/index.json``. Every scene renders with ``python -m nidar_mi.render``.
+resumes; a file holding a scene of another run is refused unless ``--overwrite``, a file edited
+by hand is kept) and ``DIR/index.json``. Every scene renders with ``python -m nidar_mi.render``.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ def build_parser():
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace scene files that differ from this run's (another --kind, or edited)",
+        help="replace scene files of another run (another --kind) and files edited by hand",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
