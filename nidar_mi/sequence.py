@@ -105,6 +105,7 @@ def render_sequence(
     frames: int | None = None,
     formats=rf.FORMATS,
     sequence_formats=(),
+    bin_intensity: str = "unit",
     seed: int | None = None,
     spp: int = 16,
     variant: str | None = None,
@@ -127,7 +128,10 @@ def render_sequence(
         frames: number of frames (default: as many as the trajectory holds).
         formats: point formats of each frame.
         sequence_formats: whole-sequence outputs, from :data:`SEQUENCE_FORMATS`.
-        seed: base seed; frame ``k`` uses ``seed + k`` (each LiDAR's own seed + k without it).
+        bin_intensity: ``unit`` or ``raw`` KITTI ``.bin`` intensity of each frame
+            (:func:`nidar_mi.render_folder.write_lidar`).
+        seed: base seed; frame ``k`` uses ``seed + k`` modulo 2³² (each LiDAR's own seed + k
+            without it; the camera sampler ``k`` without it).
         spp: camera samples per pixel.
         variant: Mitsuba variant.
         params: the scene's ``<default>`` values.
@@ -145,7 +149,7 @@ def render_sequence(
 
     from .io.atomic import staged_directory
     from .io.trajectory import read_trajectory, write_kitti_poses, write_times
-    from .simulate import _check_memory, _check_request, _load, _versions
+    from .simulate import _check_memory, _check_request, _load, _versions, nir_wavelengths
 
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
         raise NidarError(f"--rate must be > 0 Hz (got {rate})")
@@ -158,7 +162,13 @@ def render_sequence(
             f"(choose from {', '.join(SEQUENCE_FORMATS)})"
         )
     req = rf.RenderRequest.of(
-        scene_path, params=params, seed=seed, spp=spp, formats=tuple(formats), cameras=cameras
+        scene_path,
+        params=params,
+        seed=seed,
+        spp=spp,
+        formats=tuple(formats),
+        cameras=cameras,
+        bin_intensity=bin_intensity,
     )
     _check_request(req)
     if not os.path.isfile(trajectory):
@@ -208,6 +218,8 @@ def render_sequence(
                     cam_mounts,
                     cam_offsets,
                     formats=formats,
+                    bin_intensity=bin_intensity,
+                    wavelengths=nir_wavelengths(loaded),
                     seed=seed,
                     spp=spp,
                     deskew=deskew,
@@ -287,6 +299,8 @@ def _render_frame(
     cam_offsets,
     *,
     formats,
+    bin_intensity,
+    wavelengths,
     seed,
     spp,
     deskew,
@@ -311,7 +325,7 @@ def _render_frame(
         T_rig = traj.at(t_k + cfg.pattern.column_time_s())
         columns = T_rig @ mounts[lid]
         start = traj.at(t_k)[0] @ mounts[lid]
-        frame_seed = (cfg.seed if seed is None else seed) + k
+        frame_seed = ((cfg.seed if seed is None else seed) + k) % 2**32
         ts = time.perf_counter()
         result = scan(
             loaded.scene,
@@ -325,7 +339,7 @@ def _render_frame(
         scan_s = time.perf_counter() - ts
         results[lid] = result
         tw = time.perf_counter()
-        written = rf.write_lidar(folder, result, formats, deskew=deskew)
+        written = rf.write_lidar(folder, result, formats, None, bin_intensity, deskew=deskew)
         files += written
         lidar_entries[lid] = {
             "parameters": result.config.to_dict() | {"seed": frame_seed},
@@ -337,14 +351,20 @@ def _render_frame(
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": scan_s, "write": time.perf_counter() - tw},
         }
-    wavelength = loaded.lidars[0].config.wavelength
     for cam in loaded.cameras if cam_mounts else []:
         cid = cam.id()
         t_cam = t_k + cam_offsets[cid]
         rig = traj.at(t_cam)[0]
         _set_camera_pose(cam, rig @ cam_mounts[cid])
         ts = time.perf_counter()
-        r = render_camera(loaded, cam, wavelength=wavelength, spp=spp, seed=(seed or 0) + k)
+        r = render_camera(
+            loaded,
+            cam,
+            wavelength=wavelengths[0],
+            other_wavelengths=wavelengths[1:],
+            spp=spp,
+            seed=((seed or 0) + k) % 2**32,
+        )
         render_s = time.perf_counter() - ts
         lidar_poses = {lid: rig @ mounts[lid] for lid in results}
         calib, written = rf.write_camera(folder, r, lidar_poses)

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import os
 
-from ..render_folder import DEFAULT_FORMATS, FORMATS
+from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..simulate import INTENSITY_SOURCES, NIDAR_BRANCHES
-from ._common import parse_defines, parser, run
+from ._common import parse_defines, parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
 
@@ -79,7 +79,11 @@ def build_parser():
         help=f"point formats, from {','.join(FORMATS)} (default {','.join(DEFAULT_FORMATS)})",
     )
     p.add_argument(
-        "--seed", type=int, default=None, help="overrides every lidar's seed; camera sampler seed"
+        "--seed",
+        type=seed_arg,
+        default=None,
+        help="overrides every lidar's seed; camera sampler seed; 0 .. 2**32-1 "
+        "(default: each lidar's own seed, sampler seed 0)",
     )
     p.add_argument("--spp", type=int, default=16, help="camera samples per pixel (default 16)")
     p.add_argument(
@@ -102,13 +106,23 @@ def build_parser():
         help="nidar: also predict intensity_nidar / nidar_observed from the cameras with NIDAR",
     )
     p.add_argument(
-        "--weights", default=None, help="NIDAR weights folder (default: the shipped model)"
+        "--weights",
+        default=None,
+        help="NIDAR weights folder for --intensity nidar (default: the shipped model)",
     )
     p.add_argument(
         "--nidar-branch",
-        default="R",
+        default=None,
         choices=NIDAR_BRANCHES,
-        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
+        help="with --intensity nidar: R, the calibrated reflectance branch (the paper's, "
+        "default); I_hat, the dense intensity head",
+    )
+    p.add_argument(
+        "--bin-intensity",
+        default="unit",
+        choices=BIN_INTENSITY,
+        help="intensity in points.bin: unit, KITTI's [0, 1] (intensity / the sensor's full "
+        "scale, clipped; default); raw, the simulated intensity as it is",
     )
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
@@ -171,6 +185,10 @@ def main(argv=None) -> int:
         if args.trajectory is not None:
             if args.intensity != "physics" or args.rgb_twin:
                 raise NidarError("--trajectory renders physics intensity of the scene itself")
+            if args.weights is not None or args.nidar_branch is not None:
+                raise NidarError(
+                    "--weights and --nidar-branch are used only with --intensity nidar"
+                )
             from ..sequence import render_sequence
 
             manifest = render_sequence(
@@ -180,6 +198,7 @@ def main(argv=None) -> int:
                 rate=args.rate,
                 frames=args.frames,
                 formats=_parse_formats(args.formats),
+                bin_intensity=args.bin_intensity,
                 sequence_formats=tuple(
                     f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
                 ),
@@ -212,6 +231,7 @@ def main(argv=None) -> int:
             weights=args.weights,
             nidar_branch=args.nidar_branch,
             overwrite=args.overwrite,
+            bin_intensity=args.bin_intensity,
             max_memory=_memory(args.max_memory),
             deskew=args.deskew,
         )

@@ -17,7 +17,8 @@ name                 dtype      shape   unit  meaning
 ``intensity``        float32    (N,)    --    g·ρ·a + η, clipped at 0 (``intensity_mode`` ``raw``:
                                               1/m²; ``compensated``: unitless)
 ``reflectance``      float32    (N,)    --    ρ at the LiDAR wavelength: π × the monostatic BSDF
-                                              value (a Lambertian surface gives its albedo)
+                                              value (a Lambertian surface gives its albedo;
+                                              retroreflectors and rough metals exceed 1)
 ``cos_incidence``    float32    (N,)    --    cosine of the incidence angle on the shading normal
 ``ring``             uint16     (N,)    --    beam (channel) index, 0 = highest beam = top row
                                               of the range image

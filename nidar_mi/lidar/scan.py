@@ -106,7 +106,7 @@ def scan(
     with _timed(timings, "readback"):
         shape = (cfg.rings, cfg.horizontal_resolution)
         names, lut = material_table(scene)
-        _warn_nonfinite(cfg, names, _lookup(lut, np.concatenate(out.nonfinite_ids)))
+        bad = _warn_nonfinite(cfg, names, _lookup(lut, np.concatenate(out.nonfinite_ids)))
         shape_names, shape_lut = shape_table(scene)
         layers = []
         for m in range(cfg.max_returns):
@@ -124,6 +124,8 @@ def scan(
                     .reshape(shape),
                 )
             )
+        for layer in layers:
+            _drop_materials(layer, bad)
         first = layers[0]
         _warn_rgb_materials(scene, cfg, names, first.material[first.material >= 0])
         result = ScanResult(
@@ -535,8 +537,21 @@ def _bsdf_name(shape) -> str:
     return shape.bsdf().id() or f"{shape.id()}.bsdf"
 
 
-def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -> None:
-    """One warning per material among ``materials`` (indices) whose returns were not finite."""
+def _drop_materials(layer: ReturnLayer, bad: np.ndarray) -> None:
+    """Remove from ``layer`` every return of the materials ``bad`` (indices): a material with no
+    data at the laser wavelength gives no trustworthy return anywhere, even where its
+    evaluation happens to be finite (Mitsuba's conductor presets read η = k = 0 past their
+    table, a perfect mirror at exactly normal incidence and NaN elsewhere)."""
+    drop = np.isin(layer.material, bad) & layer.valid
+    if drop.any():
+        layer.valid = layer.valid & ~drop
+        layer.range = np.where(drop, 0.0, layer.range).astype(np.float32)
+        layer.intensity = np.where(drop, 0.0, layer.intensity).astype(np.float32)
+
+
+def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -> np.ndarray:
+    """One warning per material among ``materials`` (indices) whose returns were not finite;
+    returns those materials (the scan drops every return of them)."""
     for idx in np.unique(materials):
         name = names[idx] if idx >= 0 else "?"
         warnings.warn(
@@ -546,6 +561,7 @@ def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -
             RuntimeWarning,
             stacklevel=3,
         )
+    return np.unique(materials)
 
 
 _warned_rgb: set[tuple[str, str]] = set()
