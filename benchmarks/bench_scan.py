@@ -4,9 +4,10 @@
 
 The scene is :mod:`city_scene`'s procedural city (116 200 triangles by default: a height-field
 terrain and box buildings), loaded through :func:`nidar_mi.scene.load_scene` with a diffuse
-spectral material per mesh and a ``lidar`` sensor (``os1_128`` for 128 rings, else uniform rings
-over the same ±22.5°; ``cols`` columns). Open3D gets the same vertex and index arrays and the same
-rays (origin and unit world direction of every beam, from the sensor's pose).
+spectral material per mesh and a ``lidar`` sensor (the ``os1_128`` preset's uniform table for 128
+rings, else uniform rings over the same ±22.5°; ``cols`` columns). Open3D gets the same vertex and
+index arrays and the same rays (origin and unit world direction of every beam, from the sensor's
+pose).
 
 Both sides are warmed up (Dr.Jit compiles its kernels on the first call, Open3D builds its BVH
 on the first cast), then timed ``repeats`` times, interleaved so that both see the same machine

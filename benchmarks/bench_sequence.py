@@ -39,7 +39,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STREET = os.path.join(REPO, "scenes", "street.xml")
 
 SETUPS = {
-    "uniform": "",
+    "uniform": '<string name="layout" value="uniform"/>',
     "per_laser": '<string name="layout" value="per_laser"/>',
     "per_laser + divergence": '<string name="layout" value="per_laser"/>'
     '<float name="beam_divergence" value="3"/><integer name="beam_sample_quality" value="3"/>'

@@ -114,11 +114,13 @@ def scene_xml(plys: dict[str, str], rings: int, cols: int) -> str:
 
     Args:
         plys: mesh name -> PLY path (``terrain``, ``buildings``).
-        rings: LiDAR channels (128 uses the ``os1_128`` preset, else uniform over ±22.5°).
+        rings: LiDAR channels (128 uses the ``os1_128`` preset's uniform table, else uniform
+            over ±22.5°).
         cols: columns per scan.
     """
     if rings == 128:
-        pattern = '<string name="preset" value="os1_128"/>'
+        # its uniform table: the rays below are the uniform grid
+        pattern = '<string name="preset" value="os1_128"/><string name="layout" value="uniform"/>'
     else:
         angles = ", ".join(f"{a:.6f}" for a in np.linspace(22.5, -22.5, rings))
         pattern = f'<string name="elevation_angles" value="{angles}"/>'

@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     if not dirs:
         print("skipped: no KITTI frames found (give --kitti DIR)", file=sys.stderr)
         return 0
-    layouts = {"hdl64e uniform": {"preset": "hdl64e"}}
+    layouts = {"hdl64e uniform": {"preset": "hdl64e", "layout": "uniform"}}
     layouts["hdl64e per_laser"] = {"preset": "hdl64e", "layout": "per_laser"}
     for path in args.calibration:
         layouts[f"calibration {os.path.basename(path)}"] = {

@@ -41,7 +41,8 @@ class LidarSensor(mi.Sensor):
            lasers of a column firing together; ``per_laser``: the preset's published per-laser
            table (elevations, azimuth corrections, beam origins, firing order and timing; not
            ``waymo_top``)
-         - ``uniform`` (``per_laser`` with ``calibration_file``)
+         - ``per_laser`` (for a preset with a table or with ``calibration_file``; ``uniform``
+           for ``waymo_top`` and with ``elevation_angles``)
        * - ``calibration_file``
          - string
          - per-laser calibration of your own unit: a Velodyne ``db.xml``, a ROS velodyne
@@ -114,8 +115,16 @@ class LidarSensor(mi.Sensor):
          - 0
        * - ``detection_threshold``
          - float
-         - a return with g·ρ·T²·a below it is dropped, >= 0 (``hdl64e``: 4e-5, the
-           datasheet's 10 % target at 50 m, :mod:`nidar_mi.lidar.calibration`)
+         - T: a return is reported when the receiver's output g·ρ·T²·a + σ_n·n reaches it
+           (n standard normal), >= 0 (``hdl64e``: 4e-5, the datasheet's 10 % target at 50 m
+           detected half the time, :mod:`nidar_mi.lidar.calibration`)
+         - preset's in ``raw`` mode (0 for the others and in ``compensated`` mode)
+       * - ``receiver_noise_std``
+         - float
+         - σ_n, the receiver noise on a return before the detection test (the unit of
+           ``detection_threshold``), >= 0: P(detect) = Φ((g·ρ·T²·a − T)/σ_n); the reported
+           intensity is the receiver's output. 0: a step at the threshold (``hdl64e``: 1.08e-5
+           = T/3.72, false alarms 1e-4 per ranging event)
          - preset's in ``raw`` mode (0 for the others and in ``compensated`` mode)
        * - ``dropout``
          - float

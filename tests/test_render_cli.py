@@ -78,7 +78,16 @@ def test_points_schema_and_formats_agree(street_out):
     assert {"asphalt", "brick_red", "vegetation", "car_paint_red"} <= set(names)
     assert np.all((p["material"] >= 0) & (p["material"] < len(names)))
     assert np.all(np.isfinite(p["intensity"])) and np.all(p["intensity"] >= 0)
-    np.testing.assert_allclose(np.linalg.norm(p["xyz"], axis=1), p["range"], rtol=1e-5)
+    # the range runs from the beam's origin (the per-laser table's, 0.1-0.2 m off the axis)
+    from nidar_mi.lidar.config import LidarConfig
+
+    cfg = LidarConfig.from_mapping("l", {"preset": "hdl64e", "horizontal_resolution": 256})
+    direction, origin = cfg.pattern.beams()
+    beam = p["ring"].astype(np.int64) * 256 + p["column"]
+    np.testing.assert_allclose(np.linalg.norm(p["xyz"] - origin[beam], axis=1), p["range"], 1e-5)
+    np.testing.assert_allclose(
+        p["xyz"] - origin[beam], direction[beam] * p["range"][:, None], 0, 2e-5
+    )
     # the rig is at z = 1.73 m: world = lidar frame + translation
     np.testing.assert_allclose(p["xyz_world"], p["xyz"] + [0, 0, 1.73], atol=1e-4)
 

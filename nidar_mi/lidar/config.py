@@ -49,6 +49,7 @@ PARAMETERS = (
     "noise_intensity_std",
     "noise_range_std",
     "detection_threshold",
+    "receiver_noise_std",
     "dropout",
     "beam_divergence",
     "beam_sample_quality",
@@ -82,6 +83,7 @@ class LidarConfig:
     dropout: float
     seed: int
     layout: str = "uniform"
+    receiver_noise_std: float = 0.0
     calibration_file: str | None = None
     fov_h_centred: bool = False
     rotation_rate: float = 10.0
@@ -221,7 +223,10 @@ class LidarConfig:
             if preset not in PRESETS:
                 raise fail("preset", f"is unknown: '{preset}' (known: {', '.join(PRESETS)})")
         p = PRESETS[preset] if preset is not None else None
-        layout = choice("layout", "per_laser" if calib is not None else "uniform", LAYOUTS)
+        # a preset with a published table casts it unless its uniform table is asked for (or
+        # replaced by elevation_angles)
+        real = calib is not None or (preset in TABLE_FILES and angles is None)
+        layout = choice("layout", "per_laser" if real else "uniform", LAYOUTS)
         if angles is not None and (layout == "per_laser" or calib is not None):
             raise fail("elevation_angles", "cannot be combined with a per-laser layout")
         table = None
@@ -279,6 +284,12 @@ class LidarConfig:
             detection_threshold=number(
                 "detection_threshold",
                 p.detection_threshold if p and mode == "raw" else 0.0,
+                lo=0.0,
+            ),
+            # the receiver noise belongs to the preset's receiver: kept when the threshold is set
+            receiver_noise_std=number(
+                "receiver_noise_std",
+                p.receiver_noise_std if p and mode == "raw" else 0.0,
                 lo=0.0,
             ),
             dropout=number("dropout", 0.0, lo=0.0, hi=1.0),

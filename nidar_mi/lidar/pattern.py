@@ -65,6 +65,10 @@ class Preset:
         detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
             the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
             datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.calibration`).
+        receiver_noise_std: default ``raw``-mode receiver noise σ_n (1/m², gain 1): the
+            threshold over ``Q⁻¹(P_FA)`` for a false-alarm probability of 1e-4 per ranging
+            event (:func:`nidar_mi.lidar.calibration.noise_for`); 0 (a step at the
+            threshold) where the threshold is 0.
     """
 
     elevations_deg: tuple[float, ...]
@@ -73,6 +77,7 @@ class Preset:
     range_max: float
     reference: str
     detection_threshold: float = 0.0
+    receiver_noise_std: float = 0.0
 
 
 def _desc(values: np.ndarray) -> tuple[float, ...]:
@@ -101,6 +106,7 @@ PRESETS: dict[str, Preset] = {
         120.0,
         "Velodyne HDL-64E S2 datasheet (KITTI, Geiger et al. IJRR 2013)",
         4.0e-5,  # 0.10 / 50 m²: 10 % at normal incidence detected to 50 m (datasheet)
+        4.0e-5 / 3.719016485455709,  # T / Q⁻¹(1e-4): false alarms 1e-4 per ranging event
     ),
     "os1_64": Preset(
         _desc(np.linspace(16.6, -16.6, 64)),

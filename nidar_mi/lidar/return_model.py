@@ -14,10 +14,20 @@ passed through (1 without glass), and
 ``α`` is the atmospheric extinction coefficient (1/m); the factor 2 is the two-way path.
 
 A return is reported (:func:`detect`) when the beam hit something, its expected intensity
-``g·ρ·T²·a`` is finite, carries energy (> 0) and reaches the detection threshold, its range
-lies in ``[range_min, range_max]``, and a uniform draw is not below the dropout probability.
-``η`` is zero-mean Gaussian noise added after the detection test (:func:`add_noise`; the
-range gets its own), the result clipped at 0. :func:`compensate` turns written intensities
+``E = g·ρ·T²·a`` is finite and carries energy (> 0), the receiver's output ``E + σ_n·n`` reaches
+the detection threshold ``T`` (``n`` standard normal: the receiver noise, ``σ_n`` the sensor's
+``receiver_noise_std``), its range lies in ``[range_min, range_max]``, and a uniform draw is not
+below the dropout probability. The threshold test in white Gaussian noise gives the detection
+probability (:func:`detection_probability`)
+
+    P_D = Φ((E - T) / σ_n),   P_FA = Q(T / σ_n)
+
+(a known level in white Gaussian noise: S. M. Kay, *Fundamentals of Statistical Signal
+Processing, Vol. II: Detection Theory*, 1998, ch. 3): a return fades out over a few ``σ_n``
+around the threshold instead of stopping at a step (``σ_n = 0``), and a return exactly at the
+threshold is detected half the time. The sensor reports the receiver's output ``E + σ_n·n``;
+``η`` is further zero-mean Gaussian noise added after the detection test (:func:`add_noise`;
+the range gets its own), the result clipped at 0. :func:`compensate` turns written intensities
 back into the range-compensated ``g·ρ·T²·cos θ·exp(-2αd)`` (+ noise).
 :func:`full_scale_intensity` is a sensor's fixed reference for integer or unit-range encodings
 (LAS counts, KITTI's [0, 1]): the same for every frame of the sensor.
@@ -35,6 +45,8 @@ __all__ = [
     "attenuation",
     "expected_intensity",
     "detect",
+    "detection_probability",
+    "received",
     "add_noise",
     "box_muller",
     "compensate",
@@ -101,34 +113,84 @@ def expected_intensity(
 
 
 def detect(
-    expected, d, *, hit=True, threshold=0.0, range_min=0.0, range_max=np.inf, dropout=0.0, u=1.0
+    expected,
+    d,
+    *,
+    hit=True,
+    threshold=0.0,
+    range_min=0.0,
+    range_max=np.inf,
+    dropout=0.0,
+    u=1.0,
+    noise=0.0,
+    normal=0.0,
 ):
     """Which returns the sensor reports.
 
     Args:
-        expected: expected intensity ``g·ρ·T²·a`` (:func:`expected_intensity`).
+        expected: expected intensity ``E = g·ρ·T²·a`` (:func:`expected_intensity`).
         d: range (path length) in m.
         hit: bool, the beam hit a surface.
-        threshold: detection threshold on ``expected``, same unit, >= 0.
+        threshold: detection threshold ``T`` on the receiver's output, the unit of ``expected``,
+            >= 0.
         range_min, range_max: the range window in m.
         dropout: probability of dropping a return at random, in [0, 1].
         u: uniform draws in [0, 1), one per beam; a return is dropped where ``u < dropout``.
+        noise: ``σ_n``, standard deviation of the receiver noise, the unit of ``expected``, >= 0.
+        normal: standard normal draws, one per beam: the receiver's output is
+            ``E + σ_n · normal`` (:func:`received`).
 
     Returns:
-        bool mask, broadcast shape of the arguments: hit, finite, ``expected > 0`` (a return
-        carrying no energy is never reported, whatever the threshold), ``expected >= threshold``,
-        ``range_min <= d <= range_max`` and ``u >= dropout``.
+        bool mask, broadcast shape of the arguments: hit, finite, ``E > 0`` (a return carrying
+        no energy is never reported, whatever the threshold and the noise),
+        ``E + σ_n·normal >= T``, ``range_min <= d <= range_max`` and ``u >= dropout``.
     """
-    xp = _math(expected, d, u)
+    xp = _math(expected, d, u, normal)
     return (
         hit
         & xp.isfinite(expected)
         & (expected > 0.0)
-        & (expected >= threshold)
+        & (received(expected, noise, normal) >= threshold)
         & (d >= range_min)
         & (d <= range_max)
         & (u >= dropout)
     )
+
+
+def received(expected, noise, normal):
+    """The receiver's output ``E + σ_n · n``: the expected intensity and the receiver noise.
+
+    Args:
+        expected: expected intensity ``E``.
+        noise: ``σ_n``, >= 0, the unit of ``expected``.
+        normal: standard normal draws (:func:`box_muller`), broadcast with ``expected``.
+    """
+    return expected + noise * normal
+
+
+def detection_probability(expected, threshold, noise):
+    """``P_D = Φ((E - T) / σ_n)``: the probability that a return of expected intensity ``E``
+    passes the threshold ``T`` in white Gaussian receiver noise of deviation ``σ_n`` (a step
+    ``E >= T`` where ``σ_n = 0``). The range window, dropout and the ``E > 0`` rule of
+    :func:`detect` come on top.
+
+    Args:
+        expected: (...) expected intensity ``E``.
+        threshold: ``T``, the unit of ``E``.
+        noise: ``σ_n`` >= 0, the unit of ``E``.
+
+    Returns:
+        (...) float64 probabilities in [0, 1] (NumPy only).
+    """
+    from scipy.special import ndtr
+
+    e = np.asarray(expected, dtype=np.float64)
+    t = np.asarray(threshold, dtype=np.float64)
+    s = np.asarray(noise, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (e - t) / s
+    step = (e >= t).astype(np.float64)
+    return np.where(s > 0, ndtr(np.where(s > 0, z, 0.0)), step)
 
 
 def add_noise(value, std, normal):

@@ -16,7 +16,8 @@ Two paths, one per beam model:
   a'(d)`` (a mirror of Fresnel reflectance ``R_F`` tilted by ``α`` from the beam axis returns a
   Gaussian beam of divergence ``θ_w`` centred ``2α`` off the receiver, over twice the range;
   ``a'`` is ``a`` without the cosine). The contributions are grouped into echoes and the returns
-  selected per ``return_mode`` (:mod:`.echoes`); detection and noise per return.
+  selected per ``return_mode`` (:mod:`.echoes`) by the receiver's output (each echo with its
+  own receiver noise); further noise per return.
 
 Reading back names the materials (:func:`material_table`) and the shapes (``scene.shapes()``
 order), and warns once per material whose reflectance is not finite (Mitsuba's conductor presets
@@ -40,7 +41,14 @@ from .memory import check_scan_memory, chunk_beams
 from .raycast import cast, monostatic_reflectance
 from .rays import block_rays, column_poses, jit_float, static_pose
 from .result import ReturnLayer, ScanResult
-from .return_model import add_noise, attenuation, box_muller, detect, expected_intensity
+from .return_model import (
+    add_noise,
+    attenuation,
+    box_muller,
+    detect,
+    expected_intensity,
+    received,
+)
 
 __all__ = ["ScanResult", "ReturnLayer", "scan", "material_table", "shape_table"]
 
@@ -231,6 +239,7 @@ def _ideal_block(
     s = slice(start, stop)
     with _timed(timings, "detect"):
         u_dropout, normal_intensity, normal_range = draws[0]
+        normal_receiver = draws[-1][0]
         valid = detect(
             expected,
             d,
@@ -240,9 +249,12 @@ def _ideal_block(
             range_max=inputs.range_max,
             dropout=inputs.dropout,
             u=u_dropout,
+            noise=inputs.receiver_noise,
+            normal=normal_receiver,
         )
+        output = received(expected, inputs.receiver_noise, normal_receiver)
         intensity = dr.select(
-            valid, add_noise(expected, inputs.noise_intensity, normal_intensity), 0.0
+            valid, add_noise(output, inputs.noise_intensity, normal_intensity), 0.0
         )
         range_m = dr.select(valid, add_noise(d, inputs.noise_range, normal_range), 0.0)
         finite = dr.isfinite(expected)
@@ -341,6 +353,11 @@ def _echo_block(
         attrs = {key: np.concatenate(v, axis=1) for key, v in attrs.items()}
     with _timed(timings, "detect"):
         echoes = group_echoes(contrib_range, contrib_energy, cfg.return_separation)
+        normal = (
+            _echo_normals(inputs.seed, start, echoes.energy.shape)
+            if cfg.receiver_noise_std > 0
+            else 0.0
+        )
         candidate = detect(
             echoes.energy,
             echoes.range_m,
@@ -348,7 +365,11 @@ def _echo_block(
             threshold=cfg.detection_threshold,
             range_min=cfg.range_min,
             range_max=cfg.range_max,
+            noise=cfg.receiver_noise_std,
+            normal=normal,
         )
+        # the sensor sees (and picks by) each echo's output with its receiver noise
+        echoes = echoes._replace(energy=received(echoes.energy, cfg.receiver_noise_std, normal))
         slots = select_returns(echoes, candidate, cfg.return_mode)
         # attributes of beams without a return: their strongest echo, if any
         fallback = np.argmax(np.where(np.isfinite(echoes.range_m), echoes.energy, -1.0), axis=1)
@@ -429,8 +450,10 @@ class _KernelInputs(NamedTuple):
     dropout: Any
     noise_intensity: Any
     noise_range: Any
+    receiver_noise: Any
     half_angle: Any
     seed_state: Any
+    seed: int
 
 
 def _kernel_inputs(cfg: LidarConfig, seed: int) -> _KernelInputs:
@@ -450,8 +473,10 @@ def _kernel_inputs(cfg: LidarConfig, seed: int) -> _KernelInputs:
         dropout=opaque(cfg.dropout),
         noise_intensity=opaque(cfg.noise_intensity_std),
         noise_range=opaque(cfg.noise_range_std),
+        receiver_noise=opaque(cfg.receiver_noise_std),
         half_angle=opaque(cfg.beam_divergence * 5e-4),  # mrad full angle -> rad half angle
         seed_state=dr.opaque(mi.UInt64, (seed * 0x9E3779B97F4A7C15) % 2**64),
+        seed=seed,
     )
 
 
@@ -460,7 +485,9 @@ _PCG32_DEFAULT_STREAM = 0xDA3E39CB94B95BDB
 
 def _draws(n: int, returns: int, seed_state, first_beam):
     """Per beam and return: a uniform dropout draw and standard normals for intensity and range
-    noise. Beam ``b`` draws from its own stream whatever block it is cast in."""
+    noise; then, per beam, a standard normal of the receiver noise (the last entry, a 1-tuple;
+    drawn after the others so that they keep their values). Beam ``b`` draws from its own
+    stream whatever block it is cast in."""
     import drjit as dr
     import mitsuba as mi
 
@@ -476,7 +503,32 @@ def _draws(n: int, returns: int, seed_state, first_beam):
         normal_intensity = box_muller(rng.next_float32(), rng.next_float32())
         normal_range = box_muller(rng.next_float32(), rng.next_float32())
         out.append((u_dropout, normal_intensity, normal_range))
+    out.append((box_muller(rng.next_float32(), rng.next_float32()),))
     return out
+
+
+def _mix64(x: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser (Steele et al., OOPSLA 2014): a bijective uint64 hash."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _echo_normals(seed: int, first_beam: int, shape: tuple[int, int]) -> np.ndarray:
+    """(n, E) standard normals, one per echo slot of beams ``first_beam..first_beam+n``: a
+    counter-based draw (hash of seed, beam and slot), the same whatever block a beam is cast in.
+    """
+    n, e = shape
+    beam = np.arange(first_beam, first_beam + n, dtype=np.uint64)[:, None]
+    slot = np.arange(e, dtype=np.uint64)[None, :]
+    with np.errstate(over="ignore"):  # uint64 arithmetic wraps by design
+        key = _mix64(
+            np.array([seed], dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+            + np.uint64(0x632BE59BD9B4E019)
+        )
+        base = _mix64(key ^ (beam * np.uint64(0xD1B54A32D192ED03) + slot * np.uint64(2)))
+        u = [(_mix64(base + np.uint64(i)) >> np.uint64(11)) * 2.0**-53 for i in (1, 2)]
+    return box_muller(u[0], u[1])
 
 
 # ---------------------------------------------------------------- read back

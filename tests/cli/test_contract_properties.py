@@ -71,6 +71,7 @@ LIDAR_PARAMETERS = {
     "noise_intensity_std": ("float", _small(-0.1, 1)),
     "noise_range_std": ("float", _small(-0.1, 1)),
     "detection_threshold": ("float", _small(-0.1, 1)),
+    "receiver_noise_std": ("float", _small(-0.1, 1)),
     "dropout": ("float", _small(-0.5, 1.5)),
     "layout": ("string", st.sampled_from(["uniform", "per_laser", "PER_LASER", "grid", ""])),
     "calibration_file": ("string", st.sampled_from(["", "none.xml", "cal.yaml", "a.txt", "x y"])),

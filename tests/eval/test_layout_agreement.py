@@ -32,7 +32,7 @@ def _pattern(**values):
 
 @pytest.mark.parametrize(
     "values, ring_matched, nearest",
-    [({}, 2.44, 0.113), ({"layout": "per_laser"}, 0.35, 0.077)],
+    [({"layout": "uniform"}, 2.44, 0.113), ({}, 0.35, 0.077)],  # {}: per_laser by default
 )
 def test_kitti_elevation_agreement(values, ring_matched, nearest):
     from nidar_mi.eval.layout_agreement import elevation_agreement

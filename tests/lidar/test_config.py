@@ -13,9 +13,33 @@ def test_defaults_from_preset():
     assert c.range_min == 0.9 and c.range_max == 120.0
     # the datasheet's 10 % target at 50 m, in raw units only
     assert c.detection_threshold == pytest.approx(0.10 / 50.0**2)
+    # the receiver noise under it: false alarms 1e-4 per ranging event, Q^-1(1e-4) = 3.719
+    assert c.receiver_noise_std == pytest.approx(4e-5 / 3.7190164854557, rel=1e-12)
     comp = LidarConfig.from_mapping("l", {"preset": "hdl64e", "intensity_mode": "compensated"})
-    assert comp.detection_threshold == 0.0
-    assert LidarConfig.from_mapping("l", {"preset": "vlp16"}).detection_threshold == 0.0
+    assert comp.detection_threshold == 0.0 and comp.receiver_noise_std == 0.0
+    vlp = LidarConfig.from_mapping("l", {"preset": "vlp16"})
+    assert vlp.detection_threshold == 0.0 and vlp.receiver_noise_std == 0.0
+    # a threshold of one's own keeps the preset's receiver
+    own = LidarConfig.from_mapping("l", {"preset": "hdl64e", "detection_threshold": 5e-5})
+    assert own.receiver_noise_std == c.receiver_noise_std
+
+
+@pytest.mark.parametrize(
+    "values, layout",
+    [
+        ({}, "per_laser"),  # vlp16
+        ({"preset": "hdl64e"}, "per_laser"),
+        ({"preset": "os1_128"}, "per_laser"),
+        ({"preset": "waymo_top"}, "uniform"),  # no published table
+        ({"preset": "hdl64e", "layout": "uniform"}, "uniform"),
+        ({"preset": "hdl32e", "elevation_angles": "1, -1"}, "uniform"),
+        ({"elevation_angles": "1, -1"}, "uniform"),
+    ],
+)
+def test_default_layout_is_the_published_table(values, layout):
+    c = LidarConfig.from_mapping("l", values)
+    assert c.layout == layout
+    assert (c.table is not None) == (layout == "per_laser")
 
 
 def test_elevation_angles_imply_channels():
@@ -37,6 +61,8 @@ def test_elevation_angles_imply_channels():
         ({"range_min": 10, "range_max": 5}, "range_min"),
         ({"noise_intensity_std": -1}, "noise_intensity_std"),
         ({"noise_range_std": -0.1}, "noise_range_std"),
+        ({"receiver_noise_std": -1e-6}, "receiver_noise_std"),
+        ({"receiver_noise_std": "nan"}, "receiver_noise_std"),
         ({"dropout": 1.5}, "dropout"),
         ({"gain": 0}, "gain"),
         ({"gain": "x"}, "gain"),
@@ -91,7 +117,7 @@ def test_per_laser_layout_and_derived_counts():
     assert (
         c.elevations_deg
         == c.laser_table.elevation_deg
-        != LidarConfig.from_mapping("l", {"preset": "hdl64e"}).elevations_deg
+        != LidarConfig.from_mapping("l", {"preset": "hdl64e", "layout": "uniform"}).elevations_deg
     )
     d = LidarConfig.from_mapping(
         "l", {"beam_divergence": 2, "beam_sample_quality": 4, "return_mode": "dual"}

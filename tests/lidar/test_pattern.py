@@ -87,7 +87,8 @@ def test_centred_field_of_view():
     from nidar_mi.lidar.config import LidarConfig
 
     c = LidarConfig.from_mapping(
-        "l", {"fov_h": 120, "fov_h_centred": True, "horizontal_resolution": 120}
+        "l",
+        {"fov_h": 120, "fov_h_centred": True, "horizontal_resolution": 120, "layout": "uniform"},
     )
     az = c.pattern.column_azimuth_deg()
     assert az[0] == pytest.approx(-59.5) and az[-1] == pytest.approx(59.5)
