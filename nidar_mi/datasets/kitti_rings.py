@@ -13,14 +13,22 @@ Far away a real road leaves that plane (a 0.4° slope lifts it 0.35 m at 50 m), 
 :func:`grow_ground` grows the ground outward ring by ring along each azimuth: a point is ground
 when it is within 0.2 m of the plane, or when the point of the next lower ring at its azimuth is
 ground and the step between them is further out and at most 6° steep (a car or a kerb face is
-steeper).
+steeper). :func:`pose_over_plane` gives the sensor's pose over its road plane (height and tilt),
+from which a simulated sweep can be cast over a flat road as the real one was.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["azimuth_deg", "scan_rings", "ground_plane", "grow_ground", "nearest_in_ring"]
+__all__ = [
+    "azimuth_deg",
+    "scan_rings",
+    "ground_plane",
+    "grow_ground",
+    "nearest_in_ring",
+    "pose_over_plane",
+]
 
 
 def azimuth_deg(xyz: np.ndarray) -> np.ndarray:
@@ -100,6 +108,24 @@ def ground_plane(
         n = n * np.sign(n[2])
         c = -float(n @ centre)
     return n, c
+
+
+def pose_over_plane(n: np.ndarray, c: float) -> np.ndarray:
+    """(4, 4) the sensor's pose in the frame of its road plane ``n · x + c = 0``: the plane is
+    ``z = 0``, the sensor ``c`` above it, its x axis projected onto the plane (yaw 0).
+
+    Args:
+        n: (3,) the plane's unit normal in the sensor frame, pointing up.
+        c: the sensor's height above the plane, m.
+    """
+    z = np.asarray(n, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, np.cross(z, x), z])  # rows: the road axes in sensor coordinates
+    T[2, 3] = c
+    return T
 
 
 def nearest_in_ring(az_ring: np.ndarray, az_query: np.ndarray, step_deg: float):

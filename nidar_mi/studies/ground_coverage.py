@@ -4,24 +4,37 @@ A real HDL-64E S2 on a flat road returns each laser's ground in a narrow band of
 the laser's flat-ground intersection, and keeps detecting asphalt at grazing incidence out to
 about 50 m. This module measures both sides the same way, per ring (0 = highest laser):
 
-* **simulated** (:func:`simulate_flat_road`): a LiDAR preset at the KITTI rig's 1.73 m over an
-  endless flat road of one material, scanned by the real ``lidar`` plugin; every column of a
-  ring meets the road, so ``P(detect)`` is the fraction of its columns reported.
 * **real** (:func:`kitti_ground_rings`): KITTI frames read from a user path (never copied);
   the ring of every point from the storage order and the road plane by RANSAC
   (:mod:`nidar_mi.datasets.kitti_rings`); ground = within 0.2 m of the plane or grown outward
-  from it along each azimuth (:func:`nidar_mi.datasets.kitti_rings.grow_ground`). ``P(detect)`` of
-  ring r is conditional on the road being visible: of the ground returns of the next lower
-  ring r+1, the fraction at whose azimuth ring r also returned ground (ring r returning
-  something else there, a car or a kerb, is left out; returning nothing is a miss). It is a
-  lower bound where the road ends or rises out of view.
+  from it along each azimuth (:func:`nidar_mi.datasets.kitti_rings.grow_ground`). The range of
+  a point is its distance from the sensor origin, ``|xyz|``. ``P(detect)`` of ring r is
+  conditional on the road being visible: of the ground returns of the next lower ring r+1, the
+  fraction at whose azimuth ring r also returned ground (ring r returning something else there,
+  a car or a kerb, is left out; returning nothing is a miss). It is a lower bound where the road
+  ends or rises out of view. Each frame also gives the sensor's pose over its road plane
+  (height and tilt, :func:`nidar_mi.datasets.kitti_rings.pose_over_plane`) and whether the
+  sweep was cut to the front half (x > 0).
+* **simulated** (:func:`simulate_flat_road`): a LiDAR preset over an endless flat road of one
+  material, scanned by the real ``lidar`` plugin, either level at the KITTI rig's 1.73 m or,
+  frame by frame, at the pose a real frame measured (the road is still a plane: only the car's
+  height and attitude over it are taken from the frame; nothing of the sensor). Ranges are
+  ``|xyz|`` as on the real side, and so is ``P(detect)`` of a ring: of the columns where ring
+  r+1 returned the road, the fraction where ring r did too. Every beam that met the road is also
+  counted by its range (:attr:`RingCoverage.range_hits`), so that ``P(detect)`` of the simulated
+  road at any range can be read whatever the ring (:meth:`RingCoverage.p_at_range`).
 
-:func:`compare_rings` puts them side by side: per ring the median ground range of each, their
-ratio, the two ``P(detect)`` and whether both agree within a tolerance (10 %: the ratio within
-[0.9, 1.1] and ``|ΔP| <= 0.1``). The median range tests the ring geometry (the preset's
-elevation table and beam origins); ``P(detect)`` the detection model (threshold, and the road's
-backscatter at grazing incidence). :func:`target_reach_scanned` finds by bisection how far a
-Lambertian target at normal incidence is reported.
+:func:`compare_rings` puts them side by side, per ring: the median and 90th percentile of the
+ground range, real and simulated, and ``P(detect)``. The ground-range criterion: a ring
+**matches** when both its simulated median and 90th percentile lie within 10 % of the real ones;
+rings are compared where the real frames hold at least 50 ground returns of that ring per frame
+(:data:`MIN_GROUND_PER_FRAME`). ``P(detect)`` agrees when the simulated road's ``P(detect)`` at
+the ring's real median range (the detection model alone) is within 0.1 (absolute) of the real
+ring's, where that rests on at least 200 references; the same ring's simulated ``P(detect)`` is
+compared too (it mixes in where the ring meets the road). :func:`summarize` counts the rings.
+:func:`target_detection_scanned` measures the fraction of beams a Lambertian target at normal
+incidence returns at a range, :func:`target_reach_scanned` how far it is reported without
+receiver noise.
 """
 
 from __future__ import annotations
@@ -42,15 +55,31 @@ __all__ = [
     "simulate_flat_road",
     "kitti_ground_rings",
     "compare_rings",
+    "summarize",
+    "target_detection_scanned",
     "target_reach_scanned",
     "LAMBERTIAN_ASPHALT",
     "ROUGH_ASPHALT",
+    "MIN_GROUND_PER_FRAME",
+    "MIN_REFERENCES",
+    "TOLERANCE",
+    "RANGE_BINS_M",
 ]
 
 #: The road of the old model: Lambertian asphalt_old (its earthlib spectrum).
 LAMBERTIAN_ASPHALT = "lambertian:asphalt_old"
 #: The library's asphalt_old: roughdiffuse (nidar_mi.lidar.calibration).
 ROUGH_ASPHALT = "asphalt_old"
+#: A ring's ground ranges are compared where the real frames hold at least this many of its
+#: ground returns per frame (about 5 % of a 2000-column sweep).
+MIN_GROUND_PER_FRAME = 50
+#: A ring's P(detect) is compared where its real estimate rests on at least this many references.
+MIN_REFERENCES = 200
+#: Relative tolerance on the median and 90th percentile; absolute tolerance on P(detect).
+TOLERANCE = 0.10
+#: Edges of the range bins (m) in which a simulated coverage counts the beams that met the
+#: road and those reported (1 % wide, 1-300 m).
+RANGE_BINS_M = np.geomspace(1.0, 300.0, int(np.ceil(np.log(300.0) / np.log(1.01))) + 1)
 
 
 @dataclass
@@ -58,12 +87,18 @@ class RingCoverage:
     """Ground returns per ring (R rings).
 
     Attributes:
-        ranges: per ring, (n_r,) float64 ranges (m) of its ground returns.
-        detected: (R,) int, columns (sim) or references (real) where the ground was reported.
+        ranges: per ring, (n_r,) float64 ranges ``|xyz|`` (m) of its ground returns.
+        detected: (R,) int, beams (sim) or references (real) where the ground was reported.
         missed: (R,) int, where it was visible but not reported.
         frames: how many sweeps were pooled.
-        flat_range_m: (R,) where each ring meets flat ground (simulated; ``inf`` above the
-            horizon), or None (real).
+        flat_range_m: (R,) where each ring meets flat ground from the nominal pose (simulated;
+            ``inf`` where it does not), or None (real).
+        poses: (F, 4, 4) the sensor's pose in its road's frame (road = the plane z = 0) per
+            frame (real), or the poses scanned (simulated).
+        front_only: (F,) bool, the sweep holds only the front half (x > 0).
+        range_hits: (B,) int, simulated only: beams that met the road, per bin of range
+            (:data:`RANGE_BINS_M`, whatever their ring), or None.
+        range_detected: (B,) int, of those, the beams reported, or None.
     """
 
     ranges: list[np.ndarray]
@@ -71,17 +106,32 @@ class RingCoverage:
     missed: np.ndarray
     frames: int
     flat_range_m: np.ndarray | None = None
+    poses: np.ndarray | None = None
+    front_only: np.ndarray | None = None
+    range_hits: np.ndarray | None = None
+    range_detected: np.ndarray | None = None
 
-    def p_at_range(self, range_m: np.ndarray) -> np.ndarray:
-        """``P(detect)`` of the ring whose flat-ground range is nearest each of ``range_m``
-        (simulated coverage only): the detection model at a range, whatever the ring."""
-        if self.flat_range_m is None:
-            raise ValueError("p_at_range needs the flat-ground range of each ring")
-        ok = np.isfinite(self.flat_range_m)
-        flat, p = self.flat_range_m[ok], np.nan_to_num(self.p_detect[ok])
+    def p_at_range(self, range_m: np.ndarray, *, window: float = 0.05) -> np.ndarray:
+        """``P(detect)`` of the simulated road at each of ``range_m`` (simulated coverage only):
+        the fraction of beams reported among those that met the road within ``±window``
+        (relative) of that range, whatever their ring: the detection model alone. NaN where
+        fewer than 50 beams met the road there.
+
+        Args:
+            range_m: (N,) ranges, m.
+            window: half width of the range window, relative.
+        """
+        if self.range_hits is None or self.range_detected is None:
+            raise ValueError("p_at_range needs a simulated coverage")
         d = np.asarray(range_m, dtype=np.float64)
-        nearest = np.argmin(np.abs(np.log(flat)[None, :] - np.log(d)[:, None]), axis=1)
-        return p[nearest]
+        lo = np.searchsorted(RANGE_BINS_M, d / (1.0 + window), side="right") - 1
+        hi = np.searchsorted(RANGE_BINS_M, d * (1.0 + window), side="left")
+        hits = np.concatenate([[0], np.cumsum(self.range_hits)])
+        det = np.concatenate([[0], np.cumsum(self.range_detected)])
+        lo = np.clip(lo, 0, len(self.range_hits))
+        hi = np.clip(hi, 0, len(self.range_hits))
+        n, k = hits[hi] - hits[lo], det[hi] - det[lo]
+        return np.where(n >= 50, k / np.maximum(n, 1), np.nan)
 
     @property
     def p_detect(self) -> np.ndarray:
@@ -89,9 +139,19 @@ class RingCoverage:
         total = self.detected + self.missed
         return np.where(total > 0, self.detected / np.maximum(total, 1), np.nan)
 
+    @property
+    def counts(self) -> np.ndarray:
+        """(R,) int ground returns per ring."""
+        return np.array([len(r) for r in self.ranges], dtype=np.int64)
+
+    def percentile(self, q: float) -> np.ndarray:
+        """(R,) the ``q``-th percentile of the ground range per ring (m); NaN where a ring has
+        none."""
+        return np.array([np.percentile(r, q) if len(r) else np.nan for r in self.ranges])
+
     def medians(self) -> np.ndarray:
         """(R,) median ground range per ring (m); NaN where a ring has none."""
-        return np.array([np.median(r) if len(r) else np.nan for r in self.ranges])
+        return self.percentile(50.0)
 
 
 def _road_bsdf(material: str) -> str:
@@ -115,6 +175,9 @@ def flat_road_scene_xml(
     height_m: float = 1.73,
     cols: int | None = None,
     threshold: float | None = None,
+    noise: float | None = None,
+    layout: str | None = None,
+    calibration_file: str | os.PathLike | None = None,
 ) -> str:
     """Scene XML: ``preset`` at ``height_m`` over a 4 km flat road of ``material``.
 
@@ -125,6 +188,9 @@ def flat_road_scene_xml(
         height_m: sensor height above the road.
         cols: columns per sweep (preset's when None).
         threshold: detection threshold (the preset's when None).
+        noise: receiver noise ``receiver_noise_std`` (the preset's when None).
+        layout: ``uniform`` or ``per_laser`` (the preset's default when None).
+        calibration_file: a per-laser calibration file (absolute path) to cast instead.
     """
     lines = [
         '<scene version="3.0.0">',
@@ -132,10 +198,17 @@ def flat_road_scene_xml(
         f'    <string name="preset" value="{preset}"/>',
         '    <float name="range_max" value="120"/>',
     ]
+    if layout is not None:
+        lines.append(f'    <string name="layout" value="{layout}"/>')
+    if calibration_file is not None:
+        path = os.path.abspath(os.fspath(calibration_file))
+        lines.append(f'    <string name="calibration_file" value="{path}"/>')
     if cols is not None:
         lines.append(f'    <integer name="horizontal_resolution" value="{int(cols)}"/>')
     if threshold is not None:
         lines.append(f'    <float name="detection_threshold" value="{threshold:.9g}"/>')
+    if noise is not None:
+        lines.append(f'    <float name="receiver_noise_std" value="{noise:.9g}"/>')
     lines += [
         f'    <transform name="to_world"><translate z="{height_m:.9g}"/></transform>',
         "  </sensor>",
@@ -158,6 +231,18 @@ def _load_xml(xml: str):
         return load_scene(path)
 
 
+def _flat_ranges(pattern, height_m: float) -> np.ndarray:
+    """(R,) ``|xyz|`` where each ring's beam of column 0 meets the plane ``z = -h`` below a
+    level sensor; inf where it points up."""
+    ring = np.arange(pattern.rings)
+    d, o = pattern.rays_at(ring, np.zeros(pattern.rings))
+    o = np.zeros_like(d) if o is None else o
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (-height_m - o[:, 2]) / d[:, 2]
+    p = o + t[:, None] * d
+    return np.where((d[:, 2] < 0) & (t > 0), np.linalg.norm(p, axis=1), np.inf)
+
+
 def simulate_flat_road(
     preset: str = "hdl64e",
     material: str = ROUGH_ASPHALT,
@@ -165,20 +250,90 @@ def simulate_flat_road(
     height_m: float = 1.73,
     cols: int | None = None,
     threshold: float | None = None,
+    noise: float | None = None,
+    layout: str | None = None,
+    calibration_file: str | os.PathLike | None = None,
+    poses: np.ndarray | None = None,
+    front_only: Sequence[bool] | None = None,
+    seed: int = 0,
 ) -> RingCoverage:
-    """Scan a flat road (:func:`flat_road_scene_xml`); per ring its reported ground returns."""
+    """Scan a flat road (:func:`flat_road_scene_xml`); per ring its reported ground returns.
+
+    Args:
+        preset, material, height_m, cols, threshold, noise, layout, calibration_file: the scene
+            (:func:`flat_road_scene_xml`).
+        poses: (F, 4, 4) sensor poses over the road (the plane z = 0), one sweep each (e.g. a
+            real coverage's ``poses``); None: one level sweep at ``height_m``.
+        front_only: (F,) keep only the points ahead (x > 0 in the sensor frame) of sweep k, as
+            in real sweeps cut to the front half; None: keep all.
+        seed: noise seed of the first sweep; sweep k uses ``seed + k``.
+    """
     from ..lidar.scan import scan
 
     loaded = _load_xml(
-        flat_road_scene_xml(preset, material, height_m=height_m, cols=cols, threshold=threshold)
+        flat_road_scene_xml(
+            preset,
+            material,
+            height_m=height_m,
+            cols=cols,
+            threshold=threshold,
+            noise=noise,
+            layout=layout,
+            calibration_file=calibration_file,
+        )
     )
-    r = scan(loaded.scene, loaded.lidars[0], seed=0)
-    ranges = [r.range[k][r.valid[k]].astype(np.float64) for k in range(r.valid.shape[0])]
-    detected = r.valid.sum(axis=1)
-    missed = (r.hit & ~r.valid).sum(axis=1)
-    down = np.sin(np.radians(-r.config.elevations))
-    flat = np.where(down > 0, height_m / np.maximum(down, 1e-12), np.inf)
-    return RingCoverage(ranges, detected, missed, 1, flat)
+    lidar = loaded.lidars[0]
+    if poses is None:
+        level = np.eye(4)
+        level[2, 3] = height_m
+        poses = level[None]
+    poses = np.asarray(poses, dtype=np.float64)
+    front = np.zeros(len(poses), bool) if front_only is None else np.asarray(front_only, bool)
+    rings = lidar.config.rings
+    ranges: list[list[np.ndarray]] = [[] for _ in range(rings)]
+    detected = np.zeros(rings, dtype=np.int64)
+    missed = np.zeros(rings, dtype=np.int64)
+    bins = len(RANGE_BINS_M) - 1
+    range_hits = np.zeros(bins, dtype=np.int64)
+    range_detected = np.zeros(bins, dtype=np.int64)
+    for k, pose in enumerate(poses):
+        r = scan(loaded.scene, lidar, seed=seed + k, to_world=pose)
+        origins = np.zeros_like(r.directions) if r.origins is None else r.origins
+        # where each beam meets the road, reported or not: |xyz| in the sensor frame
+        o_z = origins @ pose[2, :3] + pose[2, 3]
+        d_z = r.directions @ pose[2, :3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(d_z < 0, -o_z / d_z, np.inf)
+        dist = np.linalg.norm(
+            origins + np.where(np.isfinite(t), t, 0.0)[..., None] * r.directions, axis=-1
+        )
+        # a sweep cut to the front half keeps the beams pointing ahead (x > 0)
+        keep = r.directions[..., 0] > 0 if front[k] else np.ones(r.valid.shape, bool)
+        valid, hit = r.valid & keep, r.hit & keep
+        for q in range(rings):
+            ranges[q].append(dist[q][valid[q]])
+        # P(detect) of ring q as on the real side: where ring q+1 returned the road
+        ref = np.zeros_like(valid)
+        ref[:-1] = valid[1:] & hit[:-1]
+        detected += (ref & valid).sum(axis=1)
+        missed += (ref & ~valid).sum(axis=1)
+        b_idx = np.searchsorted(RANGE_BINS_M, dist[hit], side="right") - 1
+        inside = (b_idx >= 0) & (b_idx < bins)
+        range_hits += np.bincount(b_idx[inside], minlength=bins)
+        range_detected += np.bincount(
+            b_idx[inside], weights=valid[hit][inside], minlength=bins
+        ).astype(np.int64)
+    return RingCoverage(
+        [np.concatenate(x) for x in ranges],
+        detected,
+        missed,
+        len(poses),
+        _flat_ranges(lidar.config.pattern, height_m),
+        poses,
+        front,
+        range_hits,
+        range_detected,
+    )
 
 
 def _conditional_detection(az, ring, ground, step, rings: int):
@@ -202,6 +357,7 @@ def kitti_ground_rings(
     *,
     rings: int = 64,
     seed: int = 0,
+    progress: bool = False,
 ) -> RingCoverage:
     """Ground returns per ring of real KITTI HDL-64E sweeps (method in the module docstring).
 
@@ -211,22 +367,33 @@ def kitti_ground_rings(
         rings: lasers per sweep; a sweep whose storage order gives another count (a truncated
             file) is left out.
         seed: RANSAC seed.
+        progress: show a progress bar.
 
     Raises:
         NidarError: the folder holds no usable sweep.
     """
-    from ..datasets.kitti_rings import azimuth_deg, ground_plane, grow_ground, scan_rings
+    from ..datasets.kitti_rings import (
+        azimuth_deg,
+        ground_plane,
+        grow_ground,
+        pose_over_plane,
+        scan_rings,
+    )
     from ..io.points import read_kitti_bin
 
     paths = sorted(glob.glob(os.path.join(os.fspath(velodyne_dir), "*.bin")))
     if frames is not None:
         wanted = set(frames)
         paths = [p for p in paths if os.path.splitext(os.path.basename(p))[0] in wanted]
+    if progress:
+        from tqdm import tqdm
+
+        paths = tqdm(paths, desc="KITTI sweeps", unit="sweep")
     rng = np.random.default_rng(seed)
     ranges: list[list[np.ndarray]] = [[] for _ in range(rings)]
     detected = np.zeros(rings, dtype=np.int64)
     missed = np.zeros(rings, dtype=np.int64)
-    used = 0
+    poses, front = [], []
     for path in paths:
         xyz, _ = read_kitti_bin(path)
         xyz = xyz.astype(np.float64)
@@ -236,66 +403,163 @@ def kitti_ground_rings(
         az = azimuth_deg(xyz)
         steps = np.diff(np.sort(az[ring == rings // 2]))
         step = float(np.median(steps[(steps > 0) & (steps < 1.0)]))
-        ground = grow_ground(xyz, ring, ground_plane(xyz, rng), step)
+        plane = ground_plane(xyz, rng)
+        ground = grow_ground(xyz, ring, plane, step)
         d = np.linalg.norm(xyz, axis=1)
         for r in range(rings):
             ranges[r].append(d[(ring == r) & ground])
         det, mis = _conditional_detection(az, ring, ground, step, rings)
         detected += det
         missed += mis
-        used += 1
-    if used == 0:
+        poses.append(pose_over_plane(*plane))
+        front.append(bool(np.mean(xyz[:, 0] < 0.0) < 0.01))
+    if not poses:
         raise NidarError(f"{velodyne_dir}: no whole {rings}-ring KITTI sweep found")
-    return RingCoverage([np.concatenate(r) for r in ranges], detected, missed, used)
+    return RingCoverage(
+        [np.concatenate(r) for r in ranges],
+        detected,
+        missed,
+        len(poses),
+        None,
+        np.stack(poses),
+        np.array(front),
+    )
 
 
 def compare_rings(
     real: RingCoverage,
     sim: RingCoverage,
     *,
-    tolerance: float = 0.10,
-    min_references: int = 200,
+    tolerance: float = TOLERANCE,
+    min_ground_per_frame: float = MIN_GROUND_PER_FRAME,
+    min_references: int = MIN_REFERENCES,
 ) -> list[dict]:
-    """Per ring: real and simulated median ground range, ratio, P(detect), agreement.
+    """Per ring: real and simulated ground-range median and 90th percentile, P(detect).
 
-    Only rings whose real ``P(detect)`` rests on at least ``min_references`` visible-ground
-    references are compared (``compared`` False otherwise; rings above the horizon never are).
+    Args:
+        real, sim: the two coverages (same ring count).
+        tolerance: relative on the range statistics, absolute on P(detect).
+        min_ground_per_frame: a ring's ranges are compared where the real coverage holds at
+            least this many of its ground returns per frame.
+        min_references: a ring's P(detect) is compared where its real estimate rests on at
+            least this many references.
 
     Returns:
-        One dict per ring: ``ring``, ``real_median_m``, ``sim_median_m``, ``ratio``,
-        ``real_p``, ``sim_p`` (the same ring), ``sim_p_at_range`` (the simulated ring nearest
-        the real median range: the detection model alone), ``references``, ``compared``,
-        ``range_ok``, ``p_ok``, ``ok`` (both), ``p_at_range_ok``.
+        One dict per ring: ``ring``, ``real_ground`` (count), ``real_median_m``,
+        ``sim_median_m``, ``ratio`` (median, sim/real), ``real_p90_m``, ``sim_p90_m``,
+        ``ratio_p90``, ``compared`` (enough real ground), ``median_ok``, ``p90_ok``,
+        ``range_ok`` (both), ``references``, ``p_compared``, ``real_p``, ``sim_p`` (the same
+        ring; 0 where the simulated ring meets no road), ``p_ok``, ``sim_p_at_range`` (the
+        simulated ring nearest the real median range: the detection model alone; needs the
+        simulated flat ranges) and ``p_at_range_ok``, ``ok`` (``range_ok``, and ``p_ok`` where
+        P is compared).
     """
     rm, sm = real.medians(), sim.medians()
+    r90, s90 = real.percentile(90.0), sim.percentile(90.0)
     rp, sp = real.p_detect, sim.p_detect
-    at_range = sim.p_at_range(np.where(np.isfinite(rm), rm, 1.0))
+    count = real.counts
     refs = real.detected + real.missed
+    at_range = (
+        sim.p_at_range(np.where(np.isfinite(rm), rm, 1.0))
+        if sim.range_hits is not None
+        else np.full(len(rm), np.nan)
+    )
+
+    def within(a, b):
+        return bool(np.isfinite(a) and np.isfinite(b) and abs(a / b - 1.0) <= tolerance)
+
     rows = []
     for r in range(len(rm)):
-        compared = bool(refs[r] >= min_references and np.isfinite(rm[r]))
-        ratio = sm[r] / rm[r] if compared and np.isfinite(sm[r]) else np.nan
-        sim_p = 0.0 if compared and not np.isfinite(sp[r]) else sp[r]
-        range_ok = bool(compared and np.isfinite(ratio) and abs(ratio - 1.0) <= tolerance)
-        p_ok = bool(compared and abs(sim_p - rp[r]) <= tolerance)
+        compared = bool(count[r] >= min_ground_per_frame * real.frames and np.isfinite(rm[r]))
+        p_compared = bool(refs[r] >= min_references)
+        sim_p = 0.0 if not np.isfinite(sp[r]) else float(sp[r])
+        median_ok = compared and within(sm[r], rm[r])
+        p90_ok = compared and within(s90[r], r90[r])
+        p_ok = bool(p_compared and abs(sim_p - rp[r]) <= tolerance)
         rows.append(
             {
                 "ring": r,
+                "real_ground": int(count[r]),
                 "real_median_m": float(rm[r]),
                 "sim_median_m": float(sm[r]),
-                "ratio": float(ratio),
-                "real_p": float(rp[r]),
-                "sim_p": float(sim_p),
-                "sim_p_at_range": float(at_range[r]) if compared else float("nan"),
-                "references": int(refs[r]),
+                "ratio": float(sm[r] / rm[r]) if compared else float("nan"),
+                "real_p90_m": float(r90[r]),
+                "sim_p90_m": float(s90[r]),
+                "ratio_p90": float(s90[r] / r90[r]) if compared else float("nan"),
                 "compared": compared,
-                "range_ok": range_ok,
+                "median_ok": median_ok,
+                "p90_ok": p90_ok,
+                "range_ok": median_ok and p90_ok,
+                "references": int(refs[r]),
+                "p_compared": p_compared,
+                "real_p": float(rp[r]),
+                "sim_p": sim_p,
                 "p_ok": p_ok,
-                "ok": range_ok and p_ok,
-                "p_at_range_ok": bool(compared and abs(at_range[r] - rp[r]) <= tolerance),
+                "sim_p_at_range": float(at_range[r]) if p_compared else float("nan"),
+                "p_at_range_ok": bool(p_compared and abs(at_range[r] - rp[r]) <= tolerance),
+                "ok": median_ok and p90_ok and (p_ok or not p_compared),
             }
         )
     return rows
+
+
+def summarize(rows: list[dict]) -> dict[str, int]:
+    """Ring counts of :func:`compare_rings`: ``compared``, ``median_ok``, ``p90_ok``,
+    ``range_ok``; ``p_compared``, ``p_ok``, ``p_at_range_ok``; ``ok``."""
+    keys = (
+        "compared",
+        "median_ok",
+        "p90_ok",
+        "range_ok",
+        "p_compared",
+        "p_ok",
+        "p_at_range_ok",
+        "ok",
+    )
+    return {k: int(sum(bool(r[k]) for r in rows)) for k in keys}
+
+
+def _target_scene(reflectivity: float, threshold: float, noise: float, beams: int, hi_m: float):
+    return _load_xml(f"""<scene version="3.0.0">
+  <sensor type="lidar" id="lidar">
+    <string name="elevation_angles" value="0"/>
+    <integer name="horizontal_resolution" value="{int(beams)}"/>
+    <float name="fov_h" value="1e-3"/><boolean name="fov_h_centred" value="true"/>
+    <float name="range_max" value="{hi_m * 2:g}"/>
+    <float name="detection_threshold" value="{threshold:.9g}"/>
+    <float name="receiver_noise_std" value="{noise:.9g}"/>
+  </sensor>
+  <shape type="rectangle" id="panel">
+    <transform name="to_world"><scale value="20"/><rotate y="1" angle="-90"/></transform>
+    <bsdf type="diffuse"><spectrum name="reflectance" value="{reflectivity:.9g}"/></bsdf>
+  </shape>
+</scene>
+""")
+
+
+def _at_distance(d: float) -> np.ndarray:
+    T = np.eye(4)
+    T[0, 3] = -d  # the panel lies in the plane x = 0, its normal towards -x
+    return T
+
+
+def target_detection_scanned(
+    reflectivity: float,
+    range_m: float,
+    threshold: float,
+    noise: float,
+    *,
+    beams: int = 4000,
+    seed: int = 0,
+) -> float:
+    """The fraction of ``beams`` beams a Lambertian target of ``reflectivity`` at normal
+    incidence and ``range_m`` returns (the scanned ``P_D``; its binomial deviation is
+    ``sqrt(P (1 - P) / beams)``)."""
+    from ..lidar.scan import scan
+
+    loaded = _target_scene(reflectivity, threshold, noise, beams, 2.0 * range_m)
+    r = scan(loaded.scene, loaded.lidars[0], seed=seed, to_world=_at_distance(range_m))
+    return float(r.valid.mean())
 
 
 def target_reach_scanned(
@@ -306,31 +570,18 @@ def target_reach_scanned(
     hi_m: float = 300.0,
     tol_m: float = 0.05,
 ) -> float:
-    """How far (m) the scan reports a Lambertian target of ``reflectivity`` at normal incidence.
+    """How far (m) the scan reports a Lambertian target of ``reflectivity`` at normal incidence
+    without receiver noise (the step at the threshold; with noise this is where ``P_D = 0.5``).
 
     One horizontal beam meets a 40 m wide vertical panel; the LiDAR is moved back (an opaque
     pose: one compiled kernel) and the reach bracketed by bisection to ``tol_m``.
     """
     from ..lidar.scan import scan
 
-    xml = f"""<scene version="3.0.0">
-  <sensor type="lidar" id="lidar">
-    <string name="elevation_angles" value="0"/><integer name="horizontal_resolution" value="1"/>
-    <float name="fov_h" value="1e-3"/><float name="range_max" value="{hi_m * 2:g}"/>
-    <float name="detection_threshold" value="{threshold:.9g}"/>
-  </sensor>
-  <shape type="rectangle" id="panel">
-    <transform name="to_world"><scale value="20"/><rotate y="1" angle="-90"/></transform>
-    <bsdf type="diffuse"><spectrum name="reflectance" value="{reflectivity:.9g}"/></bsdf>
-  </shape>
-</scene>
-"""
-    loaded = _load_xml(xml)
+    loaded = _target_scene(reflectivity, threshold, 0.0, 1, hi_m)
 
     def seen(d: float) -> bool:
-        T = np.eye(4)
-        T[0, 3] = -d  # the panel lies in the plane x = 0, its normal towards -x
-        return bool(scan(loaded.scene, loaded.lidars[0], to_world=T).valid[0, 0])
+        return bool(scan(loaded.scene, loaded.lidars[0], to_world=_at_distance(d)).valid[0, 0])
 
     if not seen(lo_m):
         return 0.0
