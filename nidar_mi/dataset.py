@@ -25,6 +25,7 @@ import glob
 import json
 import os
 import zipfile
+from functools import partial
 from pathlib import Path
 from typing import NamedTuple
 
@@ -254,13 +255,63 @@ def _write_frame(path: str, frame: dict) -> None:
             np.savez(f, **frame)
 
 
+def _frame_current(path: str, rendered_at: float) -> bool:
+    """Whether a frame file exists and was written after its render."""
+    return os.path.isfile(path) and os.path.getmtime(path) >= rendered_at
+
+
+def _scene_frames(
+    scene_path: str, name: str, render_dir: str, frame_dir: str, lidar_id, options: dict
+) -> None:
+    """One scene's task: render it (cached) and write a frame per camera into ``frame_dir``."""
+    from .simulate import ensure_rendered
+
+    ensure_rendered(scene_path, render_dir, **options)
+    rendered_at = os.path.getmtime(os.path.join(render_dir, "manifest.json"))
+    for cam_id, frame, _ in frames_of_render(render_dir, lidar_id):
+        target = os.path.join(frame_dir, f"{name}__{cam_id}.npz")
+        if not _frame_current(target, rendered_at):
+            _write_frame(target, frame)
+
+
+def _scene_done(scene_path: str, name: str, render_dir: str, frame_dir: str, options: dict) -> bool:
+    """Skip test of :func:`_scene_frames`: the render is current and so is every frame."""
+    from .render_folder import MANIFEST, is_current, read_manifest
+    from .simulate import render_request
+
+    if not is_current(render_dir, render_request(scene_path, **options)):
+        return False
+    rendered_at = os.path.getmtime(os.path.join(render_dir, MANIFEST))
+    cameras = read_manifest(render_dir).get("cameras", {})
+    return all(
+        _frame_current(os.path.join(frame_dir, f"{name}__{c}.npz"), rendered_at) for c in cameras
+    )
+
+
+def _scene_entry(render_dir: str, lidar_id: str | None) -> tuple[list[str], float]:
+    """The camera ids of a render folder and the supervising LiDAR's wavelength, nm."""
+    from .render_folder import read_manifest
+
+    manifest = read_manifest(render_dir)
+    lidars = manifest.get("lidars") or {}
+    lid = lidar_id or (min(lidars) if lidars else None)
+    if lid not in lidars:
+        raise NidarError(f"{render_dir}: no lidar '{lid}' (has {', '.join(sorted(lidars))})")
+    return sorted(manifest.get("cameras", {})), lidars[lid]["parameters"]["wavelength"]
+
+
 def _remove_stale_frames(out_dir: str, frames: dict[str, list[str]]) -> None:
-    """Delete frame files an earlier run left in a split they no longer belong to."""
+    """Delete frame files an earlier run left in a split they no longer belong to, and the
+    temporaries of a writer that was killed."""
+    from .io.atomic import leftovers
+
     for split in SPLITS:
         keep = set(frames[split])
         for path in list_frames(out_dir, split):
             if path.stem not in keep:
                 path.unlink()
+        for _, path in leftovers(os.path.join(out_dir, split)):
+            path.unlink(missing_ok=True)
 
 
 def build_dataset(
@@ -274,8 +325,14 @@ def build_dataset(
     lidar_id: str | None = None,
     intensity_scale: float = 1.0,
     progress: bool = True,
+    workers: int | None = None,
+    ray_address: str | None = None,
 ) -> dict:
     """Render every scene (cached per request) and write the frames and ``meta.json``.
+
+    One task per scene (:mod:`nidar_mi.tasks`): render it unless its render folder holds the
+    same request, then write the frames older than the render. A scene that fails is reported
+    and the others complete; ``meta.json`` is written only when every scene succeeded.
 
     Args:
         scene_dir: folder of scene XML files.
@@ -288,20 +345,25 @@ def build_dataset(
         lidar_id: the LiDAR whose returns supervise (None: the first by id).
         intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
         progress: show a progress bar.
+        workers: scenes at once on a local Ray runtime (None: one after the other, in this
+            process).
+        ray_address: run on this Ray cluster instead.
 
     Returns:
         The meta dict (also written to ``DATA/meta.json``).
-    """
-    from tqdm.auto import tqdm
 
+    Raises:
+        NidarError: bad arguments; :class:`~nidar_mi.tasks.TasksFailed` when scenes failed.
+    """
+    from .backend import prepare_worker
     from .io.atomic import atomic_write_json
-    from .simulate import ensure_rendered
+    from .tasks import Task, run_tasks
 
     if not intensity_scale > 0:
         raise NidarError(f"--intensity-scale must be > 0 (got {intensity_scale})")
     if seed < 0:
         raise NidarError(f"--seed must be >= 0 (got {seed})")
-    files = find_scenes(scene_dir)
+    files = [os.path.abspath(f) for f in find_scenes(scene_dir)]
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
         raise NidarError(f"{scene_dir}: scene file names must be unique")
@@ -311,23 +373,36 @@ def build_dataset(
         raise NidarError(f"-D {', '.join(unused)}: no scene in {scene_dir} has such a parameter")
     splits = split_scenes(names, fractions, seed)
     split_of = {n: s for s, ns in splits.items() for n in ns}
+    out_dir = os.path.abspath(out_dir)
+    tasks = []
+    for path, name in zip(files, names):
+        rdir = os.path.join(out_dir, "renders", name)
+        fdir = os.path.join(out_dir, split_of[name])
+        opts = dict(formats=("npz",), seed=seed, spp=spp, params=used[path], progress=False)
+        tasks.append(
+            Task(
+                name,
+                _scene_frames,
+                (path, name, rdir, fdir, lidar_id, opts),
+                output=rdir,
+                skip=partial(_scene_done, path, name, rdir, fdir, opts),
+            )
+        )
+    report = run_tasks(
+        tasks,
+        workers=workers,
+        address=ray_address,
+        setup=prepare_worker,
+        progress=progress,
+        desc="dataset",
+        unit="scene",
+    )
+    report.raise_on_failure("scenes")
     frames: dict[str, list[str]] = {s: [] for s in SPLITS}
     wavelength = None
-    for path, name in tqdm(
-        list(zip(files, names)), desc="dataset", unit="scene", disable=not progress
-    ):
-        rdir = os.path.join(out_dir, "renders", name)
-        opts = dict(formats=("npz",), seed=seed, spp=spp, params=used[path], progress=False)
-        ensure_rendered(path, rdir, **opts)
-        rendered_at = os.path.getmtime(os.path.join(rdir, "manifest.json"))
-        for cam_id, frame, lparams in frames_of_render(rdir, lidar_id):
-            wavelength = lparams["wavelength"]
-            split = split_of[name]
-            fid = f"{name}__{cam_id}"
-            target = os.path.join(out_dir, split, fid + ".npz")
-            if not os.path.isfile(target) or os.path.getmtime(target) < rendered_at:
-                _write_frame(target, frame)
-            frames[split].append(fid)
+    for name in names:
+        cameras, wavelength = _scene_entry(os.path.join(out_dir, "renders", name), lidar_id)
+        frames[split_of[name]] += [f"{name}__{c}" for c in cameras]
     _remove_stale_frames(out_dir, frames)
     meta = {
         "scenes": splits,

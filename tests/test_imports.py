@@ -139,7 +139,7 @@ LAYERS = {
     **dict.fromkeys(
         ("errors", "backend", "illumination", "io", "geometry", "lidar", "materials"), 0
     ),
-    **dict.fromkeys(("datasets", "plugins"), 0),
+    **dict.fromkeys(("datasets", "plugins", "tasks"), 0),
     **dict.fromkeys(
         ("scene", "camera", "render_folder", "simulate", "dataset", "nidar", "scenegen"), 1
     ),

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from ..errors import NidarError
 from ._common import parse_defines, parser, run
+from ._workers import add_worker_options
 
 __all__ = ["main", "build_parser"]
 
@@ -44,6 +45,7 @@ def build_parser():
         help="scene parameter for every scene that has it, e.g. -D width=320; repeatable",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    add_worker_options(p, "scenes")
     return p
 
 
@@ -67,6 +69,8 @@ def main(argv=None) -> int:
             lidar_id=args.lidar,
             intensity_scale=args.intensity_scale,
             progress=not args.quiet,
+            workers=args.workers,
+            ray_address=args.ray_address,
         )
         if not args.quiet:
             for s in SPLITS:

@@ -30,8 +30,8 @@ def _group(results, name: str, scenes: list[str], note: str = "") -> dict:
 def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     import numpy as np
 
-    from .frames import METHOD_LABELS
     from .figures import maps_figure, scatter_figure
+    from .frames import METHOD_LABELS
 
     paths = []
     for r in results[: max(count, 0)]:
@@ -153,6 +153,9 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
             params=meta.get("params"),
             seed=int(meta.get("seed", 0)),
             spp=int(meta.get("spp", 16)),
+            workers=args.workers,
+            ray_address=args.ray_address,
+            progress=not args.quiet,
         )
         res = evaluate_renders(dirs, model, scale, **common)
         names = [os.path.basename(d) for d in dirs]
