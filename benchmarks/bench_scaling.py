@@ -11,13 +11,14 @@ machine load (the machine is shared: read ratios within a run, not absolute seco
    timings (scene load, LiDAR scan, camera RGB / NIR / depth, file writing), the frame step
    (read the render folder, project the returns, write the frame), and NIDAR on the frame
    (networks on the RGB image, intensity at the points); wall and CPU seconds (all threads);
-   bytes of the render folder and of the frame.
+   bytes of the render folder and of the frame (also written with ``np.savez_compressed``).
 2. **kernel cache**: the first scene rendered in a fresh process, with Dr.Jit's kernel cache
    (``~/.drjit``) empty (a temporary ``HOME``) and warm.
-3. **modes**: ``python -m nidar_mi.dataset`` from scratch in a fresh process, serially, with
-   ``--workers 1`` and ``--workers 2``; ``repeats`` rounds, the order rotated every round;
-   wall time of the whole command (start-up, Ray included) and speed-ups against serial in the
-   same round.
+3. **modes**: the dataset command's work (:func:`nidar_mi.dataset.build_dataset`) from scratch
+   in a fresh process, serially, with ``workers=1`` and ``workers=2``; ``repeats`` rounds, the
+   order rotated every round. Wall time of the whole process (start-up, Ray included), the time
+   the first scene finished, and the steady rate after the first wave (each worker's first
+   scene pays its process start-up); speed-ups against serial in the same round.
 4. **Ray**: ``import ray`` in a fresh interpreter against ``import nidar_mi.dataset``; starting
    and stopping the local runtime; per-task overhead (no-op tasks through
    :func:`nidar_mi.tasks.run_tasks`, Ray against serial); a worker's first set-up
@@ -41,7 +42,6 @@ import time
 __all__ = ["build_parser", "main", "run_benchmark", "sizing"]
 
 PY = sys.executable
-DATASET_CMD = [PY, "-m", "nidar_mi.dataset"]
 
 
 def _median(values) -> float:
@@ -114,6 +114,14 @@ def _stages(scene_files: list[str], work: str, args) -> dict:
                 np.savez(f, **frame)
             frame_bytes += os.path.getsize(fpath)
         write = (time.perf_counter() - w0, time.process_time() - c0)
+        w0, c0 = time.perf_counter(), time.process_time()
+        packed_bytes = 0
+        for cam_id, frame, _ in frames:
+            fpath = os.path.join(work, "frames", f"s{i}__{cam_id}.packed.npz")
+            with open(fpath, "wb") as f:
+                np.savez_compressed(f, **frame)
+            packed_bytes += os.path.getsize(fpath)
+        packed = (time.perf_counter() - w0, time.process_time() - c0)
         r = read_render(rdir)
         w0, c0 = time.perf_counter(), time.process_time()
         for cam in r.cameras:
@@ -141,6 +149,9 @@ def _stages(scene_files: list[str], work: str, args) -> dict:
                 "frame_project_cpu_s": project[1],
                 "frame_write_wall_s": write[0],
                 "frame_write_cpu_s": write[1],
+                "frame_write_compressed_wall_s": packed[0],
+                "frame_write_compressed_cpu_s": packed[1],
+                "frame_compressed_bytes": packed_bytes,
                 "nidar_wall_s": nidar[0],
                 "nidar_cpu_s": nidar[1],
                 "render_bytes": _folder_bytes(rdir),
@@ -201,7 +212,40 @@ def _kernel_cache(scene: str, work: str, args) -> dict:
 
 # --------------------------------------------------------------------------- 3. modes
 
-MODES = {"serial": [], "workers_1": ["--workers", "1"], "workers_2": ["--workers", "2"]}
+MODES = {"serial": None, "workers_1": 1, "workers_2": 2}
+
+#: ``python -m nidar_mi.dataset`` in a fresh process (the same call as the command), with the
+#: time each scene finished taken from the job's progress bar.
+_DATASET_JOB = """
+import json, sys, time
+t0 = time.perf_counter()
+import nidar_mi.tasks as tasks
+from nidar_mi.dataset import build_dataset
+done = []
+original = tasks._Progress.done
+def stamp(self, failure):
+    done.append(time.perf_counter() - t0)
+    original(self, failure)
+tasks._Progress.done = stamp
+scenes, out, spp, params, workers = sys.argv[1:6]
+build_dataset(scenes, out, spp=int(spp), params=json.loads(params), progress=False,
+              workers=None if workers == "None" else int(workers))
+print(json.dumps({"done_s": done, "total_s": time.perf_counter() - t0}))
+"""
+
+
+def _job(scene_dir: str, out: str, args, workers) -> dict:
+    cmd = [PY, "-c", _DATASET_JOB, scene_dir, out, str(args.spp), json.dumps(_params(args))]
+    t0 = time.perf_counter()
+    proc = subprocess.run(
+        cmd + [str(workers)], capture_output=True, text=True, check=True, timeout=3600
+    )
+    wall = time.perf_counter() - t0
+    job = json.loads(proc.stdout.strip().splitlines()[-1])
+    done, k = job["done_s"], workers or 1
+    # after the first wave (each worker's first scene: process start-up, imports, kernels)
+    steady = (done[-1] - done[k - 1]) / (len(done) - k) if len(done) > k else float("nan")
+    return {"wall_s": wall, "first_done_s": done[0], "steady_s_per_scene": steady, "done_s": done}
 
 
 def _modes(scene_dir: str, work: str, args) -> dict:
@@ -209,19 +253,25 @@ def _modes(scene_dir: str, work: str, args) -> dict:
     names = list(MODES)
     for r in range(args.repeats):
         order = names[r % len(names) :] + names[: r % len(names)]
-        times = {}
+        jobs = {}
         for mode in order:
             out = os.path.join(work, f"data_{mode}_{r}")
-            cmd = DATASET_CMD + ["--scenes", scene_dir, "-o", out, "-q", "--spp", str(args.spp)]
-            t0 = time.perf_counter()
-            subprocess.run(cmd + _defines(args) + MODES[mode], check=True, timeout=3600)
-            times[mode] = time.perf_counter() - t0
+            jobs[mode] = _job(scene_dir, out, args, MODES[mode])
             shutil.rmtree(out, ignore_errors=True)
-        rounds.append({"order": order, "wall_s": times})
-    speedups = {m: _median([x["wall_s"]["serial"] / x["wall_s"][m] for x in rounds]) for m in names}
+        rounds.append({"order": order, "jobs": jobs})
+
+    def med(key, mode):
+        return _median([x["jobs"][mode][key] for x in rounds])
+
+    def ratio(key, mode):
+        return _median([x["jobs"]["serial"][key] / x["jobs"][mode][key] for x in rounds])
+
     return {
-        "median_wall_s": {m: _median([x["wall_s"][m] for x in rounds]) for m in names},
-        "speedup_vs_serial": speedups,
+        "median_wall_s": {m: med("wall_s", m) for m in names},
+        "median_steady_s_per_scene": {m: med("steady_s_per_scene", m) for m in names},
+        "median_first_done_s": {m: med("first_done_s", m) for m in names},
+        "speedup_vs_serial": {m: ratio("wall_s", m) for m in names},
+        "steady_speedup_vs_serial": {m: ratio("steady_s_per_scene", m) for m in names},
         "rounds": rounds,
     }
 
@@ -381,14 +431,20 @@ def _report(r: dict) -> str:
         f"   NIDAR {m['nidar_wall_s']:.3f} (CPU {m['nidar_cpu_s']:.3f}; model load "
         f"{r['stages']['model_load_s']:.2f})",
         f"  bytes: render folder {m['render_bytes'] / 1e6:.2f} MB, frame "
-        f"{m['frame_bytes'] / 1e6:.2f} MB",
+        f"{m['frame_bytes'] / 1e6:.2f} MB ({m['frame_compressed_bytes'] / 1e6:.2f} MB compressed,"
+        f" {m['frame_write_compressed_wall_s']:.3f} s to write)",
         f"first scene in this process: render {r['stages']['first_scene']['render_wall_s']:.2f} s",
         f"kernel cache, first scene in a fresh process: cold {r['kernel_cache']['cold_render_s']:.2f}"
         f" s, warm {r['kernel_cache']['warm_render_s']:.2f} s (render only)",
         "dataset command from scratch (median wall s; speed-up vs serial, same round):",
     ]
-    for mode, wall in r["modes"]["median_wall_s"].items():
-        lines.append(f"  {mode:10s} {wall:7.1f}  x{r['modes']['speedup_vs_serial'][mode]:.2f}")
+    md = r["modes"]
+    for mode, wall in md["median_wall_s"].items():
+        lines.append(
+            f"  {mode:10s} {wall:7.1f} s  x{md['speedup_vs_serial'][mode]:.2f};  first scene done "
+            f"at {md['median_first_done_s'][mode]:.1f} s; then {md['median_steady_s_per_scene'][mode]:.2f}"
+            f" s per scene  x{md['steady_speedup_vs_serial'][mode]:.2f}"
+        )
     ray = r["ray"]
     lines += [
         f"ray {ray['ray_version']}: import {ray['import_ray_s']:.2f} s (nidar_mi.dataset "
