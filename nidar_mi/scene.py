@@ -1,7 +1,8 @@
 """Load a scene XML with this package's plugins and find the sensor rigs it declares.
 
 Loading runs the material loader pass (:func:`nidar_mi.materials.expand_scene_xml`: ``nidar_material``
-BSDFs by name, and the RGB-only twin) before Mitsuba parses the XML. Any failure becomes a
+BSDFs by name, and the RGB-only twin) and the label pass (:func:`nidar_mi.labels.strip_labels`: the
+``label`` / ``instance`` attributes of shapes) before Mitsuba parses the XML. Any failure becomes a
 :class:`~nidar_mi.errors.NidarError` with one line naming the file and the cause.
 """
 
@@ -9,10 +10,12 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 
 from .backend import set_variant
 from .errors import NidarError
+from .labels import SceneLabels, strip_labels
 
 __all__ = ["LoadedScene", "load_scene", "RGB_EMITTER_MARKERS"]
 
@@ -30,8 +33,11 @@ class LoadedScene:
         scene: the ``mi.Scene``.
         variant: the Mitsuba variant it was loaded in.
         lidars: ``lidar`` sensors.
-        cameras: ``perspective`` sensors.
+        cameras: ``perspective`` and ``thinlens`` sensors (other sensor types are not rendered:
+            a warning names them).
         rgb_twin: whether materials were replaced by their RGB appearance.
+        labels: the semantic class and instance each shape declares
+            (:mod:`nidar_mi.labels.scene_labels`).
     """
 
     path: str
@@ -40,6 +46,7 @@ class LoadedScene:
     lidars: list = field(default_factory=list)
     cameras: list = field(default_factory=list)
     rgb_twin: bool = False
+    labels: SceneLabels = field(default_factory=SceneLabels)
 
     def rgb_only_emitters(self) -> list[str]:
         """Ids of emitters whose radiance is RGB/float (nothing meaningful past 830 nm)."""
@@ -65,7 +72,9 @@ def _one_line(err: Exception) -> str:
     lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
     text = " ".join(lines) if lines else type(err).__name__
     text = re.sub(r"\[[a-z_]+\.cpp:\d+\]\s*", "", text)  # drop "[parser.cpp:123]"
-    text = re.sub(r"While loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text)
+    text = re.sub(
+        r"(?:Error w|W)hile loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text
+    )
     return text
 
 
@@ -102,6 +111,7 @@ def load_scene(
 
     try:
         xml = _expand(xml, rgb_twin)
+        xml, labels = strip_labels(xml)
     except NidarError as e:
         raise NidarError(f"{path}: {e}") from None
     except Exception as e:
@@ -111,14 +121,39 @@ def load_scene(
     scene_dir = os.path.dirname(os.path.abspath(path))
     resolver.prepend(scene_dir)
     try:
-        scene = mi.load_string(xml, **{k: str(v) for k, v in (params or {}).items()})
+        # Mitsuba merges meshes that share a BSDF into one shape; labelled shapes stay apart.
+        optimize = not (labels.classes or labels.instances)
+        values = {k: str(v) for k, v in (params or {}).items()}
+        scene = mi.load_string(xml, optimize=optimize, **values)
     except Exception as e:
         raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
+
+    from .camera import CAMERA_CLASSES
 
     lidar_cls = plugins.plugin_module("lidar", variant).LidarSensor
     sensors = sorted(scene.sensors(), key=lambda s: s.id())
     lidars = [s for s in sensors if isinstance(s, lidar_cls)]
-    cameras = [s for s in sensors if s.class_name() == "PerspectiveCamera"]
+    cameras = [s for s in sensors if s.class_name() in CAMERA_CLASSES]
+    others = [f"'{s.id()}' ({s.class_name()})" for s in sensors if s not in lidars + cameras]
+    if others:
+        warnings.warn(
+            f"{path}: sensor(s) {', '.join(others)} not rendered: only lidar, perspective and "
+            "thinlens sensors are",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    for cam in cameras:
+        W, H = (int(v) for v in cam.film().crop_size())
+        if W < 1 or H < 1:
+            raise NidarError(
+                f"{path}: camera '{cam.id()}' has a {W}x{H} film (width and height must be >= 1)"
+            )
     return LoadedScene(
-        path=path, scene=scene, variant=variant, lidars=lidars, cameras=cameras, rgb_twin=rgb_twin
+        path=path,
+        scene=scene,
+        variant=variant,
+        lidars=lidars,
+        cameras=cameras,
+        rgb_twin=rgb_twin,
+        labels=labels,
     )

@@ -60,6 +60,7 @@ __all__ = [
     "TaskFailure",
     "TaskReport",
     "TasksFailed",
+    "check_parallel",
     "run_tasks",
 ]
 
@@ -454,6 +455,21 @@ def _run_on(ray, pending, setup, report, bar, workers, address, retries, after_i
             ray.shutdown()
 
 
+def check_parallel(workers: int | None, address: str | None) -> None:
+    """Check ``workers`` and ``address`` as :func:`run_tasks` takes them, and that Ray imports
+    when they ask for it: a command calls it before it touches its output.
+
+    Raises:
+        NidarError: ``workers`` < 1, an empty address, or Ray missing (:data:`RAY_MISSING`).
+    """
+    if workers is not None and (isinstance(workers, bool) or workers < 1):
+        raise NidarError(f"--workers must be >= 1 (got {workers})")
+    if address is not None and not str(address).strip():
+        raise NidarError("--ray-address must not be empty")
+    if workers is not None or address is not None:
+        _import_ray()
+
+
 def run_tasks(
     tasks: Iterable[Task],
     *,
@@ -487,10 +503,7 @@ def run_tasks(
         KeyboardInterrupt: Ctrl-C or SIGTERM; tasks in flight are cancelled, finished outputs
             stay (a later run skips them).
     """
-    if workers is not None and (isinstance(workers, bool) or workers < 1):
-        raise NidarError(f"--workers must be >= 1 (got {workers})")
-    if address is not None and not str(address).strip():
-        raise NidarError("--ray-address must not be empty")
+    check_parallel(workers, address)
     tasks = list(tasks)
     t0 = time.perf_counter()
     report = TaskReport(results=[None] * len(tasks), skipped=[], failures=[], seconds=0.0)

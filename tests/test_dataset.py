@@ -167,7 +167,9 @@ def test_workers_give_the_serial_frames_even_when_a_worker_is_killed(variant, tm
     assert {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")} == stamps
 
 
-def test_a_failing_scene_is_named_and_the_others_are_written(variant, tmp_path, capsys):
+def test_a_failing_scene_is_named_and_the_others_are_rendered(variant, tmp_path, capsys):
+    """A scene that fails is named, the others are rendered, nothing is published; the next run
+    reuses the renders."""
     from nidar_mi.cli.dataset import main
 
     scenes = _tiny_scenes(tmp_path)
@@ -176,20 +178,24 @@ def test_a_failing_scene_is_named_and_the_others_are_written(variant, tmp_path, 
     )
     out = tmp_path / "data"
     args = ["--scenes", str(scenes), "-o", str(out), "--spp", "1", "--split", "1,0,0", "-q"]
-    argv = args + [f"-D{k}={v}" for k, v in TINY.items() if k != "cols"] + ["-Dcols=256"]
-    assert main(argv) == 2
+    args += [f"-D{k}={v}" for k, v in TINY.items()]
+    assert main(args) == 2
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("error: broken: ") and "no lidar sensor" in err[0]
     assert err[1:] == [
         "error: 1 of 4 scenes failed (broken); the other 3 are written; "
         "run again to retry the failed ones"
     ]
+    assert sorted(p.name for p in out.iterdir()) == ["renders"]  # no split, no meta.json
+    renders = out / "renders"
+    assert sorted(p.name for p in renders.iterdir()) == sorted(REPEATABLE)
+    stamps = {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")}
+    (scenes / "broken.xml").unlink()
+    assert main(args) == 0
+    assert {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")} == stamps
     assert sorted(p.name for p in (out / "train").iterdir()) == [
-        "park__cam_front.npz",
-        "parking_lot__cam_front.npz",
-        "street__cam_front.npz",
+        f"{n}__cam_front.npz" for n in sorted(REPEATABLE)
     ]
-    assert not (out / "meta.json").exists()  # the dataset is not complete
 
 
 def test_workers_without_ray_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):

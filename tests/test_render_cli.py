@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 
+import laspy
 import numpy as np
 import pytest
 
@@ -81,16 +82,20 @@ def test_points_schema_and_formats_agree(street_out):
     # the rig is at z = 1.73 m: world = lidar frame + translation
     np.testing.assert_allclose(p["xyz_world"], p["xyz"] + [0, 0, 1.73], atol=1e-4)
 
+    # fixed per-sensor encodings: full scale = g · 1 m⁻² (raw mode, gain 1) = 1
     xyz, inten = read_kitti_bin(street_out / "lidar_top/points.bin")
     np.testing.assert_array_equal(xyz, p["xyz"])
-    np.testing.assert_array_equal(inten, p["intensity"])
+    np.testing.assert_array_equal(inten, np.clip(p["intensity"], 0.0, 1.0))
+    assert (p["intensity"] > 1.0).any()  # close, bright returns saturate in the [0, 1] encoding
     ply = read_ply(street_out / "lidar_top/points.ply")
     np.testing.assert_array_equal(ply["xyz"], p["xyz"])
     np.testing.assert_array_equal(ply["reflectance"], p["reflectance"])
     las = read_las(street_out / "lidar_top/points.las")
     np.testing.assert_allclose(las["xyz"], p["xyz"], atol=1e-4)
-    scale = 65535.0 / p["intensity"].max()
-    np.testing.assert_allclose(las["intensity"], p["intensity"], atol=0.51 / scale)
+    counts = np.asarray(laspy.read(street_out / "lidar_top/points.las").intensity)
+    want = np.round(np.clip(p["intensity"].astype(np.float64), 0, 1) * 65535)
+    np.testing.assert_array_equal(counts, want)
+    np.testing.assert_allclose(las["intensity"], np.minimum(p["intensity"], 1.0), atol=0.51 / 65535)
 
 
 def test_range_image_and_camera_outputs(street_out):
@@ -222,3 +227,31 @@ def test_two_lidars_in_one_scene(tmp_path):
     # ρ at each sensor's wavelength (linear spectrum 0.3 at 360 nm .. 0.6 at 1700 nm)
     np.testing.assert_allclose(front["reflectance"], 0.3 + 0.3 * (905 - 360) / 1340, rtol=1e-4)
     np.testing.assert_allclose(rear["reflectance"], 0.3 + 0.3 * (1550 - 360) / 1340, rtol=1e-4)
+
+
+def test_pcd_format_and_semantic_labels(tmp_path):
+    """``--formats npz,pcd`` writes the same points twice; the street's labels follow its shapes
+    (every asphalt return is road, every brick return building, every car-paint return car)."""
+    from nidar_mi.io.pcd import read_pcd
+    from nidar_mi.io.points import read_npz
+
+    out = tmp_path / "street"
+    r = run_cli(STREET, "-o", str(out), "-q", "--no-cameras", "--formats", "npz,pcd", *SMALL)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (out / "lidar_top").glob("points.*")) == [
+        "points.npz",
+        "points.pcd",
+    ]
+    npz = read_npz(out / "lidar_top/points.npz")
+    pcd = read_pcd(out / "lidar_top/points.pcd")
+    assert sorted(pcd) == sorted(npz)
+    for key, value in npz.items():
+        np.testing.assert_array_equal(pcd[key], value, err_msg=key)
+    names = list(npz["material_names"])
+    material = np.array(names)[npz["material"]]
+    for mat, label in (("asphalt", 40), ("brick_red", 50), ("car_paint_red", 10)):
+        assert (material == mat).sum() > 0, mat
+        assert np.all(npz["label"][material == mat] == label), mat
+    car = npz["instance_names"][npz["instance"][npz["label"] == 10]]
+    assert set(car) == {"car"}  # body, cabin and wheels are one instance
+    assert np.all(npz["instance"] > 0)

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import os
 
-from ..render_folder import FORMATS
+from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..simulate import INTENSITY_SOURCES, NIDAR_BRANCHES
-from ._common import parse_defines, parser, run
+from ._common import parse_defines, parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
 
@@ -51,9 +51,17 @@ def build_parser():
     )
     p.add_argument("scene", help="scene XML file")
     p.add_argument("-o", "--out", help="output directory (default: out/<scene name>)")
-    p.add_argument("--formats", default=",".join(FORMATS), help="point formats: npz,ply,las,bin")
     p.add_argument(
-        "--seed", type=int, default=None, help="overrides every lidar's seed; camera sampler seed"
+        "--formats",
+        default=",".join(DEFAULT_FORMATS),
+        help=f"point formats, from {','.join(FORMATS)} (default {','.join(DEFAULT_FORMATS)})",
+    )
+    p.add_argument(
+        "--seed",
+        type=seed_arg,
+        default=None,
+        help="overrides every lidar's seed; camera sampler seed; 0 .. 2**32-1 "
+        "(default: each lidar's own seed, sampler seed 0)",
     )
     p.add_argument("--spp", type=int, default=16, help="camera samples per pixel (default 16)")
     p.add_argument(
@@ -76,13 +84,23 @@ def build_parser():
         help="nidar: also predict intensity_nidar / nidar_observed from the cameras with NIDAR",
     )
     p.add_argument(
-        "--weights", default=None, help="NIDAR weights folder (default: the shipped model)"
+        "--weights",
+        default=None,
+        help="NIDAR weights folder for --intensity nidar (default: the shipped model)",
     )
     p.add_argument(
         "--nidar-branch",
-        default="R",
+        default=None,
         choices=NIDAR_BRANCHES,
-        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
+        help="with --intensity nidar: R, the calibrated reflectance branch (the paper's, "
+        "default); I_hat, the dense intensity head",
+    )
+    p.add_argument(
+        "--bin-intensity",
+        default="unit",
+        choices=BIN_INTENSITY,
+        help="intensity in points.bin: unit, KITTI's [0, 1] (intensity / the sensor's full "
+        "scale, clipped; default); raw, the simulated intensity as it is",
     )
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
@@ -115,6 +133,7 @@ def main(argv=None) -> int:
             weights=args.weights,
             nidar_branch=args.nidar_branch,
             overwrite=args.overwrite,
+            bin_intensity=args.bin_intensity,
         )
         if not args.quiet:
             print(_summary(manifest, out))
