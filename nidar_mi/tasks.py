@@ -317,14 +317,45 @@ def _connect(ray, workers: int | None, address: str | None, after_init: Callable
     return True
 
 
+#: Added to a failed connection when the command's environment does not enable Ray's token
+#: authentication, which Ray never does by itself for an explicit address.
+_AUTH_HINT = (
+    "; a cluster with token authentication (the default of clusters Ray starts) also needs "
+    "RAY_AUTH_MODE=token and its token (RAY_AUTH_TOKEN or ~/.ray/auth_token)"
+)
+
+
+@contextmanager
+def _stderr_to_log():
+    """Send what Ray's C++ core writes straight to file descriptor 2 while it connects (a
+    warning a second while a cluster refuses it) to the debug log instead of the terminal."""
+    import logging
+    import tempfile
+
+    sys.stderr.flush()
+    with tempfile.TemporaryFile(mode="w+b") as capture:
+        saved = os.dup(2)
+        os.dup2(capture.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            capture.seek(0)
+            text = capture.read().decode("utf-8", "replace").strip()
+            if text:
+                logging.getLogger("nidar_mi.tasks").debug("ray while connecting:\n%s", text)
+
+
 def _init(ray, workers: int | None, address: str | None) -> None:
     quiet = dict(logging_level="ERROR", log_to_driver=False, configure_logging=True)
     if address is not None:
-        _check_address(address)
         try:
-            ray.init(address=address, **quiet)
+            with _stderr_to_log():
+                ray.init(address=address, **quiet)
         except (ConnectionError, RuntimeError, ValueError) as e:
-            raise NidarError(f"--ray-address {address}: {_one_line(e)}") from None
+            hint = "" if os.environ.get("RAY_AUTH_MODE") else _AUTH_HINT
+            raise NidarError(f"--ray-address {address}: {_one_line(e)}{hint}") from None
         return
     ray.init(
         num_cpus=workers,
@@ -456,11 +487,13 @@ def _run_on(ray, pending, setup, report, bar, workers, address, retries, after_i
 
 
 def check_parallel(workers: int | None, address: str | None) -> None:
-    """Check ``workers`` and ``address`` as :func:`run_tasks` takes them, and that Ray imports
-    when they ask for it: a command calls it before it touches its output.
+    """Check ``workers`` and ``address`` as :func:`run_tasks` takes them, that Ray imports when
+    they ask for it, and that something answers at ``address``: a command calls it before it
+    touches its output.
 
     Raises:
-        NidarError: ``workers`` < 1, an empty address, or Ray missing (:data:`RAY_MISSING`).
+        NidarError: ``workers`` < 1, an empty address, Ray missing (:data:`RAY_MISSING`), or
+            nothing listening at ``address``.
     """
     if workers is not None and (isinstance(workers, bool) or workers < 1):
         raise NidarError(f"--workers must be >= 1 (got {workers})")
@@ -468,6 +501,8 @@ def check_parallel(workers: int | None, address: str | None) -> None:
         raise NidarError("--ray-address must not be empty")
     if workers is not None or address is not None:
         _import_ray()
+    if address is not None:
+        _check_address(address)
 
 
 def run_tasks(

@@ -264,8 +264,13 @@ def ancestors():
 def where(i):
     return os.getpid(), os.environ.get("NIDAR_TEST_THREADS", ""), i * i, ancestors()
 
-report = run_tasks([Task(f"t{i}", where, (i,)) for i in range(4)], address=sys.argv[1],
-                   setup=setup, progress=False)
+from nidar_mi.errors import NidarError
+try:
+    report = run_tasks([Task(f"t{i}", where, (i,)) for i in range(4)], address=sys.argv[1],
+                       setup=setup, progress=False)
+except NidarError as e:
+    print(f"error: {e}", file=sys.stderr)
+    sys.exit(2)
 import ray
 print(json.dumps({"results": report.results, "connected": ray.is_initialized()}))
 """
@@ -273,26 +278,41 @@ print(json.dumps({"results": report.results, "connected": ray.is_initialized()})
 
 def test_an_existing_cluster_runs_the_tasks(tmp_path):
     """``address=``: the tasks run in the cluster's workers (one thread each); the driver only
-    connects, and disconnects at the end without stopping the cluster."""
+    connects, and disconnects at the end without stopping the cluster. The cluster uses Ray's
+    token authentication (its default): a driver without ``RAY_AUTH_MODE=token`` is refused in
+    one line that says so, and nothing else on the terminal."""
     import json
 
     pytest.importorskip("ray")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_AUTH")}
     cluster = subprocess.Popen(
         [sys.executable, "-c", _CLUSTER],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        env=env,
     )
     try:
         address = cluster.stdout.readline().strip()
         assert address, "the cluster did not start"
+        refused = subprocess.run(
+            [sys.executable, "-c", _DRIVER, address],
+            capture_output=True,
+            text=True,
+            timeout=240,
+            cwd=tmp_path,
+            env=env,
+        )
+        assert refused.returncode == 2
+        assert refused.stderr.count("\n") == 1 and "needs RAY_AUTH_MODE=token" in refused.stderr
         driver = subprocess.run(
             [sys.executable, "-c", _DRIVER, address],
             capture_output=True,
             text=True,
             timeout=240,
             cwd=tmp_path,
+            env=dict(env, RAY_AUTH_MODE="token"),
         )
         assert driver.returncode == 0, driver.stderr
         out = json.loads(driver.stdout)
