@@ -36,6 +36,8 @@ __all__ = [
     "NIR_RAMP_NM",
     "CAMERA_CLASSES",
     "nir_response",
+    "render_memory",
+    "check_render_memory",
 ]
 
 #: Mitsuba sensor classes rendered as cameras.
@@ -195,6 +197,38 @@ def _nir_camera(camera, wavelength: float, spp: int):
             "sampler": {"type": "independent", "sample_count": spp},
         }
     )
+
+
+#: Peak memory of a render per pixel (RGB and NIR films, depth, the images written), bytes, and
+#: per sample (sampler state): Mitsuba traces the image in one fused kernel, so memory grows with
+#: the pixels and barely with the samples (measured: docs/BENCHMARKS.md, "Memory").
+PIXEL_BYTES = 160
+SAMPLE_BYTES = 2
+
+
+def render_memory(width: int, height: int, spp: int) -> int:
+    """Estimated peak memory of one camera render written to disk, bytes."""
+    return width * height * (PIXEL_BYTES + SAMPLE_BYTES * spp)
+
+
+def check_render_memory(camera, spp: int, limit: int | None = None) -> None:
+    """Refuse a render whose estimate exceeds ``limit`` (None: the default scan limit).
+
+    Raises:
+        NidarError: one line with the estimate, the limit and how to raise it.
+    """
+    from .errors import NidarError
+    from .lidar.memory import default_limit, format_size
+
+    W, H = (int(v) for v in camera.film().size())
+    limit = default_limit() if limit is None else int(limit)
+    need = render_memory(W, H, spp)
+    if need > limit:
+        raise NidarError(
+            f"camera '{camera.id()}': the render needs about {format_size(need)} ({W} x {H} "
+            f"pixels, {spp} spp), more than the limit of {format_size(limit)}; lower the "
+            "resolution or raise the limit with --max-memory (or NIDAR_MAX_MEMORY)"
+        )
 
 
 _warned: set[str] = set()

@@ -159,6 +159,8 @@ def write_lidar(
     formats,
     extra: dict | None = None,
     bin_intensity: str = "unit",
+    *,
+    deskew: bool = False,
 ) -> list[str]:
     """Write one LiDAR's points, range image and previews into ``folder/<lidar id>/``.
 
@@ -174,6 +176,7 @@ def write_lidar(
         formats: point formats from :data:`FORMATS`.
         extra: further per-point columns (e.g. ``intensity_nidar``).
         bin_intensity: ``unit`` or ``raw`` (:data:`BIN_INTENSITY`).
+        deskew: add ``xyz_deskewed`` (the points in the LiDAR frame at the sweep's start).
 
     Returns:
         The paths written.
@@ -190,7 +193,7 @@ def write_lidar(
     cfg = result.config
     d = os.path.join(folder, cfg.name)
     os.makedirs(d, exist_ok=True)
-    pts = result.points() | dict(extra or {})
+    pts = result.points(deskew=deskew) | dict(extra or {})
     full = full_scale_intensity(cfg.gain, cfg.intensity_mode)
     bin_i = pts["intensity"] if bin_intensity == "raw" else np.clip(pts["intensity"] / full, 0, 1)
     writers = {

@@ -99,6 +99,17 @@ class _Run:
     timings: dict = field(default_factory=dict)
 
 
+def _check_memory(loaded, cameras: bool, spp: int, max_memory: int | None) -> None:
+    """Refuse, before any work, a scan or render estimated to need more than ``max_memory``."""
+    from .camera import check_render_memory
+    from .lidar.memory import check_scan_memory
+
+    for sensor in loaded.lidars:
+        check_scan_memory(sensor.config, max_memory)
+    for cam in loaded.cameras if cameras else []:
+        check_render_memory(cam, spp, max_memory)
+
+
 _RGB_ONLY = re.compile(r"lidar '(?P<lidar>.*)': material '(?P<name>.*)' is RGB-only; (?P<rest>.*)")
 
 
@@ -129,21 +140,23 @@ def _rgb_only_summary():
         warnings.warn(text, RuntimeWarning, stacklevel=3)
 
 
-def _scan_lidars(run: _Run, loaded, seed: int | None, bar) -> None:
+def _scan_lidars(run: _Run, loaded, seed: int | None, bar, max_memory: int | None = None) -> None:
     from .lidar.scan import scan
 
     for sensor in loaded.lidars:
         bar.set_postfix_str(f"lidar {sensor.id()}")
         t0 = time.perf_counter()
         with _rgb_only_summary():
-            result = scan(loaded.scene, sensor, seed=seed, labels=loaded.labels)
+            result = scan(
+                loaded.scene, sensor, seed=seed, max_memory=max_memory, labels=loaded.labels
+            )
         run.results[sensor.id()] = result
         run.lidars[sensor.id()] = {
             "parameters": result.config.to_dict() | ({"seed": seed} if seed is not None else {}),
             "to_world": result.to_world.tolist(),
             "rays": int(result.valid.size),
             "hits": int(result.hit.sum()),
-            "returns": int(result.valid.sum()),
+            "returns": int(sum(layer.valid.sum() for layer in result.returns)),
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
         }
@@ -212,10 +225,14 @@ def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dic
     return out
 
 
-def _write_lidars(run: _Run, formats, extra: dict[str, dict], bin_intensity: str) -> None:
+def _write_lidars(
+    run: _Run, formats, extra: dict[str, dict], bin_intensity: str, deskew: bool = False
+) -> None:
     for lid, result in run.results.items():
         t0 = time.perf_counter()
-        run.written += rf.write_lidar(run.stage, result, formats, extra.get(lid), bin_intensity)
+        run.written += rf.write_lidar(
+            run.stage, result, formats, extra.get(lid), bin_intensity, deskew=deskew
+        )
         entry = run.lidars[lid]
         entry["timings_s"]["write"] = time.perf_counter() - t0
         if lid in extra:
@@ -239,6 +256,8 @@ def render_scene(
     nidar_branch: str | None = None,
     overwrite: bool = False,
     bin_intensity: str = "unit",
+    max_memory: int | None = None,
+    deskew: bool = False,
 ) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`).
 
@@ -261,6 +280,10 @@ def render_scene(
         overwrite: replace a non-empty ``out_dir``.
         bin_intensity: ``unit`` (KITTI's [0, 1]) or ``raw``: see
             :func:`nidar_mi.render_folder.write_lidar`.
+        max_memory: bytes a scan or camera render may use (None:
+            :func:`nidar_mi.lidar.memory.default_limit`); larger requests are refused before
+            anything runs.
+        deskew: add ``xyz_deskewed`` to the points (equal to ``xyz`` for a scan from one pose).
 
     Returns:
         The manifest (also written to ``out_dir/manifest.json``).
@@ -295,12 +318,13 @@ def render_scene(
     t0 = time.perf_counter()
     loaded = _load(req, variant)
     load_s = time.perf_counter() - t0
+    _check_memory(loaded, cameras, spp, max_memory)
     steps = len(loaded.lidars) + (len(loaded.cameras) if cameras else 0)
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
         run = _Run(stage=str(stage), timings={"load": load_s})
         bar = tqdm(total=steps, desc="render", unit="sensor", disable=not progress, file=sys.stderr)
         try:
-            _scan_lidars(run, loaded, seed, bar)
+            _scan_lidars(run, loaded, seed, bar, max_memory)
             if cameras:
                 _render_cameras(run, loaded, spp, seed, bar)
         finally:
@@ -310,7 +334,7 @@ def render_scene(
             t0 = time.perf_counter()
             extra = _nidar_columns(run, weights, nidar_branch)
             run.timings["nidar"] = time.perf_counter() - t0
-        _write_lidars(run, formats, extra, bin_intensity)
+        _write_lidars(run, formats, extra, bin_intensity, deskew)
         manifest = {
             "request": req.to_dict(),
             "scene": req.scene,

@@ -142,7 +142,17 @@ LAYERS = {
     ),
     **dict.fromkeys(("datasets", "plugins", "tasks"), 0),
     **dict.fromkeys(
-        ("scene", "camera", "render_folder", "simulate", "dataset", "nidar", "scenegen"), 1
+        (
+            "scene",
+            "camera",
+            "render_folder",
+            "simulate",
+            "sequence",
+            "dataset",
+            "nidar",
+            "scenegen",
+        ),
+        1,
     ),
     "studies": 1,
     **dict.fromkeys(("eval", "cli"), 2),

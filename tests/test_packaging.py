@@ -37,6 +37,7 @@ def test_wheel_install_ships_plugins(tmp_path):
     for data in ("nidar/weights/irnet.safetensors", "nidar/weights/MODEL_CARD.md"):
         assert (target / "nidar_mi" / data).is_file(), data
     assert list((target / "nidar_mi" / "materials" / "data").glob("*.csv"))
+    assert (target / "nidar_mi" / "lidar" / "data" / "hdl64e_s2_sztaki.csv").is_file()
     code = (
         "import nidar_mi, nidar_mi.plugins as p; print(nidar_mi.__file__); print(p.__file__);"
         "from nidar_mi.backend import set_variant; set_variant('llvm_ad_spectral');"

@@ -72,6 +72,16 @@ LIDAR_PARAMETERS = {
     "noise_range_std": ("float", _small(-0.1, 1)),
     "detection_threshold": ("float", _small(-0.1, 1)),
     "dropout": ("float", _small(-0.5, 1.5)),
+    "layout": ("string", st.sampled_from(["uniform", "per_laser", "PER_LASER", "grid", ""])),
+    "calibration_file": ("string", st.sampled_from(["", "none.xml", "cal.yaml", "a.txt", "x y"])),
+    "fov_h_centred": ("boolean", st.sampled_from(["true", "false", "1", "maybe"])),
+    "rotation_rate": ("float", _small(-1, 200)),
+    "spin": ("string", st.sampled_from(["cw", "ccw", "CW", "left", ""])),
+    "scan_start_azimuth": ("float", _small(-400, 400)),
+    "beam_divergence": ("float", _small(-1, 120)),
+    "beam_sample_quality": ("integer", st.integers(-1, 14)),
+    "return_mode": ("string", st.sampled_from(["strongest", "first", "last", "dual", "all", ""])),
+    "return_separation": ("float", _small(-1, 5)),
     "seed": ("integer", st.one_of(st.integers(-5, 2**63 - 1), st.integers(-(2**70), 2**70))),
 }
 
