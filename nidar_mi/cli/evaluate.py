@@ -9,7 +9,8 @@ real KITTI frames, and the ablations.
   ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
   and (e), ``meta.json`` gives ``intensity_scale``.
 * ``--scenes`` renders the hand-made scene files (cached in ``CACHE/renders``) with the
-  dataset's parameters, seed and spp, and evaluates them the same way.
+  dataset's parameters, seed and spp, and evaluates them the same way; ``--workers N`` /
+  ``--ray-address`` render them on Ray (:mod:`nidar_mi.tasks`).
 * ``--kitti`` evaluates the real frames (skipped with a message when the folder is absent).
 * ``--ablation`` trains the IRNet variants and the RGB-input model into ``CACHE/ablation``
   (finished runs of the same dataset, STN and settings are reused) and scores them on the
@@ -29,6 +30,7 @@ import os
 import sys
 
 from ._common import parser, run
+from ._workers import add_worker_options
 
 __all__ = ["main"]
 
@@ -67,6 +69,7 @@ def _parser():
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
     )
     p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
+    add_worker_options(p, "hand-made scenes to render")
     return p
 
 

@@ -95,6 +95,10 @@ def run(args, argv_text: str) -> dict:
             raise NidarError(f"{args.data}: scene {name} is not rendered under {renders}")
     if args.scenes and not os.path.isdir(args.scenes):
         raise NidarError(f"--scenes: no such directory {args.scenes}")
+    if args.scenes:
+        from ..tasks import check_parallel
+
+        check_parallel(args.workers, args.ray_address)
     if args.lpips:
         reason = lpips_unavailable_reason()
         if reason:
@@ -169,6 +173,9 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
             params=meta.get("params"),
             seed=int(meta.get("seed", 0)),
             spp=int(meta.get("spp", 16)),
+            workers=args.workers,
+            ray_address=args.ray_address,
+            progress=not args.quiet,
         )
         res = evaluate_renders(dirs, model, scale, **common)
         names = [os.path.basename(d) for d in dirs]
