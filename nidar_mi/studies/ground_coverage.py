@@ -519,9 +519,17 @@ def summarize(rows: list[dict]) -> dict[str, int]:
     return {k: int(sum(bool(r[k]) for r in rows)) for k in keys}
 
 
-def _target_scene(reflectivity: float, threshold: float, noise: float, beams: int, hi_m: float):
+def _target_scene(
+    reflectivity: float,
+    threshold: float,
+    noise: float,
+    beams: int,
+    hi_m: float,
+    divergence: float = 0.0,
+):
     return _load_xml(f"""<scene version="3.0.0">
   <sensor type="lidar" id="lidar">
+    <float name="beam_divergence" value="{divergence:.9g}"/>
     <string name="elevation_angles" value="0"/>
     <integer name="horizontal_resolution" value="{int(beams)}"/>
     <float name="fov_h" value="1e-3"/><boolean name="fov_h_centred" value="true"/>
@@ -551,13 +559,17 @@ def target_detection_scanned(
     *,
     beams: int = 4000,
     seed: int = 0,
+    beam_divergence: float = 0.0,
 ) -> float:
     """The fraction of ``beams`` beams a Lambertian target of ``reflectivity`` at normal
     incidence and ``range_m`` returns (the scanned ``P_D``; its binomial deviation is
-    ``sqrt(P (1 - P) / beams)``)."""
+    ``sqrt(P (1 - P) / beams)``); ``beam_divergence`` (mrad) > 0 casts diverging beams (their
+    footprint lies wholly on the 40 m panel)."""
     from ..lidar.scan import scan
 
-    loaded = _target_scene(reflectivity, threshold, noise, beams, 2.0 * range_m)
+    loaded = _target_scene(
+        reflectivity, threshold, noise, beams, 2.0 * range_m, divergence=beam_divergence
+    )
     r = scan(loaded.scene, loaded.lidars[0], seed=seed, to_world=_at_distance(range_m))
     return float(r.valid.mean())
 

@@ -199,10 +199,16 @@ def test_documented_schema_matches_a_simulated_scan():
     assert {"xyz", "ring", "intensity_nidar", "nidar_observed"} <= set(rows)
     scan = read_npz(GOLDEN)
     sizes = {"N": str(len(scan["xyz"])), "M": str(len(scan["material_names"]))}
+    if "instance_names" in scan:  # K instances and [0] = "" (none): K+1 names
+        assert scan["instance_names"][0] == "" and scan["instance"].max() < len(
+            scan["instance_names"]
+        )
+        sizes["K+1"] = str(len(scan["instance_names"]))
     for name, a in scan.items():
         _, dtype, *rest = rows[name].split()
         shape = rest[1] if dtype == "str" else rest[0]  # "str (U) (M,)"
         assert (a.dtype.kind == "U") if dtype == "str" else (a.dtype == np.dtype(dtype)), name
+        shape = shape.replace("K+1", sizes.get("K+1", "K+1"))
         want = "".join(sizes.get(c, c) for c in shape)
         assert str(a.shape).replace(" ", "") == want, name
 

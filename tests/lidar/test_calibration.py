@@ -126,6 +126,11 @@ def test_scanned_targets_are_detected_as_the_noise_model_says(variant):
         expect = detection_probability(refl / d**2, T64, NOISE64)
         got = target_detection_scanned(refl, d, T64, NOISE64, beams=n, seed=3)
         assert got == pytest.approx(expect, abs=_binomial_tol(expect, n)), (refl, d)
+    # diverging beams: one receiver draw per echo, the same P_D (the footprint is on the panel)
+    for d in (45.0, 50.0):
+        expect = detection_probability(0.10 / d**2, T64, NOISE64)
+        got = target_detection_scanned(0.10, d, T64, NOISE64, beams=n, beam_divergence=3.0)
+        assert got == pytest.approx(expect, abs=_binomial_tol(expect, n)), d
     # the datasheet: detected (P >= 0.5) to 50 m and 120 m
     assert target_detection_scanned(0.10, 50.0, T64, NOISE64, beams=n) >= 0.5 - _binomial_tol(
         0.5, n

@@ -159,3 +159,16 @@ def test_ideal_beam_is_the_single_ray_scan(variant, write_scene):
         out.append(scan(L.scene, L.lidars[0]))
     assert not out[1].further
     assert out[0].range[0, 0] == out[1].range[0, 0]
+
+
+def test_echo_receiver_draws_are_per_beam_and_standard_normal():
+    """The receiver noise of diverging beams: one standard normal per (beam, echo slot), the
+    same whatever block the beam is cast in, another for another seed."""
+    from nidar_mi.lidar.scan import _echo_normals
+
+    whole = _echo_normals(3, 0, (100_000, 4))
+    np.testing.assert_array_equal(_echo_normals(3, 500, (10, 4)), whole[500:510])
+    np.testing.assert_array_equal(_echo_normals(3, 500, (10, 2)), whole[500:510, :2])
+    assert abs(whole.mean()) < 0.01 and abs(whole.std() - 1.0) < 0.01
+    assert abs(np.corrcoef(whole[:, 0], whole[:, 1])[0, 1]) < 0.01
+    assert not np.array_equal(_echo_normals(4, 0, (10, 4)), whole[:10])
