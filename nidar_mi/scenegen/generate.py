@@ -6,7 +6,9 @@ the same scene for the same (S, k) whatever ``--count`` is. Its XML is written a
 ``DIR/scene_<S>_<k>.xml``; a scene whose file already exists is skipped, so an interrupted run
 resumes. ``DIR/index.json`` lists every scene of the folder (entries of earlier runs with other
 seeds are kept), with its seeds, kind, materials and rig calibration. A layout that repeats one
-already in the folder is an error (it would leak across a split by scene).
+already in the folder is an error (it would leak across a split by scene). A ``city`` or
+``suburb`` scene also gets its drive (:mod:`.drives`): ``DIR/scene_<S>_<k>_drive.tum`` and the
+KITTI-style pose and time files beside it, recorded under ``"drive"`` in its index entry.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import sys
 import numpy as np
 
 from ..errors import NidarError
+from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
 from .layout import KINDS, sample_layout
 from .primitives import Layout
 from .xml import scene_xml
@@ -46,15 +49,21 @@ def scene_rng(seed: int, k: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
 
 
-def generate_scene(seed: int, k: int, kind: str | None = None) -> tuple[Layout, str]:
+def generate_scene(
+    seed: int, k: int, kind: str | None = None, blocks: tuple[int, int] | None = None
+) -> tuple[Layout, str]:
     """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
 
     Args:
         seed: run seed (>= 0).
         k: scene index in the run (>= 0).
-        kind: ``urban``, ``vegetated`` or None (drawn per scene).
+        kind: one of :data:`~.layout.KINDS` or None (urban or vegetated, drawn per scene).
+        blocks: (nx, ny) blocks of a ``city`` or ``suburb`` layout (None: its default).
     """
-    layout = sample_layout(scene_rng(seed, k), kind)
+    if blocks is not None and kind in CITY_KINDS:
+        layout = sample_city(scene_rng(seed, k), kind, blocks)[0]
+    else:
+        layout = sample_layout(scene_rng(seed, k), kind)
     name = scene_id(seed, k)
     text = scene_xml(
         layout,
@@ -122,6 +131,8 @@ def generate(
     *,
     kind: str | None = None,
     progress: bool = True,
+    blocks: tuple[int, int] | None = None,
+    drive: dict | None = None,
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -131,6 +142,9 @@ def generate(
         seed: run seed (>= 0).
         kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
+        blocks: (nx, ny) blocks of ``city`` and ``suburb`` layouts (None: the default).
+        drive: keyword arguments of :func:`.drives.write_drive` (``frames``, ``rate_hz``,
+            ``speed``) for ``city`` and ``suburb`` scenes.
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -159,13 +173,18 @@ def generate(
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
-        layout, text = generate_scene(seed, k, kind)
+        layout, text = generate_scene(seed, k, kind, blocks)
         entry = index_entry(seed, k, layout, text)
         other = hashes.get(entry["layout_sha256"], entry["id"])
         if other != entry["id"]:
             raise NidarError(f"{entry['id']} repeats the layout of {other}")
         hashes[entry["layout_sha256"]] = entry["id"]
         path = os.path.join(out_dir, entry["file"])
+        if layout.kind in CITY_KINDS:
+            from .drives import write_drive
+
+            grid = sample_grid(scene_rng(seed, k), layout.kind, blocks or DEFAULT_BLOCKS)
+            entry["drive"] = write_drive(out_dir, entry["id"], grid, **(drive or {}))
         if os.path.exists(path):
             skipped += 1
         else:
