@@ -43,6 +43,7 @@ DEFAULT_BLOCKS = (4, 3)
 #: Height of the LiDAR above the road in the drive rigs (KITTI's HDL-64E: 1.73 m).
 LIDAR_HEIGHT_M = 1.73
 _KERB_M = 0.15
+_NO_PARKING_M = 5.0  # no car parks closer than this to the end of a block side (turning cars)
 
 
 @dataclass(frozen=True)
@@ -388,9 +389,9 @@ def _furniture(rng: np.random.Generator, g: StreetGrid, prefix: str, side: _Side
     # parked cars along the kerb, facing the traffic of that side (right-hand traffic)
     occupancy = 0.6 if city else 0.3
     lane_off = kerb + g.park_w / 2
-    s = side.a + rng.uniform(0.0, 4.0)
+    s = side.a + _NO_PARKING_M + rng.uniform(0.0, 3.0)
     k = 0
-    while s < side.b - 3.0:
+    while s < side.b - _NO_PARKING_M:
         if rng.random() < occupancy:
             x, y = side.at(s, lane_off)
             heading = math.degrees(math.atan2(-side.u[1], -side.u[0]))
@@ -427,11 +428,14 @@ def _block(rng: np.random.Generator, g: StreetGrid, bi: int, bj: int) -> list[Sh
     for side in sides:
         prefix = f"blk{bi}_{bj}{side.name}"
         if side.name in ("s", "n"):
-            shapes += _frontage(rng, g, prefix, side, half_y - 0.5)
+            shapes += _frontage(rng, g, prefix, side, min(12.0, half_y - 0.5))
         else:  # east and west frontages between the corner plots of the north and south rows
-            inner = dataclasses.replace(side, a=side.a + 15.0, b=side.b - 15.0)
+            corner = min(12.0, half_y - 0.5)
+            inner = dataclasses.replace(side, a=side.a + corner, b=side.b - corner)
             if inner.b - inner.a > 6.0:
                 shapes += _frontage(rng, g, prefix, inner, (x1 - x0) / 2 - 0.5)
+            elif inner.b - inner.a > 1.0:  # a boundary wall closes the gap between the corners
+                shapes.append(_wall(rng, f"{prefix}_w", inner, inner.a, inner.b, -0.5))
         # the sidewalk sits on the street side of the building line
         shapes += _furniture(rng, g, prefix, side)
     return shapes
@@ -487,11 +491,22 @@ def sample_city(
     sun, sky = sample_light(rng)
     x, y, heading = route_start(g)
     rig = sample_rig(rng, x, y, heading)
+    # the LiDAR looks exactly along the road at KITTI's height; the camera keeps its mounting
+    # relative to it (turned and lifted with it)
+    turn = math.radians(heading - rig.lidar_yaw_deg)
+    cx, cy = rig.camera_position[0] - x, rig.camera_position[1] - y
+    cam = (
+        x + cx * math.cos(turn) - cy * math.sin(turn),
+        y + cx * math.sin(turn) + cy * math.cos(turn),
+        rig.camera_position[2] - rig.lidar_position[2] + LIDAR_HEIGHT_M,
+    )
     rig = dataclasses.replace(
         rig,
         lidar_preset="hdl64e",
         lidar_position=(rnd(x), rnd(y), LIDAR_HEIGHT_M),
         lidar_yaw_deg=rnd(heading, 2),
+        camera_position=(rnd(cam[0]), rnd(cam[1]), rnd(cam[2])),
+        camera_yaw_deg=rnd(rig.camera_yaw_deg + math.degrees(turn), 2),
     )
     ids = [s.id for s in shapes]
     assert len(ids) == len(set(ids)), "duplicate shape ids"

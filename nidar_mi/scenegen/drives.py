@@ -22,7 +22,8 @@ from .trajectory import drive, revisits, write_kitti, write_times, write_tum
 
 __all__ = ["DEFAULT_FRAMES", "write_drive"]
 
-#: Frames of a drive unless asked otherwise (50 s at 10 Hz: two revisits of the shared street).
+#: Frames of a drive unless asked otherwise (50 s at 10 Hz: about 300 m, most of a lap of the
+#: figure eight in a city of the default size).
 DEFAULT_FRAMES = 500
 
 

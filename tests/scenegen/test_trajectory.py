@@ -1,0 +1,93 @@
+"""Drives: smooth, within the speed limits, in the right-hand lane, revisiting; their files."""
+
+import numpy as np
+import pytest
+
+from nidar_mi.errors import NidarError
+from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_grid
+from nidar_mi.scenegen.trajectory import (
+    A_LAT,
+    TURN_RADIUS_M,
+    drive,
+    read_tum,
+    revisits,
+    route_polyline,
+    route_start,
+    write_kitti,
+    write_times,
+    write_tum,
+)
+
+
+@pytest.fixture(scope="module")
+def grid():
+    return sample_grid(np.random.default_rng(1), "city", (4, 3))
+
+
+def test_route_is_a_closed_figure_eight_of_straights_and_quarter_arcs(grid):
+    pts, curv = route_polyline(grid, laps=1)
+    np.testing.assert_allclose(pts[0], pts[-1], atol=1e-9)  # closes on its start
+    L = np.linalg.norm(np.diff(pts, axis=0), axis=1).sum()
+    # 8 streets of one pitch and 8 quarter turns, each cutting 2R and adding a quarter circle
+    expected = 8 * grid.pitch + 8 * (np.pi / 2 - 2) * TURN_RADIUS_M
+    # the lane offset lengthens a left turn by 2 * (lane_w / 2) and shortens a right turn as
+    # much: the four left turns of one loop cancel the four right turns of the other
+    assert L == pytest.approx(expected, rel=2e-3)
+    assert set(np.round(curv, 9)) == {0.0, round(1 / TURN_RADIUS_M, 9)}
+
+
+def test_drive_respects_the_speed_limits_and_looks_along_its_path(grid):
+    traj = drive(grid, 650, rate_hz=10.0, speed=10.0)
+    p = traj.positions()
+    v = np.linalg.norm(np.diff(p, axis=0), axis=1) * 10.0
+    assert v.max() <= 10.0 + 1e-6
+    assert v.min() >= np.sqrt(A_LAT * TURN_RADIUS_M) * 0.95  # never slower than the turn speed
+    step = np.diff(p[:, :2], axis=0)
+    heading = np.arctan2(step[:, 1], step[:, 0])
+    yaw = np.arctan2(traj.poses[:-1, 1, 0], traj.poses[:-1, 0, 0])
+    err = np.angle(np.exp(1j * (heading - yaw)))
+    assert np.abs(err).max() < np.radians(12)  # the chord lags the tangent in turns only
+    assert np.all(p[:, 2] == LIDAR_HEIGHT_M)
+    np.testing.assert_allclose(np.linalg.det(traj.poses[:, :3, :3]), 1.0)
+    x, y, h = route_start(grid)
+    np.testing.assert_allclose(p[0, :2], (x, y)) and h == pytest.approx(90.0)
+    # right-hand lane: the first street is driven north, half a lane east of its centreline
+    assert x == pytest.approx(grid.nx // 2 * grid.pitch + grid.lane_w / 2)
+    assert revisits(traj) >= 2
+
+
+def test_revisits_by_hand():
+    # out along x and straight back 2 m to the side: one revisit run
+    from nidar_mi.scenegen.trajectory import Trajectory
+
+    x = np.r_[np.arange(0, 50.0), np.arange(49, -1, -1.0)]
+    y = np.r_[np.zeros(50), np.full(50, 2.0)]
+    poses = np.tile(np.eye(4), (100, 1, 1))
+    poses[:, 0, 3], poses[:, 1, 3] = x, y
+    d = np.r_[0, np.cumsum(np.hypot(np.diff(x), np.diff(y)))]
+    traj = Trajectory(times=np.arange(100) / 10, poses=poses, distance=d)
+    assert revisits(traj, radius_m=5.0, min_gap_m=30.0) == 1
+    assert revisits(traj, radius_m=1.0, min_gap_m=30.0) == 0
+
+
+def test_files_round_trip(grid, tmp_path):
+    traj = drive(grid, 50)
+    write_tum(tmp_path / "d.tum", traj)
+    write_kitti(tmp_path / "d_kitti.txt", traj)
+    write_times(tmp_path / "t.txt", traj)
+    t, poses = read_tum(tmp_path / "d.tum")
+    np.testing.assert_allclose(t, traj.times, atol=1e-9)
+    np.testing.assert_allclose(poses, traj.poses, atol=1e-6)
+    kitti = np.loadtxt(tmp_path / "d_kitti.txt").reshape(-1, 3, 4)
+    np.testing.assert_allclose(kitti, traj.poses[:, :3, :], atol=1e-6)
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "t.txt"), traj.times, atol=1e-6)
+
+
+def test_bad_input(grid, tmp_path):
+    with pytest.raises(NidarError, match="at least 2 frames"):
+        drive(grid, 1)
+    with pytest.raises(NidarError, match="must be > 0"):
+        drive(grid, 10, rate_hz=0)
+    (tmp_path / "bad.tum").write_text("0 1 2\n")
+    with pytest.raises(NidarError, match="8 numbers"):
+        read_tum(tmp_path / "bad.tum")
