@@ -362,6 +362,11 @@ def run_study(out: str, cfg: StudyConfig, *, progress: bool = True) -> dict:
         nidar_dir = nidar_columns(phys, cfg.frames, cfg.weights, progress=progress)
         timings["nidar"] = time.perf_counter() - t0
 
+    observed = None
+    if nidar_dir is not None:
+        seen = [np.load(os.path.join(nidar_dir, f"{k:06d}.npz"))["nidar_observed"] for k in range(cfg.frames)]
+        observed = float(np.mean([s.mean() for s in seen]))
+
     t0 = time.perf_counter()
     odometry = _odometry_runs(cfg, phys, gt, progress)
     timings["odometry"] = time.perf_counter() - t0
@@ -383,6 +388,7 @@ def run_study(out: str, cfg: StudyConfig, *, progress: bool = True) -> dict:
         "odometry": {k: {a: b for a, b in v.items() if a != "poses"} for k, v in odometry.items()},
         "loops": {s: v["summary"] for s, v in loops.items()},
         "pose_graph": {s: {a: b for a, b in v.items() if a != "poses"} for s, v in graphs.items()},
+        "nidar_observed_fraction": observed,
     }
     write_report(out, results, gt=gt, odometry=odometry, loops=loops, graphs=graphs, desc=desc)
     return results
