@@ -86,3 +86,20 @@ def test_layouts_are_deterministic_and_write_xml():
     assert a.rig.lidar_preset == "hdl64e" and a.rig.lidar_position[2] == pytest.approx(1.73)
     text = scene_xml(a)
     assert text.count("<shape ") == len(a.shapes)
+
+
+@pytest.mark.parametrize("kind", CITY_KINDS)
+def test_every_city_shape_is_labelled(kind):
+    from nidar_mi.labels import strip_labels
+
+    layout, _ = sample_city(np.random.default_rng(1), kind, (2, 1))
+    _, labels = strip_labels(scene_xml(layout))
+    assert set(labels.classes) == {s.id for s in layout.shapes}
+    assert "unlabeled" not in labels.classes.values()
+    classes = set(labels.classes.values())
+    assert {"road", "sidewalk", "building", "car", "pole", "fence", "other-object"} <= classes
+    for sid, cls in labels.classes.items():
+        if "_pilaster" in sid or "_window_" in sid:
+            assert cls == "building"
+            walls = sid.split("_window_")[0].split("_pilaster")[0] + "_walls"
+            assert labels.instances[sid] == labels.instances[walls]

@@ -363,7 +363,10 @@ def run_study(out: str, cfg: StudyConfig, *, progress: bool = True) -> dict:
 
     observed = None
     if nidar_dir is not None:
-        seen = [np.load(os.path.join(nidar_dir, f"{k:06d}.npz"))["nidar_observed"] for k in range(cfg.frames)]
+        seen = [
+            np.load(os.path.join(nidar_dir, f"{k:06d}.npz"))["nidar_observed"]
+            for k in range(cfg.frames)
+        ]
         observed = float(np.mean([s.mean() for s in seen]))
 
     t0 = time.perf_counter()

@@ -72,7 +72,9 @@ def test_source_values():
     np.testing.assert_allclose(source_values("physics", xyz, intensity, rng), [0.4, 0.5])
     np.testing.assert_allclose(source_values("carla", xyz, intensity, rng), np.exp(-0.004 * rng))
     np.testing.assert_allclose(source_values("none", xyz, intensity, rng), [0.0, 2.73])
-    np.testing.assert_allclose(source_values("nidar", xyz, intensity, rng, np.array([0.3, 0])), [0.3, 0])
+    np.testing.assert_allclose(
+        source_values("nidar", xyz, intensity, rng, np.array([0.3, 0])), [0.3, 0]
+    )
     with pytest.raises(NidarError, match="NIDAR"):
         source_values("nidar", xyz, intensity, rng)
     assert set(SOURCES) == {"physics", "nidar", "rgb_twin", "carla", "none"}

@@ -30,7 +30,9 @@ def drive(tmp_path_factory):
         T[:3, 3] = x + g.lane_w / 2 + (0.3 if second else 0.0), y, LIDAR_HEIGHT_M
         poses.append(T)
     poses = np.stack(poses)
-    folder = render_drive(str(scene), poses, str(out / "f"), params={"cols": "1024"}, progress=False)
+    folder = render_drive(
+        str(scene), poses, str(out / "f"), params={"cols": "1024"}, progress=False
+    )
     # distance along the drive: 12 m north, a lap round the block (~160 m), 12 m north again
     dist = np.r_[np.arange(7) * 2.0, 172.0 + np.arange(7) * 2.0]
     return folder, poses, dist
