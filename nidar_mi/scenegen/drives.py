@@ -35,14 +35,17 @@ def write_drive(
     frames: int = DEFAULT_FRAMES,
     rate_hz: float = 10.0,
     speed: float = 10.0,
+    seed: int = 0,
 ) -> dict:
     """Write the drive files of ``scene`` into ``out_dir`` (atomically, replacing older ones).
+
+    ``seed`` draws the phases of the body's oscillations (:func:`.trajectory.drive`).
 
     Returns:
         The index record: file names, frames, rate (Hz), cruising speed (m/s), length (m) and the
         number of revisits (:func:`.trajectory.revisits`).
     """
-    traj = drive(grid, frames, rate_hz, speed)
+    traj = drive(grid, frames, rate_hz, speed, seed=seed)
     files = {
         "tum": f"{scene}_drive.tum",
         "kitti": f"{scene}_drive_kitti.txt",

@@ -184,7 +184,10 @@ def generate(
             from .drives import write_drive
 
             grid = sample_grid(scene_rng(seed, k), layout.kind, blocks or DEFAULT_BLOCKS)
-            entry["drive"] = write_drive(out_dir, entry["id"], grid, **(drive or {}))
+            body_seed = int(np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(1)[0])
+            entry["drive"] = write_drive(
+                out_dir, entry["id"], grid, seed=body_seed, **(drive or {})
+            )
         if os.path.exists(path):
             skipped += 1
         else:

@@ -7,7 +7,13 @@
 2. a speed profile: at most ``speed`` (m/s), at most ``sqrt(a_lat · R)`` on an arc of radius R
    (lateral acceleration :data:`A_LAT`), changing by at most :data:`A_LONG` (m/s²);
 3. the pose at every frame time ``k / rate_hz``: the LiDAR :data:`~.city.LIDAR_HEIGHT_M` above the
-   road, x along the direction of travel, z up.
+   road, x along the direction of travel, z up;
+4. the body's motion on its suspension (``body_motion``): roll of :data:`ROLL_PER_MS2` per m/s² of
+   lateral acceleration (leaning out of a turn), pitch of :data:`PITCH_PER_MS2` per m/s² of
+   braking or accelerating (nose down when braking), and the road's excitation of the body
+   modes: pitch 0.25° at 1.3 Hz + 0.1° at 2.9 Hz, roll 0.15° at 1.1 Hz, heave 1 cm at 1.5 Hz,
+   with phases drawn from ``seed``. (Real cars lean ~3-6° per g and pitch ~2-3° per g; without
+   this motion every sweep of a flat road draws the same rings round the sensor.)
 
 The route repeats until the drive has ``frames`` poses. :func:`revisits` counts how often the
 drive comes back to where it has been. Files: :func:`write_tum` (``t x y z qx qy qz qw``, the
@@ -29,6 +35,8 @@ from .city import LIDAR_HEIGHT_M, StreetGrid, drive_route
 __all__ = [
     "A_LAT",
     "A_LONG",
+    "PITCH_PER_MS2",
+    "ROLL_PER_MS2",
     "TURN_RADIUS_M",
     "Trajectory",
     "route_start",
@@ -47,6 +55,10 @@ TURN_RADIUS_M = 8.0
 A_LAT = 3.0
 #: Largest change of speed, m/s².
 A_LONG = 1.5
+#: Body roll per lateral acceleration, degrees per m/s² (about 5° per g).
+ROLL_PER_MS2 = 0.5
+#: Body pitch per longitudinal acceleration, degrees per m/s² (about 3° per g).
+PITCH_PER_MS2 = 0.3
 _STEP_M = 0.05  # spacing of the dense path
 
 
@@ -148,7 +160,15 @@ def _speed_profile(s: np.ndarray, curv: np.ndarray, v_max: float) -> np.ndarray:
     return v
 
 
-def drive(g: StreetGrid, frames: int, rate_hz: float = 10.0, speed: float = 10.0) -> Trajectory:
+def drive(
+    g: StreetGrid,
+    frames: int,
+    rate_hz: float = 10.0,
+    speed: float = 10.0,
+    *,
+    seed: int = 0,
+    body_motion: bool = True,
+) -> Trajectory:
     """LiDAR poses of a drive round :func:`~.city.drive_route` (repeated as needed).
 
     Args:
@@ -156,9 +176,13 @@ def drive(g: StreetGrid, frames: int, rate_hz: float = 10.0, speed: float = 10.0
         frames: number of poses (>= 2).
         rate_hz: frame rate, Hz (> 0).
         speed: cruising speed, m/s (> 0; slower in the turns).
+        seed: draws the phases of the body's oscillations.
+        body_motion: roll, pitch and heave of the body (module docstring); False: the LiDAR stays
+            level at a constant height.
 
     Returns:
-        The trajectory, starting at rest-free cruising speed at :func:`route_start`.
+        The trajectory, starting under way (at the speed the next turn allows) at
+        :func:`route_start`.
     """
     if frames < 2:
         raise NidarError(f"a drive needs at least 2 frames (got {frames})")
@@ -170,8 +194,7 @@ def drive(g: StreetGrid, frames: int, rate_hz: float = 10.0, speed: float = 10.0
         pts, curv = route_polyline(g, laps)
         seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         s = np.concatenate([[0.0], np.cumsum(seg)])
-        v = _speed_profile(s, curv, speed)
-        v[0] = speed  # the drive is already under way
+        v = _speed_profile(s, curv, speed)  # already under way at the start
         t = np.concatenate([[0.0], np.cumsum(seg / np.maximum((v[1:] + v[:-1]) / 2, 1e-6))])
         if t[-1] >= duration:
             break
@@ -189,11 +212,37 @@ def drive(g: StreetGrid, frames: int, rate_hz: float = 10.0, speed: float = 10.0
         np.interp(np.maximum(s_f - 0.25, 0.0), s, pts[:, 1]),
     )
     yaw = np.arctan2(ahead[1] - behind[1], ahead[0] - behind[0])
+    roll, pitch, heave = np.zeros(frames), np.zeros(frames), np.zeros(frames)
+    if body_motion:
+        roll, pitch, heave = _body_motion(times, s_f, s, t, v, pts, curv, seed)
+    from scipy.spatial.transform import Rotation
+
     poses = np.tile(np.eye(4), (frames, 1, 1))
-    c, sn = np.cos(yaw), np.sin(yaw)
-    poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -sn, sn, c
-    poses[:, 0, 3], poses[:, 1, 3], poses[:, 2, 3] = x, y, LIDAR_HEIGHT_M
+    poses[:, :3, :3] = Rotation.from_euler("ZYX", np.stack([yaw, pitch, roll], -1)).as_matrix()
+    poses[:, 0, 3], poses[:, 1, 3], poses[:, 2, 3] = x, y, LIDAR_HEIGHT_M + heave
     return Trajectory(times=times, poses=poses, distance=s_f - s_f[0])
+
+
+def _body_motion(times, s_f, s, t, v, pts, curv, seed):
+    """(roll, pitch, heave) per frame in rad, rad, m (module docstring, step 4)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0x626F6479,)))
+    ph = rng.uniform(0.0, 2 * np.pi, 4)
+    speed = np.interp(times, t, v)
+    # signed curvature: + for a left turn (the tangent turns anticlockwise)
+    d = np.diff(pts, axis=0)
+    turn = np.sign(np.r_[0.0, d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0], 0.0])
+    kappa = np.interp(s_f, s, curv * turn)
+    a_lat = speed**2 * kappa
+    dt = times[1] - times[0]
+    a_long = np.gradient(speed, dt) if len(times) > 2 else np.zeros_like(times)
+    roll = np.radians(ROLL_PER_MS2 * a_lat + 0.15 * np.sin(2 * np.pi * 1.1 * times + ph[0]))
+    pitch = np.radians(
+        -PITCH_PER_MS2 * a_long
+        + 0.25 * np.sin(2 * np.pi * 1.3 * times + ph[1])
+        + 0.1 * np.sin(2 * np.pi * 2.9 * times + ph[2])
+    )
+    heave = 0.01 * np.sin(2 * np.pi * 1.5 * times + ph[3])
+    return roll, pitch, heave
 
 
 def revisits(traj: Trajectory, radius_m: float = 5.0, min_gap_m: float = 30.0) -> int:

@@ -18,7 +18,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["GROUND_Z_M", "kiss_config", "run_odometry", "register_pair", "overlap"]
+__all__ = [
+    "GROUND_Z_M",
+    "kiss_config",
+    "run_odometry",
+    "register_pair",
+    "overlap",
+    "remove_ground",
+]
 
 
 def kiss_config(deskew: bool, threads: int = 2):
@@ -74,6 +81,32 @@ GROUND_Z_M = -1.3
 def _above_ground(xyz: np.ndarray) -> np.ndarray:
     xyz = np.asarray(xyz, np.float64)
     return xyz[xyz[:, 2] > GROUND_Z_M]
+
+
+def remove_ground(xyz: np.ndarray, height_m: float = 1.73, band_m: float = 0.3) -> np.ndarray:
+    """The points of a sweep that are not on the ground plane.
+
+    The plane ``z = a x + b y + c`` is fitted by least squares to the points below the sensor
+    (z < 0.6 - ``height_m``) within 25 m, refitted to those within 0.15 m of the first fit; points
+    within ``band_m`` of it are removed (road, sidewalks, kerbs). The fit follows the body's roll
+    and pitch, which a fixed height cut would not.
+
+    Args:
+        xyz: (N, 3) points in the LiDAR frame, m.
+        height_m: the LiDAR's height above the road, m.
+        band_m: half-thickness of the removed band, m.
+    """
+    xyz = np.asarray(xyz)
+    r = np.hypot(xyz[:, 0], xyz[:, 1])
+    low = (xyz[:, 2] < 0.6 - height_m) & (r < 25.0)
+    if low.sum() < 10:
+        return xyz
+    A = np.column_stack([xyz[:, 0], xyz[:, 1], np.ones(len(xyz))])
+    coef = np.linalg.lstsq(A[low], xyz[low, 2], rcond=None)[0]
+    near = low & (np.abs(A @ coef - xyz[:, 2]) < 0.15)
+    if near.sum() >= 10:
+        coef = np.linalg.lstsq(A[near], xyz[near, 2], rcond=None)[0]
+    return xyz[np.abs(xyz[:, 2] - A @ coef) > band_m]
 
 
 def register_pair(source: np.ndarray, target: np.ndarray, guess: np.ndarray) -> np.ndarray:

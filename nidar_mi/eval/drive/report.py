@@ -64,9 +64,9 @@ def _figures(out: str, gt, odometry: dict, loops: dict, graphs: dict, desc: dict
     written = []
     fig, ax = plt.subplots(figsize=(7, 6))
     ax.plot(gt[:, 0, 3], gt[:, 1, 3], "k-", lw=2.5, label="ground truth")
-    est = odometry["instantaneous"]["poses"]
-    al = ate(gt, est)["aligned"]
-    ax.plot(al[:, 0, 3], al[:, 1, 3], "-", lw=1.2, label="KISS-ICP")
+    for name, est in ((n, r["poses"]) for n, r in odometry.items()):
+        al = ate(gt, est)["aligned"]
+        ax.plot(al[:, 0, 3], al[:, 1, 3], "-", lw=1.2, label=f"KISS-ICP, {name}")
     for source, g in graphs.items():
         if g["loops"]:
             p = ate(gt, g["poses"])["aligned"]
