@@ -179,7 +179,7 @@ _warned: set[str] = set()
 
 
 def render_camera(
-    loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0
+    loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0, nir: bool = True
 ) -> CameraRender:
     """Render RGB, NIR band and depth of one camera of a loaded scene.
 
@@ -189,6 +189,7 @@ def render_camera(
         wavelength: NIR band centre in nm (the LiDAR's).
         spp: samples per pixel of both renders.
         seed: sampler seed.
+        nir: also render the NIR band (False: ``nir`` is all zeros; NIDAR needs only RGB).
     """
     import mitsuba as mi
 
@@ -212,11 +213,14 @@ def render_camera(
     rgb = np.array(rgb, dtype=np.float32)[..., :3]
     timings["rgb"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    _, integral = nir_response(wavelength)
-    nir_cam = _nir_camera(camera, wavelength, spp)
-    nir = mi.render(scene, sensor=nir_cam, integrator=integrator, spp=spp, seed=seed)
-    nir = np.array(nir, dtype=np.float32)
-    nir = (nir[..., 0] / integral).astype(np.float32)
+    if nir:
+        _, integral = nir_response(wavelength)
+        nir_cam = _nir_camera(camera, wavelength, spp)
+        nir = mi.render(scene, sensor=nir_cam, integrator=integrator, spp=spp, seed=seed)
+        nir = np.array(nir, dtype=np.float32)
+        nir = (nir[..., 0] / integral).astype(np.float32)
+    else:
+        nir = np.zeros(rgb.shape[:2], dtype=np.float32)
     timings["nir"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     K, T_world_cam, (W, H) = camera_calibration(camera)

@@ -25,11 +25,12 @@ def study(tmp_path_factory):
 def test_reduced_study_end_to_end(study):
     res = json.loads((study / "results.json").read_text())
     assert res["drive"]["frames"] == 40 and res["drive"]["revisits"] == 0
-    odo = res["odometry"]["instantaneous"]
-    # KISS-ICP follows the street and the first turn (a plain street of road and box buildings
-    # gives ~100 %: the ground rings move with the sensor); 5.3 % on this 22 m at 1024 columns
-    assert 0 <= odo["end_drift"]["pct"] < 10.0
-    assert 0 <= odo["ate"]["rmse"] < 1.0
+    raw = res["odometry"]["instantaneous"]
+    odo = res["odometry"]["instantaneous, ground removed"]
+    # KISS-ICP follows the street and the first turn: the whole sweeps drift 6.9 % over these
+    # 22 m (the flat road's rings hold it back), without their ground plane 0.9 %
+    assert 0 <= raw["end_drift"]["pct"] < 15.0
+    assert 0 <= odo["end_drift"]["pct"] < 3.0 and odo["ate"]["rmse"] < 0.3
     assert odo["end_drift"]["path_m"] == pytest.approx(res["drive"]["length_m"], rel=1e-3)
     assert set(res["loops"]) == {"physics", "nidar", "rgb_twin", "carla", "none"}
     for source, s in res["loops"].items():
@@ -77,7 +78,9 @@ def test_sequence_folder_adds_the_distorted_runs(study, tmp_path):
     from nidar_mi.scenegen.trajectory import read_tum
 
     res = json.loads((study / "results.json").read_text())
-    times, poses = read_tum(study / "scene" / res["drive"]["files"]["tum"])
+    times, rig = read_tum(study / "scene" / res["drive"]["files"]["tum"])
+    index = json.loads((study / "scene" / "index.json").read_text())
+    poses = rig @ np.array(index["scenes"][0]["lidar"]["T_world_lidar"])  # the LiDAR on the rig
     rel = np.linalg.inv(poses[0]) @ poses
     seq = tmp_path / "seq"
     seq.mkdir()
@@ -94,7 +97,12 @@ def test_sequence_folder_adds_the_distorted_runs(study, tmp_path):
     shutil.copytree(study, out)
     assert main(["-o", str(out), "--sequence", str(seq), *REDUCED]) == 0
     runs = json.loads((out / "results.json").read_text())["odometry"]
-    assert set(runs) == {"instantaneous", "distorted", "distorted + KISS-ICP de-skew"}
+    assert set(runs) == {
+        "instantaneous",
+        "instantaneous, ground removed",
+        "distorted",
+        "distorted + KISS-ICP de-skew",
+    }
     # the same sweeps without de-skewing give the instantaneous run's trajectory, scored against
     # the mid-sweep poses (half a frame, ~0.4 m, further on)
     assert runs["distorted"]["ate"]["rmse"] == pytest.approx(

@@ -1,21 +1,27 @@
 """The drive files of a city or suburb scene (written by ``python -m nidar_mi.scenegen``).
 
-For scene ``ID`` in folder ``DIR``:
+The files hold *rig* poses, the convention of ``render --trajectory``: every sensor keeps its
+pose in the scene XML as its mounting on the rig, so at frame k the LiDAR is at
+``T_rig(k) · T_mount`` with ``T_mount`` the pose of ``lidar_top`` in the XML (``T_world_lidar`` in
+the scene's ``index.json`` entry). The rig is at the identity when the LiDAR is at its scene pose;
+the files give ``T_rig(k) = T_world_lidar(k) · T_mount⁻¹``. For scene ``ID`` in folder ``DIR``:
 
 ==========================  ==================================================================
 file                        content
 ==========================  ==================================================================
-``DIR/ID_drive.tum``        ``t x y z qx qy qz qw`` per frame: the LiDAR pose in the world
-                            frame (TUM format; what ``render --trajectory`` reads)
-``DIR/ID_drive_kitti.txt``  the same poses as 3x4 row-major ``T_world_lidar`` (KITTI odometry
-                            poses, world frame rather than relative to the first frame)
+``DIR/ID_drive.tum``        ``t x y z qx qy qz qw`` per frame: the rig pose (TUM format; what
+                            ``render --trajectory`` reads)
+``DIR/ID_drive_kitti.txt``  the same poses as 3x4 row-major matrices (KITTI odometry poses)
 ``DIR/ID_drive_times.txt``  the frame times in s (KITTI odometry ``times.txt``)
 ==========================  ==================================================================
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
+
+import numpy as np
 
 from .city import StreetGrid
 from .trajectory import drive, revisits, write_kitti, write_times, write_tum
@@ -31,6 +37,7 @@ def write_drive(
     out_dir: str,
     scene: str,
     grid: StreetGrid,
+    mount: np.ndarray,
     *,
     frames: int = DEFAULT_FRAMES,
     rate_hz: float = 10.0,
@@ -39,19 +46,21 @@ def write_drive(
 ) -> dict:
     """Write the drive files of ``scene`` into ``out_dir`` (atomically, replacing older ones).
 
-    ``seed`` draws the phases of the body's oscillations (:func:`.trajectory.drive`).
+    ``mount`` is the (4, 4) pose of the scene's LiDAR (module docstring); ``seed`` draws the
+    phases of the body's oscillations (:func:`.trajectory.drive`).
 
     Returns:
         The index record: file names, frames, rate (Hz), cruising speed (m/s), length (m) and the
         number of revisits (:func:`.trajectory.revisits`).
     """
-    traj = drive(grid, frames, rate_hz, speed, seed=seed)
+    lidar = drive(grid, frames, rate_hz, speed, seed=seed)
+    traj = dataclasses.replace(lidar, poses=lidar.poses @ np.linalg.inv(mount))
     files = {
         "tum": f"{scene}_drive.tum",
         "kitti": f"{scene}_drive_kitti.txt",
         "times": f"{scene}_drive_times.txt",
     }
-    write_tum(os.path.join(out_dir, files["tum"]), traj)
+    write_tum(os.path.join(out_dir, files["tum"]), traj, "T_rig, T_world_lidar = T_rig @ T_mount")
     write_kitti(os.path.join(out_dir, files["kitti"]), traj)
     write_times(os.path.join(out_dir, files["times"]), traj)
     return {
@@ -59,7 +68,8 @@ def write_drive(
         "frames": frames,
         "rate_hz": rate_hz,
         "speed_m_s": speed,
-        "length_m": round(float(traj.distance[-1]), 3),
-        "revisits": revisits(traj),
+        "length_m": round(float(lidar.distance[-1]), 3),
+        "revisits": revisits(lidar),
+        "poses": "rig: T_world_lidar = T_rig @ T_mount, T_mount = lidar T_world_lidar",
         "grid": {"kind": grid.kind, "blocks": [grid.nx, grid.ny], "pitch_m": grid.pitch},
     }

@@ -185,8 +185,9 @@ def generate(
 
             grid = sample_grid(scene_rng(seed, k), layout.kind, blocks or DEFAULT_BLOCKS)
             body_seed = int(np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(1)[0])
+            mount = layout.rig.T_world_lidar()
             entry["drive"] = write_drive(
-                out_dir, entry["id"], grid, seed=body_seed, **(drive or {})
+                out_dir, entry["id"], grid, mount, seed=body_seed, **(drive or {})
             )
         if os.path.exists(path):
             skipped += 1

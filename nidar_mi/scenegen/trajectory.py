@@ -268,13 +268,14 @@ def _quat_xyzw(R: np.ndarray) -> np.ndarray:
     return np.where(q[..., 3:4] < 0, -q, q)
 
 
-def write_tum(path: str | os.PathLike, traj: Trajectory) -> None:
-    """``t x y z qx qy qz qw`` per line (TUM RGB-D format): the LiDAR pose in the world frame."""
+def write_tum(path: str | os.PathLike, traj: Trajectory, what: str = "T_world_lidar") -> None:
+    """``t x y z qx qy qz qw`` per line (TUM RGB-D format), after a comment naming ``what`` the
+    poses are."""
     from ..io.atomic import atomic_write_text
 
     q = _quat_xyzw(traj.poses[:, :3, :3])
     rows = np.column_stack([traj.times, traj.poses[:, :3, 3], q])
-    lines = ["# t x y z qx qy qz qw  (T_world_lidar; s, m)"]
+    lines = [f"# t x y z qx qy qz qw  ({what}; s, m)"]
     lines += [" ".join(f"{v:.9g}" for v in r) for r in rows]
     atomic_write_text(str(path), "\n".join(lines) + "\n")
 

@@ -7,6 +7,9 @@ from nidar_mi.errors import NidarError
 from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_grid
 from nidar_mi.scenegen.trajectory import (
     A_LAT,
+    A_LONG,
+    PITCH_PER_MS2,
+    ROLL_PER_MS2,
     TURN_RADIUS_M,
     drive,
     read_tum,
@@ -47,7 +50,7 @@ def test_drive_respects_the_speed_limits_and_looks_along_its_path(grid):
     yaw = np.arctan2(traj.poses[:-1, 1, 0], traj.poses[:-1, 0, 0])
     err = np.angle(np.exp(1j * (heading - yaw)))
     assert np.abs(err).max() < np.radians(12)  # the chord lags the tangent in turns only
-    assert np.all(p[:, 2] == LIDAR_HEIGHT_M)
+    assert np.abs(p[:, 2] - LIDAR_HEIGHT_M).max() <= 0.01 + 1e-9  # heave
     np.testing.assert_allclose(np.linalg.det(traj.poses[:, :3, :3]), 1.0)
     x, y, h = route_start(grid)
     np.testing.assert_allclose(p[0, :2], (x, y)) and h == pytest.approx(90.0)
@@ -91,3 +94,46 @@ def test_bad_input(grid, tmp_path):
     (tmp_path / "bad.tum").write_text("0 1 2\n")
     with pytest.raises(NidarError, match="8 numbers"):
         read_tum(tmp_path / "bad.tum")
+
+
+def test_body_leans_out_of_turns_and_pitches_when_braking(grid):
+    from scipy.spatial.transform import Rotation
+
+    traj = drive(grid, 650)
+    yaw, pitch, roll = np.degrees(Rotation.from_matrix(traj.poses[:, :3, :3]).as_euler("ZYX")).T
+    rate = np.degrees(np.gradient(np.unwrap(np.radians(yaw))))  # deg per frame
+    left, right = rate > 3.3, rate < -3.3  # well inside a turn (3.5 deg per frame)
+    assert left.any() and right.any()
+    lean = ROLL_PER_MS2 * A_LAT  # 1.5 deg, plus at most 0.15 deg of road excitation
+    assert np.all(np.abs(roll[left] - lean) <= 0.15 + 0.2)
+    assert np.all(np.abs(roll[right] + lean) <= 0.15 + 0.2)
+    assert np.abs(pitch).max() <= PITCH_PER_MS2 * A_LONG + 0.35 + 1e-6
+    level = drive(grid, 50, body_motion=False)
+    np.testing.assert_allclose(level.poses[:, 2, :3], [[0, 0, 1]] * 50, atol=1e-12)
+    np.testing.assert_allclose(level.poses[:, 2, 3], LIDAR_HEIGHT_M)
+    # the phases follow the seed, the path does not
+    other = drive(grid, 650, seed=1)
+    np.testing.assert_allclose(other.poses[:, :2, 3], traj.poses[:, :2, 3])
+    assert not np.allclose(other.poses[:, :3, :3], traj.poses[:, :3, :3])
+
+
+def test_generated_drive_files_hold_rig_poses(tmp_path):
+    """``render --trajectory`` puts the LiDAR at T_rig · T_mount (T_mount: its pose in the XML)."""
+    import json
+
+    from nidar_mi.scenegen.city import sample_city
+    from nidar_mi.scenegen.generate import generate, scene_rng
+
+    generate(
+        str(tmp_path), 1, 7, kind="suburb", progress=False, blocks=(2, 1), drive={"frames": 30}
+    )
+    entry = json.loads((tmp_path / "index.json").read_text())["scenes"][0]
+    assert entry["drive"]["frames"] == 30 and entry["drive"]["revisits"] == 0
+    _, rig = read_tum(tmp_path / entry["drive"]["files"]["tum"])
+    mount = np.array(entry["lidar"]["T_world_lidar"])
+    # at the start the rig is where the scene puts it, but for the body's roll, pitch and heave
+    assert np.abs(rig[0, :3, 3]).max() < 0.02
+    assert np.abs(rig[0, :3, :3] - np.eye(3)).max() < np.radians(1.0)
+    _, grid = sample_city(scene_rng(7, 0), "suburb", (2, 1))
+    seed = int(np.random.SeedSequence(7, spawn_key=(0,)).generate_state(1)[0])
+    np.testing.assert_allclose(rig @ mount, drive(grid, 30, seed=seed).poses, atol=1e-6)

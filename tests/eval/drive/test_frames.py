@@ -103,3 +103,22 @@ def test_render_drive_caches_frames_and_matches_a_direct_scan(tmp_path):
     assert (tmp_path / "f" / "000001.npz").stat().st_mtime_ns == before
     render_drive(scene, poses[:1], folder, params=params, seed=3, progress=False)
     assert frame_count(folder) == 1
+
+
+def test_loading_without_labels_scans_the_same_returns(tmp_path):
+    """``load_scene(labels=False)`` lets Mitsuba merge meshes: the returns do not change."""
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+    from nidar_mi.scenegen.city import sample_city
+    from nidar_mi.scenegen.xml import scene_xml
+
+    layout, _ = sample_city(np.random.default_rng(3), "city", (2, 1))
+    path = tmp_path / "c.xml"
+    path.write_text(scene_xml(layout))
+    pts = {}
+    for labels in (True, False):
+        loaded = load_scene(str(path), params={"cols": "256"}, labels=labels)
+        pts[labels] = scan(loaded.scene, loaded.lidars[0], seed=1, labels=loaded.labels).points()
+    np.testing.assert_array_equal(pts[True]["xyz"], pts[False]["xyz"])
+    np.testing.assert_array_equal(pts[True]["intensity"], pts[False]["intensity"])
+    assert (pts[True]["label"] > 0).mean() > 0.95 and not pts[False]["label"].any()

@@ -131,3 +131,17 @@ def test_bad_input_is_refused():
     bad[2, 0, 3] = np.nan
     with pytest.raises(ValueError, match="finite"):
         rpe_kitti(_line(5), bad)
+
+
+def test_remove_ground_follows_a_tilted_road():
+    from nidar_mi.eval.drive.kiss import remove_ground
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-30, 30, (5000, 2))
+    # the road seen from a LiDAR 1.73 m up, rolled by 1.5 deg and pitched by 0.8 deg
+    z = -1.73 + np.tan(np.radians(1.5)) * xy[:, 1] + np.tan(np.radians(0.8)) * xy[:, 0]
+    road = np.column_stack([xy, z + rng.normal(0, 0.01, len(z))])
+    wall = np.column_stack([np.full(300, 8.0), rng.uniform(-5, 5, 300), rng.uniform(-1.2, 3, 300)])
+    kept = remove_ground(np.vstack([road, wall]))
+    assert len(kept) == 300
+    np.testing.assert_array_equal(kept[:, 0], 8.0)
