@@ -44,6 +44,11 @@ def build_parser():
         help="a `render --trajectory` folder of the same drive (per-point times): adds the "
         "motion-distorted odometry runs",
     )
+    p.add_argument(
+        "--no-body-motion",
+        action="store_true",
+        help="keep the LiDAR level at a constant height (no roll, pitch or heave)",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -81,6 +86,7 @@ def main(argv=None) -> int:
             weights=args.weights,
             sources=tuple(s.strip() for s in args.sources.split(",") if s.strip()),
             sequence=args.sequence,
+            body_motion=not args.no_body_motion,
         )
         results = run_study(args.out, cfg, progress=not args.quiet)
         if not args.quiet:

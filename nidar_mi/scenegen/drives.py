@@ -43,17 +43,18 @@ def write_drive(
     rate_hz: float = 10.0,
     speed: float = 10.0,
     seed: int = 0,
+    body_motion: bool = True,
 ) -> dict:
     """Write the drive files of ``scene`` into ``out_dir`` (atomically, replacing older ones).
 
     ``mount`` is the (4, 4) pose of the scene's LiDAR (module docstring); ``seed`` draws the
-    phases of the body's oscillations (:func:`.trajectory.drive`).
+    phases of the body's oscillations and ``body_motion`` turns them on (:func:`.trajectory.drive`).
 
     Returns:
         The index record: file names, frames, rate (Hz), cruising speed (m/s), length (m) and the
         number of revisits (:func:`.trajectory.revisits`).
     """
-    lidar = drive(grid, frames, rate_hz, speed, seed=seed)
+    lidar = drive(grid, frames, rate_hz, speed, seed=seed, body_motion=body_motion)
     traj = dataclasses.replace(lidar, poses=lidar.poses @ np.linalg.inv(mount))
     files = {
         "tum": f"{scene}_drive.tum",
@@ -68,6 +69,7 @@ def write_drive(
         "frames": frames,
         "rate_hz": rate_hz,
         "speed_m_s": speed,
+        "body_motion": body_motion,
         "length_m": round(float(lidar.distance[-1]), 3),
         "revisits": revisits(lidar),
         "poses": "rig: T_world_lidar = T_rig @ T_mount, T_mount = lidar T_world_lidar",

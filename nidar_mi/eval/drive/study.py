@@ -85,6 +85,7 @@ class StudyConfig:
         rpe_lengths: RPE segment lengths, m.
         loop_overlap: overlap a registered loop needs to enter the pose graph.
         sequence: a ``render --trajectory`` folder of the same drive (optional).
+        body_motion: the body rolls, pitches and heaves (:func:`nidar_mi.scenegen.trajectory.drive`).
     """
 
     kind: str = "city"
@@ -105,6 +106,7 @@ class StudyConfig:
     rpe_lengths: tuple[int, ...] = (25, 50, 100, 200)
     loop_overlap: float = 0.7
     sequence: str | None = None
+    body_motion: bool = True
     timings: dict = field(default_factory=dict)
 
     def check(self) -> None:
@@ -177,7 +179,12 @@ def _drive(out: str, cfg: StudyConfig):
         kind=cfg.kind,
         progress=False,
         blocks=tuple(cfg.blocks),
-        drive={"frames": cfg.frames, "rate_hz": cfg.rate_hz, "speed": cfg.speed},
+        drive={
+            "frames": cfg.frames,
+            "rate_hz": cfg.rate_hz,
+            "speed": cfg.speed,
+            "body_motion": cfg.body_motion,
+        },
     )
     sid = scene_id(cfg.seed, 0)
     entry = next(e for e in index["scenes"] if e["id"] == sid)
