@@ -3,7 +3,9 @@
 * ``trajectory.png``: the true drive, KISS-ICP's estimate (aligned, as ATE sees it) and the
   pose-graph results per source, seen from above;
 * ``pr.png``: precision / recall of the loops per intensity source;
-* ``descriptors.png``: one frame's descriptor per source (rings by sectors).
+* ``descriptors.png``: one frame's descriptor per source (rings by sectors);
+* ``map.png``: the city from above (buildings, walls, cars, poles and trunks) with the drive and
+  the frames that revisit.
 """
 
 from __future__ import annotations
@@ -115,11 +117,55 @@ def _figures(out: str, gt, odometry: dict, loops: dict, graphs: dict, desc: dict
     return written
 
 
-def write_report(out: str, results: dict, *, gt, odometry, loops, graphs, desc) -> None:
-    """Write ``results.json``, ``report.md`` and the figures into ``out``."""
+def _map(out: str, layout, world_poses, revisit) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ...scenegen.primitives import Block, Cylinder
+
+    fig, ax = plt.subplots(figsize=(8, 6.5))
+    colours = {"_b": "0.3", "_car": "tab:red", "_w": "tab:brown", "_gw": "tab:brown"}
+    for s in layout.shapes:
+        if isinstance(s, Block) and s.center[2] + s.half_size[2] > 0.4:
+            a = np.radians(s.yaw_deg)
+            R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+            hx, hy = s.half_size[:2]
+            c = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy], [-hx, -hy]]) @ R.T
+            c = c + np.array(s.center[:2])
+            colour = next((v for k, v in colours.items() if k in s.id), "tab:blue")
+            ax.plot(c[:, 0], c[:, 1], "-", color=colour, lw=0.6)
+        elif isinstance(s, Cylinder) and s.p0[2] == 0.0 and s.p1[2] > 1.5:
+            ax.plot(s.p0[0], s.p0[1], ".", color="tab:green", ms=2)
+    p = world_poses[:, :3, 3]
+    ax.plot(p[:, 0], p[:, 1], "m-", lw=1.2, label="drive")
+    ax.plot(p[revisit, 0], p[revisit, 1], "o", color="tab:orange", ms=3, label="revisiting frames")
+    ax.plot(p[0, 0], p[0, 1], "k^", ms=8, label="start")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(
+        "The city from above: buildings (grey), cars (red), walls (brown), poles and trunks (green)"
+    )
+    path = os.path.join(out, "map.png")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def write_report(
+    out: str, results: dict, *, gt, odometry, loops, graphs, desc, layout=None, world_poses=None
+) -> None:
+    """Write ``results.json``, ``report.md`` and the figures into ``out`` (``map.png`` when the
+    ``layout`` and the ``world_poses`` (N, 4, 4) are given)."""
     from ...io.atomic import atomic_write_json, atomic_write_text
 
     figures = _figures(out, gt, odometry, loops, graphs, desc)
+    if layout is not None and world_poses is not None and loops:
+        revisit = next(iter(loops.values()))["matches"].revisit
+        figures.append(_map(out, layout, world_poses, revisit))
     results["figures"] = [os.path.basename(p) for p in figures]
     atomic_write_json(os.path.join(out, "results.json"), results)
     cfg = results["config"]

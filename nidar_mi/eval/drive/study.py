@@ -454,7 +454,21 @@ def run_study(out: str, cfg: StudyConfig, *, progress: bool = True) -> dict:
         "pose_graph": {s: {a: b for a, b in v.items() if a != "poses"} for s, v in graphs.items()},
         "nidar_observed_fraction": observed,
     }
-    write_report(out, results, gt=gt, odometry=odometry, loops=loops, graphs=graphs, desc=desc)
+    from ...scenegen.city import sample_city
+    from ...scenegen.generate import scene_rng
+
+    layout = sample_city(scene_rng(cfg.seed, 0), cfg.kind, tuple(cfg.blocks))[0]
+    write_report(
+        out,
+        results,
+        gt=gt,
+        odometry=odometry,
+        loops=loops,
+        graphs=graphs,
+        desc=desc,
+        layout=layout,
+        world_poses=poses,
+    )
     return results
 
 
