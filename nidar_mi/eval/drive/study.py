@@ -84,6 +84,8 @@ class StudyConfig:
         skip_m, radius_m, candidates: loop search (:func:`.loops.match_drive`).
         rpe_lengths: RPE segment lengths, m.
         loop_overlap: overlap a registered loop needs to enter the pose graph.
+        loop_candidates: the best-scoring matches of each source that are registered (and, when
+            they pass the overlap check, enter the pose graph).
         sequence: a ``render --trajectory`` folder of the same drive (optional).
         body_motion: the body rolls, pitches and heaves (:func:`nidar_mi.scenegen.trajectory.drive`).
     """
@@ -105,6 +107,7 @@ class StudyConfig:
     candidates: int = 10
     rpe_lengths: tuple[int, ...] = (25, 50, 100, 200)
     loop_overlap: float = 0.7
+    loop_candidates: int = 60
     sequence: str | None = None
     body_motion: bool = True
     timings: dict = field(default_factory=dict)
@@ -355,7 +358,9 @@ def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -
         m = entry["matches"]
         t0 = time.perf_counter()
         found = []
-        for i in np.nonzero(m.match >= 0)[0]:
+        matched = np.nonzero(m.match >= 0)[0]
+        best = matched[np.argsort(-m.score[matched], kind="stable")[: cfg.loop_candidates]]
+        for i in np.sort(best):
             j = int(m.match[i])
             key = (folder, int(i), j)
             if key not in cache:
