@@ -10,7 +10,7 @@ it: ``DIR/scene_<S>_<k>_drive.tum`` (``--frames``, ``--rate``, ``--speed``;
 from __future__ import annotations
 
 from ..scenegen.drives import DEFAULT_FRAMES
-from ..scenegen.layout import KINDS
+from ..scenegen.generate import KINDS
 from ._common import parser, run
 
 __all__ = ["main", "build_parser"]

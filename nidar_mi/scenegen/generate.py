@@ -22,12 +22,14 @@ import numpy as np
 
 from ..errors import NidarError
 from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
-from .layout import KINDS, sample_layout
+from .layout import KINDS as LAYOUT_KINDS
+from .layout import sample_layout
 from .primitives import Layout
 from .xml import scene_xml
 
 __all__ = [
     "INDEX_NAME",
+    "KINDS",
     "generate",
     "generate_scene",
     "index_entry",
@@ -37,6 +39,8 @@ __all__ = [
 ]
 
 INDEX_NAME = "index.json"
+#: Every kind of scene: the street and path layouts (:mod:`.layout`), then cities (:mod:`.city`).
+KINDS = LAYOUT_KINDS + CITY_KINDS
 
 
 def scene_id(seed: int, k: int) -> str:
@@ -57,11 +61,11 @@ def generate_scene(
     Args:
         seed: run seed (>= 0).
         k: scene index in the run (>= 0).
-        kind: one of :data:`~.layout.KINDS` or None (urban or vegetated, drawn per scene).
+        kind: one of :data:`KINDS` or None (urban or vegetated, drawn per scene).
         blocks: (nx, ny) blocks of a ``city`` or ``suburb`` layout (None: its default).
     """
-    if blocks is not None and kind in CITY_KINDS:
-        layout = sample_city(scene_rng(seed, k), kind, blocks)[0]
+    if kind in CITY_KINDS:
+        layout = sample_city(scene_rng(seed, k), kind, blocks or DEFAULT_BLOCKS)[0]
     else:
         layout = sample_layout(scene_rng(seed, k), kind)
     name = scene_id(seed, k)

@@ -11,8 +11,6 @@ the right-hand lane (or on the path) looking along +x, z is up.
   street trees, bushes and clutter.
 * ``vegetated``: a path through grass and soil patches, trees, bushes, boulders, benches, lamp
   posts, trail signs, sometimes a shed and a parked car.
-* ``city``, ``suburb``: a grid of blocks with looping streets for drives (:mod:`.city`; another
-  frame: the streets run along x and y from the origin).
 """
 
 from __future__ import annotations
@@ -37,7 +35,7 @@ from .primitives import Block, Layout, Patch, Rig, Shape, Sky, Sun
 
 __all__ = ["KINDS", "X_MIN", "X_MAX", "sample_layout", "sample_rig", "sample_light"]
 
-KINDS = ("urban", "vegetated", "city", "suburb")
+KINDS = ("urban", "vegetated")
 #: Extent of the road/path along x, m.
 X_MIN, X_MAX = -40.0, 90.0
 LIDAR_PRESETS = ("hdl64e", "vlp16")
@@ -486,8 +484,7 @@ def sample_layout(rng: np.random.Generator, kind: str | None = None) -> Layout:
 
     Args:
         rng: the only source of randomness.
-        kind: ``urban``, ``vegetated``, ``city``, ``suburb``, or None to draw it (60 % urban,
-            40 % vegetated).
+        kind: ``urban``, ``vegetated``, or None to draw it (60 % urban).
 
     Returns:
         The layout: shapes with library materials, sun, sky and rig.
@@ -496,10 +493,6 @@ def sample_layout(rng: np.random.Generator, kind: str | None = None) -> Layout:
         kind = "urban" if rng.random() < 0.6 else "vegetated"
     if kind not in KINDS:
         raise ValueError(f"unknown layout kind '{kind}' (choose from {', '.join(KINDS)})")
-    if kind in ("city", "suburb"):
-        from .city import sample_city
-
-        return sample_city(rng, kind)[0]
     shapes, (x, y) = (_urban if kind == "urban" else _vegetated)(rng)
     sun, sky = sample_light(rng)
     rig = sample_rig(rng, x, y, 0.0)

@@ -1,12 +1,12 @@
 """Drives through a city layout: a smooth route along the streets, sampled as LiDAR poses.
 
-:func:`drive` turns the figure eight of :func:`~.city.drive_route` into a trajectory:
+:func:`drive` turns the figure eight of :func:`~.streets.drive_route` into a trajectory:
 
 1. the crossings become a polyline in the right-hand lane (offset ``lane_w / 2`` to the right of
    the street centrelines), each turn rounded by a circular arc of radius :data:`TURN_RADIUS_M`;
 2. a speed profile: at most ``speed`` (m/s), at most ``sqrt(a_lat · R)`` on an arc of radius R
    (lateral acceleration :data:`A_LAT`), changing by at most :data:`A_LONG` (m/s²);
-3. the pose at every frame time ``k / rate_hz``: the LiDAR :data:`~.city.LIDAR_HEIGHT_M` above the
+3. the pose at every frame time ``k / rate_hz``: the LiDAR :data:`~.streets.LIDAR_HEIGHT_M` above the
    road, x along the direction of travel, z up;
 4. the body's motion on its suspension (``body_motion``): roll of :data:`ROLL_PER_MS2` per m/s² of
    lateral acceleration (leaning out of a turn), pitch of :data:`PITCH_PER_MS2` per m/s² of
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import NidarError
-from .city import LIDAR_HEIGHT_M, StreetGrid, drive_route
+from .streets import LIDAR_HEIGHT_M, StreetGrid, drive_route
 
 __all__ = [
     "A_LAT",
@@ -169,7 +169,7 @@ def drive(
     seed: int = 0,
     body_motion: bool = True,
 ) -> Trajectory:
-    """LiDAR poses of a drive round :func:`~.city.drive_route` (repeated as needed).
+    """LiDAR poses of a drive round :func:`~.streets.drive_route` (repeated as needed).
 
     Args:
         g: the street grid of the layout.

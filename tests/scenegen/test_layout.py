@@ -56,7 +56,7 @@ def test_rig_within_documented_ranges(kind):
         assert -6.0 <= rig.camera_pitch_deg <= 0.0
 
 
-@pytest.mark.parametrize("kind", ("urban", "vegetated"))  # city drives: tests/scenegen/test_city.py
+@pytest.mark.parametrize("kind", KINDS)
 def test_nothing_stands_on_the_rig(kind):
     """No pole or trunk within 1 m of the rig's footprint, no crown or boulder within 1 m of
     either sensor."""
@@ -90,6 +90,6 @@ def test_urban_layouts_hold_every_street_object():
 
 def test_kind_mix_and_bad_kind():
     kinds = {_layout(s).kind for s in range(12)}
-    assert kinds == {"urban", "vegetated"}  # city and suburb only when asked for
+    assert kinds == set(KINDS)
     with pytest.raises(ValueError, match="unknown layout kind"):
         _layout(0, "desert")
