@@ -32,6 +32,11 @@ def test_reduced_study_end_to_end(study):
     assert 0 <= raw["end_drift"]["pct"] < 15.0
     assert 0 <= odo["end_drift"]["pct"] < 3.0 and odo["ate"]["rmse"] < 0.3
     assert odo["end_drift"]["path_m"] == pytest.approx(res["drive"]["length_m"], rel=1e-3)
+    # kiss-icp's own KITTI loader reads the sweeps written in the KITTI odometry layout
+    kitti = res["odometry"]["instantaneous, KITTI layout read by kiss-icp"]
+    assert kitti["end_drift"]["path_m"] == pytest.approx(res["drive"]["length_m"], rel=1e-3)
+    assert 0 <= kitti["end_drift"]["pct"] < 15.0
+    assert len(list((study / "kitti" / "sequences" / "00" / "velodyne").glob("*.bin"))) == 40
     assert set(res["loops"]) == {"physics", "nidar", "rgb_twin", "carla", "none"}
     for source, s in res["loops"].items():
         assert s["revisits"] == 0 and s["average_precision"] is None, source
@@ -100,6 +105,7 @@ def test_sequence_folder_adds_the_distorted_runs(study, tmp_path):
     assert set(runs) == {
         "instantaneous",
         "instantaneous, ground removed",
+        "instantaneous, KITTI layout read by kiss-icp",
         "distorted",
         "distorted + KISS-ICP de-skew",
     }
