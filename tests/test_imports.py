@@ -140,9 +140,19 @@ LAYERS = {
         ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
         0,
     ),
-    **dict.fromkeys(("datasets", "plugins"), 0),
+    **dict.fromkeys(("datasets", "plugins", "tasks"), 0),
     **dict.fromkeys(
-        ("scene", "camera", "render_folder", "simulate", "dataset", "nidar", "scenegen"), 1
+        (
+            "scene",
+            "camera",
+            "render_folder",
+            "simulate",
+            "sequence",
+            "dataset",
+            "nidar",
+            "scenegen",
+        ),
+        1,
     ),
     "studies": 1,
     **dict.fromkeys(("eval", "cli"), 2),

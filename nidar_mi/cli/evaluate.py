@@ -2,20 +2,25 @@
 real KITTI frames, and the ablations.
 
     python -m nidar_mi.evaluate --data DATA [--weights DIR] [--scenes scenes/]
-                                [--kitti ../shared/data/kitti] [--ablation] -o OUT
+                                [--kitti ../shared/data/kitti] [--ablation] [--cache DIR]
+                                [--overwrite] -o OUT
 
 * ``DATA`` is a dataset from :mod:`nidar_mi.dataset`: its ``test`` scenes (rendered under
   ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
   and (e), ``meta.json`` gives ``intensity_scale``.
-* ``--scenes`` renders the hand-made scene files (cached in ``OUT/renders``) with the dataset's
-  parameters, seed and spp, and evaluates them the same way.
+* ``--scenes`` renders the hand-made scene files (cached in ``CACHE/renders``) with the
+  dataset's parameters, seed and spp, and evaluates them the same way; ``--workers N`` /
+  ``--ray-address`` render them on Ray (:mod:`nidar_mi.tasks`).
 * ``--kitti`` evaluates the real frames (skipped with a message when the folder is absent).
-* ``--ablation`` trains the IRNet variants and the RGB-input model into ``OUT/ablation``
-  (finished runs are reused) and scores them on the test frames.
+* ``--ablation`` trains the IRNet variants and the RGB-input model into ``CACHE/ablation``
+  (finished runs of the same dataset, STN and settings are reused) and scores them on the
+  test frames.
 
-Writes ``OUT/results.md``, ``OUT/results.csv`` (one row per frame and method, plus ``mean``
-rows), ``OUT/results.json`` and ``OUT/figures/*.png`` (no figure of KITTI frames). See
-:mod:`nidar_mi.eval.frames` for the methods and the metric scale.
+``CACHE`` is ``--cache`` (default ``DATA/cache/evaluate``): a rerun reuses what it holds, and
+nothing of it is written into ``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row
+per frame and method, plus ``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of
+KITTI frames), published whole when everything succeeded. See :mod:`nidar_mi.eval.frames` for
+the methods and the metric scale.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import os
 import sys
 
 from ._common import parser, run
+from ._workers import add_worker_options
 
 __all__ = ["main"]
 
@@ -41,14 +47,29 @@ def _parser():
     p.add_argument("--scenes", help="folder of hand-made scene XML files to evaluate too")
     p.add_argument("--kitti", help="KITTI folder (velodyne/, image_2/, calib/)")
     p.add_argument("--ablation", action="store_true", help="train and score the ablations")
-    p.add_argument("--split", default="test", help="dataset split of the held-out scenes")
+    p.add_argument(
+        "--split", default="test", help="dataset split of the held-out scenes (default test)"
+    )
     p.add_argument("--no-twin", action="store_true", help="skip baseline (a) (no Mitsuba scans)")
-    p.add_argument("--lpips", action="store_true", help="LPIPS (needs cached AlexNet weights)")
+    p.add_argument(
+        "--lpips",
+        action="store_true",
+        help="also score LPIPS (needs the lpips package and cached AlexNet weights; an error "
+        "without them)",
+    )
     p.add_argument(
         "--figures", type=int, default=3, help="frames per group with map figures (default 3)"
     )
-    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument(
+        "--cache",
+        help="folder of the renders and ablation runs a rerun reuses (default: DATA/cache/evaluate)",
+    )
+    p.add_argument("-o", "--out", required=True, help="output folder (results, figures)")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
+    add_worker_options(p, "hand-made scenes to render")
     return p
 
 

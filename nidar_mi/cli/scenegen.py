@@ -1,7 +1,8 @@
 """``python -m nidar_mi.scenegen --count N --seed S -o DIR``: random urban and vegetated scenes.
 
 Writes ``DIR/scene_<S>_<k>.xml`` for k = 0 .. N-1 (scenes already there are skipped, so a run
-resumes) and ``DIR/index.json``. Every scene renders with ``python -m nidar_mi.render``.
+resumes; a file holding a scene of another run is refused unless ``--overwrite``, a file edited
+by hand is kept) and ``DIR/index.json``. Every scene renders with ``python -m nidar_mi.render``.
 ``--kind city`` / ``--kind suburb`` draw a grid of blocks (``--blocks NX,NY``) with a drive round
 it: ``DIR/scene_<S>_<k>_drive.tum`` (``--frames``, ``--rate``, ``--speed``;
 :mod:`nidar_mi.scenegen.drives`).
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 from ..scenegen.drives import DEFAULT_FRAMES
 from ..scenegen.generate import KINDS
-from ._common import parser, run
+from ._common import parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
 
@@ -23,7 +24,7 @@ def build_parser():
         "with NIR, a LiDAR + camera rig) as Mitsuba XML. Resumable: existing scenes are skipped.",
     )
     p.add_argument("--count", type=int, required=True, help="number of scenes")
-    p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="run seed, 0 .. 2**32-1 (default 0)")
     p.add_argument("-o", "--out", required=True, help="output folder")
     p.add_argument(
         "--kind",
@@ -31,6 +32,11 @@ def build_parser():
         default=None,
         help="only this kind (default: a mix, 60%% urban, 40%% vegetated); city and suburb are "
         "grids of blocks with a drive",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace scene files of another run (another --kind) and files edited by hand",
     )
     p.add_argument(
         "--blocks", default=None, metavar="NX,NY", help="city/suburb: blocks along x and y (4,3)"
@@ -72,6 +78,7 @@ def main(argv=None) -> int:
             progress=not args.quiet,
             blocks=blocks,
             drive=drive,
+            overwrite=args.overwrite,
         )
         if not args.quiet:
             stats = index["run"]

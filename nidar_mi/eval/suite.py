@@ -2,20 +2,20 @@
 
 Held-out generated scenes (a dataset's ``test`` split), hand-made scene files, real KITTI frames
 and the IRNet ablations, each scored with :mod:`nidar_mi.eval.frames`; the results are written
-as ``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of KITTI frames).
+as ``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of KITTI frames), published
+whole when everything succeeded; renders and ablation runs are cached outside ``OUT``
+(:func:`cache_dir`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import shutil
-import tempfile
 import time
 
 from ..errors import NidarError
 
-__all__ = ["run", "KITTI_LABELS"]
+__all__ = ["run", "cache_dir", "KITTI_LABELS"]
 
 log = logging.getLogger("nidar_mi.evaluate")
 
@@ -59,12 +59,30 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     return paths
 
 
+def cache_dir(args) -> str:
+    """The evaluation's cache: ``--cache``, default ``DATA/cache/evaluate``.
+
+    It holds ``renders/<scene>`` (the hand-made scenes rendered with the dataset's parameters;
+    reused while their render request holds) and ``ablation/<key>/<run>`` (the ablation runs;
+    ``key`` hashes the dataset, the STN and the settings, so a run is reused only for the
+    same inputs). Nothing of it is written into ``OUT``.
+    """
+    return args.cache or os.path.join(args.data, "cache", "evaluate")
+
+
 def run(args, argv_text: str) -> dict:
-    """Everything the command does; returns the results payload (also written to OUT)."""
+    """Everything the command does; returns the results payload (also written to OUT).
+
+    ``OUT`` (results and figures) is published whole when everything succeeded
+    (:func:`nidar_mi.io.atomic.staged_directory`); caches go to :func:`cache_dir`.
+    """
     from ..dataset import load_meta
+    from ..io.atomic import check_output_folder, staged_directory
     from ..nidar.pipeline import NidarModel
+    from .metrics import lpips_unavailable_reason
 
     t0 = time.perf_counter()
+    check_output_folder(args.out, overwrite=args.overwrite, marker="results.json")
     meta = load_meta(args.data)
     splits = meta.get("scenes", {})
     if not splits.get(args.split):
@@ -77,6 +95,14 @@ def run(args, argv_text: str) -> dict:
             raise NidarError(f"{args.data}: scene {name} is not rendered under {renders}")
     if args.scenes and not os.path.isdir(args.scenes):
         raise NidarError(f"--scenes: no such directory {args.scenes}")
+    if args.scenes:
+        from ..tasks import check_parallel
+
+        check_parallel(args.workers, args.ray_address)
+    if args.lpips:
+        reason = lpips_unavailable_reason()
+        if reason:
+            raise NidarError(f"--lpips: LPIPS is unavailable: {reason}")
     model = NidarModel.load(args.weights)
     if model.calibration is None:
         raise NidarError(f"{model.weights_dir}: no calibration.json beside the weights")
@@ -84,23 +110,17 @@ def run(args, argv_text: str) -> dict:
         from ..backend import set_variant
 
         set_variant("llvm_ad_spectral")
-    os.makedirs(args.out, exist_ok=True)
-    # figures are staged and moved into OUT/figures only once everything succeeded
-    fig_dir = tempfile.mkdtemp(prefix=".figures.partial-", dir=args.out)
-    try:
+    with staged_directory(args.out, overwrite=args.overwrite, marker="results.json") as stage:
+        fig_dir = os.path.join(stage, "figures")
+        os.makedirs(fig_dir)
         payload = _evaluate(args, argv_text, meta, model, fig_dir)
-        final = os.path.join(args.out, "figures")
-        os.makedirs(final, exist_ok=True)
-        moved = []
-        for p in payload["figures"]:
-            target = os.path.join(final, os.path.basename(p))
-            os.replace(p, target)
-            moved.append(target)
-        payload["figures"] = moved
+        payload["figures"] = [
+            os.path.join(args.out, os.path.relpath(p, stage)) for p in payload["figures"]
+        ]
+        if not payload["figures"]:
+            os.rmdir(fig_dir)
         payload["seconds"] = time.perf_counter() - t0
-        _write(args.out, payload)
-    finally:
-        shutil.rmtree(fig_dir, ignore_errors=True)
+        _write(stage, payload, args.out)
     return payload
 
 
@@ -149,10 +169,13 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
         log.info("rendering and evaluating %d hand-made scenes", len(files))
         dirs = render_scenes(
             files,
-            os.path.join(args.out, "renders"),
+            os.path.join(cache_dir(args), "renders"),
             params=meta.get("params"),
             seed=int(meta.get("seed", 0)),
             spp=int(meta.get("spp", 16)),
+            workers=args.workers,
+            ray_address=args.ray_address,
+            progress=not args.quiet,
         )
         res = evaluate_renders(dirs, model, scale, **common)
         names = [os.path.basename(d) for d in dirs]
@@ -180,10 +203,11 @@ def _evaluate(args, argv_text: str, meta: dict, model, fig_dir: str) -> dict:
         from .ablation import run_ablation
 
         log.info("ablation: training the IRNet variants")
+        stn = model.weights_dir / "stn.safetensors"
         payload["ablation"] = run_ablation(
             args.data,
-            os.path.join(args.out, "ablation"),
-            model.weights_dir / "stn.safetensors",
+            os.path.join(cache_dir(args), "ablation", _ablation_key(meta, stn)),
+            stn,
             split=args.split,
         )
     return payload
@@ -197,7 +221,23 @@ KITTI_LABELS = {
 }
 
 
-def _write(out: str, payload: dict) -> None:
+def _ablation_key(meta: dict, stn) -> str:
+    """16 hex digits naming the ablation runs of one dataset, STN and settings."""
+    import hashlib
+    import json
+
+    from ..render_folder import file_sha256
+    from .ablation import AblationSettings
+
+    data = {k: meta.get(k) for k in ("request", "frames", "intensity_scale")}
+    stn_hash = file_sha256(stn) if os.path.isfile(stn) else None
+    text = json.dumps([data, stn_hash, AblationSettings().to_dict()], sort_keys=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def _write(stage: str, payload: dict, out: str) -> None:
+    """Write the tables into ``stage`` (figure paths in ``payload`` name their place in
+    ``out``)."""
     from . import report
     from .frames import METHOD_LABELS
 
@@ -228,7 +268,6 @@ def _write(out: str, payload: dict) -> None:
     if payload["figures"]:
         md.append("## Figures\n\n")
         md.extend(f"- `{os.path.relpath(p, out)}`\n" for p in payload["figures"])
-    os.makedirs(out, exist_ok=True)
-    report.write_csv(os.path.join(out, "results.csv"), csv_rows)
-    report.write_json(os.path.join(out, "results.json"), payload)
-    report.write_text(os.path.join(out, "results.md"), "".join(md))
+    report.write_csv(os.path.join(stage, "results.csv"), csv_rows)
+    report.write_json(os.path.join(stage, "results.json"), payload)
+    report.write_text(os.path.join(stage, "results.md"), "".join(md))
