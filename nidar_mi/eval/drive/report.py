@@ -67,7 +67,7 @@ def _figures(out: str, gt, odometry: dict, loops: dict, graphs: dict, desc: dict
     fig, ax = plt.subplots(figsize=(7, 6))
     ax.plot(gt[:, 0, 3], gt[:, 1, 3], "k-", lw=2.5, label="ground truth")
     for name, est in ((n, r["poses"]) for n, r in odometry.items()):
-        al = ate(gt, est)["aligned"]
+        al = ate(gt[: len(est)], est)["aligned"]  # a rendered sequence may be a frame shorter
         ax.plot(al[:, 0, 3], al[:, 1, 3], "-", lw=1.2, label=f"KISS-ICP, {name}")
     for source, g in graphs.items():
         if g["loops"]:

@@ -225,7 +225,9 @@ def _odometry_runs(cfg: StudyConfig, phys: str, gt: np.ndarray, progress: bool) 
         from .frames import read_sequence
 
         seq_poses, seq_times, load = read_sequence(cfg.sequence)
-        n = len(seq_poses)
+        # the renderer needs each sweep inside the trajectory, so it may hold a frame less
+        n = min(len(seq_poses), cfg.frames)
+        seq_poses, seq_times = seq_poses[:n], seq_times[:n]
         period = 1.0 / cfg.rate_hz
         mid = gt_at_mid_sweep(seq_poses, seq_times, period)
         mid = np.linalg.inv(mid[0]) @ mid
