@@ -117,3 +117,11 @@ def test_sequence_folder_adds_the_distorted_runs(study, tmp_path):
     # de-skewing sweeps that were never skewed bends them by a tenth of the motion: still
     # followed, but no better
     assert runs["distorted + KISS-ICP de-skew"]["end_drift"]["pct"] < 10.0
+
+
+def test_a_folder_of_something_else_is_refused(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("mine")
+    assert main(["-o", str(tmp_path), *REDUCED]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "is not empty" in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

@@ -49,6 +49,11 @@ def build_parser():
         action="store_true",
         help="keep the LiDAR level at a constant height (no roll, pitch or heave)",
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into OUT even when it holds files of something else (none is removed)",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -88,7 +93,7 @@ def main(argv=None) -> int:
             sequence=args.sequence,
             body_motion=not args.no_body_motion,
         )
-        results = run_study(args.out, cfg, progress=not args.quiet)
+        results = run_study(args.out, cfg, progress=not args.quiet, overwrite=args.overwrite)
         if not args.quiet:
             print(markdown_tables(results))
             print(f"report: {args.out}/report.md")

@@ -386,12 +386,25 @@ def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -
     return out
 
 
-def run_study(out: str, cfg: StudyConfig, *, progress: bool = True) -> dict:
-    """Run every step into ``out`` (created; caches reused) and return the results."""
+#: A folder holding this file (the scene index, written first) is an earlier study's output.
+MARKER = os.path.join("scene", "index.json")
+
+
+def run_study(
+    out: str, cfg: StudyConfig, *, progress: bool = True, overwrite: bool = False
+) -> dict:
+    """Run every step into ``out`` and return the results.
+
+    ``out`` is created; an earlier study's folder (:data:`MARKER`) is reused as the cache, any
+    other non-empty folder is refused unless ``overwrite`` (then the study's files are added to
+    it; nothing else there is touched).
+    """
+    from ...io.atomic import check_output_folder
     from .frames import nidar_columns, render_drive
     from .report import write_report
 
     cfg.check()
+    check_output_folder(out, overwrite=overwrite, marker=MARKER)
     os.makedirs(out, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
