@@ -80,10 +80,11 @@ def test_sequence_folder_adds_the_distorted_runs(study, tmp_path):
     import numpy as np
 
     from nidar_mi.io.points import write_npz
-    from nidar_mi.scenegen.trajectory import read_tum
+    from nidar_mi.io.trajectory import read_trajectory
 
     res = json.loads((study / "results.json").read_text())
-    times, rig = read_tum(study / "scene" / res["drive"]["files"]["tum"])
+    traj = read_trajectory(study / "scene" / res["drive"]["files"]["tum"])
+    times, rig = traj.times, traj.poses
     index = json.loads((study / "scene" / "index.json").read_text())
     poses = rig @ np.array(index["scenes"][0]["lidar"]["T_world_lidar"])  # the LiDAR on the rig
     rel = np.linalg.inv(poses[0]) @ poses

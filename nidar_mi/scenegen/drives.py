@@ -23,8 +23,9 @@ import os
 
 import numpy as np
 
+from ..io.trajectory import write_kitti_poses, write_times, write_tum
 from .city import StreetGrid
-from .trajectory import drive, revisits, write_kitti, write_times, write_tum
+from .trajectory import drive, revisits
 
 __all__ = ["DEFAULT_FRAMES", "write_drive"]
 
@@ -61,9 +62,10 @@ def write_drive(
         "kitti": f"{scene}_drive_kitti.txt",
         "times": f"{scene}_drive_times.txt",
     }
-    write_tum(os.path.join(out_dir, files["tum"]), traj, "T_rig, T_world_lidar = T_rig @ T_mount")
-    write_kitti(os.path.join(out_dir, files["kitti"]), traj)
-    write_times(os.path.join(out_dir, files["times"]), traj)
+    comment = "t x y z qx qy qz qw  (T_rig, T_world_lidar = T_rig @ T_mount; s, m)"
+    write_tum(os.path.join(out_dir, files["tum"]), traj.times, traj.poses, comment)
+    write_kitti_poses(os.path.join(out_dir, files["kitti"]), traj.poses)
+    write_times(os.path.join(out_dir, files["times"]), traj.times)
     return {
         "files": files,
         "frames": frames,

@@ -16,15 +16,13 @@
    this motion every sweep of a flat road draws the same rings round the sensor.)
 
 The route repeats until the drive has ``frames`` poses. :func:`revisits` counts how often the
-drive comes back to where it has been. Files: :func:`write_tum` (``t x y z qx qy qz qw``, the
-LiDAR pose in the world frame), :func:`write_kitti` (the 3x4 row-major ``T_world_lidar`` per
-line, with :func:`write_times`), read back with :func:`read_tum`.
+drive comes back to where it has been. The files of a drive are written by :mod:`.drives` with
+:mod:`nidar_mi.io.trajectory`.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,10 +41,6 @@ __all__ = [
     "route_polyline",
     "drive",
     "revisits",
-    "write_tum",
-    "write_kitti",
-    "write_times",
-    "read_tum",
 ]
 
 #: Radius of the arcs that round the turns, m.
@@ -256,60 +250,3 @@ def revisits(traj: Trajectory, radius_m: float = 5.0, min_gap_m: float = 30.0) -
         if earlier.any():
             hit[i] = np.min(np.linalg.norm(p[earlier] - p[i], axis=1)) < radius_m
     return int(np.count_nonzero(hit[1:] & ~hit[:-1]) + int(hit[0]))
-
-
-# ---------------------------------------------------------------- files
-
-
-def _quat_xyzw(R: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(R).as_quat()  # (x, y, z, w)
-    return np.where(q[..., 3:4] < 0, -q, q)
-
-
-def write_tum(path: str | os.PathLike, traj: Trajectory, what: str = "T_world_lidar") -> None:
-    """``t x y z qx qy qz qw`` per line (TUM RGB-D format), after a comment naming ``what`` the
-    poses are."""
-    from ..io.atomic import atomic_write_text
-
-    q = _quat_xyzw(traj.poses[:, :3, :3])
-    rows = np.column_stack([traj.times, traj.poses[:, :3, 3], q])
-    lines = [f"# t x y z qx qy qz qw  ({what}; s, m)"]
-    lines += [" ".join(f"{v:.9g}" for v in r) for r in rows]
-    atomic_write_text(str(path), "\n".join(lines) + "\n")
-
-
-def write_kitti(path: str | os.PathLike, traj: Trajectory) -> None:
-    """The first three rows of ``T_world_lidar`` per line, row-major (KITTI odometry poses)."""
-    from ..io.atomic import atomic_write_text
-
-    rows = traj.poses[:, :3, :].reshape(len(traj), 12)
-    atomic_write_text(str(path), "\n".join(" ".join(f"{v:.9g}" for v in r) for r in rows) + "\n")
-
-
-def write_times(path: str | os.PathLike, traj: Trajectory) -> None:
-    """One frame time (s) per line (KITTI odometry ``times.txt``)."""
-    from ..io.atomic import atomic_write_text
-
-    atomic_write_text(str(path), "\n".join(f"{t:.6e}" for t in traj.times) + "\n")
-
-
-def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Times (N,) s and poses (N, 4, 4) of a TUM trajectory file.
-
-    Raises:
-        NidarError: the file is missing or a line is not 8 numbers.
-    """
-    from scipy.spatial.transform import Rotation
-
-    try:
-        data = np.loadtxt(path, comments="#", ndmin=2)
-    except (OSError, ValueError) as e:
-        raise NidarError(f"{path}: not a TUM trajectory ({e})") from None
-    if data.shape[1] != 8 or len(data) == 0:
-        raise NidarError(f"{path}: a TUM trajectory has 8 numbers per line (t x y z qx qy qz qw)")
-    poses = np.tile(np.eye(4), (len(data), 1, 1))
-    poses[:, :3, :3] = Rotation.from_quat(data[:, 4:8]).as_matrix()
-    poses[:, :3, 3] = data[:, 1:4]
-    return data[:, 0], poses

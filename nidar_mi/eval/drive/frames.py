@@ -249,18 +249,6 @@ def nidar_columns(
 # ---------------------------------------------------------------- sequence folders
 
 
-def _read_kitti_poses(path: str) -> np.ndarray:
-    try:
-        rows = np.loadtxt(path, ndmin=2)
-    except (OSError, ValueError) as e:
-        raise NidarError(f"{path}: not a KITTI poses file ({e})") from None
-    if rows.shape[1] != 12:
-        raise NidarError(f"{path}: a KITTI poses line has 12 numbers (got {rows.shape[1]})")
-    poses = np.tile(np.eye(4), (len(rows), 1, 1))
-    poses[:, :3, :] = rows.reshape(-1, 3, 4)
-    return poses
-
-
 def read_sequence(folder: str, lidar: str | None = None):
     """The frames of a ``render --trajectory`` sequence folder.
 
@@ -275,9 +263,10 @@ def read_sequence(folder: str, lidar: str | None = None):
     Raises:
         NidarError: a missing or malformed file, or frame folders that do not match the poses.
     """
+    from ...io.kitti_odometry import read_poses
     from ...io.points import read_npz
 
-    poses = _read_kitti_poses(os.path.join(folder, "poses.txt"))
+    poses = read_poses(os.path.join(folder, "poses.txt"))
     try:
         times = np.loadtxt(os.path.join(folder, "times.txt"), ndmin=1)
     except (OSError, ValueError) as e:

@@ -171,8 +171,8 @@ def gt_at_mid_sweep(poses: np.ndarray, times: np.ndarray, period: float) -> np.n
 
 
 def _drive(out: str, cfg: StudyConfig):
+    from ...io.trajectory import read_trajectory
     from ...scenegen.generate import generate, scene_id
-    from ...scenegen.trajectory import read_tum
 
     folder = os.path.join(out, "scene")
     index = generate(
@@ -191,7 +191,8 @@ def _drive(out: str, cfg: StudyConfig):
     )
     sid = scene_id(cfg.seed, 0)
     entry = next(e for e in index["scenes"] if e["id"] == sid)
-    times, rig = read_tum(os.path.join(folder, entry["drive"]["files"]["tum"]))
+    traj = read_trajectory(os.path.join(folder, entry["drive"]["files"]["tum"]))
+    times, rig = traj.times, traj.poses
     poses = rig @ np.array(entry["lidar"]["T_world_lidar"])  # the LiDAR on the rig
     return os.path.join(folder, entry["file"]), times, poses, entry["drive"]
 
