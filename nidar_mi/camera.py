@@ -248,7 +248,14 @@ def _render(scene, sensor, integrator, spp: int, seed: int, what: str) -> np.nda
 
 
 def render_camera(
-    loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0, other_wavelengths=()
+    loaded,
+    camera,
+    *,
+    wavelength: float,
+    spp: int = 16,
+    seed: int = 0,
+    other_wavelengths=(),
+    nir: bool = True,
 ) -> CameraRender:
     """Render RGB, NIR band and depth of one camera of a loaded scene.
 
@@ -259,6 +266,7 @@ def render_camera(
         spp: samples per pixel of both renders.
         seed: sampler seed, in [0, 2**32).
         other_wavelengths: further NIR band centres in nm (``CameraRender.other_nir``).
+        nir: render the NIR bands (False: ``nir`` is all zeros; NIDAR needs only RGB).
     """
     import mitsuba as mi
 
@@ -283,11 +291,11 @@ def render_camera(
     timings["rgb"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     bands = {}
-    for wl in dict.fromkeys([float(wavelength), *map(float, other_wavelengths)]):
+    for wl in dict.fromkeys([float(wavelength), *map(float, other_wavelengths)]) if nir else ():
         _, integral = nir_response(wl)
-        nir = _render(scene, _nir_camera(camera, wl, spp), integrator, spp, seed, what)
-        bands[wl] = (nir[..., 0] / integral).astype(np.float32)
-    nir = bands.pop(float(wavelength))
+        nir_img = _render(scene, _nir_camera(camera, wl, spp), integrator, spp, seed, what)
+        bands[wl] = (nir_img[..., 0] / integral).astype(np.float32)
+    nir = bands.pop(float(wavelength)) if nir else np.zeros(rgb.shape[:2], dtype=np.float32)
     timings["nir"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     K, T_world_cam, (W, H) = camera_calibration(camera)

@@ -158,7 +158,7 @@ LAYERS = {
     **dict.fromkeys(("eval", "cli"), 2),
 }
 #: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
-SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate"}
+SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate", "drive"}
 
 
 def _component(module: str) -> str:

@@ -13,13 +13,14 @@ __all__ = ["COMMANDS", "main"]
 
 #: Command name -> one-line summary, in the order of the data flow.
 COMMANDS = {
-    "scenegen": "generate random urban and vegetated scenes (Mitsuba XML)",
+    "scenegen": "generate random urban, vegetated, city and suburb scenes (Mitsuba XML), drives",
     "render": "scan every LiDAR and render every camera of a scene",
     "materials": "list the spectral material library, plot spectra",
     "dataset": "render scenes and build NIDAR training frames",
     "train": "train the NIDAR networks",
     "assign": "NIDAR intensity for a point cloud from camera images (or a KITTI frame)",
     "evaluate": "score NIDAR and the baselines (tables, figures)",
+    "drive": "odometry and loop closure per intensity source on a simulated drive",
 }
 
 

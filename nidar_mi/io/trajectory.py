@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import NidarError
 from .atomic import atomic_write_text, reading
 
-__all__ = ["Trajectory", "read_trajectory", "write_kitti_poses", "write_times"]
+__all__ = ["Trajectory", "read_trajectory", "write_kitti_poses", "write_times", "write_tum"]
 
 
 @dataclass(frozen=True)
@@ -172,3 +172,19 @@ def write_kitti_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
 def write_times(path: str | os.PathLike, times: np.ndarray) -> None:
     """Write one time per line in s (KITTI odometry ``times.txt``)."""
     atomic_write_text(path, "".join(f"{t:.6e}\n" for t in np.asarray(times, dtype=np.float64)))
+
+
+def write_tum(
+    path: str | os.PathLike, times: np.ndarray, poses: np.ndarray, comment: str = ""
+) -> None:
+    """Write timed (K, 4, 4) poses as TUM ``t x y z qx qy qz qw`` lines (quaternion scalar last,
+    ``qw >= 0``), after ``# comment`` when given."""
+    from scipy.spatial.transform import Rotation
+
+    poses = np.asarray(poses, dtype=np.float64)
+    q = Rotation.from_matrix(poses[:, :3, :3]).as_quat()
+    q = np.where(q[:, 3:4] < 0, -q, q)
+    rows = np.column_stack([np.asarray(times, dtype=np.float64), poses[:, :3, 3], q])
+    lines = [f"# {comment}"] if comment else []
+    lines += [" ".join(f"{v:.9g}" for v in r) for r in rows]
+    atomic_write_text(path, "\n".join(lines) + "\n")

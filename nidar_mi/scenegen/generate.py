@@ -8,7 +8,9 @@ resumes; a file holding the scene of another run (another kind) is refused unles
 a file edited by hand is kept. ``DIR/index.json`` lists every scene file of the folder (entries
 of earlier runs with other seeds are kept), with its seeds, kind, materials, sha256 (of the file
 as it is; ``"edited": true`` when it was changed by hand) and rig calibration. A layout that repeats one
-already in the folder is an error (it would leak across a split by scene).
+already in the folder is an error (it would leak across a split by scene). A ``city`` or ``suburb``
+scene also gets its drive (:mod:`.drives`): ``DIR/scene_<S>_<k>_drive.tum`` and the KITTI-style
+pose and time files beside it, recorded under ``"drive"`` in its index entry.
 """
 
 from __future__ import annotations
@@ -21,12 +23,15 @@ import sys
 import numpy as np
 
 from ..errors import NidarError
-from .layout import KINDS, sample_layout
+from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
+from .layout import KINDS as LAYOUT_KINDS
+from .layout import sample_layout
 from .primitives import Layout
 from .xml import scene_xml
 
 __all__ = [
     "INDEX_NAME",
+    "KINDS",
     "generate",
     "generate_scene",
     "index_entry",
@@ -36,6 +41,8 @@ __all__ = [
 ]
 
 INDEX_NAME = "index.json"
+#: Every kind of scene: the street and path layouts (:mod:`.layout`), then cities (:mod:`.city`).
+KINDS = LAYOUT_KINDS + CITY_KINDS
 
 
 def scene_id(seed: int, k: int) -> str:
@@ -48,15 +55,21 @@ def scene_rng(seed: int, k: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
 
 
-def generate_scene(seed: int, k: int, kind: str | None = None) -> tuple[Layout, str]:
+def generate_scene(
+    seed: int, k: int, kind: str | None = None, blocks: tuple[int, int] | None = None
+) -> tuple[Layout, str]:
     """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
 
     Args:
         seed: run seed (>= 0).
         k: scene index in the run (>= 0).
-        kind: ``urban``, ``vegetated`` or None (drawn per scene).
+        kind: one of :data:`KINDS` or None (urban or vegetated, drawn per scene).
+        blocks: (nx, ny) blocks of a ``city`` or ``suburb`` layout (None: its default).
     """
-    layout = sample_layout(scene_rng(seed, k), kind)
+    if kind in CITY_KINDS:
+        layout = sample_city(scene_rng(seed, k), kind, blocks or DEFAULT_BLOCKS)[0]
+    else:
+        layout = sample_layout(scene_rng(seed, k), kind)
     name = scene_id(seed, k)
     text = scene_xml(
         layout,
@@ -133,6 +146,8 @@ def generate(
     kind: str | None = None,
     progress: bool = True,
     overwrite: bool = False,
+    blocks: tuple[int, int] | None = None,
+    drive: dict | None = None,
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -150,6 +165,9 @@ def generate(
         kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
         overwrite: replace scene files that differ from this run's.
+        blocks: (nx, ny) blocks of ``city`` and ``suburb`` layouts (None: the default).
+        drive: keyword arguments of :func:`.drives.write_drive` (``frames``, ``rate_hz``,
+            ``speed``) for ``city`` and ``suburb`` scenes.
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -182,10 +200,11 @@ def generate(
     # a layout repeated in the folder would leak across a split by scene
     hashes = {e["layout_sha256"]: e["id"] for e in entries.values() if "layout_sha256" in e}
     todo = []
+    drives = []  # (k, layout, entry) of the cities, whose drive files are written with them
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
-        layout, text = generate_scene(seed, k, kind)
+        layout, text = generate_scene(seed, k, kind, blocks)
         entry = index_entry(seed, k, layout, text)
         other = hashes.get(entry["layout_sha256"], entry["id"])
         if other != entry["id"]:
@@ -206,7 +225,18 @@ def generate(
             action = "keep"  # edited by hand (or of unknown origin): kept, marked edited
             entry = (old or entry) | {"sha256": on_disk, "edited": True}
         todo.append((path, text, entry, action))
+        if layout.kind in CITY_KINDS and action != "keep":
+            drives.append((k, layout, entry))
     written = skipped = 0
+    for k, layout, entry in drives:
+        from .drives import write_drive
+
+        grid = sample_grid(scene_rng(seed, k), layout.kind, blocks or DEFAULT_BLOCKS)
+        body_seed = int(np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(1)[0])
+        mount = layout.rig.T_world_lidar()
+        entry["drive"] = write_drive(
+            out_dir, entry["id"], grid, mount, seed=body_seed, **(drive or {})
+        )
     for path, text, entry, action in todo:
         if action == "write":
             atomic_write_text(path, text)

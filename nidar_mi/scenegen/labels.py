@@ -43,7 +43,29 @@ _RULES: tuple[tuple[re.Pattern, str, str | None], ...] = tuple(
         (r"(clutter_\d+)_(seat|leg_\d+)", "other-object", r"\1"),
     )
 )
-_GROUND = re.compile(r"ground_base|ground_(left|right)(_\d+)?|patch_\d+")
+_GROUND = re.compile(r"ground_base|ground_(left|right)(_\d+)?|patch_\d+|lot_\d+_\d+")
+# city and suburb layouts (scenegen/city.py): streets, sidewalks, and objects named after their
+# block side, ``blk<i>_<j><s|n|w|e>_<object>``
+_SIDE = r"blk\d+_\d+[snwe]"
+_CITY_RULES: tuple[tuple[re.Pattern, str, str | None], ...] = tuple(
+    (re.compile(p), c, i)
+    for p, c, i in (
+        (r"road_[xy]\d+", "road", None),
+        (r"dash_\d+", "lane-marking", None),
+        (r"walk_\d+_\d+_[snwe]", "sidewalk", None),
+        (rf"({_SIDE}_b\d+)_(walls|roof|door|window_\d+_\d+|pilaster\d+)", "building", r"\1"),
+        (rf"{_SIDE}_g?w\d*", "fence", None),
+        (rf"{_SIDE}_hedge\d+_\d+", "vegetation", None),
+        (rf"{_SIDE}_tree\d+_trunk", "trunk", None),
+        (rf"({_SIDE}_tree\d+_crown)_\d+", "vegetation", r"\1"),
+        (rf"({_SIDE}_light\d+)_(pole|arm|lamp)", "pole", r"\1"),
+        (rf"{_SIDE}_sign\d+_pole", "pole", None),
+        (rf"({_SIDE}_sign\d+)_(back|face)", "traffic-sign", r"\1"),
+        (rf"{_SIDE}_(bin|bollard)\d+", "other-object", None),
+        (rf"({_SIDE}_bench\d+)_(seat|leg\d)", "other-object", r"\1"),
+        (rf"({_SIDE}_car\d+)_(body|cabin_glass|interior|roof|wheel_\w+)", "car", r"\1"),
+    )
+)
 _CLUTTER = re.compile(r"clutter_\d+")
 
 
@@ -56,7 +78,7 @@ def shape_label(shape: Shape) -> tuple[str, str | None] | None:
     if _CLUTTER.fullmatch(sid):
         shrub = isinstance(shape, Sphere) and shape.material in MATERIALS["bush"]
         return ("vegetation" if shrub else "other-object"), None
-    for pattern, cls, instance in _RULES:
+    for pattern, cls, instance in _RULES + _CITY_RULES:
         m = pattern.fullmatch(sid)
         if m:
             return cls, (m.expand(instance) if instance else None)

@@ -97,7 +97,9 @@ def test_signal_during_render_leaves_nothing(tmp_path, sig, status, word):
     """A render stopped while it writes leaves neither OUT nor its staging folder."""
     out = tmp_path / "street"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "nidar_mi.render", "scenes/street.xml", "-o", str(out), "-q"],
+        # large enough (~20 camera-seconds) that the signal always lands while it works
+        [sys.executable, "-m", "nidar_mi.render", "scenes/street.xml", "-o", str(out), "-q"]
+        + ["-D", "width=1280", "-D", "height=720", "--spp", "64"],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

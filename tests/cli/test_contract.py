@@ -31,6 +31,25 @@ def _argv(command, out, tiny_scene, assign_inputs, synthetic_data, tmp_path):
         "evaluate": ["--data", tmp_path / "no_data", "-o", out, "-q"],
         "scenegen": ["--count", "1", "-o", out, "-q"],
         "materials": ["--plot", "grass", "-o", os.path.join(out, "spectra.png")],
+        "drive": [
+            "-o",
+            out,
+            "-q",
+            "--blocks",
+            "2,1",
+            "--frames",
+            "10",
+            "--cols",
+            "64",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--spp",
+            "1",
+            "--sources",
+            "physics",
+        ],
     }[command]
 
 

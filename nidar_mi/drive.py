@@ -1,0 +1,8 @@
+"""``python -m nidar_mi.drive``: the ``drive`` command (:mod:`nidar_mi.cli.drive`)."""
+
+if __name__ == "__main__":
+    import sys
+
+    from nidar_mi.cli.drive import main
+
+    sys.exit(main())

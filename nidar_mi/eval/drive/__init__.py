@@ -1,0 +1,10 @@
+"""The drive study: odometry and intensity-aware place recognition on simulated drives.
+
+* :mod:`.odometry`: ATE after SE(3) alignment (Umeyama) and the KITTI odometry devkit's
+  relative error over fixed distances.
+* :mod:`.scan_context`: Scan Context / Intensity Scan Context descriptors and their matching.
+* :mod:`.loops`: loop-closure detection on a drive and its precision/recall.
+* :mod:`.pose_graph`: pose-graph correction with the detected loops.
+* :mod:`.frames`: the frames of a drive, scanned and (for NIDAR) photographed along it.
+* :mod:`.study`: the whole study, its tables and figures (``python -m nidar_mi.drive_study``).
+"""

@@ -1,0 +1,143 @@
+"""KISS-ICP (Vizzo et al., RA-L 2023; the ``kiss-icp`` package) on the frames of a drive.
+
+:func:`run_odometry` feeds frames to :class:`kiss_icp.kiss_icp.KissICP` with its default
+configuration (``max_range`` 100 m, voxel size 1 m, adaptive threshold) and returns its pose after
+every frame: ``T_{lidar_0 <- lidar_k}``. With per-point times and ``deskew`` the times are scaled
+to [0, 1] over the sweep, the form KISS-ICP's de-skewing expects; it then corrects every point to
+the middle of the sweep, so its pose of frame k is the pose at mid-sweep.
+
+:func:`register_pair` aligns one scan to another with KISS-ICP's own registration (point to
+point, robust kernel) from an initial guess, for loop constraints; :func:`overlap` is the fraction
+of aligned points that land within a distance of the target (the check a loop must pass).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = [
+    "GROUND_Z_M",
+    "kiss_config",
+    "run_odometry",
+    "register_pair",
+    "overlap",
+    "remove_ground",
+]
+
+
+def kiss_config(deskew: bool, threads: int = 2):
+    """KISS-ICP's default configuration, with de-skewing on or off and a thread limit."""
+    from kiss_icp.config import load_config
+
+    cfg = load_config(None)
+    cfg.data.deskew = bool(deskew)
+    cfg.registration.max_num_threads = int(threads)
+    return cfg
+
+
+def run_odometry(
+    load: Callable[[int], tuple[np.ndarray, np.ndarray | None]],
+    frames: int,
+    *,
+    deskew: bool = True,
+    progress: bool = True,
+) -> np.ndarray:
+    """KISS-ICP's pose after each frame.
+
+    Args:
+        load: ``load(k) -> (xyz (N, 3) m, t (N,) s since the sweep's start, or None)``.
+        frames: how many frames.
+        deskew: let KISS-ICP de-skew (only meaningful with per-point times).
+        progress: progress bar on stderr.
+
+    Returns:
+        (frames, 4, 4) float64 ``T_{lidar_0 <- lidar_k}``.
+    """
+    from kiss_icp.kiss_icp import KissICP
+    from tqdm.auto import tqdm
+
+    odom = KissICP(kiss_config(deskew))
+    poses = np.zeros((frames, 4, 4))
+    for k in tqdm(
+        range(frames), desc="KISS-ICP", unit="frame", disable=not progress, file=sys.stderr
+    ):
+        xyz, t = load(k)
+        stamps = np.zeros(0)
+        if t is not None and len(t):
+            span = float(t.max() - t.min())
+            stamps = (t - t.min()) / span if span > 0 else np.full(len(t), 0.5)
+        odom.register_frame(np.asarray(xyz, dtype=np.float64), stamps.astype(np.float64))
+        poses[k] = odom.last_pose
+    return poses
+
+
+#: Points lower than this in the LiDAR frame (m) are ground and left out of loop registration.
+GROUND_Z_M = -1.3
+
+
+def _above_ground(xyz: np.ndarray) -> np.ndarray:
+    xyz = np.asarray(xyz, np.float64)
+    return xyz[xyz[:, 2] > GROUND_Z_M]
+
+
+def remove_ground(xyz: np.ndarray, height_m: float = 1.73, band_m: float = 0.3) -> np.ndarray:
+    """The points of a sweep that are not on the ground plane.
+
+    The plane ``z = a x + b y + c`` is fitted by least squares to the points below the sensor
+    (z < 0.6 - ``height_m``) within 25 m, refitted to those within 0.15 m of the first fit; points
+    within ``band_m`` of it are removed (road, sidewalks, kerbs). The fit follows the body's roll
+    and pitch, which a fixed height cut would not.
+
+    Args:
+        xyz: (N, 3) points in the LiDAR frame, m.
+        height_m: the LiDAR's height above the road, m.
+        band_m: half-thickness of the removed band, m.
+    """
+    xyz = np.asarray(xyz)
+    r = np.hypot(xyz[:, 0], xyz[:, 1])
+    low = (xyz[:, 2] < 0.6 - height_m) & (r < 25.0)
+    if low.sum() < 10:
+        return xyz
+    A = np.column_stack([xyz[:, 0], xyz[:, 1], np.ones(len(xyz))])
+    coef = np.linalg.lstsq(A[low], xyz[low, 2], rcond=None)[0]
+    near = low & (np.abs(A @ coef - xyz[:, 2]) < 0.15)
+    if near.sum() >= 10:
+        coef = np.linalg.lstsq(A[near], xyz[near, 2], rcond=None)[0]
+    return xyz[np.abs(xyz[:, 2] - A @ coef) > band_m]
+
+
+def register_pair(source: np.ndarray, target: np.ndarray, guess: np.ndarray) -> np.ndarray:
+    """(4, 4) transform taking ``source`` points (N, 3) onto ``target`` (M, 3), from ``guess``.
+
+    Ground points (z < :data:`GROUND_Z_M`) are left out: they agree under any shift along the
+    road and would hold the alignment at its guess."""
+    source, target = _above_ground(source), _above_ground(target)
+    from kiss_icp.mapping import VoxelHashMap
+    from kiss_icp.registration import Registration
+    from kiss_icp.voxelization import voxel_down_sample
+
+    target_map = VoxelHashMap(voxel_size=1.0, max_distance=100.0, max_points_per_voxel=20)
+    target_map.add_points(voxel_down_sample(np.asarray(target, np.float64), 0.5))
+    src = voxel_down_sample(np.asarray(source, np.float64), 1.5)
+    reg = Registration(max_num_iterations=500, convergence_criterion=1e-4, max_num_threads=2)
+    T = np.asarray(guess, dtype=np.float64)
+    for sigma in (2.0, 1.0, 0.3):  # coarse to fine correspondence distances
+        T = reg.align_points_to_map(src, target_map, T, 3 * sigma, sigma)
+    return T
+
+
+def overlap(source: np.ndarray, target: np.ndarray, T: np.ndarray, within_m: float = 0.3) -> float:
+    """Fraction of ``source`` points above the ground and within 40 m of its origin that ``T``
+    puts within ``within_m`` of a ``target`` point above the ground."""
+    from scipy.spatial import cKDTree
+
+    s = _above_ground(source)
+    s = s[np.linalg.norm(s[:, :2], axis=1) < 40.0]
+    if len(s) == 0:
+        return 0.0
+    moved = s @ T[:3, :3].T + T[:3, 3]
+    d, _ = cKDTree(_above_ground(target)).query(moved, k=1, distance_upper_bound=within_m)
+    return float(np.isfinite(d).mean())

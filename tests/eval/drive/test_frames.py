@@ -1,0 +1,124 @@
+"""Drive frames: the sequence-folder reader, mid-sweep poses, per-source values, the frame cache."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from nidar_mi.errors import NidarError
+from nidar_mi.eval.drive.frames import frame_count, load_frame, read_sequence, render_drive
+from nidar_mi.eval.drive.study import SOURCES, gt_at_mid_sweep, source_values
+from nidar_mi.io.points import write_npz
+
+
+def _write_sequence(folder, n=3):
+    """A sequence folder as ``render --trajectory`` writes it (SEQUENCES.md)."""
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = np.arange(n) * 1.5
+    np.savetxt(folder / "poses.txt", poses[:, :3, :].reshape(n, 12))
+    np.savetxt(folder / "times.txt", np.arange(n) * 0.1)
+    for k in range(n):
+        d = folder / "frames" / f"{k:06d}" / "lidar_top"
+        d.mkdir(parents=True)
+        write_npz(
+            d / "points.npz",
+            {
+                "xyz": np.full((4, 3), k, np.float32),
+                "intensity": np.full(4, 0.5, np.float32),
+                "range": np.full(4, 2.0, np.float32),
+                "t": np.linspace(0, 0.099, 4).astype(np.float32),
+            },
+        )
+    return poses
+
+
+def test_read_sequence(tmp_path):
+    poses = _write_sequence(tmp_path)
+    got, times, load = read_sequence(str(tmp_path))
+    np.testing.assert_allclose(got, poses)
+    np.testing.assert_allclose(times, [0, 0.1, 0.2])
+    f = load(2)
+    np.testing.assert_array_equal(f.xyz, np.full((4, 3), 2, np.float32))
+    np.testing.assert_allclose(f.t, np.linspace(0, 0.099, 4), rtol=1e-6)
+
+
+def test_read_sequence_refuses_a_mismatch(tmp_path):
+    _write_sequence(tmp_path)
+    np.savetxt(tmp_path / "times.txt", [0.0, 0.1])
+    with pytest.raises(NidarError, match="3 poses, 2 times and 3 frame folders"):
+        read_sequence(str(tmp_path))
+    (tmp_path / "poses.txt").write_text("1 2 3\n")
+    with pytest.raises(NidarError, match="12 numbers"):
+        read_sequence(str(tmp_path))
+
+
+def test_gt_at_mid_sweep_of_a_constant_turn():
+    # 2 m and 0.1 rad of yaw per 0.1 s frame: half a frame later is 1 m and 0.05 rad further
+    n = 5
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    for k in range(n):
+        poses[k, :3, :3] = Rotation.from_euler("z", 0.1 * k).as_matrix()
+        poses[k, 0, 3] = 2.0 * k
+    mid = gt_at_mid_sweep(poses, np.arange(n) * 0.1, 0.1)
+    # (the last frame extrapolates the last step in its own frame, so its position turns too)
+    np.testing.assert_allclose(mid[:-1, 0, 3], 2.0 * np.arange(n - 1) + 1.0, atol=1e-9)
+    yaw = Rotation.from_matrix(mid[:, :3, :3]).as_euler("zyx")[:, 0]
+    np.testing.assert_allclose(yaw, 0.1 * np.arange(n) + 0.05, atol=1e-9)
+
+
+def test_source_values():
+    xyz = np.array([[10.0, 0, -1.73], [0, 5.0, 1.0]])
+    intensity = np.array([0.004, 0.02])
+    rng = np.array([10.0, 5.0])
+    np.testing.assert_allclose(source_values("physics", xyz, intensity, rng), [0.4, 0.5])
+    np.testing.assert_allclose(source_values("carla", xyz, intensity, rng), np.exp(-0.004 * rng))
+    np.testing.assert_allclose(source_values("none", xyz, intensity, rng), [0.0, 2.73])
+    np.testing.assert_allclose(
+        source_values("nidar", xyz, intensity, rng, np.array([0.3, 0])), [0.3, 0]
+    )
+    with pytest.raises(NidarError, match="NIDAR"):
+        source_values("nidar", xyz, intensity, rng)
+    assert set(SOURCES) == {"physics", "nidar", "rgb_twin", "carla", "none"}
+
+
+def test_render_drive_caches_frames_and_matches_a_direct_scan(tmp_path):
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+
+    poses = np.tile(np.eye(4), (2, 1, 1))
+    poses[:, 2, 3] = 1.0
+    poses[1, 0, 3] = 0.5
+    folder = str(tmp_path / "f")
+    scene = "scenes/target.xml"
+    params = {"cols": "64"}
+    render_drive(scene, poses, folder, params=params, seed=3, progress=False)
+    assert frame_count(folder) == 2
+    loaded = load_scene(scene, params=params)
+    direct = scan(loaded.scene, loaded.lidars[0], seed=4, to_world=poses[1]).points()
+    f = load_frame(folder, 1)
+    np.testing.assert_array_equal(f.xyz, direct["xyz"])
+    np.testing.assert_array_equal(f.intensity, direct["intensity"])
+    # the same request reuses the frames; another request renders them again
+    before = (tmp_path / "f" / "000001.npz").stat().st_mtime_ns
+    render_drive(scene, poses, folder, params=params, seed=3, progress=False)
+    assert (tmp_path / "f" / "000001.npz").stat().st_mtime_ns == before
+    render_drive(scene, poses[:1], folder, params=params, seed=3, progress=False)
+    assert frame_count(folder) == 1
+
+
+def test_loading_without_labels_scans_the_same_returns(tmp_path):
+    """``load_scene(labels=False)`` lets Mitsuba merge meshes: the returns do not change."""
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+    from nidar_mi.scenegen.city import sample_city
+    from nidar_mi.scenegen.xml import scene_xml
+
+    layout, _ = sample_city(np.random.default_rng(3), "city", (2, 1))
+    path = tmp_path / "c.xml"
+    path.write_text(scene_xml(layout))
+    pts = {}
+    for labels in (True, False):
+        loaded = load_scene(str(path), params={"cols": "256"}, labels=labels)
+        pts[labels] = scan(loaded.scene, loaded.lidars[0], seed=1, labels=loaded.labels).points()
+    np.testing.assert_array_equal(pts[True]["xyz"], pts[False]["xyz"])
+    np.testing.assert_array_equal(pts[True]["intensity"], pts[False]["intensity"])
+    assert (pts[True]["label"] > 0).mean() > 0.95 and not pts[False]["label"].any()
