@@ -55,7 +55,7 @@ def street_image(width: int, height: int, seed: int = 0) -> np.ndarray:
     img[:] = [0.55, 0.65, 0.85]
     horizon = int(0.45 * height)
     img[horizon:] = [0.3, 0.3, 0.32]
-    for k in range(12):
+    for _ in range(12):
         x0 = int(rng.uniform(0, width - 40))
         w = int(rng.uniform(30, width / 6))
         top = int(rng.uniform(0.05, 0.4) * height)

@@ -30,8 +30,8 @@ def _group(results, name: str, scenes: list[str], note: str = "") -> dict:
 def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     import numpy as np
 
-    from .frames import METHOD_LABELS
     from .figures import maps_figure, scatter_figure
+    from .frames import METHOD_LABELS
 
     paths = []
     for r in results[: max(count, 0)]:

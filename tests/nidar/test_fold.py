@@ -33,9 +33,9 @@ def test_fold_conv_bn_is_the_affine_formula_in_float64():
     x = torch.randn(2, 3, 17, 13, dtype=torch.float64)
     y = conv(x)
     s = bn.weight / torch.sqrt(bn.running_var + bn.eps)
-    expected = (y - bn.running_mean.reshape(1, -1, 1, 1)) * s.reshape(1, -1, 1, 1) + bn.bias.reshape(
+    expected = (y - bn.running_mean.reshape(1, -1, 1, 1)) * s.reshape(
         1, -1, 1, 1
-    )
+    ) + bn.bias.reshape(1, -1, 1, 1)
     with torch.no_grad():
         torch.testing.assert_close(fold_conv_bn(conv, bn)(x), expected, rtol=1e-12, atol=1e-12)
 
