@@ -7,6 +7,11 @@
   radiance: a uniform sky of radiance 1 reads 1.
 * Depth: z-depth (m, along the optical axis) of the first surface through each pixel centre, by
   casting the camera's own rays; 0 where nothing is hit.
+* Reflectance: ρ(λ) at the LiDAR wavelength of the surface through each pixel centre, seen
+  monostatically along the camera ray (π · f_r(ω, ω; λ), as a LiDAR at the camera would see it:
+  :func:`nidar_mi.lidar.raycast.cast` and :func:`~nidar_mi.lidar.raycast.monostatic_reflectance`),
+  times the two-way transmittance T² of any glass on the way; 0 where nothing is hit, at grazing
+  incidence, or where the material has no finite value at λ.
 * Calibration: OpenCV pinhole intrinsics ``K`` (x right, y down, z forward; the centre of pixel
   (0, 0) at (0, 0)) and ``T_world_cam`` (camera-to-world, OpenCV camera axes). Mitsuba's camera
   space is x left, y up, z forward, hence ``T_world_cam = to_world · diag(-1, -1, 1, 1)``.
@@ -52,6 +57,8 @@ class CameraRender:
         T_world_cam: (4,4) float64 camera-to-world, OpenCV axes.
         wavelength: NIR band centre in nm.
         timings: seconds per stage.
+        reflectance: (H,W) float32 monostatic ρ(λ)·T² per pixel centre (module docstring), or
+            None when not rendered.
     """
 
     name: str
@@ -62,6 +69,7 @@ class CameraRender:
     T_world_cam: np.ndarray
     wavelength: float
     timings: dict[str, float] = field(default_factory=dict)
+    reflectance: np.ndarray | None = None
 
     def exposure(self) -> float:
         """Auto exposure of this render (:func:`auto_exposure` of its RGB image)."""
@@ -148,6 +156,25 @@ def _depth(scene, camera, W: int, H: int, T_world_cam: np.ndarray) -> np.ndarray
     return z.numpy().astype(np.float32).reshape(H, W)
 
 
+def _reflectance(scene, camera, W: int, H: int, wavelength: float) -> np.ndarray:
+    """(H, W) float32 monostatic ρ(λ)·T² of the surface through each pixel centre."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from .lidar.raycast import cast, monostatic_reflectance
+
+    idx = dr.arange(mi.UInt32, W * H)
+    px = (mi.Float(idx % W) + 0.5) / W
+    py = (mi.Float(idx // W) + 0.5) / H
+    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5))
+    to_world = camera.world_transform()
+    wl = mi.Float(float(wavelength))
+    beams = cast(scene, to_world, to_world.inverse() @ ray.d, wl)
+    rho, _, _ = monostatic_reflectance(beams, wl)
+    out = (rho * beams.two_way_transmittance).numpy().astype(np.float32).reshape(H, W)
+    return np.where(np.isfinite(out), np.maximum(out, 0.0), 0.0).astype(np.float32)
+
+
 def _nir_camera(camera, wavelength: float, spp: int):
     import mitsuba as mi
 
@@ -181,7 +208,7 @@ _warned: set[str] = set()
 def render_camera(
     loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0
 ) -> CameraRender:
-    """Render RGB, NIR band and depth of one camera of a loaded scene.
+    """Render RGB, NIR band, depth and reflectance at λ of one camera of a loaded scene.
 
     Args:
         loaded: a :class:`nidar_mi.scene.LoadedScene`.
@@ -222,6 +249,9 @@ def render_camera(
     K, T_world_cam, (W, H) = camera_calibration(camera)
     depth = _depth(scene, camera, W, H, T_world_cam)
     timings["depth"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    reflectance = _reflectance(scene, camera, W, H, wavelength)
+    timings["reflectance"] = time.perf_counter() - t0
     for name, img in (("rgb", rgb), ("nir", nir)):
         if not np.all(np.isfinite(img)):
             bad = int((~np.isfinite(img)).sum())
@@ -241,4 +271,5 @@ def render_camera(
         T_world_cam=T_world_cam,
         wavelength=float(wavelength),
         timings=timings,
+        reflectance=reflectance,
     )

@@ -5,7 +5,7 @@ One module owns the layout (the table of files is in the README, "Rendering")::
     OUT/manifest.json                           the request, versions, resolved parameters, timings
     OUT/<lidar_id>/points.{npz,ply,las,bin}     valid returns (schema: nidar_mi.io.points)
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
-    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, calib.json
+    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, reflectance.exr, calib.json
 
 Writers take the in-memory results (:class:`~nidar_mi.lidar.scan.ScanResult`,
 :class:`~nidar_mi.camera.CameraRender`); :func:`read_render` gives them back as arrays and camera
@@ -45,6 +45,9 @@ __all__ = [
 FORMATS = ("npz", "ply", "las", "bin")
 #: The manifest's file name; its presence marks a folder as a render folder.
 MANIFEST = "manifest.json"
+#: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
+#: without ``reflectance.exr``) are rendered again.
+LAYOUT_VERSION = 2
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -69,6 +72,7 @@ class RenderRequest:
         intensity: ``physics`` or ``nidar``.
         weights: NIDAR weights folder (``nidar`` only; None: the shipped model).
         nidar_branch: NIDAR branch (``nidar`` only).
+        layout: :data:`LAYOUT_VERSION` of the folder.
     """
 
     scene: str
@@ -82,6 +86,7 @@ class RenderRequest:
     intensity: str = "physics"
     weights: str | None = None
     nidar_branch: str | None = None
+    layout: int = LAYOUT_VERSION
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
@@ -224,6 +229,8 @@ def write_camera(
         "nir.exr": lambda p: images.write_exr(p, {"Y": render.nir}),
         "depth.exr": lambda p: images.write_exr(p, {"Z": render.depth}),
     }
+    if render.reflectance is not None:
+        outputs["reflectance.exr"] = lambda p: images.write_exr(p, {"Y": render.reflectance})
     written = []
     for fname, fn in outputs.items():
         path = os.path.join(d, fname)
@@ -276,6 +283,16 @@ class RenderedCamera:
         from .io.images import read_exr
 
         return _single_channel(read_exr(os.path.join(self.folder, "nir.exr")))
+
+    def reflectance(self) -> np.ndarray:
+        """(H, W) float32 monostatic ρ(λ)·T² per pixel centre (reflectance.exr).
+
+        Raises:
+            NidarError: the folder has no reflectance.exr.
+        """
+        from .io.images import read_exr
+
+        return _single_channel(read_exr(os.path.join(self.folder, "reflectance.exr")))
 
 
 @dataclass

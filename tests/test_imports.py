@@ -139,10 +139,11 @@ LAYERS = {
     **dict.fromkeys(
         ("errors", "backend", "illumination", "io", "geometry", "lidar", "materials"), 0
     ),
-    **dict.fromkeys(("datasets", "plugins"), 0),
+    "plugins": 0,
     **dict.fromkeys(
-        ("scene", "camera", "render_folder", "simulate", "dataset", "nidar", "scenegen"), 1
+        ("scene", "camera", "render_folder", "simulate", "dataset", "datasets", "nidar"), 1
     ),
+    "scenegen": 1,
     "studies": 1,
     **dict.fromkeys(("eval", "cli"), 2),
 }
