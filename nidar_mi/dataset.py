@@ -174,9 +174,7 @@ def load_frame(path: str | Path, keys=None) -> dict[str, np.ndarray]:
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as npz:
-            wanted = (
-                [k for k in FRAME_KEYS if k in npz.files] if keys is None else list(keys)
-            )
+            wanted = [k for k in FRAME_KEYS if k in npz.files] if keys is None else list(keys)
             need = list(CORE_KEYS) + wanted if keys is None else wanted
             missing = [k for k in dict.fromkeys(need) if k not in npz.files]
             if missing:

@@ -72,6 +72,8 @@ class RenderRequest:
         intensity: ``physics`` or ``nidar``.
         weights: NIDAR weights folder (``nidar`` only; None: the shipped model).
         nidar_branch: NIDAR branch (``nidar`` only).
+        profile: NIDAR sensor profile, a name or an absolute file path (``nidar`` only; None:
+            the weights' own calibration).
         layout: :data:`LAYOUT_VERSION` of the folder.
     """
 
@@ -86,6 +88,7 @@ class RenderRequest:
     intensity: str = "physics"
     weights: str | None = None
     nidar_branch: str | None = None
+    profile: str | None = None
     layout: int = LAYOUT_VERSION
 
     @classmethod
@@ -97,9 +100,12 @@ class RenderRequest:
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
         options["formats"] = tuple(options.get("formats", FORMATS))
         if options.get("intensity", "physics") != "nidar":
-            options["weights"] = options["nidar_branch"] = None
-        elif options.get("weights") is not None:
-            options["weights"] = os.path.abspath(options["weights"])
+            options["weights"] = options["nidar_branch"] = options["profile"] = None
+        else:
+            if options.get("weights") is not None:
+                options["weights"] = os.path.abspath(options["weights"])
+            if options.get("profile") is not None and os.path.isfile(options["profile"]):
+                options["profile"] = os.path.abspath(options["profile"])
         return cls(scene=path, scene_sha256=file_sha256(path), params=params, **options)
 
     def to_dict(self) -> dict[str, Any]:

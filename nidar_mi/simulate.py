@@ -132,14 +132,18 @@ def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
         bar.update(1)
 
 
-def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dict]:
+def _nidar_columns(
+    run: _Run, weights: str | None, branch: str, profile: str | None = None
+) -> dict[str, dict]:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .io.calib import render_camera
     from .nidar.pipeline import NidarModel
+    from .nidar.profiles import resolve_profile
 
     if not run.renders:
         raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
     model = NidarModel.load(weights)
+    prof = resolve_profile(profile, model) if profile is not None else None
     maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in run.renders.items()}
     out = {}
     for lid, result in run.results.items():
@@ -148,13 +152,16 @@ def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dic
             cams.append(render_camera(calib, cid, lid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
+        pts = result.points()
         res = model.point_intensity(
-            result.points()["xyz"],
+            pts["xyz"],
             cams,
             [None] * len(cams),
             depth_images=depth,
             maps=cam_maps,
             branch=branch,
+            profile=prof,
+            ring=pts["ring"].astype(np.int64),
         )
         out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
     return out
@@ -185,6 +192,7 @@ def render_scene(
     intensity: str = "physics",
     weights: str | None = None,
     nidar_branch: str = "R",
+    profile: str | None = None,
     overwrite: bool = False,
 ) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`).
@@ -203,7 +211,9 @@ def render_scene(
         progress: show a progress bar on stderr.
         intensity: ``physics``, or ``nidar`` to add NIDAR's intensity from the cameras.
         weights: NIDAR weights folder (None: the shipped model).
-        nidar_branch: ``R`` or ``I_hat``.
+        nidar_branch: ``R`` or ``I_hat`` (without a profile).
+        profile: NIDAR sensor profile, a name or a file (:mod:`nidar_mi.nidar.profiles`); None:
+            the weights' own calibration (the numbers of ``sim-905``).
         overwrite: replace a non-empty ``out_dir``.
 
     Returns:
@@ -227,6 +237,7 @@ def render_scene(
         intensity=intensity,
         weights=weights,
         nidar_branch=nidar_branch,
+        profile=profile,
     )
     _check_request(req)
     t_start = time.perf_counter()
@@ -246,7 +257,7 @@ def render_scene(
         extra = {}
         if intensity == "nidar":
             t0 = time.perf_counter()
-            extra = _nidar_columns(run, weights, nidar_branch)
+            extra = _nidar_columns(run, weights, nidar_branch, profile)
             run.timings["nidar"] = time.perf_counter() - t0
         _write_lidars(run, formats, extra)
         manifest = {
@@ -263,6 +274,7 @@ def render_scene(
             "intensity": intensity,
             "nidar_weights": req.weights,
             "nidar_branch": req.nidar_branch,
+            "nidar_profile": req.profile,
             "lidars": run.lidars,
             "cameras": run.cameras,
             "timings_s": run.timings | {"total": time.perf_counter() - t_start},
@@ -284,6 +296,7 @@ def ensure_rendered(scene_path: str, out_dir: str, **options) -> dict:
         scene_path,
         **{k: options[k] for k in keys if k in options},
         nidar_branch=options.get("nidar_branch", "R"),
+        profile=options.get("profile"),
     )
     if rf.is_current(out_dir, req):
         return rf.read_manifest(out_dir)

@@ -11,6 +11,13 @@ with one LiDAR works too), one ``--image`` per camera in the same order. ``--kit
 ``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2;
 :func:`nidar_mi.datasets.kitti.load_frame`).
 
+``--profile NAME|FILE`` chooses the sensor profile that turns NIDAR's map into the sensor's
+intensity (:mod:`nidar_mi.nidar.profiles`): ``kitti-hdl64e`` by default with ``--kitti`` (fitted
+on the real KITTI frames at first use and cached; the rings come from the scan order,
+:func:`nidar_mi.datasets.kitti.scan_rings`), ``sim-905`` (the simulator's) by default otherwise,
+or a file from ``python -m nidar_mi.calibrate``. A cloud with a ``ring`` field gives its rings to
+the profile. ``--branch I_hat`` without ``--profile`` assigns the dense head raw.
+
 Output in OUT: ``points.npz`` with ``xyz`` (N,3 float32), the input's own ``intensity`` when it has
 one, ``intensity_nidar`` (N float32, 0 where unobserved) and ``nidar_observed`` (N bool); plus
 ``points.ply`` and ``points.las`` (``--formats``). Files appear only when everything succeeded.
@@ -31,19 +38,27 @@ FORMATS = ("npz", "ply", "las")
 
 
 def assign_intensity(
-    xyz, cameras, images, *, weights=None, occlusion=True, branch="R"
+    xyz, cameras, images, *, weights=None, occlusion=True, branch="R", profile=None, ring=None
 ) -> dict[str, np.ndarray]:
-    """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``."""
+    """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``.
+
+    ``profile`` is a profile name or file (None: ``branch`` with the weights' own calibration,
+    or raw for ``I_hat``); ``ring`` the points' rings for it (-1 unknown).
+    """
     from ..nidar.pipeline import NidarModel
+    from ..nidar.profiles import resolve_profile
 
     model = NidarModel.load(weights)
+    prof = resolve_profile(profile, model) if profile is not None else None
     for cam, im in zip(cameras, images):
         if im.shape[:2] != (cam.height, cam.width):
             raise NidarError(
                 f"image {im.shape[1]}x{im.shape[0]} does not match camera '{cam.name}' "
                 f"{cam.width}x{cam.height}"
             )
-    res = model.point_intensity(xyz, cameras, images, occlusion=occlusion, branch=branch)
+    res = model.point_intensity(
+        xyz, cameras, images, occlusion=occlusion, branch=branch, profile=prof, ring=ring
+    )
     return {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
 
 
@@ -80,6 +95,11 @@ def build_parser():
         help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
     )
     p.add_argument(
+        "--profile",
+        help="sensor profile: kitti-hdl64e (default with --kitti), sim-905 (default otherwise) "
+        "or a profile file from python -m nidar_mi.calibrate",
+    )
+    p.add_argument(
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
     )
     return p
@@ -97,11 +117,13 @@ def _assign(args) -> None:
     if args.kitti:
         if not args.frame:
             raise NidarError("--kitti needs --frame")
-        from ..datasets.kitti import load_frame
+        from ..datasets.kitti import load_frame, scan_rings
 
         frame = load_frame(args.kitti, args.frame)
         cameras, images, name = [frame.camera], [frame.rgb], f"kitti_{args.frame}"
         points = {"xyz": frame.xyz, "intensity": frame.intensity}
+        ring = scan_rings(frame.xyz)
+        profile = args.profile or ("kitti-hdl64e" if args.branch == "R" else None)
     else:
         if not (args.points and args.calib and args.image):
             raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
@@ -121,6 +143,8 @@ def _assign(args) -> None:
         points = {"xyz": np.asarray(cloud["xyz"], dtype=np.float32)}
         if "intensity" in cloud:
             points["intensity"] = np.asarray(cloud["intensity"], dtype=np.float32)
+        ring = np.asarray(cloud["ring"], dtype=np.int64) if "ring" in cloud else None
+        profile = args.profile
         name = os.path.splitext(os.path.basename(args.points))[0]
     points.update(
         assign_intensity(
@@ -130,6 +154,8 @@ def _assign(args) -> None:
             weights=args.weights,
             occlusion=not args.no_occlusion,
             branch=args.branch,
+            profile=profile,
+            ring=ring,
         )
     )
     out = args.out or os.path.join("out", "assign", name)

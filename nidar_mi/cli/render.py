@@ -84,6 +84,12 @@ def build_parser():
         choices=NIDAR_BRANCHES,
         help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
     )
+    p.add_argument(
+        "--profile",
+        default=None,
+        help="NIDAR sensor profile: sim-905 (the simulator's; default), kitti-hdl64e, or a "
+        "profile file from python -m nidar_mi.calibrate",
+    )
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
     p.add_argument(
@@ -114,6 +120,7 @@ def main(argv=None) -> int:
             intensity=args.intensity,
             weights=args.weights,
             nidar_branch=args.nidar_branch,
+            profile=args.profile,
             overwrite=args.overwrite,
         )
         if not args.quiet:

@@ -16,12 +16,16 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import NidarError
 from ..geometry import CameraModel, sample_cameras
 from .calibration import Calibration
+
+if TYPE_CHECKING:
+    from .profile import SensorProfile
 
 __all__ = [
     "NidarModel",
@@ -151,6 +155,8 @@ class NidarModel:
         occlusion: bool = True,
         maps: Sequence[dict[str, np.ndarray]] | None = None,
         branch: str = "R",
+        profile: SensorProfile | None = None,
+        ring: np.ndarray | None = None,
     ) -> PointIntensity:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
 
@@ -168,8 +174,15 @@ class NidarModel:
                 cloud's own z-buffer).
             occlusion: reject points hidden from the camera.
             maps: precomputed :meth:`predict_image` outputs (skips the networks).
-            branch: ``"R"`` or ``"I_hat"``.
+            branch: ``"R"`` or ``"I_hat"`` (ignored with a ``profile``).
+            profile: a sensor profile (:mod:`nidar_mi.nidar.profiles`): its NIDAR map at the
+                points through its mapping (range, ring, elevation) instead of ``branch``.
+            ring: optional (N,) ring of each point (-1 unknown), for a ``range_ring`` profile.
         """
+        if profile is not None:
+            branch = profile.branch
+            if branch is None:
+                raise NidarError(f"profile {profile.name} does not map a NIDAR branch")
         if branch not in BRANCHES:
             raise NidarError(f"branch must be one of {', '.join(BRANCHES)} (got '{branch}')")
         xyz = np.asarray(xyz_lidar, dtype=np.float64)
@@ -179,6 +192,16 @@ class NidarModel:
         values, observed, cam_idx = sample_cameras(
             xyz, cameras, [m[branch] for m in maps], depth_images=depth_images, occlusion=occlusion
         )
+        if profile is not None:
+            observed = observed & np.isfinite(values)
+            out = np.zeros(len(xyz), dtype=np.float32)
+            if observed.any():
+                p = xyz[observed]
+                r = None if ring is None else np.asarray(ring).reshape(-1)[observed]
+                el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
+                out[observed] = profile.apply(values[observed], np.linalg.norm(p, axis=1), r, el)
+            raw = np.where(observed, values, 0.0).astype(np.float32)
+            return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
         if branch == "I_hat":
             observed = observed & np.isfinite(values)
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)

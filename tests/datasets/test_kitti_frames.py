@@ -22,10 +22,11 @@ from nidar_mi.errors import NidarError
 from nidar_mi.geometry import project
 from nidar_mi.io.images import write_png
 from nidar_mi.io.points import write_kitti_bin
+from tests.helpers.synthetic_kitti import CALIB as _SYNTHETIC_KITTI
+from tests.helpers.synthetic_kitti import kitti_order_scan
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_kitti import _SYNTHETIC_KITTI  # noqa: E402
-from test_kitti_rings import _shared, kitti_order_scan  # noqa: E402
+from test_kitti_rings import _shared  # noqa: E402
 
 
 @pytest.fixture()

@@ -12,34 +12,9 @@ import pytest
 
 from nidar_mi.datasets.kitti import elevation_rings, read_scan, scan_rings
 from nidar_mi.lidar.pattern import elevation_table
+from tests.helpers.synthetic_kitti import kitti_order_scan
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def kitti_order_scan(cols=720, front_only=False, rings=64, offset_m=0.05, seed=0):
-    """An HDL-64E scan stored as KITTI stores it: laser after laser (top first), each sweep
-    from azimuth 0 counter-clockwise; lasers mounted up to ``offset_m`` above/below the origin.
-    Returns (xyz, true ring, range)."""
-    el = np.radians(elevation_table("hdl64e"))[:rings]
-    z0 = np.random.default_rng(seed).uniform(-offset_m, offset_m, rings)
-    az = np.radians((np.arange(cols) + 0.5) * 360.0 / cols)
-    az = np.where(az > np.pi, az - 2 * np.pi, az)
-    pts, ring = [], []
-    for r in range(rings):
-        d = np.stack(
-            [np.cos(el[r]) * np.cos(az), np.cos(el[r]) * np.sin(az), np.full(cols, np.sin(el[r]))],
-            1,
-        )
-        o = np.array([0.0, 0.0, z0[r]])
-        t = np.full(cols, 25.0)  # a cylinder wall of radius 25 m ...
-        down = d[:, 2] < 0
-        t[down] = np.minimum(t[down], (-1.73 - z0[r]) / d[down, 2])  # ... and the ground
-        p = o + d * t[:, None]
-        keep = p[:, 0] > 0 if front_only else np.ones(cols, bool)
-        pts.append(p[keep])
-        ring.append(np.full(keep.sum(), r))
-    xyz = np.concatenate(pts).astype(np.float32)
-    return xyz, np.concatenate(ring), np.linalg.norm(xyz, axis=1)
 
 
 @pytest.mark.parametrize("front_only", [False, True])
