@@ -24,6 +24,13 @@ def build_parser():
     p.add_argument(
         "--kind", choices=KINDS, default=None, help="only this kind (default: a mix, 60%% urban)"
     )
+    p.add_argument(
+        "--materials",
+        choices=("all", "train", "heldout"),
+        default="all",
+        help="all (default); train: none of the held-out materials; heldout: the held-out "
+        "materials wherever a part has one (a test of unseen spectra)",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 
@@ -34,7 +41,14 @@ def main(argv=None) -> int:
     def work():
         from ..scenegen.generate import generate
 
-        index = generate(args.out, args.count, args.seed, kind=args.kind, progress=not args.quiet)
+        index = generate(
+            args.out,
+            args.count,
+            args.seed,
+            kind=args.kind,
+            progress=not args.quiet,
+            materials=args.materials,
+        )
         if not args.quiet:
             stats = index["run"]
             print(

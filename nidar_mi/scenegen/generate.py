@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import NidarError
 from .layout import KINDS, sample_layout
+from .objects import material_set
 from .primitives import Layout
 from .xml import scene_xml
 
@@ -46,15 +47,21 @@ def scene_rng(seed: int, k: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
 
 
-def generate_scene(seed: int, k: int, kind: str | None = None) -> tuple[Layout, str]:
+def generate_scene(
+    seed: int, k: int, kind: str | None = None, materials: str = "all"
+) -> tuple[Layout, str]:
     """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
 
     Args:
         seed: run seed (>= 0).
         k: scene index in the run (>= 0).
         kind: ``urban``, ``vegetated`` or None (drawn per scene).
+        materials: material set (:data:`nidar_mi.scenegen.objects.MATERIAL_SETS`): ``all``,
+            ``train`` (no held-out material) or ``heldout`` (held-out materials wherever a part
+            has one).
     """
-    layout = sample_layout(scene_rng(seed, k), kind)
+    with material_set(materials):
+        layout = sample_layout(scene_rng(seed, k), kind)
     name = scene_id(seed, k)
     text = scene_xml(
         layout,
@@ -70,10 +77,11 @@ def layout_hash(layout: Layout) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def index_entry(seed: int, k: int, layout: Layout, text: str) -> dict:
+def index_entry(seed: int, k: int, layout: Layout, text: str, materials: str = "all") -> dict:
     """The ``index.json`` record of one scene (rig matrices as nested lists)."""
     rig = layout.rig
     return {
+        "material_set": materials,
         "id": scene_id(seed, k),
         "file": f"{scene_id(seed, k)}.xml",
         "seed": seed,
@@ -122,6 +130,7 @@ def generate(
     *,
     kind: str | None = None,
     progress: bool = True,
+    materials: str = "all",
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -131,6 +140,7 @@ def generate(
         seed: run seed (>= 0).
         kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
+        materials: material set of every scene (:func:`generate_scene`).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -159,8 +169,8 @@ def generate(
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
-        layout, text = generate_scene(seed, k, kind)
-        entry = index_entry(seed, k, layout, text)
+        layout, text = generate_scene(seed, k, kind, materials)
+        entry = index_entry(seed, k, layout, text, materials)
         other = hashes.get(entry["layout_sha256"], entry["id"])
         if other != entry["id"]:
             raise NidarError(f"{entry['id']} repeats the layout of {other}")
