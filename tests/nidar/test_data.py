@@ -117,6 +117,14 @@ def test_irnet_dataset_keeps_input_and_supervision_aligned(tmp_path, data_dir):
             assert np.all(item["intensity"].numpy()[~m] == 0)
     rgb = IRNetDataset(frames, 255.0, 32, train=False)[0]
     assert rgb["x"].shape == (3, 32, 32) and set(np.unique(rgb["mask"].numpy())) <= {0.0, 1.0}
+    # with the true reflectance and shading: R_true * S_true = π * NIR under the same crop/flip
+    ds = IRNetDataset(frames, 255.0, 32, seed=2, input_dir=tmp_path, intrinsic_targets=True)
+    for epoch in range(3):
+        ds.set_epoch(epoch)
+        item = ds[1]
+        np.testing.assert_allclose(
+            (item["R_true"] * item["S_true"]).numpy(), np.pi * item["x"].numpy(), rtol=1e-5
+        )
 
 
 def test_crop_larger_than_frame_is_a_user_error(data_dir):
