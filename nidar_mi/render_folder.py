@@ -3,7 +3,7 @@
 One module owns the layout (the table of files is in the README, "Rendering")::
 
     OUT/manifest.json                           the request, versions, resolved parameters, timings
-    OUT/<lidar_id>/points.{npz,ply,las,bin}     valid returns (schema: nidar_mi.io.points)
+    OUT/<lidar_id>/points.{npz,ply,las,bin,pcd} valid returns (schema: nidar_mi.io.points)
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
     OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, reflectance.exr, calib.json
 
@@ -28,6 +28,7 @@ import numpy as np
 from .errors import NidarError
 
 __all__ = [
+    "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
     "RenderRequest",
@@ -42,7 +43,9 @@ __all__ = [
 ]
 
 #: Point-cloud formats a LiDAR folder can hold.
-FORMATS = ("npz", "ply", "las", "bin")
+FORMATS = ("npz", "ply", "las", "bin", "pcd")
+#: The formats written when none are asked for.
+DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
 #: The manifest's file name; its presence marks a folder as a render folder.
 MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
@@ -82,7 +85,7 @@ class RenderRequest:
     params: dict[str, str] = field(default_factory=dict)
     seed: int | None = None
     spp: int = 16
-    formats: tuple[str, ...] = FORMATS
+    formats: tuple[str, ...] = DEFAULT_FORMATS
     cameras: bool = True
     rgb_twin: bool = False
     intensity: str = "physics"
@@ -98,7 +101,7 @@ class RenderRequest:
         if not os.path.isfile(path):
             raise NidarError(f"{scene_path}: no such scene file")
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
-        options["formats"] = tuple(options.get("formats", FORMATS))
+        options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
             options["weights"] = options["nidar_branch"] = options["profile"] = None
         else:
@@ -170,6 +173,7 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
     from .io import images
     from .io import points as pio
     from .io.las import write_las
+    from .io.pcd import write_pcd
 
     d = os.path.join(folder, result.config.name)
     os.makedirs(d, exist_ok=True)
@@ -179,6 +183,7 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts),
         "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], pts["intensity"]),
+        "pcd": lambda p: write_pcd(p, pts),
     }
     written = []
     for fmt in formats:

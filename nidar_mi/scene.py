@@ -1,7 +1,8 @@
 """Load a scene XML with this package's plugins and find the sensor rigs it declares.
 
 Loading runs the material loader pass (:func:`nidar_mi.materials.expand_scene_xml`: ``nidar_material``
-BSDFs by name, and the RGB-only twin) before Mitsuba parses the XML. Any failure becomes a
+BSDFs by name, and the RGB-only twin) and the label pass (:func:`nidar_mi.labels.strip_labels`: the
+``label`` / ``instance`` attributes of shapes) before Mitsuba parses the XML. Any failure becomes a
 :class:`~nidar_mi.errors.NidarError` with one line naming the file and the cause.
 """
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass, field
 
 from .backend import set_variant
 from .errors import NidarError
+from .labels import SceneLabels, strip_labels
 
 __all__ = ["LoadedScene", "load_scene", "RGB_EMITTER_MARKERS"]
 
@@ -32,6 +34,8 @@ class LoadedScene:
         lidars: ``lidar`` sensors.
         cameras: ``perspective`` sensors.
         rgb_twin: whether materials were replaced by their RGB appearance.
+        labels: the semantic class and instance each shape declares
+            (:mod:`nidar_mi.labels.scene_labels`).
     """
 
     path: str
@@ -40,6 +44,7 @@ class LoadedScene:
     lidars: list = field(default_factory=list)
     cameras: list = field(default_factory=list)
     rgb_twin: bool = False
+    labels: SceneLabels = field(default_factory=SceneLabels)
 
     def rgb_only_emitters(self) -> list[str]:
         """Ids of emitters whose radiance is RGB/float (nothing meaningful past 830 nm)."""
@@ -102,6 +107,7 @@ def load_scene(
 
     try:
         xml = _expand(xml, rgb_twin)
+        xml, labels = strip_labels(xml)
     except NidarError as e:
         raise NidarError(f"{path}: {e}") from None
     except Exception as e:
@@ -111,7 +117,10 @@ def load_scene(
     scene_dir = os.path.dirname(os.path.abspath(path))
     resolver.prepend(scene_dir)
     try:
-        scene = mi.load_string(xml, **{k: str(v) for k, v in (params or {}).items()})
+        # Mitsuba merges meshes that share a BSDF into one shape; labelled shapes stay apart.
+        optimize = not (labels.classes or labels.instances)
+        values = {k: str(v) for k, v in (params or {}).items()}
+        scene = mi.load_string(xml, optimize=optimize, **values)
     except Exception as e:
         raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
 
@@ -120,5 +129,11 @@ def load_scene(
     lidars = [s for s in sensors if isinstance(s, lidar_cls)]
     cameras = [s for s in sensors if s.class_name() == "PerspectiveCamera"]
     return LoadedScene(
-        path=path, scene=scene, variant=variant, lidars=lidars, cameras=cameras, rgb_twin=rgb_twin
+        path=path,
+        scene=scene,
+        variant=variant,
+        lidars=lidars,
+        cameras=cameras,
+        rgb_twin=rgb_twin,
+        labels=labels,
     )

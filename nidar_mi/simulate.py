@@ -97,7 +97,7 @@ def _scan_lidars(run: _Run, loaded, seed: int | None, bar) -> None:
     for sensor in loaded.lidars:
         bar.set_postfix_str(f"lidar {sensor.id()}")
         t0 = time.perf_counter()
-        result = scan(loaded.scene, sensor, seed=seed)
+        result = scan(loaded.scene, sensor, seed=seed, labels=loaded.labels)
         run.results[sensor.id()] = result
         run.lidars[sensor.id()] = {
             "parameters": result.config.to_dict() | ({"seed": seed} if seed is not None else {}),
@@ -181,7 +181,7 @@ def render_scene(
     scene_path: str,
     out_dir: str,
     *,
-    formats=rf.FORMATS,
+    formats=rf.DEFAULT_FORMATS,
     seed: int | None = None,
     spp: int = 16,
     variant: str | None = None,

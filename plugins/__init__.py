@@ -30,7 +30,7 @@ __all__ = [
 ]
 
 #: Plugin modules, in registration order.
-PLUGIN_MODULES = ("lidar", "retroreflector")
+PLUGIN_MODULES = ("lidar", "retroreflector", "roughdiffuse")
 
 _by_variant: dict[str, dict[str, ModuleType]] = {}
 

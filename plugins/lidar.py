@@ -84,8 +84,9 @@ class LidarSensor(mi.Sensor):
          - 0
        * - ``detection_threshold``
          - float
-         - a return with g·ρ·T²·a below it is dropped, >= 0
-         - 0
+         - a return with g·ρ·T²·a below it is dropped, >= 0 (``hdl64e``: 4e-5, the
+           datasheet's 10 % target at 50 m, :mod:`nidar_mi.lidar.calibration`)
+         - preset's in ``raw`` mode (0 for the others and in ``compensated`` mode)
        * - ``dropout``
          - float
          - probability of dropping a return at random, [0, 1]

@@ -137,7 +137,8 @@ def test_no_import_cycles_in_the_package():
 #: First component below ``nidar_mi`` -> layer (0 low, 1 middle, 2 top); docs/ARCHITECTURE.md.
 LAYERS = {
     **dict.fromkeys(
-        ("errors", "backend", "illumination", "io", "geometry", "lidar", "materials"), 0
+        ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
+        0,
     ),
     "plugins": 0,
     **dict.fromkeys(

@@ -222,3 +222,31 @@ def test_two_lidars_in_one_scene(tmp_path):
     # ρ at each sensor's wavelength (linear spectrum 0.3 at 360 nm .. 0.6 at 1700 nm)
     np.testing.assert_allclose(front["reflectance"], 0.3 + 0.3 * (905 - 360) / 1340, rtol=1e-4)
     np.testing.assert_allclose(rear["reflectance"], 0.3 + 0.3 * (1550 - 360) / 1340, rtol=1e-4)
+
+
+def test_pcd_format_and_semantic_labels(tmp_path):
+    """``--formats npz,pcd`` writes the same points twice; the street's labels follow its shapes
+    (every asphalt return is road, every brick return building, every car-paint return car)."""
+    from nidar_mi.io.pcd import read_pcd
+    from nidar_mi.io.points import read_npz
+
+    out = tmp_path / "street"
+    r = run_cli(STREET, "-o", str(out), "-q", "--no-cameras", "--formats", "npz,pcd", *SMALL)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (out / "lidar_top").glob("points.*")) == [
+        "points.npz",
+        "points.pcd",
+    ]
+    npz = read_npz(out / "lidar_top/points.npz")
+    pcd = read_pcd(out / "lidar_top/points.pcd")
+    assert sorted(pcd) == sorted(npz)
+    for key, value in npz.items():
+        np.testing.assert_array_equal(pcd[key], value, err_msg=key)
+    names = list(npz["material_names"])
+    material = np.array(names)[npz["material"]]
+    for mat, label in (("asphalt", 40), ("brick_red", 50), ("car_paint_red", 10)):
+        assert (material == mat).sum() > 0, mat
+        assert np.all(npz["label"][material == mat] == label), mat
+    car = npz["instance_names"][npz["instance"][npz["label"] == 10]]
+    assert set(car) == {"car"}  # body, cabin and wheels are one instance
+    assert np.all(npz["instance"] > 0)

@@ -14,7 +14,7 @@ with one LiDAR works too), one ``--image`` per camera in the same order. ``--kit
 ``--profile NAME|FILE`` chooses the sensor profile that turns NIDAR's map into the sensor's
 intensity (:mod:`nidar_mi.nidar.profiles`): ``kitti-hdl64e`` by default with ``--kitti`` (fitted
 on the real KITTI frames at first use and cached; the rings come from the scan order,
-:func:`nidar_mi.datasets.kitti.scan_rings`), ``sim-905`` (the simulator's) by default otherwise,
+:func:`nidar_mi.datasets.kitti_rings.checked_rings`), ``sim-905`` (the simulator's) by default otherwise,
 or a file from ``python -m nidar_mi.calibrate``. A cloud with a ``ring`` field gives its rings to
 the profile. ``--branch I_hat`` without ``--profile`` assigns the dense head raw.
 
@@ -117,12 +117,13 @@ def _assign(args) -> None:
     if args.kitti:
         if not args.frame:
             raise NidarError("--kitti needs --frame")
-        from ..datasets.kitti import load_frame, scan_rings
+        from ..datasets.kitti import load_frame
+        from ..datasets.kitti_rings import checked_rings
 
         frame = load_frame(args.kitti, args.frame)
         cameras, images, name = [frame.camera], [frame.rgb], f"kitti_{args.frame}"
         points = {"xyz": frame.xyz, "intensity": frame.intensity}
-        ring = scan_rings(frame.xyz)
+        ring = checked_rings(frame.xyz)
         profile = args.profile or ("kitti-hdl64e" if args.branch == "R" else None)
     else:
         if not (args.points and args.calib and args.image):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 
-from ..render_folder import FORMATS
+from ..render_folder import DEFAULT_FORMATS, FORMATS
 from ..simulate import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ._common import parse_defines, parser, run
 
@@ -51,7 +51,11 @@ def build_parser():
     )
     p.add_argument("scene", help="scene XML file")
     p.add_argument("-o", "--out", help="output directory (default: out/<scene name>)")
-    p.add_argument("--formats", default=",".join(FORMATS), help="point formats: npz,ply,las,bin")
+    p.add_argument(
+        "--formats",
+        default=",".join(DEFAULT_FORMATS),
+        help=f"point formats, from {','.join(FORMATS)} (default {','.join(DEFAULT_FORMATS)})",
+    )
     p.add_argument(
         "--seed", type=int, default=None, help="overrides every lidar's seed; camera sampler seed"
     )

@@ -1,9 +1,10 @@
 """Real datasets: readers in their own layouts, and training data built from them.
 
 * :mod:`~nidar_mi.datasets.kitti`: KITTI object-layout frames (Velodyne scan, camera-2
-  image, calibration), rings from the scan order: :func:`~nidar_mi.datasets.kitti.frame_ids`,
-  :func:`~nidar_mi.datasets.kitti.load_frame`, :func:`~nidar_mi.datasets.kitti.load_kitti_calib`,
-  :func:`~nidar_mi.datasets.kitti.scan_rings`.
+  image, calibration): :func:`~nidar_mi.datasets.kitti.frame_ids`,
+  :func:`~nidar_mi.datasets.kitti.load_frame`, :func:`~nidar_mi.datasets.kitti.load_kitti_calib`.
+* :mod:`~nidar_mi.datasets.kitti_rings`: the laser ring of every point from the storage order
+  (checked by elevation), and the road plane.
 * :mod:`~nidar_mi.datasets.kitti_frames`: KITTI frames as NIDAR training frames (cached, with a
   held-out frame list).
 * :mod:`~nidar_mi.datasets.rgbnir`: pixel-aligned RGB/NIR photo pairs and their held-out split.

@@ -15,20 +15,7 @@ in ``p``; since ``K`` is invertible, ``P_n = K [I | K^{-1} p]``, so the model is
 homogeneous coordinate of ``P_n R0_rect Tr_velo_to_cam x_velo``). ``K`` is in pixels with
 pixel centres at integer coordinates (:mod:`nidar_mi.geometry.camera_model`).
 
-**Rings.** A KITTI ``.bin`` has no ring (laser) column, but it keeps the order in which the
-HDL-64E delivered the points: one laser's sweep after the other, top laser first, each sweep
-starting at azimuth 0 and turning counter-clockwise (0 -> 180 deg, then -180 -> 0; the clouds cut
-to ``x > 0`` run 0 -> 90, then -90 -> 0). :func:`scan_rings` therefore starts a new ring where the
-azimuth passes from negative to non-negative. The result is checked against the elevations:
-there must be at most 64 rings and the median elevation of each ring's far returns (> 10 m,
-where the lasers' mounting offsets no longer matter) must decrease from ring to ring; on the 84
-shared KITTI scans this recovers 64 rings (39 in the truncated raw frame 000077) with strictly
-decreasing elevations. Where the order is lost (a filtered or re-sorted cloud), the check fails
-and :func:`elevation_rings` assigns each point the ring of the nearest beam elevation in a
-table instead. That is approximate: measured against the scan order on the shared scans, the
-nearest of the per-ring median elevations gives the right ring for 29 % of the returns closer
-than 5 m, 63 % at 5-10 m and 80 % at 10-20 m (the lasers sit up to ~0.2 m apart, which moves a
-near return by several rings' elevation).
+Rings (lasers) come from the storage order: :mod:`nidar_mi.datasets.kitti_rings`.
 
 **Short scans.** A scan may end early (a truncated file): it then has fewer than 64 rings, all
 of them the top ones; :func:`load_frame` reads whole points and drops a trailing partial one with
@@ -49,21 +36,13 @@ from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.images import read_png
 
 __all__ = [
-    "HDL64E_RINGS",
     "KITTI_IMAGE_SIZE",
     "KittiFrame",
-    "elevation_rings",
     "frame_ids",
     "load_frame",
     "load_kitti_calib",
     "read_scan",
-    "scan_rings",
 ]
-
-#: Lasers of KITTI's Velodyne HDL-64E.
-HDL64E_RINGS = 64
-#: Returns farther than this (m) date the elevation of a ring in :func:`scan_rings`'s check.
-_FAR_M = 10.0
 
 KITTI_IMAGE_SIZE = (1242, 375)
 """(width, height) in pixels of most KITTI object ``image_2`` frames; some are a few
@@ -169,66 +148,6 @@ def frame_ids(kitti_dir: str | os.PathLike[str]) -> list[str]:
         if os.path.isfile(paths["image"]) and os.path.isfile(paths["calib"]):
             ids.append(stem)
     return ids
-
-
-def _elevation_deg(xyz: np.ndarray) -> np.ndarray:
-    x, y, z = (np.asarray(xyz[:, k], dtype=np.float64) for k in range(3))
-    return np.degrees(np.arctan2(z, np.hypot(x, y)))
-
-
-def scan_rings(xyz: np.ndarray, max_rings: int = HDL64E_RINGS) -> np.ndarray | None:
-    """Ring (laser) of every point of a KITTI scan in its stored order (module docstring).
-
-    Args:
-        xyz: (N, 3) points in the stored order, Velodyne frame, m.
-        max_rings: most rings the sensor has.
-
-    Returns:
-        (N,) int16 rings, 0 = the top laser; None when the order does not look like a scan (more
-        than ``max_rings`` rings, or ring elevations that do not decrease).
-    """
-    xyz = np.asarray(xyz)
-    if len(xyz) == 0:
-        return np.zeros(0, dtype=np.int16)
-    az = np.arctan2(xyz[:, 1].astype(np.float64), xyz[:, 0].astype(np.float64))
-    ring = np.zeros(len(xyz), dtype=np.int64)
-    ring[1:] = np.cumsum((az[:-1] < 0.0) & (az[1:] >= 0.0))
-    n = int(ring[-1]) + 1
-    if n > max_rings:
-        return None
-    far = np.linalg.norm(xyz, axis=1) > _FAR_M
-    el = _elevation_deg(xyz)
-    med = [
-        np.median(el[far & (ring == r)]) for r in range(n) if np.count_nonzero(far & (ring == r))
-    ]
-    if len(med) >= 2 and np.any(np.diff(med) >= 0.0):
-        return None
-    return ring.astype(np.int16)
-
-
-def elevation_rings(xyz: np.ndarray, elevations_deg: np.ndarray) -> np.ndarray:
-    """Ring of each point as the beam whose elevation is nearest (approximate, see the module).
-
-    Args:
-        xyz: (N, 3) points, sensor frame, m.
-        elevations_deg: (R,) beam elevations in degrees, ring 0 first.
-
-    Returns:
-        (N,) int16 ring indices into ``elevations_deg``.
-    """
-    table = np.asarray(elevations_deg, dtype=np.float64).reshape(-1)
-    if table.size == 0 or not np.all(np.isfinite(table)):
-        raise NidarError("elevation_rings: the elevation table must be finite and non-empty")
-    el = _elevation_deg(np.asarray(xyz))
-    order = np.argsort(table)
-    sorted_t = table[order]
-    pos = np.clip(np.searchsorted(sorted_t, el), 1, max(len(sorted_t) - 1, 1))
-    if len(sorted_t) == 1:
-        return np.zeros(len(el), dtype=np.int16)
-    left = sorted_t[pos - 1]
-    right = sorted_t[pos]
-    nearest = np.where(np.abs(el - left) <= np.abs(el - right), pos - 1, pos)
-    return order[nearest].astype(np.int16)
 
 
 def read_scan(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,7 @@ format of :mod:`nidar_mi.dataset` (source ``"kitti"``, keys
 * the returns camera 2 sees: in front of it, inside the image and not hidden in the cloud's own
   z-buffer (:func:`nidar_mi.geometry.visible_mask`, the package defaults; KITTI has no rendered
   depth): ``points_xyz``, ``points_intensity`` (the stored reflectance in [0, 1]) and
-  ``points_ring`` (:func:`~nidar_mi.datasets.kitti.scan_rings`; the nominal HDL-64E elevation
+  ``points_ring`` (:func:`~nidar_mi.datasets.kitti_rings.checked_rings`; the nominal HDL-64E elevation
   table when the scan order is lost);
 * those returns splatted to camera resolution (nearest return wins a pixel): the sparse
   ``intensity`` and ``range`` (m) with their ``mask``;
@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from .kitti import HDL64E_RINGS, KittiFrame, elevation_rings, frame_ids, load_frame, scan_rings
+from .kitti import KittiFrame, frame_ids, load_frame
+from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
 from .paths import cache_dir, cache_key, data_root
 
 __all__ = [
@@ -84,7 +85,7 @@ def kitti_training_frame(frame: KittiFrame) -> tuple[dict[str, np.ndarray], dict
     from ..lidar.pattern import elevation_table
 
     xyz = frame.xyz.astype(np.float64)
-    rings = scan_rings(frame.xyz)
+    rings = checked_rings(frame.xyz)
     method = "scan order"
     if rings is None:
         rings = elevation_rings(frame.xyz, elevation_table("hdl64e"))

@@ -19,7 +19,7 @@ from .images import (
     write_srgb_png,
 )
 from .las import LAS_SCALE_M, read_las, write_las
-from .pcd import read_pcd
+from .pcd import read_pcd, write_pcd
 from .point_cloud import read_point_cloud
 from .points import (
     read_kitti_bin,
@@ -51,6 +51,7 @@ __all__ = [
     "write_las",
     "read_las",
     "read_pcd",
+    "write_pcd",
     "write_npz",
     "read_npz",
     "write_ply",

@@ -1,22 +1,34 @@
-"""Reading Point Cloud Library ``.pcd`` files (format v0.7, ``DATA ascii`` and ``binary``).
+"""Point Cloud Library ``.pcd`` files (format v0.7): writing (``DATA binary``) and reading
+(``DATA ascii`` and ``binary``).
 
 The header names the fields of each point (``FIELDS x y z intensity ...``), their byte size
 (``SIZE``), type (``TYPE``: ``F`` float, ``I`` signed, ``U`` unsigned integer) and element
 count (``COUNT``, default 1). ``binary`` data are packed little-endian records, one per
 point; ``ascii`` data are whitespace-separated numbers in the same order. Fields named
 ``_`` are padding and skipped. ``binary_compressed`` (LZF) is not supported.
+
+:func:`write_pcd` writes every per-point column of a points dict (:mod:`nidar_mi.io.points`):
+``x y z`` (float32), then the other columns in the dict's order with their own type (bool as
+``U 1``; (N, k) columns as ``<name>_<i>``). A header comment ``# nidar_mi.points {json}``
+(comment lines are allowed by the format and skipped by PCL) carries the metadata and column
+dtypes, so :func:`read_pcd` restores a points dict it wrote exactly. ``VIEWPOINT`` is the
+identity: the points are in the LiDAR frame.
 """
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
 
 from ..errors import NidarError
-from .atomic import reading
+from .atomic import atomic_path, reading
+from .points import _TAG, _decode_meta, _flatten, _header_json, _split_points, _unflatten
 
-__all__ = ["read_pcd"]
+__all__ = ["read_pcd", "write_pcd"]
+
+_PCD_TYPES = frozenset({"i1", "u1", "i2", "u2", "i4", "u4", "i8", "u8", "f4", "f8"})
 
 _DTYPES = {
     ("F", 4): "<f4",
@@ -32,8 +44,47 @@ _DTYPES = {
 }
 
 
+def write_pcd(path: str | os.PathLike, points) -> None:
+    """Write a points dict as a binary PCD v0.7 file (layout in the module docstring).
+
+    Raises:
+        NidarError: invalid points dict, a column PCD cannot store or name, or a write failure.
+    """
+    n, columns, meta = _split_points(points)
+    xyz = columns.pop("xyz").astype("<f4")
+    fields, schema = _flatten(columns, _PCD_TYPES, "PCD")
+    if {"x", "y", "z"} & fields.keys():
+        raise NidarError("PCD columns cannot be named 'x', 'y' or 'z' (they hold xyz)")
+    fields = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], **fields}
+    bad = [k for k in fields if not k.isascii() or any(c.isspace() for c in k)]
+    if bad:
+        raise NidarError(f"PCD field names cannot hold spaces or non-ASCII: {bad}")
+    record = np.empty(n, dtype=[(k, v.dtype.newbyteorder("<")) for k, v in fields.items()])
+    for k, v in fields.items():
+        record[k] = v
+    kinds = {"f": "F", "i": "I", "u": "U"}
+    header = [
+        "# .PCD v0.7 - Point Cloud Data file format",
+        f"# {_TAG} {_header_json(schema, meta)}",
+        "VERSION 0.7",
+        "FIELDS " + " ".join(fields),
+        "SIZE " + " ".join(str(v.dtype.itemsize) for v in fields.values()),
+        "TYPE " + " ".join(kinds[v.dtype.kind] for v in fields.values()),
+        "COUNT " + " ".join("1" for _ in fields),
+        f"WIDTH {n}",
+        "HEIGHT 1",
+        "VIEWPOINT 0 0 0 1 0 0 0",
+        f"POINTS {n}",
+        "DATA binary",
+    ]
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(record.tobytes())
+
+
 def _parse_header(raw: bytes) -> tuple[dict[str, list[str]], int]:
-    """Header entries (upper-case key -> values) and the byte offset of the data."""
+    """Header entries (upper-case key -> values; ``#`` for our JSON comment) and the byte
+    offset of the data."""
     header: dict[str, list[str]] = {}
     pos = 0
     while pos < len(raw):
@@ -41,6 +92,9 @@ def _parse_header(raw: bytes) -> tuple[dict[str, list[str]], int]:
         end = len(raw) if end < 0 else end
         line = raw[pos:end].decode("ascii", errors="replace").strip()
         pos = end + 1
+        if line.startswith(f"# {_TAG} "):
+            header["#"] = [line[len(_TAG) + 3 :]]
+            continue
         if not line or line.startswith("#"):
             continue
         key, *values = line.split()
@@ -75,7 +129,8 @@ def read_pcd(path: str | os.PathLike) -> dict[str, np.ndarray]:
     Returns:
         ``xyz`` (N, 3) float32, ``intensity`` (N,) float32 if the file has that field, and
         every other field in its own dtype ((N,) or (N, COUNT)); N = ``POINTS`` (default
-        ``WIDTH * HEIGHT``).
+        ``WIDTH * HEIGHT``). A file written by :func:`write_pcd` is restored exactly (column
+        dtypes and shapes, and the metadata).
 
     Raises:
         NidarError: missing or malformed file, no x/y/z fields, or ``binary_compressed``.
@@ -117,6 +172,11 @@ def read_pcd(path: str | os.PathLike) -> dict[str, np.ndarray]:
         if not {"x", "y", "z"} <= fields.keys():
             raise ValueError("PCD has no x, y, z fields")
         out = {"xyz": np.stack([fields.pop(k) for k in "xyz"], axis=1).astype(np.float32)}
+        if "#" in header:
+            doc = json.loads(header["#"][0])
+            out.update(_unflatten(fields, doc["columns"]))
+            out.update(_decode_meta(doc))
+            return out
         if "intensity" in fields:
             out["intensity"] = fields.pop("intensity").astype(np.float32)
         out.update(fields)

@@ -1,6 +1,6 @@
 """Point sets ("points dicts") and their files: npz, PLY and KITTI ``.bin``.
 
-LAS is in :mod:`nidar_mi.io.las`, PCD (read only) in :mod:`nidar_mi.io.pcd`, and
+LAS is in :mod:`nidar_mi.io.las`, PCD in :mod:`nidar_mi.io.pcd`, and
 :func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of them.
 
 A points dict maps names to numpy arrays. ``xyz`` is required; every other entry is
@@ -24,6 +24,11 @@ name                 dtype      shape   unit  meaning
 ``material``         int32      (N,)    --    index into ``material_names``; -1 = none
 ``material_names``   str (U)    (M,)    --    BSDF ids (anonymous BSDFs: ``<shape id>.bsdf``);
                                               fixed-width unicode, never object
+``label``            uint16     (N,)    --    semantic class, SemanticKITTI id (0 = unlabeled;
+                                              table: :mod:`nidar_mi.labels.classes`)
+``instance``         uint32     (N,)    --    instance (object) id, 1..K; 0 = none
+``instance_names``   str (U)    (K+1,)  --    ``instance_names[k]`` names instance k (the
+                                              scene's ``instance`` or the shape id); ``[0]`` ""
 ``intensity_nidar``  float32    (N,)    --    with ``--intensity nidar``: NIDAR's calibrated
                                               intensity in [0, 1], 0 where no camera sees the point
 ``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
@@ -37,7 +42,8 @@ Other entries are carried generically by every writer:
 * *metadata* is everything else: string arrays (``material_names``) and numeric scalars or
   arrays of another length. PLY keeps them in an ``obj_info`` line and LAS in a VLR
   (user id ``nidar_mi``, record 1), as JSON that also records each column's dtype and shape
-  so that the readers restore the dict exactly (bool, for example, is stored as uint8).
+  so that the readers restore the dict exactly (bool, for example, is stored as uint8);
+  PCD keeps the same JSON in a ``# nidar_mi.points`` header comment.
 
 Readers accept files from other tools too: they return ``xyz`` (float32) and, when the file
 has it, ``intensity`` (float32), plus the file's other per-point fields.
@@ -71,7 +77,7 @@ _PLY_TYPES = frozenset({"i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8"})
 _KNOWN_SHAPES = {
     "xyz_world": 3,
     **dict.fromkeys(("range", "intensity", "reflectance", "cos_incidence"), None),
-    **dict.fromkeys(("ring", "column", "material"), None),
+    **dict.fromkeys(("ring", "column", "material", "label", "instance"), None),
 }
 
 

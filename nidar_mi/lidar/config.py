@@ -165,7 +165,12 @@ class LidarConfig:
             intensity_mode=mode,
             noise_intensity_std=number("noise_intensity_std", 0.0, lo=0.0),
             noise_range_std=number("noise_range_std", 0.0, lo=0.0),
-            detection_threshold=number("detection_threshold", 0.0, lo=0.0),
+            # the preset's threshold is in raw units (1/m²): it is the default in raw mode only
+            detection_threshold=number(
+                "detection_threshold",
+                p.detection_threshold if p and mode == "raw" else 0.0,
+                lo=0.0,
+            ),
             dropout=number("dropout", 0.0, lo=0.0, hi=1.0),
             seed=integer("seed", 0, lo=0),
         )

@@ -46,6 +46,9 @@ class Preset:
         range_min: minimum range in m.
         range_max: maximum range in m.
         reference: datasheet or paper the table comes from.
+        detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
+            the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
+            datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.calibration`).
     """
 
     elevations_deg: tuple[float, ...]
@@ -53,6 +56,7 @@ class Preset:
     range_min: float
     range_max: float
     reference: str
+    detection_threshold: float = 0.0
 
 
 def _desc(values: np.ndarray) -> tuple[float, ...]:
@@ -80,6 +84,7 @@ PRESETS: dict[str, Preset] = {
         0.9,
         120.0,
         "Velodyne HDL-64E S2 datasheet (KITTI, Geiger et al. IJRR 2013)",
+        4.0e-5,  # 0.10 / 50 m²: 10 % at normal incidence detected to 50 m (datasheet)
     ),
     "os1_128": Preset(
         _desc(np.linspace(-22.5, 22.5, 128)),

@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..labels import SceneLabels, ShapeLabels, shape_labels
 from .config import LidarConfig
 from .pattern import beam_directions
 from .raycast import cast, monostatic_reflectance
@@ -44,6 +45,10 @@ class ScanResult:
         to_world: (4, 4) float64 LiDAR pose.
         material_names: list of material (BSDF) ids.
         hit: bool, the beam hit a surface (before range, threshold and dropout tests).
+        shape_index: int32 index into ``scene.shapes()`` of the surface hit; -1 where no hit.
+        shape_labels: per-shape class and instance tables
+            (:class:`nidar_mi.labels.ShapeLabels`) that :meth:`points` turns into ``label``
+            and ``instance``.
         timings: seconds per stage (``pattern``, ``raycast``, ``bsdf``, ``detect``, ``readback``).
     """
 
@@ -58,6 +63,8 @@ class ScanResult:
     to_world: np.ndarray
     material_names: list[str]
     hit: np.ndarray
+    shape_index: np.ndarray
+    shape_labels: ShapeLabels
     timings: dict[str, float] = field(default_factory=dict)
 
     def points(self) -> dict[str, np.ndarray]:
@@ -68,6 +75,7 @@ class ScanResult:
         xyz = (self.directions[m] * rng[:, None]).astype(np.float32)
         R, t = self.to_world[:3, :3], self.to_world[:3, 3]
         xyz_world = (xyz.astype(np.float64) @ R.T + t).astype(np.float32)
+        label, instance = self.shape_labels.lookup(self.shape_index[m])
         return {
             "xyz": xyz,
             "xyz_world": xyz_world,
@@ -79,10 +87,15 @@ class ScanResult:
             "column": cols.astype(np.uint32),
             "material": self.material[m].astype(np.int32),
             "material_names": np.asarray(self.material_names, dtype=np.str_),
+            "label": label,
+            "instance": instance,
+            "instance_names": self.shape_labels.instance_names,
         }
 
 
-def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult:
+def scan(
+    scene, sensor, *, seed: int | None = None, to_world=None, labels: SceneLabels | None = None
+) -> ScanResult:
     """Cast every beam of ``sensor`` and compute its return.
 
     Args:
@@ -90,6 +103,8 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
         sensor: a ``lidar`` sensor of that scene.
         seed: overrides the sensor's ``seed`` for the noise and dropout draws.
         to_world: optional (4,4) pose overriding the sensor's ``to_world`` (frame animation).
+        labels: the scene's label declaration (:attr:`nidar_mi.scene.LoadedScene.labels`);
+            None: every point ``unlabeled``, every shape its own instance.
 
     Returns:
         The scan on the (ring, column) grid.
@@ -138,7 +153,8 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
         range_m = dr.select(valid, add_noise(d, inputs.noise_range, normal_range), 0.0)
         finite = dr.isfinite(expected)
         bsdf_id = dr.reinterpret_array(mi.UInt32, bsdf)
-        dr.eval(intensity, range_m, rho, cos_t, bsdf_id, valid, beams.hit, finite)
+        shape_id = dr.reinterpret_array(mi.UInt32, beams.si.shape)
+        dr.eval(intensity, range_m, rho, cos_t, bsdf_id, shape_id, valid, beams.hit, finite)
 
     with _timed(timings, "readback"):
         shape = (cfg.rings, cfg.horizontal_resolution)
@@ -160,6 +176,8 @@ def scan(scene, sensor, *, seed: int | None = None, to_world=None) -> ScanResult
             to_world=pose,
             material_names=names,
             hit=hit.reshape(shape),
+            shape_index=_shape_index(scene, shape_id.numpy(), hit).reshape(shape),
+            shape_labels=shape_labels(scene, labels),
             timings=timings,
         )
     return result
@@ -294,6 +312,17 @@ def _materials(scene, bsdf_ids: np.ndarray, hit: np.ndarray) -> tuple[list[str],
         lut[reg] = idx
     material = np.where(hit, lut[np.minimum(bsdf_ids, lut.size - 1)], -1).astype(np.int32)
     return names, material
+
+
+def _shape_index(scene, shape_ids: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """Per beam, the int32 index into ``scene.shapes()`` of the shape hit (-1: no hit)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    regs = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in scene.shapes()]
+    lut = np.full(max(regs, default=0) + 2, -1, dtype=np.int32)
+    lut[regs] = np.arange(len(regs), dtype=np.int32)
+    return np.where(hit, lut[np.minimum(shape_ids, lut.size - 1)], -1).astype(np.int32)
 
 
 def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -> None:

@@ -22,7 +22,7 @@ from .metals import METAL_SOURCES, METALS_LICENSE, metal_nk, metal_reflectance
 from .optics import SODA_LIME_SOURCE, soda_lime_ior
 from .spectra import GRID_NM, Spectrum, absorption_band, flat, logistic
 
-__all__ = ["build_catalog", "CLEAR_COAT_IOR", "GLASS_IOR_WAVELENGTH_NM"]
+__all__ = ["build_catalog", "CLEAR_COAT_IOR", "GLASS_IOR_WAVELENGTH_NM", "ROAD_SURFACE"]
 
 MODEL_LICENSE = "CC0 1.0 (parametric model defined in nidar_mi)"
 #: Refractive index of automotive clear coat (acrylic / polyurethane), used for car paints.
@@ -68,6 +68,16 @@ def _earthlib_source(level_2: str, level_3: str, name: str) -> str:
     return f"earthlib:{level_2}/{level_3}/{name}"
 
 
+#: Road surfaces rendered rough (``roughdiffuse``): asphalt and concrete keep returning LiDAR
+#: light at grazing incidence. ``sigma`` (facet slope deviation, degrees) is the value at which
+#: ``asphalt_old`` seen from 1.73 m is detected to the HDL-64E datasheet's 50 m for pavement with
+#: its 4e-5 threshold and ``B0 = 1`` (Hapke's shadow-hiding amplitude of a dark surface);
+#: :func:`nidar_mi.lidar.calibration.sigma_for_reach` reproduces it. The surge's 5 degree half
+#: width matters only away from the monostatic direction (cameras) and is not calibrated.
+ROAD_SURFACE = {"sigma": 35.1, "opposition_amplitude": 1.0, "opposition_width": 5.0}
+_ROUGH = frozenset({"asphalt_new", "asphalt_old", "concrete"})
+
+
 def _earthlib_materials() -> list[Material]:
     out = []
     for name, l2, l3, sid, desc in _EARTHLIB_DIFFUSE:
@@ -75,14 +85,21 @@ def _earthlib_materials() -> list[Material]:
             f"earthlib metadata: {earthlib_notes(l2, l3, sid)}; extended below 400 nm and across "
             "1350-1460 nm as in nidar_mi.materials.earthlib_data"
         )
+        params = {"reflectance": earthlib_spectrum(l2, l3, sid)}
+        if name in _ROUGH:
+            params |= ROAD_SURFACE
+            notes += (
+                "; rough diffuse road surface (roughdiffuse: Oren-Nayar sigma, Hapke opposition "
+                "surge) calibrated in nidar_mi.lidar.calibration"
+            )
         out.append(
             Material(
                 name=name,
-                kind="diffuse",
+                kind="rough_diffuse" if name in _ROUGH else "diffuse",
                 description=desc,
                 source=_earthlib_source(l2, l3, sid),
                 license=EARTHLIB_LICENSE,
-                params=_freeze(reflectance=earthlib_spectrum(l2, l3, sid)),
+                params=_freeze(**params),
                 notes=notes,
             )
         )

@@ -15,6 +15,7 @@ plastic         ``roughplastic``           the albedo of the diffuse (pigment) l
 conductor       ``roughconductor``         normal-incidence Fresnel R from (n, k)
 dielectric      ``roughdielectric``        normal-incidence Fresnel R of one surface
 retroreflector  ``retroreflector``         the sheeting reflectance rho
+rough_diffuse   ``roughdiffuse``           the facet albedo rho (Oren–Nayar + opposition)
 ==============  =========================  ==============================================
 """
 

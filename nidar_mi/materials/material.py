@@ -12,7 +12,7 @@ from typing import Any
 
 __all__ = ["KINDS", "Material"]
 
-KINDS = ("diffuse", "plastic", "conductor", "dielectric", "retroreflector")
+KINDS = ("diffuse", "plastic", "conductor", "dielectric", "retroreflector", "rough_diffuse")
 
 
 @dataclass(frozen=True)

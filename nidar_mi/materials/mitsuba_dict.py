@@ -20,11 +20,14 @@ dielectric      ``thindielectric`` pane (or            tint -> rgb (clear glass 
                 ``roughdielectric`` with a roughness
                 override), tint spectrum
 retroreflector  ``retroreflector``, rho spectrum       ``reflectance`` -> rgb
+rough_diffuse   ``roughdiffuse``, facet albedo         ``reflectance`` -> rgb
+                spectrum, ``sigma``, opposition surge
 ==============  =====================================  ======================================
 
 Overrides (``overrides={"roughness": 0.3}``): ``roughness`` (GGX alpha, plastic / conductor /
 dielectric), ``int_ior`` (plastic / dielectric), ``lobe_width`` (degrees) and
-``diffuse_fraction`` (retroreflector).
+``diffuse_fraction`` (retroreflector), ``sigma`` (degrees, in [0, 90)),
+``opposition_amplitude`` (in [0, 1]) and ``opposition_width`` (degrees, in (0, 90]) (rough_diffuse).
 """
 
 from __future__ import annotations
@@ -38,7 +41,8 @@ from .spectra import Spectrum
 __all__ = ["OVERRIDES", "bsdf_dict", "rgb_dict", "spectrum_dict"]
 
 #: Overridable parameters per kind -> (parameter in Material.params, low, high, low included).
-#: Intervals are ``(low, high]`` except ``diffuse_fraction``'s ``[0, 1]``.
+#: Intervals are ``(low, high]`` when the low end is excluded, else ``[low, high]``; ``sigma``
+#: is ``[0, 90)`` (:data:`_OPEN_HIGH`).
 OVERRIDES: dict[str, dict[str, tuple[str, float, float, bool]]] = {
     "diffuse": {},
     "plastic": {"roughness": ("alpha", 0.0, 1.0, False), "int_ior": ("int_ior", 1.0, 3.0, False)},
@@ -51,7 +55,14 @@ OVERRIDES: dict[str, dict[str, tuple[str, float, float, bool]]] = {
         "lobe_width": ("lobe_width", 0.0, 90.0, False),
         "diffuse_fraction": ("diffuse_fraction", 0.0, 1.0, True),
     },
+    "rough_diffuse": {
+        "sigma": ("sigma", 0.0, 90.0, True),
+        "opposition_amplitude": ("opposition_amplitude", 0.0, 1.0, True),
+        "opposition_width": ("opposition_width", 0.0, 90.0, False),
+    },
 }
+#: Overrides whose high end is excluded.
+_OPEN_HIGH = frozenset({"sigma"})
 
 
 def spectrum_dict(spectrum: Spectrum) -> dict:
@@ -78,8 +89,9 @@ def _resolve(kind: str, params: Mapping, overrides: Mapping[str, float] | None) 
             v = float(value)
         except (TypeError, ValueError):
             raise NidarError(f"parameter '{key}' must be a number, got {value!r}") from None
-        if not ((lo <= v) if lo_closed else (lo < v)) or not v <= hi:
-            interval = f"{'[' if lo_closed else '('}{lo:g}, {hi:g}]"
+        hi_closed = key not in _OPEN_HIGH
+        if not ((lo <= v) if lo_closed else (lo < v)) or not ((v <= hi) if hi_closed else (v < hi)):
+            interval = f"{'[' if lo_closed else '('}{lo:g}, {hi:g}{']' if hi_closed else ')'}"
             raise NidarError(f"parameter '{key}' = {v:g} is outside {interval}")
         out[target] = v
     return out
@@ -142,5 +154,13 @@ def bsdf_dict(
             "reflectance": rgb or spectrum_dict(p["reflectance"]),
             "lobe_width": float(p["lobe_width"]),
             "diffuse_fraction": float(p["diffuse_fraction"]),
+        }
+    if m.kind == "rough_diffuse":
+        return {
+            "type": "roughdiffuse",
+            "reflectance": rgb or spectrum_dict(p["reflectance"]),
+            "sigma": float(p["sigma"]),
+            "opposition_amplitude": float(p["opposition_amplitude"]),
+            "opposition_width": float(p["opposition_width"]),
         }
     raise AssertionError(f"unhandled kind {m.kind}")  # pragma: no cover

@@ -6,6 +6,10 @@ the same layout always gives byte-identical XML. Materials are ``nidar_material`
 (:func:`nidar_mi.illumination.sun_irradiance`), the sky a ``constant`` emitter with the diffuse
 spectrum (:func:`nidar_mi.illumination.sky_radiance`), both scaled by the layout's factors.
 
+Every shape carries its semantic ``label`` and, for multi-part objects, an ``instance``
+(:func:`nidar_mi.scenegen.labels.shape_label`; the declaration is read by
+:func:`nidar_mi.labels.strip_labels`).
+
 Like ``scenes/street.xml`` the scene declares ``<default>`` parameters ``spp``, ``width``,
 ``height`` (camera film) and ``cols`` (LiDAR columns per scan), so ``render -D`` can shrink it.
 """
@@ -13,6 +17,7 @@ Like ``scenes/street.xml`` the scene declares ``<default>`` parameters ``spp``, 
 from __future__ import annotations
 
 from ..illumination import sky_radiance, spectrum_string, sun_irradiance
+from .labels import shape_label
 from .primitives import Block, Cylinder, Layout, Panel, Patch, Rig, Sphere
 
 __all__ = ["scene_xml", "DEFAULT_COLS", "SPECTRUM_STEP_NM"]
@@ -75,7 +80,21 @@ def _shape(s) -> str:
         kind = "sphere"
     else:  # pragma: no cover
         raise TypeError(f"unknown shape record {type(s).__name__}")
-    return f'    <shape type="{kind}" id="{s.id}">{body}{ref}</shape>'
+    tags = ""
+    if (label := shape_label(s)) is not None:
+        cls, instance = label
+        tags = f' label="{cls}"' + (f' instance="{instance}"' if instance else "")
+    return f'    <shape type="{kind}" id="{s.id}"{tags}>{body}{ref}</shape>'
+
+
+def _threshold(preset: str) -> list[str]:
+    """The detection threshold line: none where the preset has a calibrated default
+    (:mod:`nidar_mi.lidar.calibration`), else 5e-5."""
+    from ..lidar.pattern import PRESETS
+
+    if PRESETS[preset].detection_threshold > 0:
+        return []
+    return ['        <float name="detection_threshold" value="0.00005"/>']
 
 
 def _rig(rig: Rig) -> list[str]:
@@ -94,7 +113,7 @@ def _rig(rig: Rig) -> list[str]:
         '        <string name="intensity_mode" value="raw"/>',
         '        <float name="noise_intensity_std" value="0.0002"/>',
         '        <float name="noise_range_std" value="0.01"/>',
-        '        <float name="detection_threshold" value="0.00005"/>',
+        *_threshold(rig.lidar_preset),
         '        <float name="dropout" value="0.01"/>',
         '        <integer name="seed" value="0"/>',
         f'        <transform name="to_world">{lidar_ops}</transform>',

@@ -98,3 +98,83 @@ def test_pcd_binary_truncated(tmp_path):
     (tmp_path / "t.pcd").write_bytes(_binary_pcd(3, RECORDS))
     with pytest.raises(NidarError, match="fewer than the 3 points"):
         read_pcd(tmp_path / "t.pcd")
+
+
+# --- writing ------------------------------------------------------------------------------
+
+
+def test_write_pcd_round_trip(tmp_path, make_points, assert_points_equal):
+    from nidar_mi.io.pcd import write_pcd
+
+    pts = make_points(257) | {
+        "label": np.arange(257, dtype=np.uint16) % 100,
+        "instance": np.arange(257, dtype=np.uint32),
+        "t": np.linspace(0.0, 0.1, 257, dtype=np.float32),
+        "instance_names": np.array(["", "car_1"]),
+    }
+    write_pcd(tmp_path / "p.pcd", pts)
+    assert_points_equal(read_pcd(tmp_path / "p.pcd"), pts)
+    assert_points_equal(read_point_cloud(tmp_path / "p.pcd"), pts)
+
+
+def test_write_pcd_layout_follows_the_pcd_spec(tmp_path):
+    """The file read by hand against the PCD v0.7 specification (pointclouds.org, "The PCD
+    (Point Cloud Data) file format"): header entries in the prescribed order, one ``SIZE`` /
+    ``TYPE`` / ``COUNT`` per field, ``WIDTH * HEIGHT == POINTS``, and binary data of packed
+    little-endian records of exactly ``POINTS * sum(SIZE)`` bytes right after ``DATA binary``."""
+    from nidar_mi.io.pcd import write_pcd
+
+    xyz = np.array([[1.5, -2.0, 0.25], [100.0, 0.0, -3.5], [0.0, 7.0, 1.0]], np.float32)
+    pts = {
+        "xyz": xyz,
+        "intensity": np.array([0.5, 0.0, 2.0], np.float32),
+        "ring": np.array([0, 63, 7], np.uint16),
+        "label": np.array([40, 10, 0], np.uint16),
+        "time": np.array([0.0, 0.05, 0.099], np.float64),
+        "valid": np.array([True, False, True]),
+        "xyz_world": xyz + 10.0,
+    }
+    write_pcd(tmp_path / "p.pcd", pts)
+    raw = (tmp_path / "p.pcd").read_bytes()
+    lines, pos = [], 0
+    while True:
+        end = raw.index(b"\n", pos)
+        lines.append(raw[pos:end].decode("ascii"))
+        pos = end + 1
+        if lines[-1].startswith("DATA"):
+            break
+    entries = [ln for ln in lines if not ln.startswith("#")]
+    keys = [ln.split()[0] for ln in entries]
+    assert keys == [
+        "VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS",
+        "DATA",
+    ]  # fmt: skip
+    h = {ln.split()[0]: ln.split()[1:] for ln in entries}
+    assert h["VERSION"] == ["0.7"] and h["DATA"] == ["binary"]
+    names = ["x", "y", "z", "intensity", "ring", "label", "time", "valid"]
+    names += ["xyz_world_0", "xyz_world_1", "xyz_world_2"]
+    assert h["FIELDS"] == names
+    assert h["SIZE"] == ["4", "4", "4", "4", "2", "2", "8", "1", "4", "4", "4"]
+    assert h["TYPE"] == ["F", "F", "F", "F", "U", "U", "F", "U", "F", "F", "F"]
+    assert h["COUNT"] == ["1"] * 11
+    assert h["WIDTH"] == ["3"] and h["HEIGHT"] == ["1"] and h["POINTS"] == ["3"]
+    assert h["VIEWPOINT"] == ["0", "0", "0", "1", "0", "0", "0"]
+    record = "<ffffHHdBfff"
+    assert len(raw) - pos == 3 * struct.calcsize(record)
+    for i in range(3):
+        got = struct.unpack_from(record, raw, pos + i * struct.calcsize(record))
+        want = (*xyz[i], pts["intensity"][i], pts["ring"][i], pts["label"][i], pts["time"][i])
+        want += (int(pts["valid"][i]), *(xyz[i] + 10.0))
+        np.testing.assert_array_equal(np.array(got, np.float64), np.array(want, np.float64))
+
+
+def test_write_pcd_refuses_bad_points(tmp_path):
+    from nidar_mi.io.pcd import write_pcd
+
+    with pytest.raises(NidarError, match="no 'xyz'"):
+        write_pcd(tmp_path / "p.pcd", {"intensity": np.zeros(3, np.float32)})
+    with pytest.raises(NidarError, match="cannot be named 'x'"):
+        write_pcd(tmp_path / "p.pcd", {"xyz": np.zeros((2, 3)), "x": np.zeros(2)})
+    with pytest.raises(NidarError, match="spaces"):
+        write_pcd(tmp_path / "p.pcd", {"xyz": np.zeros((2, 3)), "a b": np.zeros(2)})
+    assert not (tmp_path / "p.pcd").exists()

@@ -11,6 +11,11 @@ def test_defaults_from_preset():
     assert c.rings == 64 and c.horizontal_resolution == 2048
     assert c.wavelength == 905.0 and c.gain == 1.0 and c.intensity_mode == "raw"
     assert c.range_min == 0.9 and c.range_max == 120.0
+    # the datasheet's 10 % target at 50 m, in raw units only
+    assert c.detection_threshold == pytest.approx(0.10 / 50.0**2)
+    comp = LidarConfig.from_mapping("l", {"preset": "hdl64e", "intensity_mode": "compensated"})
+    assert comp.detection_threshold == 0.0
+    assert LidarConfig.from_mapping("l", {"preset": "vlp16"}).detection_threshold == 0.0
 
 
 def test_elevation_angles_imply_channels():

@@ -40,11 +40,32 @@ def test_every_material_loads_and_is_finite_from_360_to_1700_nm(mi):
             assert np.all(np.isfinite(rho)) and np.all(rho >= 0.0), (name, twin, rho)
 
 
-@pytest.mark.parametrize("name", ["asphalt_old", "grass", "white_panel_95", "fabric"])
+@pytest.mark.parametrize("name", ["gravel", "grass", "white_panel_95", "fabric"])
 def test_diffuse_monostatic_reflectance_equals_the_library(mi, name):
     rho = monostatic_rho(mi, mi.load_dict(bsdf_dict(name)))
     want = reflectance(name, np.concatenate(WAVELENGTH_SETS))
     np.testing.assert_allclose(rho, want, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["asphalt_old", "asphalt_new", "concrete"])
+@pytest.mark.parametrize("theta", [20.0, 85.0])
+def test_road_surfaces_are_rough_diffuse(mi, name, theta):
+    """rho_eff = rho (A + B sin²θ / cos θ)(1 + B0) (Oren–Nayar facets with the opposition surge)."""
+    from nidar_mi.plugins.oren_nayar import coefficients
+
+    m = get_material(name)
+    assert m.kind == "rough_diffuse" and bsdf_dict(name)["type"] == "roughdiffuse"
+    a, b = coefficients(m.params["sigma"])
+    c = math.cos(math.radians(theta))
+    gain = (a + b * (1 - c * c) / c) * (1 + m.params["opposition_amplitude"])
+    rho = monostatic_rho(mi, mi.load_dict(bsdf_dict(name)), theta)
+    want = reflectance(name, np.concatenate(WAVELENGTH_SETS)) * gain
+    np.testing.assert_allclose(rho, want, rtol=1e-4)
+    twin = bsdf_dict(name, rgb_twin=True)
+    assert twin["type"] == "roughdiffuse" and twin["reflectance"]["type"] == "rgb"
+    with pytest.raises(NidarError, match=r"'sigma' = 90 is outside \[0, 90\)"):
+        bsdf_dict(name, overrides={"sigma": 90})
+    assert bsdf_dict(name, overrides={"sigma": 10})["sigma"] == 10.0
 
 
 def test_retro_sheeting_returns_far_more_than_a_white_panel(mi):

@@ -49,7 +49,8 @@ def test_expansion_keeps_ids_and_nesting():
     assert "nidar_material" not in out
     root = ET.fromstring(out)
     road = root.find("bsdf[@id='road']")
-    assert road is not None and road.get("type") == "diffuse"
+    assert road is not None and road.get("type") == "roughdiffuse"
+    assert road.find("float[@name='sigma']").get("value") == "35.1"
     spec = road.find("spectrum[@name='reflectance']")
     s = Spectrum.parse_xml_value(spec.get("value"))
     assert s.wavelengths_nm[0] == 360.0 and s.wavelengths_nm[-1] == 1700.0
