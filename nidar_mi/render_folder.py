@@ -75,8 +75,8 @@ class RenderRequest:
         intensity: ``physics`` or ``nidar``.
         weights: NIDAR weights folder (``nidar`` only; None: the shipped model).
         nidar_branch: NIDAR branch (``nidar`` only).
-        profile: NIDAR sensor profile, a name or an absolute file path (``nidar`` only; None:
-            the weights' own calibration).
+        profile: NIDAR sensor profile as ``<name>@<hash of its content>`` (``nidar`` only;
+            None: the weights' own calibration).
         layout: :data:`LAYOUT_VERSION` of the folder.
     """
 
@@ -104,11 +104,8 @@ class RenderRequest:
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
             options["weights"] = options["nidar_branch"] = options["profile"] = None
-        else:
-            if options.get("weights") is not None:
-                options["weights"] = os.path.abspath(options["weights"])
-            if options.get("profile") is not None and os.path.isfile(options["profile"]):
-                options["profile"] = os.path.abspath(options["profile"])
+        elif options.get("weights") is not None:
+            options["weights"] = os.path.abspath(options["weights"])
         return cls(scene=path, scene_sha256=file_sha256(path), params=params, **options)
 
     def to_dict(self) -> dict[str, Any]:

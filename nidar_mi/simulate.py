@@ -30,6 +30,17 @@ INTENSITY_SOURCES = ("physics", "nidar")
 NIDAR_BRANCHES = ("R", "I_hat")
 
 
+def _profile_key(profile) -> str | None:
+    """``<name>@<sha256 of its JSON, 16 digits>``: what a render's request records of a profile."""
+    if profile is None:
+        return None
+    import hashlib
+    import json
+
+    text = json.dumps(profile.to_dict(), sort_keys=True)
+    return f"{profile.name}@{hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]}"
+
+
 def _versions() -> dict[str, str]:
     import drjit
     import mitsuba
@@ -133,17 +144,15 @@ def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
 
 
 def _nidar_columns(
-    run: _Run, weights: str | None, branch: str, profile: str | None = None
+    run: _Run, weights: str | None, branch: str, profile=None
 ) -> dict[str, dict]:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .io.calib import render_camera
     from .nidar.pipeline import NidarModel
-    from .nidar.profiles import resolve_profile
 
     if not run.renders:
         raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
     model = NidarModel.load(weights)
-    prof = resolve_profile(profile, model) if profile is not None else None
     maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in run.renders.items()}
     out = {}
     for lid, result in run.results.items():
@@ -160,7 +169,7 @@ def _nidar_columns(
             depth_images=depth,
             maps=cam_maps,
             branch=branch,
-            profile=prof,
+            profile=profile,
             ring=pts["ring"].astype(np.int64),
         )
         out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
@@ -192,7 +201,7 @@ def render_scene(
     intensity: str = "physics",
     weights: str | None = None,
     nidar_branch: str = "R",
-    profile: str | None = None,
+    profile=None,
     overwrite: bool = False,
 ) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`).
@@ -212,8 +221,9 @@ def render_scene(
         intensity: ``physics``, or ``nidar`` to add NIDAR's intensity from the cameras.
         weights: NIDAR weights folder (None: the shipped model).
         nidar_branch: ``R`` or ``I_hat`` (without a profile).
-        profile: NIDAR sensor profile, a name or a file (:mod:`nidar_mi.nidar.profiles`); None:
-            the weights' own calibration (the numbers of ``sim-905``).
+        profile: a :class:`~nidar_mi.nidar.profile.SensorProfile` for NIDAR's intensity
+            (:func:`nidar_mi.nidar.profiles.resolve_profile` turns a name or file into one);
+            None: the weights' own calibration (the numbers of ``sim-905``).
         overwrite: replace a non-empty ``out_dir``.
 
     Returns:
@@ -237,7 +247,7 @@ def render_scene(
         intensity=intensity,
         weights=weights,
         nidar_branch=nidar_branch,
-        profile=profile,
+        profile=_profile_key(profile),
     )
     _check_request(req)
     t_start = time.perf_counter()
@@ -296,7 +306,7 @@ def ensure_rendered(scene_path: str, out_dir: str, **options) -> dict:
         scene_path,
         **{k: options[k] for k in keys if k in options},
         nidar_branch=options.get("nidar_branch", "R"),
-        profile=options.get("profile"),
+        profile=_profile_key(options.get("profile")),
     )
     if rf.is_current(out_dir, req):
         return rf.read_manifest(out_dir)

@@ -178,7 +178,8 @@ def test_render_with_nidar_intensity(tmp_path):
     import json
 
     manifest = json.loads((out / "manifest.json").read_text())
-    assert manifest["nidar_profile"] == "sim-905" and manifest["request"]["profile"] == "sim-905"
+    assert manifest["nidar_profile"].startswith("sim-905@")
+    assert manifest["request"]["profile"] == manifest["nidar_profile"]
     p = read_npz(out / "lidar_top/points.npz")
     assert p["intensity_nidar"].dtype == np.float32 and p["nidar_observed"].dtype == bool
     obs = p["nidar_observed"]

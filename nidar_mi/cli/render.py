@@ -110,6 +110,16 @@ def main(argv=None) -> int:
     def work():
         from ..simulate import render_scene
 
+        profile = None
+        if args.profile is not None:
+            from ..errors import NidarError
+
+            if args.intensity != "nidar":
+                raise NidarError("--profile applies to --intensity nidar")
+            from ..nidar.pipeline import NidarModel
+            from ..nidar.profiles import resolve_profile
+
+            profile = resolve_profile(args.profile, NidarModel.load(args.weights))
         manifest = render_scene(
             args.scene,
             out,
@@ -124,7 +134,7 @@ def main(argv=None) -> int:
             intensity=args.intensity,
             weights=args.weights,
             nidar_branch=args.nidar_branch,
-            profile=args.profile,
+            profile=profile,
             overwrite=args.overwrite,
         )
         if not args.quiet:
