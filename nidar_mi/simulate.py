@@ -143,9 +143,7 @@ def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
         bar.update(1)
 
 
-def _nidar_columns(
-    run: _Run, weights: str | None, branch: str, profile=None
-) -> dict[str, dict]:
+def _nidar_columns(run: _Run, weights: str | None, branch: str, profile=None) -> dict[str, dict]:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .io.calib import render_camera
     from .nidar.pipeline import NidarModel

@@ -269,8 +269,9 @@ def _luminance_map(rgb: np.ndarray) -> np.ndarray:
 
 
 def _nidar_branches(model, scan) -> dict[str, np.ndarray]:
-    maps = [model.predict_image(im) for im in scan.images]
-    return {b: map_at_returns(scan, [m[b] for m in maps]) for b in ("R", "I_hat")}
+    from ..nidar.profiles import scan_branches
+
+    return scan_branches(model, scan, ("R", "I_hat"))
 
 
 def _branch_of(maps: CachedValues, branch: str):

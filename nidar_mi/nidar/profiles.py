@@ -47,6 +47,7 @@ __all__ = [
     "fit_values_profile",
     "model_identity",
     "resolve_profile",
+    "scan_branches",
     "scan_values",
 ]
 
@@ -83,21 +84,33 @@ def model_identity(model: NidarModel) -> dict[str, str]:
     return dict(cached)
 
 
-def scan_values(model: NidarModel, scan: ScanFrame, branch: str) -> np.ndarray:
-    """The model's ``branch`` map sampled at a scan's returns (NaN where no camera gives one).
+def scan_branches(
+    model: NidarModel, scan: ScanFrame, branches: Sequence[str] = ("R", "I_hat")
+) -> dict[str, np.ndarray]:
+    """The model's maps sampled at a scan's returns: branch -> (N,) values (NaN where no camera
+    gives one).
 
     The returns of a :class:`~nidar_mi.datasets.scans.ScanFrame` are already the visible
-    ones, so the cameras are sampled without a second occlusion test.
+    ones, so the cameras are sampled without a second occlusion test. The networks run once per
+    image for all ``branches``.
     """
     from ..geometry import sample_cameras
 
     maps = [model.predict_image(im) for im in scan.images]
-    if any(branch not in m for m in maps):
-        raise NidarError(f"the model gives no '{branch}' map")
-    values, seen, _ = sample_cameras(
-        scan.xyz, scan.cameras, [m[branch] for m in maps], occlusion=False
-    )
-    return np.where(seen, values, np.nan).astype(np.float64)
+    out = {}
+    for branch in branches:
+        if any(branch not in m for m in maps):
+            raise NidarError(f"the model gives no '{branch}' map")
+        values, seen, _ = sample_cameras(
+            scan.xyz, scan.cameras, [m[branch] for m in maps], occlusion=False
+        )
+        out[branch] = np.where(seen, values, np.nan).astype(np.float64)
+    return out
+
+
+def scan_values(model: NidarModel, scan: ScanFrame, branch: str) -> np.ndarray:
+    """One branch of :func:`scan_branches`."""
+    return scan_branches(model, scan, (branch,))[branch]
 
 
 def fit_values_profile(
