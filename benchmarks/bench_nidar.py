@@ -56,8 +56,8 @@ def street_image(width: int, height: int, seed: int = 0) -> np.ndarray:
     horizon = int(0.45 * height)
     img[horizon:] = [0.3, 0.3, 0.32]
     for _ in range(12):
-        x0 = int(rng.uniform(0, width - 40))
-        w = int(rng.uniform(30, width / 6))
+        w = int(rng.uniform(0.03, 0.15) * width) + 1
+        x0 = int(rng.uniform(0, width - w))
         top = int(rng.uniform(0.05, 0.4) * height)
         img[top:horizon, x0 : x0 + w] = rng.uniform(0.1, 0.9, 3)
     img += 0.05 * np.sin(x[..., None] / 7.0) * np.cos(y[..., None] / 5.0)
