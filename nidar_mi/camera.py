@@ -4,7 +4,11 @@
 * NIR: the same camera with a ``specfilm`` whose response is a trapezoid around λ (flat over
   λ ± :data:`NIR_HALF_PLATEAU_NM`, linear ramps of :data:`NIR_RAMP_NM` on each side). Mitsuba's
   specfilm integrates ``∫ L(λ') r(λ') dλ'``; the image is divided by ``∫ r`` so it reads band-averaged
-  radiance: a uniform sky of radiance 1 reads 1.
+  radiance: a uniform sky of radiance 1 reads 1. One band image per wavelength asked for (a scene
+  with LiDARs at 905 and 1550 nm gets both).
+* Cameras: ``perspective`` and ``thinlens`` sensors (:data:`CAMERA_CLASSES`); a thin-lens camera's
+  NIR image has the same aperture and focus distance, and its calibration is the pinhole through
+  the lens centre.
 * Depth: z-depth (m, along the optical axis) of the first surface through each pixel centre, by
   casting the camera's own rays; 0 where nothing is hit.
 * Reflectance: ρ(λ) at the LiDAR wavelength of the surface through each pixel centre, seen
@@ -25,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import NidarError
 from .io.images import REC709_LUMA, linear_to_srgb
 
 __all__ = [
@@ -34,8 +39,14 @@ __all__ = [
     "camera_calibration",
     "NIR_HALF_PLATEAU_NM",
     "NIR_RAMP_NM",
+    "CAMERA_CLASSES",
     "nir_response",
+    "render_memory",
+    "check_render_memory",
 ]
+
+#: Mitsuba sensor classes rendered as cameras.
+CAMERA_CLASSES = ("PerspectiveCamera", "ThinLensCamera")
 
 #: Path-tracing depth used when a scene declares no integrator.
 DEFAULT_MAX_DEPTH = 6
@@ -55,10 +66,12 @@ class CameraRender:
         depth: (H,W) float32 z-depth in m, 0 where no surface.
         K: (3,3) float64 OpenCV intrinsics.
         T_world_cam: (4,4) float64 camera-to-world, OpenCV axes.
-        wavelength: NIR band centre in nm.
+        wavelength: NIR band centre of ``nir`` in nm.
         timings: seconds per stage.
-        reflectance: (H,W) float32 monostatic ρ(λ)·T² per pixel centre (module docstring), or
-            None when not rendered.
+        other_nir: further band centre (nm) -> (H,W) float32 band image, when several
+            wavelengths were asked for.
+        reflectance: (H,W) float32 monostatic ρ(λ)·T² per pixel centre at ``wavelength``
+            (module docstring), or None when not rendered.
     """
 
     name: str
@@ -69,6 +82,7 @@ class CameraRender:
     T_world_cam: np.ndarray
     wavelength: float
     timings: dict[str, float] = field(default_factory=dict)
+    other_nir: dict[float, np.ndarray] = field(default_factory=dict)
     reflectance: np.ndarray | None = None
 
     def exposure(self) -> float:
@@ -181,13 +195,23 @@ def _nir_camera(camera, wavelength: float, spp: int):
     params = mi.traverse(camera)
     W, H = (int(v) for v in camera.film().size())
     pts, _ = nir_response(wavelength)
-    return mi.load_dict(
-        {
+    if camera.class_name() == "ThinLensCamera":
+        lens = {
+            "type": "thinlens",
+            "aperture_radius": float(params["aperture_radius"][0]),
+            "focus_distance": float(params["focus_distance"][0]),
+        }
+    else:
+        lens = {
             "type": "perspective",
-            "fov": float(params["x_fov"][0]),
-            "fov_axis": "x",
             "principal_point_offset_x": float(params["principal_point_offset_x"][0]),
             "principal_point_offset_y": float(params["principal_point_offset_y"][0]),
+        }
+    return mi.load_dict(
+        lens
+        | {
+            "fov": float(params["x_fov"][0]),
+            "fov_axis": "x",
             "near_clip": float(params["near_clip"]),
             "far_clip": float(params["far_clip"]),
             "to_world": mi.ScalarTransform4f(_matrix(camera.world_transform())),
@@ -202,11 +226,56 @@ def _nir_camera(camera, wavelength: float, spp: int):
     )
 
 
+#: Peak memory of a render per pixel (RGB and NIR films, depth, the images written), bytes, and
+#: per sample (sampler state): Mitsuba traces the image in one fused kernel, so memory grows with
+#: the pixels and barely with the samples (measured: docs/BENCHMARKS.md, "Memory").
+PIXEL_BYTES = 160
+SAMPLE_BYTES = 2
+
+
+def render_memory(width: int, height: int, spp: int) -> int:
+    """Estimated peak memory of one camera render written to disk, bytes."""
+    return width * height * (PIXEL_BYTES + SAMPLE_BYTES * spp)
+
+
+def check_render_memory(camera, spp: int, limit: int | None = None) -> None:
+    """Refuse a render whose estimate exceeds ``limit`` (None: the default scan limit).
+
+    Raises:
+        NidarError: one line with the estimate, the limit and how to raise it.
+    """
+    from .errors import NidarError
+    from .lidar.memory import default_limit, format_size
+
+    W, H = (int(v) for v in camera.film().size())
+    limit = default_limit() if limit is None else int(limit)
+    need = render_memory(W, H, spp)
+    if need > limit:
+        raise NidarError(
+            f"camera '{camera.id()}': the render needs about {format_size(need)} ({W} x {H} "
+            f"pixels, {spp} spp), more than the limit of {format_size(limit)}; lower the "
+            "resolution or raise the limit with --max-memory (or NIDAR_MAX_MEMORY)"
+        )
+
+
 _warned: set[str] = set()
 
 
+def _render(scene, sensor, integrator, spp: int, seed: int, what: str) -> np.ndarray:
+    import mitsuba as mi
+
+    try:
+        return np.array(
+            mi.render(scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed),
+            dtype=np.float32,
+        )
+    except RuntimeError as e:  # Mitsuba's own message, e.g. an invalid film
+        first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+        raise NidarError(f"{what}: Mitsuba could not render it ({first})") from None
+
+
 def render_camera(
-    loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0
+    loaded, camera, *, wavelength: float, spp: int = 16, seed: int = 0, other_wavelengths=()
 ) -> CameraRender:
     """Render RGB, NIR band, depth and reflectance at λ of one camera of a loaded scene.
 
@@ -215,7 +284,8 @@ def render_camera(
         camera: one of ``loaded.cameras``.
         wavelength: NIR band centre in nm (the LiDAR's).
         spp: samples per pixel of both renders.
-        seed: sampler seed.
+        seed: sampler seed, in [0, 2**32).
+        other_wavelengths: further NIR band centres in nm (``CameraRender.other_nir``).
     """
     import mitsuba as mi
 
@@ -234,16 +304,17 @@ def render_camera(
     integrator = scene.integrator() or mi.load_dict(
         {"type": "path", "max_depth": DEFAULT_MAX_DEPTH}
     )
+    what = f"camera '{camera.id()}'"
     t0 = time.perf_counter()
-    rgb = mi.render(scene, sensor=camera, integrator=integrator, spp=spp, seed=seed)
-    rgb = np.array(rgb, dtype=np.float32)[..., :3]
+    rgb = _render(scene, camera, integrator, spp, seed, what)[..., :3]
     timings["rgb"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    _, integral = nir_response(wavelength)
-    nir_cam = _nir_camera(camera, wavelength, spp)
-    nir = mi.render(scene, sensor=nir_cam, integrator=integrator, spp=spp, seed=seed)
-    nir = np.array(nir, dtype=np.float32)
-    nir = (nir[..., 0] / integral).astype(np.float32)
+    bands = {}
+    for wl in dict.fromkeys([float(wavelength), *map(float, other_wavelengths)]):
+        _, integral = nir_response(wl)
+        nir = _render(scene, _nir_camera(camera, wl, spp), integrator, spp, seed, what)
+        bands[wl] = (nir[..., 0] / integral).astype(np.float32)
+    nir = bands.pop(float(wavelength))
     timings["nir"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     K, T_world_cam, (W, H) = camera_calibration(camera)
@@ -252,7 +323,8 @@ def render_camera(
     t0 = time.perf_counter()
     reflectance = _reflectance(scene, camera, W, H, wavelength)
     timings["reflectance"] = time.perf_counter() - t0
-    for name, img in (("rgb", rgb), ("nir", nir)):
+    images = [("rgb", rgb), ("nir", nir)] + [(f"nir {wl:g} nm", b) for wl, b in bands.items()]
+    for name, img in images:
         if not np.all(np.isfinite(img)):
             bad = int((~np.isfinite(img)).sum())
             warnings.warn(
@@ -271,5 +343,6 @@ def render_camera(
         T_world_cam=T_world_cam,
         wavelength=float(wavelength),
         timings=timings,
+        other_nir=bands,
         reflectance=reflectance,
     )

@@ -2,9 +2,14 @@
 
 Layout::
 
-    DATA/meta.json                       splits, wavelength, intensity_scale, render parameters
-    DATA/renders/<scene>/                each scene's render folder (nidar_mi.render_folder)
+    DATA/meta.json                       splits, wavelength, intensity_scale, render parameters,
+                                         and the request (every input) the dataset was built from
+    DATA/renders/<scene>/                each scene's render folder (nidar_mi.render_folder): a
+                                         cache, reused while the scene's render request holds
     DATA/{train,val,test}/<frame>.npz    one frame per (scene, camera)
+
+The splits and ``meta.json`` are published together when the whole build succeeded; the renders
+are a cache that an interrupted build leaves for the next one (:func:`build_dataset`).
 
 A frame pairs one camera's images with the LiDAR returns it sees: each return is projected with
 the camera's calibration, kept when the rendered depth does not hide it, and written to its
@@ -30,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import NidarError
+from .errors import NidarError, check_seed
 
 __all__ = [
     "CORE_KEYS",
@@ -83,7 +88,8 @@ FRAME_KEYS: dict[str, FrameKey] = {
     "R_true": FrameKey(
         np.float32,
         ("H", "W"),
-        "true ρ(λ)·T² per pixel, monostatic along the camera ray (reflectance.exr), 0 on the sky",
+        "true ρ(λ)·T² per pixel, monostatic along the camera ray (reflectance.exr; frames whose "
+        "LiDAR has the wavelength of nir.exr), 0 on the sky",
     ),
     "S_true": FrameKey(
         np.float32,
@@ -256,7 +262,7 @@ def split_scenes(
     """
     names = sorted(names)
     f = np.asarray(fractions, dtype=np.float64)
-    if f.shape != (3,) or np.any(f < 0) or f.sum() <= 0:
+    if f.shape != (3,) or not np.isfinite(f).all() or np.any(f < 0) or f.sum() <= 0:
         raise NidarError(f"--split: three non-negative fractions expected (got {fractions})")
     f = f / f.sum()
     perm = np.random.default_rng(seed).permutation(len(names))
@@ -297,10 +303,8 @@ def frames_of_render(render_dir: str, lidar_id: str | None = None):
         )
         uv, z, front = project(pts["xyz"], cam.model)
         seen = np.flatnonzero(front & visible_mask(uv, z, cam.model, depth_image=cam.depth))
-        nir = cam.nir()
-        r_true = cam.reflectance()
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s_true = np.where(r_true >= R_TRUE_MIN, np.pi * nir / r_true, 0.0)
+        wavelength = r.parameters["wavelength"]
+        nir = cam.nir(wavelength)
         frame = {
             "rgb": cam.rgb8(),
             "nir": nir,
@@ -311,12 +315,16 @@ def frames_of_render(render_dir: str, lidar_id: str | None = None):
             "depth": cam.depth,
             "K": cam.model.K.astype(np.float64),
             "T_cam_lidar": cam.model.T_cam_lidar.astype(np.float64),
-            "R_true": r_true,
-            "S_true": s_true.astype(np.float32),
             "points_xyz": pts["xyz"][seen].astype(np.float32),
             "points_intensity": r.compensated[seen].astype(np.float32),
             "points_ring": pts["ring"][seen].astype(np.int16),
         }
+        if float(cam.calib.get("nir_wavelength_nm", wavelength)) == float(wavelength):
+            # reflectance.exr is at the wavelength of nir.exr (the render's first LiDAR)
+            r_true = cam.reflectance()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s_true = np.where(r_true >= R_TRUE_MIN, np.pi * nir / r_true, 0.0)
+            frame["R_true"], frame["S_true"] = r_true, s_true.astype(np.float32)
         yield cam.name, frame, r.parameters
 
 
@@ -334,13 +342,79 @@ def write_frame(path: str | os.PathLike, frame: dict[str, np.ndarray]) -> None:
             np.savez(f, **frame)
 
 
-def _remove_stale_frames(out_dir: str, frames: dict[str, list[str]]) -> None:
-    """Delete frame files an earlier run left in a split they no longer belong to."""
+def _render_request(path: str, params: dict[str, str], seed: int, spp: int):
+    """The render of one scene a dataset asks for (the cache key of ``DATA/renders/<scene>``)."""
+    from .render_folder import RenderRequest
+
+    return RenderRequest.of(path, params=params, seed=seed, spp=spp, formats=("npz",))
+
+
+def _read_meta(out_dir: str) -> dict | None:
+    """``DATA/meta.json`` when it is readable, else None."""
+    try:
+        return load_meta(out_dir)
+    except NidarError:
+        return None
+
+
+def _published(out_dir: str, meta: dict | None, request: dict, renders: dict) -> bool:
+    """Whether ``out_dir`` already holds the dataset of ``request``: same request, every render
+    current, every frame file present."""
+    from .render_folder import is_current
+
+    if meta is None or meta.get("request") != request:
+        return False
+    if not all(is_current(os.path.join(out_dir, "renders", n), r) for n, r in renders.items()):
+        return False
+    return all(
+        os.path.isfile(os.path.join(out_dir, split, f"{fid}.npz"))
+        for split, fids in meta.get("frames", {}).items()
+        for fid in fids
+    )
+
+
+def _withdraw(out_dir: str) -> None:
+    """Remove a published dataset (``meta.json`` first, then the splits); the renders stay."""
+    import shutil
+
+    meta = Path(out_dir) / "meta.json"
+    if meta.is_file():
+        meta.unlink()
     for split in SPLITS:
-        keep = set(frames[split])
-        for path in list_frames(out_dir, split):
-            if path.stem not in keep:
-                path.unlink()
+        shutil.rmtree(Path(out_dir) / split, ignore_errors=True)
+
+
+def _render_all(files, names, out_dir: str, used: dict, seed: int, spp: int, progress: bool):
+    """Render every scene into ``DATA/renders/<name>`` (skipped when current); their folders."""
+    from tqdm.auto import tqdm
+
+    from .simulate import ensure_rendered
+
+    dirs = []
+    for path, name in tqdm(
+        list(zip(files, names)), desc="dataset", unit="scene", disable=not progress
+    ):
+        rdir = os.path.join(out_dir, "renders", name)
+        opts = dict(formats=("npz",), seed=seed, spp=spp, params=used[path], progress=False)
+        ensure_rendered(path, rdir, **opts)
+        dirs.append(rdir)
+    return dirs
+
+
+def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
+    """Drop cached renders of scenes no longer in the dataset and, with ``foreign`` (an
+    ``--overwrite`` of a folder that was no dataset), every other entry."""
+    import shutil
+
+    renders = Path(out_dir) / "renders"
+    keep = set(names)
+    for d in renders.iterdir() if renders.is_dir() else ():
+        if d.is_dir() and not d.name.startswith(".") and d.name not in keep:
+            shutil.rmtree(d, ignore_errors=True)
+    if foreign:
+        for entry in Path(out_dir).iterdir():
+            if entry.name not in {"renders", "meta.json", *SPLITS}:
+                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
 
 
 def build_dataset(
@@ -354,33 +428,45 @@ def build_dataset(
     lidar_id: str | None = None,
     intensity_scale: float = 1.0,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> dict:
-    """Render every scene (cached per request) and write the frames and ``meta.json``.
+    """Render every scene (cached per request) and publish the frames and ``meta.json``.
+
+    ``DATA`` holds a render cache (``renders/``, one complete render folder per scene, reused
+    while its request is unchanged) and the published dataset (``meta.json`` and the split
+    folders). The dataset is built in a staging folder and published whole at the end
+    (``meta.json`` last); a build with other inputs first withdraws the published dataset, so
+    a failed or interrupted build never leaves frames that mix two builds, only the completed
+    renders for the next run to reuse. A build with the same inputs as the published dataset
+    (:data:`meta.json`'s ``request``) does nothing.
 
     Args:
         scene_dir: folder of scene XML files.
-        out_dir: the dataset folder.
+        out_dir: the dataset folder; a non-empty folder that is no dataset is refused unless
+            ``overwrite`` (its other entries are then removed once the dataset is published).
         fractions: train/val/test fractions of the scenes.
-        seed: split seed, scan seed and sampler seed.
-        spp: camera samples per pixel.
+        seed: split seed, scan seed and sampler seed, in [0, 2**32).
+        spp: camera samples per pixel (>= 1).
         params: scene parameters (``-D``); each scene gets those it uses; a name no scene uses
             is an error.
         lidar_id: the LiDAR whose returns supervise (None: the first by id).
         intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
         progress: show a progress bar.
+        overwrite: accept a non-empty ``out_dir`` that is no dataset.
 
     Returns:
         The meta dict (also written to ``DATA/meta.json``).
     """
-    from tqdm.auto import tqdm
+    from .io.atomic import atomic_write_json, check_output_folder, staged_entries
+    from .render_folder import file_sha256
 
-    from .io.atomic import atomic_write_json
-    from .simulate import ensure_rendered
-
+    if not (isinstance(intensity_scale, (int, float)) and np.isfinite(intensity_scale)):
+        raise NidarError(f"--intensity-scale must be a positive number (got {intensity_scale})")
     if not intensity_scale > 0:
         raise NidarError(f"--intensity-scale must be > 0 (got {intensity_scale})")
-    if seed < 0:
-        raise NidarError(f"--seed must be >= 0 (got {seed})")
+    check_seed(seed)
+    if spp < 1:
+        raise NidarError(f"--spp must be >= 1 (got {spp})")
     files = find_scenes(scene_dir)
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
@@ -390,37 +476,48 @@ def build_dataset(
     if unused:
         raise NidarError(f"-D {', '.join(unused)}: no scene in {scene_dir} has such a parameter")
     splits = split_scenes(names, fractions, seed)
+    old = _read_meta(out_dir)
+    earlier = old is not None or os.path.isdir(os.path.join(out_dir, "renders"))
+    check_output_folder(out_dir, overwrite=overwrite or earlier)
+    request = {
+        "scenes": {n: file_sha256(f) for f, n in zip(files, names)},
+        "params": dict(sorted((params or {}).items())),
+        "seed": seed,
+        "spp": spp,
+        "lidar": lidar_id,
+        "split": [float(f) for f in fractions],
+        "intensity_scale": float(intensity_scale),
+    }
+    renders = {n: _render_request(f, used[f], seed, spp) for f, n in zip(files, names)}
+    if _published(out_dir, old, request, renders):
+        return old
+    if old is not None:
+        _withdraw(out_dir)
     split_of = {n: s for s, ns in splits.items() for n in ns}
     frames: dict[str, list[str]] = {s: [] for s in SPLITS}
     wavelength = None
-    for path, name in tqdm(
-        list(zip(files, names)), desc="dataset", unit="scene", disable=not progress
-    ):
-        rdir = os.path.join(out_dir, "renders", name)
-        opts = dict(formats=("npz",), seed=seed, spp=spp, params=used[path], progress=False)
-        ensure_rendered(path, rdir, **opts)
-        rendered_at = os.path.getmtime(os.path.join(rdir, "manifest.json"))
-        for cam_id, frame, lparams in frames_of_render(rdir, lidar_id):
-            wavelength = lparams["wavelength"]
-            split = split_of[name]
-            fid = f"{name}__{cam_id}"
-            target = os.path.join(out_dir, split, fid + ".npz")
-            if not os.path.isfile(target) or os.path.getmtime(target) < rendered_at:
-                write_frame(target, frame)
-            frames[split].append(fid)
-    _remove_stale_frames(out_dir, frames)
-    meta = {
-        "source": "render",
-        "scenes": splits,
-        "frames": frames,
-        "wavelength_nm": wavelength,
-        "intensity": "range-compensated g·rho·cos(theta)·exp(-2 alpha d)",
-        "intensity_scale": float(intensity_scale),
-        "seed": seed,
-        "spp": spp,
-        "params": dict(params or {}),
-    }
-    atomic_write_json(os.path.join(out_dir, "meta.json"), meta)
+    with staged_entries(out_dir, [*SPLITS, "meta.json"], last="meta.json") as stage:
+        dirs = _render_all(files, names, out_dir, used, seed, spp, progress)
+        for rdir, name in zip(dirs, names):
+            for cam_id, frame, lparams in frames_of_render(rdir, lidar_id):
+                wavelength = lparams["wavelength"]
+                fid = f"{name}__{cam_id}"
+                write_frame(os.path.join(stage, split_of[name], fid + ".npz"), frame)
+                frames[split_of[name]].append(fid)
+        meta = {
+            "source": "render",
+            "scenes": splits,
+            "frames": frames,
+            "wavelength_nm": wavelength,
+            "intensity": "range-compensated g·rho·cos(theta)·exp(-2 alpha d)",
+            "intensity_scale": float(intensity_scale),
+            "seed": seed,
+            "spp": spp,
+            "params": dict(params or {}),
+            "request": request,
+        }
+        atomic_write_json(os.path.join(stage, "meta.json"), meta)
+    _remove_leftovers(out_dir, names, foreign=overwrite and not earlier)
     return meta
 
 

@@ -6,6 +6,7 @@ One module owns the layout (the table of files is in the README, "Rendering")::
     OUT/<lidar_id>/points.{npz,ply,las,bin,pcd} valid returns (schema: nidar_mi.io.points)
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
     OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, reflectance.exr, calib.json
+    OUT/<camera_id>/nir_<λ>nm.{png,exr}          further NIR bands (LiDARs at other wavelengths)
 
 Writers take the in-memory results (:class:`~nidar_mi.lidar.scan.ScanResult`,
 :class:`~nidar_mi.camera.CameraRender`); :func:`read_render` gives them back as arrays and camera
@@ -28,6 +29,7 @@ import numpy as np
 from .errors import NidarError
 
 __all__ = [
+    "BIN_INTENSITY",
     "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
@@ -46,6 +48,8 @@ __all__ = [
 FORMATS = ("npz", "ply", "las", "bin", "pcd")
 #: The formats written when none are asked for.
 DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
+#: ``bin_intensity`` values: KITTI's [0, 1] convention, or the simulator's own intensity.
+BIN_INTENSITY = ("unit", "raw")
 #: The manifest's file name; its presence marks a folder as a render folder.
 MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
@@ -77,6 +81,7 @@ class RenderRequest:
         nidar_branch: NIDAR branch (``nidar`` only).
         profile: NIDAR sensor profile as ``<name>@<hash of its content>`` (``nidar`` only;
             None: the weights' own calibration).
+        bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
         layout: :data:`LAYOUT_VERSION` of the folder.
     """
 
@@ -92,6 +97,7 @@ class RenderRequest:
     weights: str | None = None
     nidar_branch: str | None = None
     profile: str | None = None
+    bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
 
     @classmethod
@@ -155,14 +161,30 @@ def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
 # --------------------------------------------------------------------------- writing
 
 
-def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None = None) -> list[str]:
+def write_lidar(
+    folder: str | os.PathLike,
+    result,
+    formats,
+    extra: dict | None = None,
+    bin_intensity: str = "unit",
+    *,
+    deskew: bool = False,
+) -> list[str]:
     """Write one LiDAR's points, range image and previews into ``folder/<lidar id>/``.
+
+    Intensity encodings are fixed per sensor, never per frame: LAS stores
+    ``round(clip(I / I_full, 0, 1) · 65535)`` counts and KITTI ``.bin`` (``bin_intensity``
+    ``unit``, the default) ``clip(I / I_full, 0, 1)``, with ``I_full`` the sensor's
+    :func:`~nidar_mi.lidar.return_model.full_scale_intensity`; ``bin_intensity="raw"`` writes
+    the intensity as it is. npz and PLY always hold the float intensity unchanged.
 
     Args:
         folder: the render folder (or its staging copy).
         result: a :class:`~nidar_mi.lidar.scan.ScanResult`.
         formats: point formats from :data:`FORMATS`.
         extra: further per-point columns (e.g. ``intensity_nidar``).
+        bin_intensity: ``unit`` or ``raw`` (:data:`BIN_INTENSITY`).
+        deskew: add ``xyz_deskewed`` (the points in the LiDAR frame at the sweep's start).
 
     Returns:
         The paths written.
@@ -171,15 +193,22 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
     from .io import points as pio
     from .io.las import write_las
     from .io.pcd import write_pcd
+    from .io.range_preview import write_range_preview
+    from .lidar.return_model import full_scale_intensity
 
-    d = os.path.join(folder, result.config.name)
+    if bin_intensity not in BIN_INTENSITY:
+        raise NidarError(f"--bin-intensity must be one of {', '.join(BIN_INTENSITY)}")
+    cfg = result.config
+    d = os.path.join(folder, cfg.name)
     os.makedirs(d, exist_ok=True)
-    pts = result.points() | dict(extra or {})
+    pts = result.points(deskew=deskew) | dict(extra or {})
+    full = full_scale_intensity(cfg.gain, cfg.intensity_mode)
+    bin_i = pts["intensity"] if bin_intensity == "raw" else np.clip(pts["intensity"] / full, 0, 1)
     writers = {
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
-        "las": lambda p: write_las(p, pts),
-        "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], pts["intensity"]),
+        "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
+        "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], bin_i),
         "pcd": lambda p: write_pcd(p, pts),
     }
     written = []
@@ -191,15 +220,17 @@ def write_lidar(folder: str | os.PathLike, result, formats, extra: dict | None =
     channels = {
         "range": np.where(valid, result.range, 0.0).astype(np.float32),
         "intensity": np.where(valid, result.intensity, 0.0).astype(np.float32),
-        "reflectance": result.reflectance.astype(np.float32),
+        "reflectance": np.where(valid, result.reflectance, 0.0).astype(np.float32),
         "valid": valid.astype(np.float32),
     }
     path = os.path.join(d, "range_image.exr")
     images.write_exr(path, channels)
     written.append(path)
-    for key in ("range", "intensity"):
+    azimuth = np.degrees(np.arctan2(result.directions[0, :, 1], result.directions[0, :, 0]))
+    unit = "1/m²" if cfg.intensity_mode == "raw" else "unitless"
+    for key, label in (("range", "range (m)"), ("intensity", f"intensity ({unit})")):
         path = os.path.join(d, f"{key}.png")
-        images.write_colormap_png(path, channels[key], invalid=~valid, cmap="turbo")
+        write_range_preview(path, channels[key], valid, azimuth, label=label)
         written.append(path)
     return written
 
@@ -208,6 +239,11 @@ def _gray8(img: np.ndarray) -> np.ndarray:
     from .io.images import linear_to_srgb
 
     return np.round(linear_to_srgb(np.clip(img, 0.0, 1.0)) * 255.0).astype(np.uint8)
+
+
+def nir_file(wavelength: float) -> str:
+    """File name of a further NIR band image, e.g. ``nir_1550nm.exr``."""
+    return f"nir_{wavelength:g}nm.exr"
 
 
 def write_camera(
@@ -239,6 +275,12 @@ def write_camera(
     }
     if render.reflectance is not None:
         outputs["reflectance.exr"] = lambda p: images.write_exr(p, {"Y": render.reflectance})
+    nir_images = {f"{render.wavelength:g}": "nir.exr"}
+    for wl, band in render.other_nir.items():
+        name = nir_file(wl)
+        nir_images[f"{wl:g}"] = name
+        outputs[name] = lambda p, b=band: images.write_exr(p, {"Y": b})
+        outputs[name[:-4] + ".png"] = lambda p, b=band: images.write_png(p, _gray8(b * exposure))
     written = []
     for fname, fn in outputs.items():
         path = os.path.join(d, fname)
@@ -253,6 +295,7 @@ def write_camera(
         "T_world_cam": render.T_world_cam.tolist(),
         "T_cam_lidar": {k: (T_cam_world @ T).tolist() for k, T in lidar_poses.items()},
         "nir_wavelength_nm": render.wavelength,
+        "nir_images": nir_images,
         "png_exposure": exposure,
     }
     path = os.path.join(d, "calib.json")
@@ -273,12 +316,14 @@ class RenderedCamera:
         folder: its output folder (rgb.png, nir.exr, depth.exr, calib.json).
         model: camera model with ``T_cam_lidar`` of the scan's LiDAR.
         depth: (H, W) float32 z-depth in m, 0 where no surface.
+        calib: its ``calib.json`` entry of the manifest.
     """
 
     name: str
     folder: str
     model: object
     depth: np.ndarray
+    calib: dict = field(default_factory=dict)
 
     def rgb8(self) -> np.ndarray:
         """(H, W, 3) uint8 sRGB (rgb.png)."""
@@ -286,11 +331,26 @@ class RenderedCamera:
 
         return read_png(os.path.join(self.folder, "rgb.png"))[..., :3]
 
-    def nir(self) -> np.ndarray:
-        """(H, W) float32 NIR band radiance (nir.exr)."""
+    def nir(self, wavelength: float | None = None) -> np.ndarray:
+        """(H, W) float32 NIR band radiance at ``wavelength`` nm (default: ``nir.exr``, the band
+        of the render's first LiDAR by id).
+
+        Raises:
+            NidarError: the render holds no band at ``wavelength``.
+        """
         from .io.images import read_exr
 
-        return _single_channel(read_exr(os.path.join(self.folder, "nir.exr")))
+        name = "nir.exr"
+        if wavelength is not None:
+            images = self.calib.get("nir_images") or {
+                f"{self.calib.get('nir_wavelength_nm', 0):g}": "nir.exr"
+            }
+            name = images.get(f"{float(wavelength):g}")
+            if name is None:
+                raise NidarError(
+                    f"{self.folder}: no NIR image at {wavelength:g} nm (has {', '.join(images)} nm)"
+                )
+        return _single_channel(read_exr(os.path.join(self.folder, name)))
 
     def reflectance(self) -> np.ndarray:
         """(H, W) float32 monostatic ρ(λ)·T² per pixel centre (reflectance.exr).
@@ -358,7 +418,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
         cam_dir = os.path.join(folder, cam_id)
         model = render_camera(cam, cam_id, lid, f"{folder}: camera {cam_id}")
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
-        cameras.append(RenderedCamera(cam_id, cam_dir, model, depth))
+        cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 
 from .backend import set_variant
@@ -32,7 +33,8 @@ class LoadedScene:
         scene: the ``mi.Scene``.
         variant: the Mitsuba variant it was loaded in.
         lidars: ``lidar`` sensors.
-        cameras: ``perspective`` sensors.
+        cameras: ``perspective`` and ``thinlens`` sensors (other sensor types are not rendered:
+            a warning names them).
         rgb_twin: whether materials were replaced by their RGB appearance.
         labels: the semantic class and instance each shape declares
             (:mod:`nidar_mi.labels.scene_labels`).
@@ -70,7 +72,9 @@ def _one_line(err: Exception) -> str:
     lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
     text = " ".join(lines) if lines else type(err).__name__
     text = re.sub(r"\[[a-z_]+\.cpp:\d+\]\s*", "", text)  # drop "[parser.cpp:123]"
-    text = re.sub(r"While loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text)
+    text = re.sub(
+        r"(?:Error w|W)hile loading string \(line (\d+), col (\d+)\):", r"line \1, col \2:", text
+    )
     return text
 
 
@@ -124,10 +128,26 @@ def load_scene(
     except Exception as e:
         raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
 
+    from .camera import CAMERA_CLASSES
+
     lidar_cls = plugins.plugin_module("lidar", variant).LidarSensor
     sensors = sorted(scene.sensors(), key=lambda s: s.id())
     lidars = [s for s in sensors if isinstance(s, lidar_cls)]
-    cameras = [s for s in sensors if s.class_name() == "PerspectiveCamera"]
+    cameras = [s for s in sensors if s.class_name() in CAMERA_CLASSES]
+    others = [f"'{s.id()}' ({s.class_name()})" for s in sensors if s not in lidars + cameras]
+    if others:
+        warnings.warn(
+            f"{path}: sensor(s) {', '.join(others)} not rendered: only lidar, perspective and "
+            "thinlens sensors are",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    for cam in cameras:
+        W, H = (int(v) for v in cam.film().crop_size())
+        if W < 1 or H < 1:
+            raise NidarError(
+                f"{path}: camera '{cam.id()}' has a {W}x{H} film (width and height must be >= 1)"
+            )
     return LoadedScene(
         path=path,
         scene=scene,

@@ -11,16 +11,19 @@ renders only when the folder does not already hold the same request
 
 from __future__ import annotations
 
+import contextlib
 import os
 import platform
+import re
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import render_folder as rf
-from .errors import NidarError
+from .errors import NidarError, check_seed
 
 __all__ = ["INTENSITY_SOURCES", "render_scene", "ensure_rendered"]
 
@@ -67,8 +70,13 @@ def _check_request(req: rf.RenderRequest) -> None:
         raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
     if req.intensity == "nidar" and req.nidar_branch not in NIDAR_BRANCHES:
         raise NidarError(f"--nidar-branch must be one of {', '.join(NIDAR_BRANCHES)}")
-    if req.seed is not None and req.seed < 0:
-        raise NidarError(f"--seed must be >= 0 (got {req.seed})")
+    if req.seed is not None:
+        check_seed(req.seed)
+    if req.bin_intensity not in rf.BIN_INTENSITY:
+        raise NidarError(
+            f"--bin-intensity must be one of {', '.join(rf.BIN_INTENSITY)} "
+            f"(got '{req.bin_intensity}')"
+        )
     bad = [f for f in req.formats if f not in rf.FORMATS]
     if bad or not req.formats:
         raise NidarError(
@@ -102,35 +110,92 @@ class _Run:
     timings: dict = field(default_factory=dict)
 
 
-def _scan_lidars(run: _Run, loaded, seed: int | None, bar) -> None:
+def _check_memory(loaded, cameras: bool, spp: int, max_memory: int | None) -> None:
+    """Refuse, before any work, a scan or render estimated to need more than ``max_memory``."""
+    from .camera import check_render_memory
+    from .lidar.memory import check_scan_memory
+
+    for sensor in loaded.lidars:
+        check_scan_memory(sensor.config, max_memory)
+    for cam in loaded.cameras if cameras else []:
+        check_render_memory(cam, spp, max_memory)
+
+
+_RGB_ONLY = re.compile(r"lidar '(?P<lidar>.*)': material '(?P<name>.*)' is RGB-only; (?P<rest>.*)")
+
+
+@contextlib.contextmanager
+def _rgb_only_summary():
+    """Collect the scan's per-material "is RGB-only" warnings into one line per LiDAR (the
+    RGB twin makes every material RGB-only); other warnings pass through unchanged."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    groups: dict[str, list[str]] = {}
+    rest: dict[str, str] = {}
+    for w in caught:
+        m = _RGB_ONLY.fullmatch(str(w.message))
+        if m is None:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            continue
+        groups.setdefault(m["lidar"], []).append(m["name"])
+        rest[m["lidar"]] = m["rest"].replace("its reflectance", "their reflectance")
+    for lidar, names in groups.items():
+        if len(names) == 1:
+            text = f"lidar '{lidar}': material '{names[0]}' is RGB-only; " + rest[lidar].replace(
+                "their reflectance", "its reflectance"
+            )
+        else:
+            text = f"lidar '{lidar}': {len(names)} materials are RGB-only ({', '.join(names)}); "
+            text += rest[lidar].replace(" is not physical", " are not physical")
+        warnings.warn(text, RuntimeWarning, stacklevel=3)
+
+
+def _scan_lidars(run: _Run, loaded, seed: int | None, bar, max_memory: int | None = None) -> None:
     from .lidar.scan import scan
 
     for sensor in loaded.lidars:
         bar.set_postfix_str(f"lidar {sensor.id()}")
         t0 = time.perf_counter()
-        result = scan(loaded.scene, sensor, seed=seed, labels=loaded.labels)
+        with _rgb_only_summary():
+            result = scan(
+                loaded.scene, sensor, seed=seed, max_memory=max_memory, labels=loaded.labels
+            )
         run.results[sensor.id()] = result
         run.lidars[sensor.id()] = {
             "parameters": result.config.to_dict() | ({"seed": seed} if seed is not None else {}),
             "to_world": result.to_world.tolist(),
             "rays": int(result.valid.size),
             "hits": int(result.hit.sum()),
-            "returns": int(result.valid.sum()),
+            "returns": int(sum(layer.valid.sum() for layer in result.returns)),
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
         }
         bar.update(1)
 
 
+def nir_wavelengths(loaded) -> list[float]:
+    """The NIR bands a render gives each camera: every distinct LiDAR wavelength, that of the
+    first LiDAR by id first (``nir.exr``; the others are ``nir_<λ>nm.exr``)."""
+    return list(dict.fromkeys(float(s.config.wavelength) for s in loaded.lidars))
+
+
 def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
     from .camera import render_camera
 
     poses = {lid: r.to_world for lid, r in run.results.items()}
-    wavelength = loaded.lidars[0].config.wavelength
+    wavelengths = nir_wavelengths(loaded)
     for cam in loaded.cameras:
         bar.set_postfix_str(f"camera {cam.id()}")
         t0 = time.perf_counter()
-        r = render_camera(loaded, cam, wavelength=wavelength, spp=spp, seed=seed or 0)
+        r = render_camera(
+            loaded,
+            cam,
+            wavelength=wavelengths[0],
+            other_wavelengths=wavelengths[1:],
+            spp=spp,
+            seed=0 if seed is None else seed,
+        )
         t_render = time.perf_counter() - t0
         t0 = time.perf_counter()
         calib, written = rf.write_camera(run.stage, r, poses)
@@ -174,10 +239,14 @@ def _nidar_columns(run: _Run, weights: str | None, branch: str, profile=None) ->
     return out
 
 
-def _write_lidars(run: _Run, formats, extra: dict[str, dict]) -> None:
+def _write_lidars(
+    run: _Run, formats, extra: dict[str, dict], bin_intensity: str, deskew: bool = False
+) -> None:
     for lid, result in run.results.items():
         t0 = time.perf_counter()
-        run.written += rf.write_lidar(run.stage, result, formats, extra.get(lid))
+        run.written += rf.write_lidar(
+            run.stage, result, formats, extra.get(lid), bin_intensity, deskew=deskew
+        )
         entry = run.lidars[lid]
         entry["timings_s"]["write"] = time.perf_counter() - t0
         if lid in extra:
@@ -198,9 +267,12 @@ def render_scene(
     progress: bool = True,
     intensity: str = "physics",
     weights: str | None = None,
-    nidar_branch: str = "R",
+    nidar_branch: str | None = None,
     profile=None,
     overwrite: bool = False,
+    bin_intensity: str = "unit",
+    max_memory: int | None = None,
+    deskew: bool = False,
 ) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`).
 
@@ -209,7 +281,8 @@ def render_scene(
         out_dir: the render folder; a non-empty folder that is not an earlier render folder is
             refused unless ``overwrite``; an earlier render folder is replaced whole.
         formats: point-cloud formats.
-        seed: overrides every LiDAR's seed; the camera sampler seed.
+        seed: overrides every LiDAR's seed; the camera sampler seed (None: each LiDAR's own
+            seed and sampler seed 0; the manifest records the seeds used), in [0, 2**32).
         spp: camera samples per pixel.
         variant: Mitsuba variant (None: CUDA if available, else LLVM).
         rgb_twin: load the RGB-only twin of the scene.
@@ -217,12 +290,19 @@ def render_scene(
         cameras: render the cameras.
         progress: show a progress bar on stderr.
         intensity: ``physics``, or ``nidar`` to add NIDAR's intensity from the cameras.
-        weights: NIDAR weights folder (None: the shipped model).
-        nidar_branch: ``R`` or ``I_hat`` (without a profile).
+        weights: NIDAR weights folder (None: the shipped model); ``nidar`` only.
+        nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only (without a
+            profile).
         profile: a :class:`~nidar_mi.nidar.profile.SensorProfile` for NIDAR's intensity
             (:func:`nidar_mi.nidar.profiles.resolve_profile` turns a name or file into one);
-            None: the weights' own calibration (the numbers of ``sim-905``).
+            None: the weights' own calibration (the numbers of ``sim-905``); ``nidar`` only.
         overwrite: replace a non-empty ``out_dir``.
+        bin_intensity: ``unit`` (KITTI's [0, 1]) or ``raw``: see
+            :func:`nidar_mi.render_folder.write_lidar`.
+        max_memory: bytes a scan or camera render may use (None:
+            :func:`nidar_mi.lidar.memory.default_limit`); larger requests are refused before
+            anything runs.
+        deskew: add ``xyz_deskewed`` to the points (equal to ``xyz`` for a scan from one pose).
 
     Returns:
         The manifest (also written to ``out_dir/manifest.json``).
@@ -234,6 +314,11 @@ def render_scene(
 
     from .io.atomic import staged_directory
 
+    if intensity != "nidar" and weights is not None:
+        raise NidarError("--weights is used only with --intensity nidar")
+    if intensity != "nidar" and nidar_branch is not None:
+        raise NidarError("--nidar-branch is used only with --intensity nidar")
+    nidar_branch = nidar_branch or "R"
     req = rf.RenderRequest.of(
         scene_path,
         params=params,
@@ -246,18 +331,20 @@ def render_scene(
         weights=weights,
         nidar_branch=nidar_branch,
         profile=_profile_key(profile),
+        bin_intensity=bin_intensity,
     )
     _check_request(req)
     t_start = time.perf_counter()
     t0 = time.perf_counter()
     loaded = _load(req, variant)
     load_s = time.perf_counter() - t0
+    _check_memory(loaded, cameras, spp, max_memory)
     steps = len(loaded.lidars) + (len(loaded.cameras) if cameras else 0)
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
         run = _Run(stage=str(stage), timings={"load": load_s})
         bar = tqdm(total=steps, desc="render", unit="sensor", disable=not progress, file=sys.stderr)
         try:
-            _scan_lidars(run, loaded, seed, bar)
+            _scan_lidars(run, loaded, seed, bar, max_memory)
             if cameras:
                 _render_cameras(run, loaded, spp, seed, bar)
         finally:
@@ -267,7 +354,7 @@ def render_scene(
             t0 = time.perf_counter()
             extra = _nidar_columns(run, weights, nidar_branch, profile)
             run.timings["nidar"] = time.perf_counter() - t0
-        _write_lidars(run, formats, extra)
+        _write_lidars(run, formats, extra, bin_intensity, deskew)
         manifest = {
             "request": req.to_dict(),
             "scene": req.scene,
@@ -276,8 +363,11 @@ def render_scene(
             "rgb_twin": rgb_twin,
             "params": dict(req.params),
             "versions": _versions(),
-            "seed": seed,
+            "seed": 0 if seed is None else seed,
+            "seed_source": "default" if seed is None else "--seed",
             "spp": spp,
+            "nir_wavelengths_nm": nir_wavelengths(loaded) if cameras else [],
+            "bin_intensity": bin_intensity,
             "formats": list(formats),
             "intensity": intensity,
             "nidar_weights": req.weights,
@@ -300,10 +390,11 @@ def ensure_rendered(scene_path: str, out_dir: str, **options) -> dict:
     rendered again (replaced whole).
     """
     keys = ("params", "seed", "spp", "formats", "cameras", "rgb_twin", "intensity", "weights")
+    keys += ("bin_intensity",)
     req = rf.RenderRequest.of(
         scene_path,
         **{k: options[k] for k in keys if k in options},
-        nidar_branch=options.get("nidar_branch", "R"),
+        nidar_branch=options.get("nidar_branch") or "R",
         profile=_profile_key(options.get("profile")),
     )
     if rf.is_current(out_dir, req):

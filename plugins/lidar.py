@@ -32,13 +32,26 @@ class LidarSensor(mi.Sensor):
          - Default
        * - ``preset``
          - string
-         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_128``, ``waymo_top`` (tables and sources in
-           :mod:`nidar_mi.lidar.pattern`)
+         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top`` (tables and
+           sources in :mod:`nidar_mi.lidar.pattern` and :mod:`nidar_mi.lidar.layouts`)
          - ``vlp16``
+       * - ``layout``
+         - string
+         - ``uniform``: the preset's uniform elevation table, every beam from the origin, all
+           lasers of a column firing together; ``per_laser``: the preset's published per-laser
+           table (elevations, azimuth corrections, beam origins, firing order and timing; not
+           ``waymo_top``)
+         - ``uniform`` (``per_laser`` with ``calibration_file``)
+       * - ``calibration_file``
+         - string
+         - per-laser calibration of your own unit: a Velodyne ``db.xml``, a ROS velodyne
+           ``.yaml`` or Ouster metadata ``.json`` (relative to the scene); with a preset of the
+           same laser count, the preset's firing timing is kept
+         - none
        * - ``elevation_angles``
          - string
          - comma-separated ring elevations in degrees, each in [-90, 90]; overrides the
-           preset's table and implies the channel count
+           preset's uniform table and implies the channel count
          - preset's
        * - ``horizontal_resolution``
          - integer
@@ -47,8 +60,25 @@ class LidarSensor(mi.Sensor):
        * - ``fov_h``
          - float
          - horizontal field of view in degrees, (0, 360]; column j points at azimuth
-           (j + 0.5)·fov_h/cols from +x, counter-clockwise
+           a0 + (j + 0.5)·fov_h/cols from +x, counter-clockwise
          - 360
+       * - ``fov_h_centred``
+         - boolean
+         - ``true``: a0 = -fov_h/2, the columns span ±fov_h/2 around +x (forward);
+           ``false``: a0 = 0, they span 0..fov_h
+         - ``false``
+       * - ``rotation_rate``
+         - float
+         - spin rate in Hz, (0, 100]; one sweep takes 1/rotation_rate s
+         - 10
+       * - ``spin``
+         - string
+         - ``cw`` (clockwise seen from above, as Velodyne and Ouster sensors spin) or ``ccw``
+         - ``cw``
+       * - ``scan_start_azimuth``
+         - float
+         - azimuth in degrees where a sweep starts (firing time 0), [-360, 360]
+         - 180
        * - ``wavelength``
          - float
          - laser wavelength in nm, [360, 1700]
@@ -91,6 +121,26 @@ class LidarSensor(mi.Sensor):
          - float
          - probability of dropping a return at random, [0, 1]
          - 0
+       * - ``beam_divergence``
+         - float
+         - full-angle beam divergence at 1/e² irradiance in mrad, [0, 100]; 0: ideal rays;
+           > 0: sub-rays over the Gaussian footprint (:mod:`nidar_mi.lidar.footprint`), several
+           returns per beam, specular echoes of glass
+         - 0
+       * - ``beam_sample_quality``
+         - integer
+         - rings of sub-rays over the footprint q, [1, 12]: 1 + 3·q·(q-1) sub-rays per beam
+           (HELIOS++'s beamSampleQuality)
+         - 3
+       * - ``return_mode``
+         - string
+         - ``strongest``, ``first``, ``last`` or ``dual`` (strongest and last; the second
+           strongest when they coincide); several returns need ``beam_divergence`` > 0
+         - ``strongest``
+       * - ``return_separation``
+         - float
+         - minimum range difference between two returns of one beam in m, > 0
+         - 0.5
        * - ``seed``
          - integer
          - seed of the noise and dropout draws, >= 0
@@ -113,13 +163,16 @@ class LidarSensor(mi.Sensor):
 
     The class does not implement Mitsuba's ``Sensor.sample_ray``: an integrator would use it to
     render the scene's radiance along the beams, which is not what a LiDAR measures. The beam
-    pattern has one implementation, :func:`nidar_mi.lidar.pattern.beam_directions`, which the
+    pattern has one implementation, :class:`nidar_mi.lidar.pattern.BeamPattern`, which the
     scan casts as a whole.
     """
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         values = {k: props.get(k) for k in PARAMETERS if k in props}
+        if "calibration_file" in values:  # relative to the scene file
+            path = str(values["calibration_file"])
+            values["calibration_file"] = str(mi.file_resolver().resolve(path))
         try:
             self.config = LidarConfig.from_mapping(props.id() or "lidar", values)
         except ValueError as e:

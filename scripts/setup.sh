@@ -45,10 +45,20 @@ if [ ! -x "$VENV/bin/python" ]; then
         fi
     fi
 fi
-"$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
+# pip's output (build-backend notices included) is shown only when a step fails.
+LOG=$(mktemp "${TMPDIR:-/tmp}/nidar_setup.XXXXXX")
+trap 'rm -f "$LOG"' EXIT
+quietly() {  # run a command with its output in $LOG; print the log and stop when it fails
+    if ! "$@" >"$LOG" 2>&1; then
+        cat "$LOG" >&2
+        echo "setup: '$*' failed" >&2
+        exit 1
+    fi
+}
+quietly "$VENV/bin/python" -m pip install -q --upgrade pip
 # The CPU build of torch; an unpinned torch would pull a multi-GB CUDA build.
-"$VENV/bin/python" -m pip install -q "torch==2.13.0" 2>&1 | grep -v '^WARNING: Location' || true
-"$VENV/bin/python" -m pip install -q -e ".[dev]" 2>&1 | grep -v '^WARNING: Location' || true
+quietly "$VENV/bin/python" -m pip install -q "torch==2.13.0"
+quietly "$VENV/bin/python" -m pip install -q -e ".[dev]"
 "$VENV/bin/python" -c "import nidar_mi, mitsuba, drjit, torch" \
-    || { echo "setup: the environment in $VENV does not import; see the pip output above" >&2; exit 1; }
+    || { echo "setup: the environment in $VENV does not import (try: $VENV/bin/python -m pip install -e '.[dev]')" >&2; exit 1; }
 echo "setup: ready ($VENV)"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -103,6 +104,53 @@ def test_end_to_end_tables(tiny_run, tmp_path):
     }
 
 
+def test_lpips_without_lpips_is_an_error(tiny_run, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(
+        "nidar_mi.eval.metrics.lpips_unavailable_reason", lambda: "the lpips package is absent"
+    )
+    out = tmp_path / "out"
+    argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]
+    assert main(argv + ["--lpips", "--no-twin", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == "error: --lpips: LPIPS is unavailable: the lpips package is absent\n"
+    assert not out.exists()
+
+
+def test_out_is_published_whole_and_caches_stay_outside(tiny_run, tmp_path, capsys):
+    """Hand-made scenes render into the cache (reused by a rerun), never into OUT; a rerun
+    replaces OUT whole; a foreign OUT needs --overwrite."""
+    import os
+    import shutil
+
+    scenes = tmp_path / "handmade"
+    scenes.mkdir()
+    shutil.copy(Path(__file__).resolve().parents[1] / "scenes" / "park.xml", scenes)
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]
+    argv += ["--scenes", str(scenes), "--cache", str(cache), "--no-twin", "--figures", "0", "-q"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == [
+        "figures",
+        "results.csv",
+        "results.json",
+        "results.md",
+    ]
+    manifest = cache / "renders" / "park" / "manifest.json"
+    stamp = os.path.getmtime(manifest)
+    (out / "figures" / "stale.png").write_bytes(b"x")
+    assert main(argv) == 0
+    assert os.path.getmtime(manifest) == stamp  # the cached render was reused
+    assert not (out / "figures" / "stale.png").exists()  # OUT replaced whole
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert main([*argv[:4], "-o", str(foreign), *argv[6:]]) == 2
+    assert "is not empty" in capsys.readouterr().err
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
+
+
 def test_late_failure_leaves_no_output(tiny_run, tmp_path, capsys):
     """A broken KITTI frame fails after the figures were drawn: nothing is published."""
     kitti = tmp_path / "kitti"
@@ -116,7 +164,7 @@ def test_late_failure_leaves_no_output(tiny_run, tmp_path, capsys):
     assert main(argv + ["--kitti", str(kitti), "--no-twin", "-q"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1
-    assert sorted(p.name for p in out.iterdir()) == []
+    assert not out.exists()
 
 
 def test_nothing_to_evaluate_and_flags_that_need_data(tmp_path, capsys):

@@ -142,9 +142,19 @@ LAYERS = {
     ),
     "plugins": 0,
     **dict.fromkeys(
-        ("scene", "camera", "render_folder", "simulate", "dataset", "datasets", "nidar"), 1
+        (
+            "scene",
+            "camera",
+            "render_folder",
+            "simulate",
+            "sequence",
+            "dataset",
+            "datasets",
+            "nidar",
+            "scenegen",
+        ),
+        1,
     ),
-    "scenegen": 1,
     "studies": 1,
     **dict.fromkeys(("eval", "cli"), 2),
 }

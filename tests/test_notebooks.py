@@ -22,6 +22,60 @@ def test_notebooks_and_their_documentation_agree():
     assert set(re.findall(r"([0-9]{2}_[a-z_]+\.ipynb)", docs)) <= names
 
 
+def _exporter():
+    import importlib.util
+
+    path = NOTEBOOKS[0].parents[1] / "scripts" / "export_notebook_figures.py"
+    spec = importlib.util.spec_from_file_location("export_notebook_figures", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_exported_figures_are_there_and_documented():
+    """docs/figures/notebooks holds figures of every notebook, and docs/NOTEBOOKS.md links
+    exactly those files."""
+    import re
+
+    root = NOTEBOOKS[0].parents[1]
+    fig_root = root / "docs" / "figures" / "notebooks"
+    found = {str(p.relative_to(root / "docs")) for p in fig_root.rglob("*.png")}
+    for nb in NOTEBOOKS:
+        assert list((fig_root / nb.stem).glob("figure_*.png")), f"no exported figure of {nb.name}"
+    docs = (root / "docs" / "NOTEBOOKS.md").read_text(encoding="utf-8")
+    linked = set(re.findall(r"\((figures/notebooks/[^)]+\.png)\)", docs))
+    assert linked == found
+    assert {p.parent.name for p in fig_root.rglob("*.png")} == {nb.stem for nb in NOTEBOOKS}
+
+
+def test_export_writes_every_figure_in_order_and_drops_stale_ones(tmp_path):
+    import base64
+
+    nbformat = pytest.importorskip("nbformat")
+    export = _exporter()
+    pngs = [b"\x89PNG first", b"\x89PNG second"]
+    nb = nbformat.v4.new_notebook()
+    cell = nbformat.v4.new_code_cell("plot()")
+    cell.outputs = [
+        nbformat.v4.new_output("stream", name="stdout", text="hello"),
+        *[
+            nbformat.v4.new_output("display_data", data={"image/png": base64.b64encode(p).decode()})
+            for p in pngs
+        ],
+    ]
+    nb.cells = [nbformat.v4.new_markdown_cell("# t"), cell]
+    stale = tmp_path / "demo" / "figure_03.png"
+    stale.parent.mkdir()
+    stale.write_bytes(b"old")
+    written = export.export(nb, "demo", tmp_path)
+    assert [p.name for p in written] == ["figure_01.png", "figure_02.png"]
+    assert [p.read_bytes() for p in written] == pngs
+    assert sorted(p.name for p in (tmp_path / "demo").iterdir()) == [
+        "figure_01.png",
+        "figure_02.png",
+    ]
+
+
 def _figures(nb) -> int:
     return sum(
         1

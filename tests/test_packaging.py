@@ -31,7 +31,13 @@ def test_wheel_install_ships_plugins(tmp_path):
         timeout=600,
     )
     assert r.returncode == 0, r.stderr[-2000:]
+    # the metadata is clean: no deprecated license table, no data folder outside `packages`
+    assert "project.license" not in r.stderr and "absent from the `packages`" not in r.stderr
     assert (target / "nidar_mi" / "plugins" / "lidar.py").is_file()
+    for data in ("nidar/weights/irnet.safetensors", "nidar/weights/MODEL_CARD.md"):
+        assert (target / "nidar_mi" / data).is_file(), data
+    assert list((target / "nidar_mi" / "materials" / "data").glob("*.csv"))
+    assert (target / "nidar_mi" / "lidar" / "data" / "hdl64e_s2_sztaki.csv").is_file()
     code = (
         "import nidar_mi, nidar_mi.plugins as p; print(nidar_mi.__file__); print(p.__file__);"
         "from nidar_mi.backend import set_variant; set_variant('llvm_ad_spectral');"
@@ -86,3 +92,23 @@ def test_every_imported_distribution_is_declared():
         m for m in third_party if not ({norm(d) for d in owners.get(m, [])} | {norm(m)}) & declared
     }
     assert not missing, f"imported but not declared in pyproject.toml: {sorted(missing)}"
+
+
+def test_every_package_folder_is_listed():
+    """A folder of nidar_mi (code or data) missing from `packages` would be left out of wheels,
+    and setuptools warns about data folders outside it."""
+    tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+    from pathlib import Path
+
+    root = Path(REPO)
+    listed = set(
+        tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    folders = {
+        "nidar_mi." + ".".join(p.relative_to(root / "nidar_mi").parts)
+        if p != root / "nidar_mi"
+        else "nidar_mi"
+        for p in [root / "nidar_mi", *(root / "nidar_mi").rglob("*")]
+        if p.is_dir() and p.name != "__pycache__" and any(f.is_file() for f in p.iterdir())
+    }
+    assert folders | {"nidar_mi.plugins"} == listed

@@ -25,7 +25,7 @@ import sys
 import warnings
 from collections.abc import Callable
 
-from ..errors import NidarError
+from ..errors import MAX_SEED, NidarError, check_seed
 
 __all__ = [
     "EXIT_OK",
@@ -36,6 +36,7 @@ __all__ = [
     "parser",
     "parse_defines",
     "run",
+    "seed_arg",
 ]
 
 EXIT_OK = 0
@@ -56,15 +57,34 @@ def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
     raise Terminated()
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one ``error: ...`` line and status 2."""
+
+    def error(self, message: str):
+        print(f"error: {_one_line(message)} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(EXIT_USER_ERROR)
+
+
 def parser(command: str, description: str, **kwargs) -> argparse.ArgumentParser:
-    """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``."""
+    """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``; a usage error
+    (unknown option, a value of the wrong type) is one line on stderr and status 2."""
     from .. import __version__
 
-    p = argparse.ArgumentParser(
-        prog=f"python -m nidar_mi.{command}", description=description, **kwargs
-    )
+    p = _Parser(prog=f"python -m nidar_mi.{command}", description=description, **kwargs)
     p.add_argument("--version", action="version", version=f"nidar_mi {__version__}")
     return p
+
+
+def seed_arg(text: str) -> int:
+    """argparse ``type`` of a ``--seed`` option: an integer in [0, 2**32 - 1]."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got '{text}'") from None
+    try:
+        return check_seed(value)
+    except NidarError:
+        raise argparse.ArgumentTypeError(f"must lie in [0, {MAX_SEED}] (got {value})") from None
 
 
 def parse_defines(items: list[str]) -> dict[str, str]:
@@ -90,12 +110,19 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):  #
     print(f"warning: {_one_line(message)}", file=sys.stderr)
 
 
-def run(work: Callable[[], int | None], *, on_interrupt: str = "nothing written") -> int:
+def _left(on_interrupt: str | Callable[[], str]) -> str:
+    return _one_line(on_interrupt() if callable(on_interrupt) else on_interrupt)
+
+
+def run(
+    work: Callable[[], int | None], *, on_interrupt: str | Callable[[], str] = "nothing written"
+) -> int:
     """Run a command's work and map every expected failure to one line and an exit status.
 
     Args:
         work: the command body; returns an exit status or None (success).
-        on_interrupt: what the user is told is left after Ctrl-C or SIGTERM.
+        on_interrupt: what the user is told is left after Ctrl-C or SIGTERM (or a function
+            that says it, called after the work was stopped).
 
     Returns:
         The exit status (see the module docstring).
@@ -115,10 +142,10 @@ def run(work: Callable[[], int | None], *, on_interrupt: str = "nothing written"
         print(f"error: {_one_line(e)}", file=sys.stderr)
         return EXIT_USER_ERROR
     except Terminated:
-        print(f"terminated; {on_interrupt}", file=sys.stderr)
+        print(f"terminated; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_TERMINATED
     except KeyboardInterrupt:
-        print(f"interrupted; {on_interrupt}", file=sys.stderr)
+        print(f"interrupted; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     except OSError as e:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""

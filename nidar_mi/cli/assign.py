@@ -6,26 +6,34 @@ Two ways in::
     python -m nidar_mi.assign --kitti DIR --frame 000003 -o OUT
 
 ``--points`` reads .ply/.pcd/.las/.bin (KITTI float32 x,y,z,i)/.npz; ``--calib`` is YAML/JSON with one
-entry per camera (schema: :mod:`nidar_mi.io.calib`; the render command's ``calib.json`` of a scene
-with one LiDAR works too), one ``--image`` per camera in the same order. ``--kitti`` reads
-``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2;
-:func:`nidar_mi.datasets.kitti.load_frame`).
+entry per camera (schema: :mod:`nidar_mi.io.calib`; the render command's ``calib.json`` works too,
+``--lidar`` choosing the LiDAR of a scene with several), one ``--image`` per camera in the same
+order: 8-bit colour PNG as a camera delivers it (RGBA loses alpha, 16-bit is reduced to 8 bit, a
+greyscale image is used as R = G = B with a warning). ``--kitti`` reads ``velodyne/ID.bin``,
+``image_2/ID.png`` and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti.load_frame`).
+
+Points with a non-finite value (NaN or infinity, e.g. the no-return points of an organised
+cloud) are dropped before any work, with a warning that counts them.
 
 ``--profile NAME|FILE`` chooses the sensor profile that turns NIDAR's map into the sensor's
 intensity (:mod:`nidar_mi.nidar.profiles`): ``kitti-hdl64e`` by default with ``--kitti`` (fitted
-on the real KITTI frames at first use and cached; the rings come from the scan order,
-:func:`nidar_mi.datasets.kitti_rings.checked_rings`), ``sim-905`` (the simulator's) by default otherwise,
-or a file from ``python -m nidar_mi.calibrate``. A cloud with a ``ring`` field gives its rings to
-the profile. ``--branch I_hat`` without ``--profile`` assigns the dense head raw.
+on the real KITTI frames at first use and cached), ``sim-905`` (the simulator's) by default
+otherwise, or a file from ``python -m nidar_mi.calibrate``. A cloud's ``ring`` column gives the
+profile its rings; with ``--kitti`` they are recovered from the storage order
+(:func:`nidar_mi.datasets.kitti_rings.checked_rings`) and written as ``ring``. ``--branch I_hat``
+without ``--profile`` assigns the dense head raw.
 
-Output in OUT: ``points.npz`` with ``xyz`` (N,3 float32), the input's own ``intensity`` when it has
-one, ``intensity_nidar`` (N float32, 0 where unobserved) and ``nidar_observed`` (N bool); plus
-``points.ply`` and ``points.las`` (``--formats``). Files appear only when everything succeeded.
+Output in OUT: ``points.npz`` with every column and metadata entry of the input (``xyz``,
+``intensity``, ``ring``, ...) plus ``intensity_nidar`` (N float32, 0 where unobserved) and
+``nidar_observed`` (N bool); plus ``points.ply`` and ``points.las`` (``--formats``). OUT is
+published whole when everything succeeded (a non-empty OUT that is not an earlier output needs
+``--overwrite``).
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
@@ -62,6 +70,39 @@ def assign_intensity(
     return {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
 
 
+def finite_points(points: dict, where: str) -> dict:
+    """``points`` without the points that hold a non-finite value in any float column.
+
+    Warns with the count when points are dropped.
+
+    Raises:
+        NidarError: the cloud is empty, or no finite point is left.
+    """
+    n = len(points["xyz"])
+    if n == 0:
+        raise NidarError(f"{where}: the point cloud holds no points")
+    keep = np.ones(n, dtype=bool)
+    for value in points.values():
+        a = np.asarray(value)
+        if a.dtype.kind == "f" and a.ndim >= 1 and a.shape[0] == n:
+            keep &= np.isfinite(a.reshape(n, -1)).all(axis=1)
+    dropped = int(n - keep.sum())
+    if dropped == 0:
+        return points
+    if dropped == n:
+        raise NidarError(f"{where}: none of its {n} points has finite coordinates and values")
+    warnings.warn(
+        f"{where}: dropped {dropped} of {n} points with NaN or infinite values",
+        RuntimeWarning,
+        stacklevel=2,
+    )
+    out = {}
+    for key, value in points.items():
+        a = np.asarray(value)
+        out[key] = a[keep] if a.ndim >= 1 and a.shape[0] == n and a.dtype.kind != "U" else a
+    return out
+
+
 def _write(out_dir: str, points: dict, formats, overwrite: bool) -> list[str]:
     from ..io.atomic import staged_directory
     from ..io.las import write_las
@@ -75,18 +116,24 @@ def _write(out_dir: str, points: dict, formats, overwrite: bool) -> list[str]:
 
 
 def build_parser():
-    p = parser("assign", __doc__.split("\n")[0])
+    p = parser("assign", "NIDAR intensity for a point cloud from camera images (or a KITTI frame).")
     src = p.add_argument_group("input")
     src.add_argument("--points", help="point cloud (.ply .pcd .las .bin .npz), LiDAR frame")
     src.add_argument(
-        "--image", action="append", default=[], help="camera image (8-bit sRGB), one per camera"
+        "--image",
+        action="append",
+        default=[],
+        help="camera image (8-bit sRGB PNG as delivered), one per camera, in --calib's order",
     )
-    src.add_argument("--calib", help="camera calibration (YAML/JSON)")
+    src.add_argument("--calib", help="camera calibration (YAML/JSON, or render's calib.json)")
+    src.add_argument(
+        "--lidar", help="with a render calib.json of several LiDARs: the LiDAR of --points"
+    )
     src.add_argument("--kitti", help="KITTI folder with velodyne/, image_2/, calib/")
     src.add_argument("--frame", help="KITTI frame id, e.g. 000003")
     p.add_argument("-o", "--out", help="output folder (default: out/assign/<name>)")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
-    p.add_argument("--formats", default=",".join(FORMATS), help="npz,ply,las")
+    p.add_argument("--formats", default=",".join(FORMATS), help="npz,ply,las (default: all)")
     p.add_argument("--no-occlusion", action="store_true", help="skip the occlusion test")
     p.add_argument(
         "--branch",
@@ -110,10 +157,8 @@ def main(argv=None) -> int:
     return run(lambda: _assign(args))
 
 
-def _assign(args) -> None:
-    formats = [f.strip() for f in args.formats.split(",") if f.strip()]
-    if not formats or any(f not in FORMATS for f in formats):
-        raise NidarError(f"--formats: choose from {', '.join(FORMATS)} (got '{args.formats}')")
+def _inputs(args):
+    """``(points, cameras, images, name)`` from the command line."""
     if args.kitti:
         if not args.frame:
             raise NidarError("--kitti needs --frame")
@@ -121,32 +166,53 @@ def _assign(args) -> None:
         from ..datasets.kitti_rings import checked_rings
 
         frame = load_frame(args.kitti, args.frame)
-        cameras, images, name = [frame.camera], [frame.rgb], f"kitti_{args.frame}"
         points = {"xyz": frame.xyz, "intensity": frame.intensity}
         ring = checked_rings(frame.xyz)
-        profile = args.profile or ("kitti-hdl64e" if args.branch == "R" else None)
-    else:
-        if not (args.points and args.calib and args.image):
-            raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
-        from ..io.calib import load_calib
-        from ..io.images import read_png
-        from ..io.point_cloud import read_point_cloud
+        if ring is not None:
+            points["ring"] = ring
+        return points, [frame.camera], [frame.rgb], f"kitti_{args.frame}"
+    if not (args.points and args.calib and args.image):
+        raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
+    from ..io.calib import load_calib
+    from ..io.images import read_rgb8
+    from ..io.point_cloud import read_point_cloud
 
-        cloud = read_point_cloud(args.points)
-        cameras = load_calib(args.calib)
-        if len(cameras) != len(args.image):
+    cameras = load_calib(args.calib, lidar=args.lidar)
+    if len(cameras) != len(args.image):
+        raise NidarError(
+            f"{args.calib} has {len(cameras)} cameras but {len(args.image)} --image given"
+        )
+    images = [read_rgb8(im) for im in args.image]
+    for cam, im, path in zip(cameras, images, args.image):
+        if im.shape[:2] != (cam.height, cam.width):
             raise NidarError(
-                f"{args.calib} has {len(cameras)} cameras but {len(args.image)} --image given"
+                f"{path}: image {im.shape[1]}x{im.shape[0]} does not match camera "
+                f"'{cam.name}' {cam.width}x{cam.height}"
             )
-        images = [read_png(im)[..., :3] for im in args.image]
-        if any(im.dtype != np.uint8 for im in images):
-            raise NidarError("--image: 8-bit images expected")
-        points = {"xyz": np.asarray(cloud["xyz"], dtype=np.float32)}
-        if "intensity" in cloud:
-            points["intensity"] = np.asarray(cloud["intensity"], dtype=np.float32)
-        ring = np.asarray(cloud["ring"], dtype=np.int64) if "ring" in cloud else None
-        profile = args.profile
-        name = os.path.splitext(os.path.basename(args.points))[0]
+    points = read_point_cloud(args.points)
+    points["xyz"] = np.asarray(points["xyz"], dtype=np.float32)
+    if "intensity" in points:
+        points["intensity"] = np.asarray(points["intensity"], dtype=np.float32)
+    name = os.path.splitext(os.path.basename(args.points))[0]
+    return points, cameras, images, name
+
+
+def _assign(args) -> None:
+    from ..io.atomic import check_output_folder
+
+    formats = [f.strip() for f in args.formats.split(",") if f.strip()]
+    if not formats or any(f not in FORMATS for f in formats):
+        raise NidarError(f"--formats: choose from {', '.join(FORMATS)} (got '{args.formats}')")
+    if args.lidar and not args.calib:
+        raise NidarError("--lidar applies to --calib (a render calib.json)")
+    points, cameras, images, name = _inputs(args)
+    out = args.out or os.path.join("out", "assign", name)
+    check_output_folder(out, overwrite=args.overwrite, marker="points.npz")
+    points = finite_points(points, args.points or f"KITTI frame {args.frame}")
+    profile = args.profile
+    if profile is None and args.kitti and args.branch == "R":
+        profile = "kitti-hdl64e"
+    ring = np.asarray(points["ring"], dtype=np.int64) if "ring" in points else None
     points.update(
         assign_intensity(
             points["xyz"],
@@ -159,9 +225,9 @@ def _assign(args) -> None:
             ring=ring,
         )
     )
-    out = args.out or os.path.join("out", "assign", name)
     written = _write(out, points, formats, args.overwrite)
     n, seen = len(points["xyz"]), int(points["nidar_observed"].sum())
     print(
-        f"{seen} of {n} points seen by a camera ({100.0 * seen / max(n, 1):.1f} %); wrote {', '.join(written)}"
+        f"{seen} of {n} points seen by a camera ({100.0 * seen / max(n, 1):.1f} %); "
+        f"wrote {', '.join(written)}"
     )

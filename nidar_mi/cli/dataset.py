@@ -11,14 +11,16 @@ non-commercial: keep ``DATA`` out of any repository.
 from __future__ import annotations
 
 from ..errors import NidarError
-from ._common import parse_defines, parser, run
+from ._common import parse_defines, parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
 
 
 def build_parser():
     p = parser(
-        "dataset", "Render scenes (cached) and turn every camera into a NIDAR training frame."
+        "dataset",
+        "Render scenes (cached in DATA/renders) and turn every camera into a NIDAR training "
+        "frame; the frames and meta.json are published together when every scene is done.",
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--scenes", help="folder of scene XML files (e.g. from nidar_mi.scenegen)")
@@ -36,7 +38,10 @@ def build_parser():
         help="train,val,test fractions of the scenes; scenes are split whole (default 0.8,0.1,0.1)",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="split, scan-noise and sampler seed, >= 0 (default 0)"
+        "--seed",
+        type=seed_arg,
+        default=0,
+        help="seed of the split, the scan noise and the camera sampler, 0 .. 2**32-1 (default 0)",
     )
     p.add_argument("--spp", type=int, default=16, help="camera samples per pixel (default 16)")
     p.add_argument("--lidar", default=None, help="lidar id (default: the first by id)")
@@ -44,7 +49,8 @@ def build_parser():
         "--intensity-scale",
         type=float,
         default=1.0,
-        help="training divides the LiDAR intensity by this and clips to [0, 1] (default 1)",
+        help="recorded in meta.json: training divides the LiDAR intensity by it and clips to "
+        "[0, 1] (default 1)",
     )
     p.add_argument(
         "-D",
@@ -52,7 +58,13 @@ def build_parser():
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="scene parameter for every scene that has it, e.g. -D width=320; repeatable",
+        help="scene parameter (<default name=...>) for every scene that has it, e.g. -D "
+        "width=320; repeatable; a name no scene has is an error",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="accept an output folder that holds other files (they are removed)",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
@@ -87,10 +99,15 @@ def main(argv=None) -> int:
             lidar_id=args.lidar,
             intensity_scale=args.intensity_scale,
             progress=not args.quiet,
+            overwrite=args.overwrite,
         )
         if not args.quiet:
             for s in SPLITS:
                 n_scenes, n_frames = len(meta["scenes"][s]), len(meta["frames"][s])
                 print(f"{s:5s}  {n_scenes:4d} scenes  {n_frames:5d} frames")
 
-    return run(work, on_interrupt="the frames written so far are complete; run again to resume")
+    return run(
+        work,
+        on_interrupt="no dataset published; the completed renders are kept in "
+        f"{args.out}/renders for the next run",
+    )

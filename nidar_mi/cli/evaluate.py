@@ -4,28 +4,31 @@ the ablations.
 
     python -m nidar_mi.evaluate [--data DATA] [--weights DIR] [--scenes scenes/]
                                 [--heldout-materials DIR] [--kitti DIR ...] [--photos DIR]
-                                [--ablation] -o OUT
+                                [--ablation] [--cache DIR] [--overwrite] -o OUT
 
 * ``DATA`` is a dataset from :mod:`nidar_mi.dataset`: its ``test`` scenes (rendered under
   ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
   and (e), ``meta.json`` gives ``intensity_scale``.
-* ``--scenes`` renders the hand-made scene files (cached in ``OUT/renders``) with the dataset's
-  parameters, seed and spp, and evaluates them the same way.
+* ``--scenes`` renders the hand-made scene files (cached in ``CACHE/renders``) with the
+  dataset's parameters, seed and spp, and evaluates them the same way.
 * ``--heldout-materials`` renders scenes made of materials the training scenes lack
-  (``python -m nidar_mi.scenegen --materials heldout``) and scores every method on those
-  materials' returns.
+  (``python -m nidar_mi.scenegen --materials heldout``; cached in ``CACHE/renders_heldout``) and
+  scores every method on those materials' returns.
 * ``--kitti`` (repeatable: e.g. ``../shared/data/kitti`` and ``../shared/data/kitti_raw_0926``)
   runs the leave-one-frame-out protocol (:mod:`nidar_mi.eval.loo`); skipped with a message when
-  the folders hold no frame.
+  the folders hold no frame. The frames are converted once and cached in the user's cache.
 * ``--photos`` (e.g. ``../shared/data/rgbnir``) scores pseudo-NIR against the held-out real NIR
   photos (:mod:`nidar_mi.eval.photos`) and fits baseline (i)'s linear map for the KITTI table;
   skipped with a message when absent.
-* ``--ablation`` trains the IRNet variants and the RGB-input model into ``OUT/ablation``
-  (finished runs are reused) and scores them on the test frames.
+* ``--ablation`` trains the IRNet variants and the RGB-input model into ``CACHE/ablation``
+  (finished runs of the same dataset, STN and settings are reused) and scores them on the
+  test frames.
 
-Writes ``OUT/results.md``, ``OUT/results.csv`` (one row per frame and method, plus ``mean``
-rows), ``OUT/results.json`` and ``OUT/figures/*.png`` (no figure of real data). See
-:mod:`nidar_mi.eval.frames` for the methods and the metric scale.
+``--data`` may be left out when only real data is evaluated. ``CACHE`` is ``--cache`` (default
+``DATA/cache/evaluate``): a rerun reuses what it holds, and nothing of it is written into
+``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row per frame and method, plus
+``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of real data), published whole
+when everything succeeded. See :mod:`nidar_mi.eval.frames` for the methods and the metric scale.
 """
 
 from __future__ import annotations
@@ -44,7 +47,8 @@ log = logging.getLogger("nidar_mi.evaluate")
 def _parser():
     p = parser(
         "evaluate",
-        "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, and the ablations.",
+        "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, real "
+        "RGB/NIR photos, and the ablations.",
     )
     p.add_argument("--data", help="dataset folder (meta.json, renders/, splits)")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -62,13 +66,27 @@ def _parser():
     )
     p.add_argument("--photos", metavar="DIR", help="RGB/NIR photo pairs (<category>/NNNN_rgb.jpg)")
     p.add_argument("--ablation", action="store_true", help="train and score the ablations")
-    p.add_argument("--split", default="test", help="dataset split of the held-out scenes")
+    p.add_argument(
+        "--split", default="test", help="dataset split of the held-out scenes (default test)"
+    )
     p.add_argument("--no-twin", action="store_true", help="skip baseline (a) (no Mitsuba scans)")
-    p.add_argument("--lpips", action="store_true", help="LPIPS (needs cached AlexNet weights)")
+    p.add_argument(
+        "--lpips",
+        action="store_true",
+        help="also score LPIPS (needs the lpips package and cached AlexNet weights; an error "
+        "without them)",
+    )
     p.add_argument(
         "--figures", type=int, default=3, help="frames per group with map figures (default 3)"
     )
-    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument(
+        "--cache",
+        help="folder of the renders and ablation runs a rerun reuses (default: DATA/cache/evaluate)",
+    )
+    p.add_argument("-o", "--out", required=True, help="output folder (results, figures)")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
     return p
 

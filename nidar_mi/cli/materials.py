@@ -25,7 +25,9 @@ def _parser():
     p = parser("materials", "List the spectral material library and plot material spectra.")
     p.add_argument("--list", action="store_true", help="print the material table (default)")
     p.add_argument("--plot", nargs="+", metavar="NAME", help="materials to plot")
-    p.add_argument("-o", "--output", default="spectra.png", help="PNG path for --plot")
+    p.add_argument(
+        "-o", "--output", default=None, help="PNG path for --plot (default: spectra.png)"
+    )
     return p
 
 
@@ -36,12 +38,15 @@ def main(argv: list[str] | None = None) -> int:
     def work():
         from ..materials.report import format_table, list_materials, plot_spectra
 
+        if args.output is not None and not args.plot:
+            raise NidarError("-o/--output names the --plot file: give --plot NAME ... too")
+        output = args.output or "spectra.png"
+        if args.plot and not os.path.isdir(os.path.dirname(os.path.abspath(output))):
+            raise NidarError(f"output folder does not exist: {os.path.dirname(output)}")
         if args.list or not args.plot:
             sys.stdout.write(format_table(list_materials()))
         if args.plot:
-            if not os.path.isdir(os.path.dirname(os.path.abspath(args.output))):
-                raise NidarError(f"output folder does not exist: {os.path.dirname(args.output)}")
-            plot_spectra(args.plot, args.output)
-            sys.stdout.write(f"wrote {args.output}\n")
+            plot_spectra(args.plot, output)
+            sys.stdout.write(f"wrote {output}\n")
 
     return run(work)

@@ -1,16 +1,18 @@
 """``python -m nidar_mi.render SCENE.xml -o OUT``: scan every LiDAR and render every camera.
 
 The work is :func:`nidar_mi.simulate.render_scene`; the folder layout is
-:mod:`nidar_mi.render_folder` (table in the README, "Rendering").
+:mod:`nidar_mi.render_folder` (table in the README, "Rendering"). With ``--trajectory`` the
+scene is rendered along a trajectory, one render folder per frame
+(:func:`nidar_mi.sequence.render_sequence`).
 """
 
 from __future__ import annotations
 
 import os
 
-from ..render_folder import DEFAULT_FORMATS, FORMATS
+from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..simulate import INTENSITY_SOURCES, NIDAR_BRANCHES
-from ._common import parse_defines, parser, run
+from ._common import parse_defines, parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
 
@@ -25,6 +27,26 @@ def _parse_formats(text: str) -> list[str]:
             f"--formats: unknown format '{','.join(bad)}' (choose from {', '.join(FORMATS)})"
         )
     return fmts
+
+
+def _memory(text: str | None) -> int | None:
+    from ..errors import NidarError
+    from ..lidar.memory import parse_size
+
+    if text is None:
+        return None
+    try:
+        return parse_size(text)
+    except ValueError as e:
+        raise NidarError(f"--max-memory: {e}") from None
+
+
+def _sequence_summary(manifest: dict, out_dir: str) -> str:
+    fps = manifest["frames_per_s"]
+    return (
+        f"wrote {manifest['frame_count']} frames at {manifest['rate_hz']:g} Hz to {out_dir} "
+        f"({fps:.2f} frames/s rendered, {manifest['timings_s']['total']:.1f} s in all)"
+    )
 
 
 def _summary(manifest: dict, out_dir: str) -> str:
@@ -57,7 +79,11 @@ def build_parser():
         help=f"point formats, from {','.join(FORMATS)} (default {','.join(DEFAULT_FORMATS)})",
     )
     p.add_argument(
-        "--seed", type=int, default=None, help="overrides every lidar's seed; camera sampler seed"
+        "--seed",
+        type=seed_arg,
+        default=None,
+        help="overrides every lidar's seed; camera sampler seed; 0 .. 2**32-1 "
+        "(default: each lidar's own seed, sampler seed 0)",
     )
     p.add_argument("--spp", type=int, default=16, help="camera samples per pixel (default 16)")
     p.add_argument(
@@ -80,13 +106,23 @@ def build_parser():
         help="nidar: also predict intensity_nidar / nidar_observed from the cameras with NIDAR",
     )
     p.add_argument(
-        "--weights", default=None, help="NIDAR weights folder (default: the shipped model)"
+        "--weights",
+        default=None,
+        help="NIDAR weights folder for --intensity nidar (default: the shipped model)",
     )
     p.add_argument(
         "--nidar-branch",
-        default="R",
+        default=None,
         choices=NIDAR_BRANCHES,
-        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
+        help="with --intensity nidar: R, the calibrated reflectance branch (the paper's, "
+        "default); I_hat, the dense intensity head",
+    )
+    p.add_argument(
+        "--bin-intensity",
+        default="unit",
+        choices=BIN_INTENSITY,
+        help="intensity in points.bin: unit, KITTI's [0, 1] (intensity / the sensor's full "
+        "scale, clipped; default); raw, the simulated intensity as it is",
     )
     p.add_argument(
         "--profile",
@@ -99,6 +135,43 @@ def build_parser():
     p.add_argument(
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
     )
+    p.add_argument(
+        "--max-memory",
+        default=None,
+        metavar="SIZE",
+        help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
+        "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
+    )
+    seq = p.add_argument_group("sequences (rendering along a trajectory)")
+    seq.add_argument(
+        "--trajectory",
+        metavar="FILE",
+        default=None,
+        help="rig poses: KITTI odometry (12 numbers per line), TUM (t x y z qx qy qz qw) or CSV "
+        "with a t,x,y,z,qx,qy,qz,qw header; writes one render folder per frame",
+    )
+    seq.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        help="frames per second (default: the first lidar's rotation_rate); also the sample "
+        "rate of KITTI odometry poses",
+    )
+    seq.add_argument(
+        "--frames", type=int, default=None, help="number of frames (default: all that fit)"
+    )
+    seq.add_argument(
+        "--sequence-formats",
+        default="",
+        metavar="LIST",
+        help="whole-sequence outputs beside the frame folders: kitti (KITTI odometry layout), "
+        "rosbag (ROS 2 bag); comma-separated",
+    )
+    p.add_argument(
+        "--deskew",
+        action="store_true",
+        help="also write xyz_deskewed: the points in the lidar frame at the sweep's start",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 
@@ -108,12 +181,49 @@ def main(argv=None) -> int:
     out = args.out or os.path.join("out", os.path.splitext(os.path.basename(args.scene))[0])
 
     def work():
+        from ..errors import NidarError
         from ..simulate import render_scene
+
+        if args.trajectory is None and (
+            args.rate is not None or args.frames is not None or args.sequence_formats
+        ):
+            raise NidarError("--rate, --frames and --sequence-formats need --trajectory")
+        if args.trajectory is not None:
+            if args.intensity != "physics" or args.rgb_twin:
+                raise NidarError("--trajectory renders physics intensity of the scene itself")
+            if args.weights is not None or args.nidar_branch is not None or args.profile:
+                raise NidarError(
+                    "--weights, --nidar-branch and --profile are used only with --intensity nidar"
+                )
+            from ..sequence import render_sequence
+
+            manifest = render_sequence(
+                args.scene,
+                out,
+                args.trajectory,
+                rate=args.rate,
+                frames=args.frames,
+                formats=_parse_formats(args.formats),
+                bin_intensity=args.bin_intensity,
+                sequence_formats=tuple(
+                    f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
+                ),
+                seed=args.seed,
+                spp=args.spp,
+                variant=args.variant,
+                params=parse_defines(args.params),
+                cameras=not args.no_cameras,
+                deskew=args.deskew,
+                max_memory=_memory(args.max_memory),
+                progress=not args.quiet,
+                overwrite=args.overwrite,
+            )
+            if not args.quiet:
+                print(_sequence_summary(manifest, out))
+            return
 
         profile = None
         if args.profile is not None:
-            from ..errors import NidarError
-
             if args.intensity != "nidar":
                 raise NidarError("--profile applies to --intensity nidar")
             from ..nidar.pipeline import NidarModel
@@ -136,6 +246,9 @@ def main(argv=None) -> int:
             nidar_branch=args.nidar_branch,
             profile=profile,
             overwrite=args.overwrite,
+            bin_intensity=args.bin_intensity,
+            max_memory=_memory(args.max_memory),
+            deskew=args.deskew,
         )
         if not args.quiet:
             print(_summary(manifest, out))

@@ -22,18 +22,27 @@ import logging
 from pathlib import Path
 
 from ..errors import NidarError
-from ._common import parser, run
+from ._common import parser, run, seed_arg
 
 __all__ = ["main", "build_config"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = parser("train", __doc__.split("\n")[0])
+    p = parser(
+        "train",
+        "Train the NIDAR networks (STN, then IRNet) on a dataset from nidar_mi.dataset; "
+        "resumable (--resume); a run that fails before its first checkpoint leaves nothing.",
+    )
     p.add_argument("data", type=Path, help="training-data directory (meta.json, train/, val/)")
     p.add_argument("out", type=Path, help="output directory for weights, logs, checkpoints")
     p.add_argument("--config", type=Path, help="JSON file with a TrainConfig (nested dict)")
     p.add_argument("--reduced", action="store_true", help="start from the tiny test config")
-    p.add_argument("--stage", choices=("all", "stn", "irnet"), default="all")
+    p.add_argument(
+        "--stage",
+        choices=("all", "stn", "irnet"),
+        default="all",
+        help="train both networks (default), the STN only, or IRNet only",
+    )
     p.add_argument("--variant", help="IRNet variant, e.g. unet+deeplabv3, deeplabv3+3conv")
     p.add_argument("--input", choices=("pseudo_nir", "rgb"), help="IRNet input")
     p.add_argument("--stn-weights", type=Path, help="use this trained STN (skips the STN stage)")
@@ -41,10 +50,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-calibration", action="store_true", help="do not fit calibration.json after training"
     )
-    p.add_argument("--seed", type=int)
+    p.add_argument(
+        "--seed", type=seed_arg, help="seed of initialisation, batches and crops, 0 .. 2**32-1"
+    )
     p.add_argument("--device", help="auto (default), cpu, cuda or cuda:N")
-    p.add_argument("--epochs", type=int, help="epochs of each stage")
-    p.add_argument("--max-steps", type=int, help="optimiser steps of each stage at most")
+    p.add_argument("--epochs", type=int, help="epochs of each stage, >= 1")
+    p.add_argument("--max-steps", type=int, help="optimiser steps of each stage at most, >= 1")
     p.add_argument("--batch-size", type=int, help="batch size of each stage")
     p.add_argument("--crop-size", type=int, help="side of the square training crops (px)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -100,34 +111,65 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
 
+    left = {"text": "nothing written"}
+
     def work():
-        from ..nidar import train as training
+        from ..io.atomic import check_output_folder
 
         cfg = build_config(args)
-        progress = not args.no_progress
-        if args.stage == "stn":
-            training.train_stn(cfg, args.data, args.out, resume=args.resume, progress=progress)
-        elif args.stage == "irnet":
-            training.train_irnet(
-                cfg, args.data, args.out, args.stn_weights, resume=args.resume, progress=progress
-            )
-        else:
-            training.train(
-                cfg,
-                args.data,
-                args.out,
-                stn_weights=args.stn_weights,
-                resume=args.resume,
-                progress=progress,
-            )
-        if args.stage != "stn" and not args.no_calibration:
-            from ..nidar.dataset_calibration import fit_dataset_calibration
-            from ..nidar.pipeline import NidarModel
+        out = args.out
+        fresh = not out.exists() or (out.is_dir() and not any(out.iterdir()))
+        check_output_folder(out, marker="config.json")
+        try:
+            _train(args, cfg)
+        except BaseException:
+            left["text"] = _after_failure(out, fresh)
+            raise
+        logging.getLogger(__name__).info("weights written to %s", out)
 
-            model = NidarModel.load(args.out, device=cfg.device)
-            fit_dataset_calibration(model, args.data, "train").save_json(
-                args.out / "calibration.json"
-            )
-        logging.getLogger(__name__).info("weights written to %s", args.out)
+    return run(work, on_interrupt=lambda: left["text"])
 
-    return run(work)
+
+def _train(args: argparse.Namespace, cfg) -> None:
+    from ..nidar import train as training
+
+    progress = not args.no_progress
+    if args.stage == "stn":
+        training.train_stn(cfg, args.data, args.out, resume=args.resume, progress=progress)
+    elif args.stage == "irnet":
+        training.train_irnet(
+            cfg, args.data, args.out, args.stn_weights, resume=args.resume, progress=progress
+        )
+    else:
+        training.train(
+            cfg,
+            args.data,
+            args.out,
+            stn_weights=args.stn_weights,
+            resume=args.resume,
+            progress=progress,
+        )
+    if args.stage != "stn" and not args.no_calibration:
+        from ..nidar.dataset_calibration import fit_dataset_calibration
+        from ..nidar.pipeline import NidarModel
+
+        model = NidarModel.load(args.out, device=cfg.device)
+        fit_dataset_calibration(model, args.data, "train").save_json(args.out / "calibration.json")
+
+
+def _after_failure(out: Path, fresh: bool) -> str:
+    """Clean up after a failed or interrupted run; says what is left.
+
+    A run that started in a new (or empty) folder and saved no checkpoint leaves nothing; one
+    that saved checkpoints keeps them for ``--resume``; an existing run's folder is left as
+    it is.
+    """
+    import shutil
+
+    checkpoints = out / "checkpoints"
+    if checkpoints.is_dir() and any(checkpoints.iterdir()):
+        return f"checkpoints kept in {checkpoints}: --resume continues"
+    if fresh:
+        shutil.rmtree(out, ignore_errors=True)
+        return "nothing written"
+    return f"{out} left as it was before this run"

@@ -4,20 +4,20 @@ Held-out generated scenes (a dataset's ``test`` split), hand-made scene files, s
 materials and the IRNet ablations (scored with :mod:`nidar_mi.eval.frames`), and the real data:
 KITTI leave-one-frame-out (:mod:`nidar_mi.eval.loo`) and the held-out RGB/NIR photos
 (:mod:`nidar_mi.eval.photos`), both via :mod:`nidar_mi.eval.real`. The results are written as
-``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of real data).
+``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of real data), published whole
+when everything succeeded; renders and ablation runs are cached outside ``OUT``
+(:func:`cache_dir`; the KITTI frames in the user's cache, :mod:`nidar_mi.datasets.paths`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import shutil
-import tempfile
 import time
 
 from ..errors import NidarError
 
-__all__ = ["run"]
+__all__ = ["run", "cache_dir"]
 
 log = logging.getLogger("nidar_mi.evaluate")
 
@@ -61,12 +61,35 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     return paths
 
 
+def cache_dir(args) -> str:
+    """The evaluation's cache: ``--cache``, default ``DATA/cache/evaluate``.
+
+    It holds ``renders/<scene>`` (the hand-made scenes rendered with the dataset's parameters;
+    reused while their render request holds), ``renders_heldout/<scene>`` (the scenes of
+    held-out materials, likewise) and ``ablation/<key>/<run>`` (the ablation runs;
+    ``key`` hashes the dataset, the STN and the settings, so a run is reused only for the
+    same inputs). Nothing of it is written into ``OUT``.
+    """
+    return args.cache or os.path.join(args.data, "cache", "evaluate")
+
+
 def run(args, argv_text: str) -> dict:
-    """Everything the command does; returns the results payload (also written to OUT)."""
+    """Everything the command does; returns the results payload (also written to OUT).
+
+    ``OUT`` (results and figures) is published whole when everything succeeded
+    (:func:`nidar_mi.io.atomic.staged_directory`); caches go to :func:`cache_dir`.
+    """
+    from ..io.atomic import check_output_folder, staged_directory
     from ..nidar.pipeline import NidarModel
+    from .metrics import lpips_unavailable_reason
 
     t0 = time.perf_counter()
+    check_output_folder(args.out, overwrite=args.overwrite, marker="results.json")
     meta = _check_inputs(args)
+    if args.lpips:
+        reason = lpips_unavailable_reason()
+        if reason:
+            raise NidarError(f"--lpips: LPIPS is unavailable: {reason}")
     model = NidarModel.load(args.weights)
     if meta is not None and model.calibration is None:
         raise NidarError(f"{model.weights_dir}: no calibration.json beside the weights")
@@ -74,24 +97,17 @@ def run(args, argv_text: str) -> dict:
         from ..backend import set_variant
 
         set_variant("llvm_ad_spectral")
-    os.makedirs(args.out, exist_ok=True)
-    # figures are staged and moved into OUT/figures only once everything succeeded
-    fig_dir = tempfile.mkdtemp(prefix=".figures.partial-", dir=args.out)
-    try:
+    with staged_directory(args.out, overwrite=args.overwrite, marker="results.json") as stage:
+        fig_dir = os.path.join(stage, "figures")
+        os.makedirs(fig_dir)
         payload = _evaluate(args, argv_text, meta, model, fig_dir)
-        final = os.path.join(args.out, "figures")
-        moved = []
-        if payload["figures"]:
-            os.makedirs(final, exist_ok=True)
-        for p in payload["figures"]:
-            target = os.path.join(final, os.path.basename(p))
-            os.replace(p, target)
-            moved.append(target)
-        payload["figures"] = moved
+        payload["figures"] = [
+            os.path.join(args.out, os.path.relpath(p, stage)) for p in payload["figures"]
+        ]
+        if not payload["figures"]:
+            os.rmdir(fig_dir)
         payload["seconds"] = time.perf_counter() - t0
-        _write(args.out, payload)
-    finally:
-        shutil.rmtree(fig_dir, ignore_errors=True)
+        _write(stage, payload, args.out)
     return payload
 
 
@@ -210,7 +226,7 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
 
         files = find_scenes(args.scenes)
         log.info("rendering and evaluating %d hand-made scenes", len(files))
-        dirs = render_scenes(files, os.path.join(args.out, "renders"), **render_opts)
+        dirs = render_scenes(files, os.path.join(cache_dir(args), "renders"), **render_opts)
         res = evaluate_renders(dirs, model, scale, **common)
         names = [os.path.basename(d) for d in dirs]
         note = (
@@ -225,7 +241,8 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
 
         files = find_scenes(args.heldout_materials)
         log.info("rendering and evaluating %d scenes of held-out materials", len(files))
-        dirs = render_scenes(files, os.path.join(args.out, "renders_heldout"), **render_opts)
+        cache = os.path.join(cache_dir(args), "renders_heldout")
+        dirs = render_scenes(files, cache, **render_opts)
         res = evaluate_renders(dirs, model, scale, **common)
         scores = heldout_material_scores(res, class_const.classes)
         payload["heldout_materials"] = scores | {
@@ -236,15 +253,32 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
         from .ablation import run_ablation
 
         log.info("ablation: training the IRNet variants")
+        stn = model.weights_dir / "stn.safetensors"
         payload["ablation"] = run_ablation(
             args.data,
-            os.path.join(args.out, "ablation"),
-            model.weights_dir / "stn.safetensors",
+            os.path.join(cache_dir(args), "ablation", _ablation_key(meta, stn)),
+            stn,
             split=args.split,
         )
 
 
-def _write(out: str, payload: dict) -> None:
+def _ablation_key(meta: dict, stn) -> str:
+    """16 hex digits naming the ablation runs of one dataset, STN and settings."""
+    import hashlib
+    import json
+
+    from ..render_folder import file_sha256
+    from .ablation import AblationSettings
+
+    data = {k: meta.get(k) for k in ("request", "frames", "intensity_scale")}
+    stn_hash = file_sha256(stn) if os.path.isfile(stn) else None
+    text = json.dumps([data, stn_hash, AblationSettings().to_dict()], sort_keys=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def _write(stage: str, payload: dict, out: str) -> None:
+    """Write the tables into ``stage`` (figure paths in ``payload`` name their place in
+    ``out``)."""
     from . import report
     from .frames import METHOD_LABELS
 
@@ -267,12 +301,9 @@ def _write(out: str, payload: dict) -> None:
             {"group": key, "scene": "mean", "camera": "", **r} for r in group["mean"]
         ]
     if "heldout_materials" in payload:
-        md.append(
-            report.heldout_materials_markdown(payload["heldout_materials"], METHOD_LABELS) + "\n"
-        )
-        csv_rows += [
-            {"group": "heldout_materials", **r} for r in payload["heldout_materials"]["rows"]
-        ]
+        h = payload["heldout_materials"]
+        md.append(report.heldout_materials_markdown(h, METHOD_LABELS) + "\n")
+        csv_rows += [{"group": "heldout_materials", **r} for r in h["rows"]]
     if "kitti" in payload:
         md.append(report.loo_markdown(payload["kitti"]) + "\n")
         csv_rows += [{"group": "kitti_loo", **r} for r in payload["kitti"].get("rows", [])]
@@ -284,7 +315,6 @@ def _write(out: str, payload: dict) -> None:
     if payload["figures"]:
         md.append("## Figures\n\n")
         md.extend(f"- `{os.path.relpath(p, out)}`\n" for p in payload["figures"])
-    os.makedirs(out, exist_ok=True)
-    report.write_csv(os.path.join(out, "results.csv"), csv_rows)
-    report.write_json(os.path.join(out, "results.json"), payload)
-    report.write_text(os.path.join(out, "results.md"), "".join(md))
+    report.write_csv(os.path.join(stage, "results.csv"), csv_rows)
+    report.write_json(os.path.join(stage, "results.json"), payload)
+    report.write_text(os.path.join(stage, "results.md"), "".join(md))

@@ -9,6 +9,8 @@
   pixel map, nearest point wins).
 * :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
   cameras, fused by a rule).
+* :mod:`~nidar_mi.geometry.se3`: SE(3) exponential and logarithm, poses interpolated along a
+  trajectory (constant twist between samples).
 
 Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are in metres.
 """

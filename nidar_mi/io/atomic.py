@@ -8,6 +8,8 @@ target is left untouched.
 
 :func:`staged_directory` does the same for a whole output folder: everything is written into a
 hidden sibling folder that takes the target's place only when the ``with`` block succeeds.
+:func:`staged_entries` does it for a set of entries inside a folder that also holds other
+things (a dataset's splits and ``meta.json`` beside its render cache).
 
 :func:`reading` is the read-side counterpart used by every reader of :mod:`nidar_mi.io`: it
 checks that the file exists and turns any failure to parse it into a one-line
@@ -32,6 +34,8 @@ from ..errors import NidarError
 
 __all__ = [
     "atomic_path",
+    "check_output_folder",
+    "staged_entries",
     "atomic_write_text",
     "atomic_write_json",
     "reading",
@@ -157,13 +161,39 @@ def reading(path: str | os.PathLike) -> Iterator[Path]:
         raise NidarError(f"cannot read {p}: {_one_line(e)}") from e
 
 
-def _check_out_dir(target: Path, overwrite: bool, marker: str | None) -> None:
+def check_output_folder(
+    out_dir: str | os.PathLike, *, overwrite: bool = False, marker: str | None = None
+) -> Path:
+    """Check, before any work, that a command can publish its output folder ``out_dir``.
+
+    Args:
+        out_dir: the folder.
+        overwrite: a non-empty folder may be replaced.
+        marker: name of a file marking an earlier output of the same kind (replaced without
+            ``overwrite``); see :func:`staged_directory`.
+
+    Returns:
+        ``out_dir`` as an absolute path.
+
+    Raises:
+        NidarError: ``out_dir`` is a file; it is a non-empty folder that is not an earlier
+            output without ``overwrite``; or the nearest existing folder above it is not a
+            writable folder (one line naming the path).
+    """
+    target = Path(out_dir).absolute()
     if target.exists() and not target.is_dir():
         raise NidarError(f"cannot write {target}: it exists and is not a folder")
-    if not target.is_dir() or overwrite or (marker and (target / marker).is_file()):
-        return
-    if any(target.iterdir()):
-        raise NidarError(f"{target} is not empty: choose another folder or pass --overwrite")
+    if target.is_dir() and not (overwrite or (marker and (target / marker).is_file())):
+        if any(target.iterdir()):
+            raise NidarError(f"{target} is not empty: choose another folder or pass --overwrite")
+    parent = target.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise NidarError(f"cannot write {target}: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise NidarError(f"cannot write {target}: {parent} is not writable")
+    return target
 
 
 @contextmanager
@@ -192,8 +222,7 @@ def staged_directory(
         NidarError: ``out_dir`` is a file, is non-empty without ``overwrite``, or its parent
             cannot be created or written.
     """
-    target = Path(out_dir).absolute()
-    _check_out_dir(target, overwrite, marker)
+    target = check_output_folder(out_dir, overwrite=overwrite, marker=marker)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=target.parent))
@@ -204,7 +233,8 @@ def staged_directory(
         raise NidarError(f"cannot write {target}: {e.strerror or e}") from None
     try:
         yield stage
-        _check_out_dir(target, overwrite, marker)  # another process may have filled it meanwhile
+        # another process may have filled it meanwhile
+        check_output_folder(target, overwrite=overwrite, marker=marker)
         old = None
         if target.exists():
             old = target.with_name(f".{target.name}.old-{secrets.token_hex(4)}")
@@ -218,3 +248,60 @@ def staged_directory(
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
+
+
+@contextmanager
+def staged_entries(
+    folder: str | os.PathLike, names: list[str], *, last: str | None = None
+) -> Iterator[Path]:
+    """Yield a hidden staging folder inside ``folder``; its entries ``names`` replace those of
+    ``folder`` together when the block succeeds.
+
+    An entry of ``names`` that the block did not create is removed from ``folder`` (the result
+    never mixes two runs). ``last`` (one of ``names``, typically the file that marks the set
+    complete) is removed from ``folder`` before the other entries are swapped and put in place
+    after them, so that even an interruption between the renames never leaves a mixed set
+    marked complete. On any exception (Ctrl-C and SIGTERM included) the staging folder is
+    removed and ``folder`` is left as it was.
+
+    Args:
+        folder: the folder holding the entries (created).
+        names: entry names (files or folders) published together.
+        last: the entry published last.
+
+    Yields:
+        The staging folder to write the entries into.
+
+    Raises:
+        NidarError: the folder cannot be created or written.
+    """
+    folder = Path(folder).absolute()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=folder))
+    except OSError as e:
+        raise NidarError(f"cannot write {folder}: {e.strerror or e}") from None
+    order = [n for n in names if n != last] + ([last] if last in names else [])
+    try:
+        yield stage
+        aside = []
+        if last is not None and (folder / last).exists():
+            old = folder / f".{last}.old-{secrets.token_hex(4)}"
+            os.replace(folder / last, old)
+            aside.append(old)
+        for name in order:
+            if (folder / name).exists():
+                old = folder / f".{name}.old-{secrets.token_hex(4)}"
+                os.replace(folder / name, old)
+                aside.append(old)
+            if (stage / name).exists():
+                os.replace(stage / name, folder / name)
+        for old in aside:
+            if old.is_dir():
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                _remove_quietly(old)
+    except OSError as e:
+        raise NidarError(f"cannot write {folder}: {e.strerror or e}") from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

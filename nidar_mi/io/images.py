@@ -1,5 +1,6 @@
 """Images: sRGB transfer functions, Rec. 709 luma, 8-bit PNG, float32 OpenEXR, false-colour PNG.
 
+:func:`read_rgb8` reads a camera image of any PNG colour type as 8-bit sRGB.
 Renders are linear (radiance, intensity, depth); :func:`write_srgb_png` encodes a linear RGB
 render for display with the sRGB OETF of IEC 61966-2-1, and :func:`write_colormap_png` maps
 a scalar image (range, intensity) through a matplotlib colour map. EXR keeps float32 values
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 
 import numpy as np
 
@@ -26,6 +28,7 @@ __all__ = [
     "srgb_to_linear",
     "write_png",
     "read_png",
+    "read_rgb8",
     "write_exr",
     "read_exr",
     "write_colormap_png",
@@ -127,6 +130,42 @@ def read_png(path: str | os.PathLike) -> np.ndarray:
             alpha = "A" in im.getbands() or "transparency" in im.info
             im = im.convert("RGBA" if alpha else "RGB")
         return np.array(im)
+
+
+def read_rgb8(path: str | os.PathLike) -> np.ndarray:
+    """Read a camera image as 8-bit sRGB, whatever its PNG colour type.
+
+    8-bit RGB is returned as it is; RGBA and grey+alpha lose the alpha channel; palette and
+    1-bit images are expanded; 16-bit grey is reduced to 8 bit (``round(v / 257)``; Pillow
+    already reduces 16-bit RGB to its high bytes); a grey image becomes R = G = B, with a
+    warning, since a colour camera was expected.
+
+    Returns:
+        (H, W, 3) uint8.
+
+    Raises:
+        NidarError: missing or unreadable file, or a floating-point image.
+    """
+    from PIL import Image
+
+    with reading(path) as p, Image.open(p) as im:
+        mode = im.mode
+        if mode == "F":
+            raise ValueError("floating-point image; expected an 8- or 16-bit colour image")
+        if mode.startswith("I"):
+            a = np.asarray(im, dtype=np.float64)  # 16-bit grey (PNG's deepest)
+            grey = np.round(np.clip(a, 0, 65535) / 257.0).astype(np.uint8)
+        elif mode in ("1", "L", "LA"):
+            grey = np.asarray(im.convert("L"))
+        else:
+            return np.ascontiguousarray(np.asarray(im.convert("RGB")))
+    warnings.warn(
+        f"{path} is a greyscale image ({mode}): NIDAR, trained on colour images, sees it as "
+        "R = G = B",
+        RuntimeWarning,
+        stacklevel=2,
+    )
+    return np.repeat(grey[..., None], 3, axis=2)
 
 
 def write_exr(path: str | os.PathLike, channels: dict[str, np.ndarray]) -> None:

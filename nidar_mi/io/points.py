@@ -11,12 +11,14 @@ folder holds the valid returns of one scan, N points and M materials); the READM
 name                 dtype      shape   unit  meaning
 ===================  =========  ======  ====  ==================================================
 ``xyz``              float32    (N,3)   m     point in the LiDAR frame (x forward, y left, z up)
+                                              at the point's firing time
 ``xyz_world``        float32    (N,3)   m     point in the world frame
-``range``            float32    (N,)    m     path length along the beam (after range noise)
+``range``            float32    (N,)    m     path length from the beam's origin (after noise)
 ``intensity``        float32    (N,)    --    g·ρ·a + η, clipped at 0 (``intensity_mode`` ``raw``:
                                               1/m²; ``compensated``: unitless)
 ``reflectance``      float32    (N,)    --    ρ at the LiDAR wavelength: π × the monostatic BSDF
-                                              value (a Lambertian surface gives its albedo)
+                                              value (a Lambertian surface gives its albedo;
+                                              retroreflectors and rough metals exceed 1)
 ``cos_incidence``    float32    (N,)    --    cosine of the incidence angle on the shading normal
 ``ring``             uint16     (N,)    --    beam (channel) index, 0 = highest beam = top row
                                               of the range image
@@ -29,6 +31,11 @@ name                 dtype      shape   unit  meaning
 ``instance``         uint32     (N,)    --    instance (object) id, 1..K; 0 = none
 ``instance_names``   str (U)    (K+1,)  --    ``instance_names[k]`` names instance k (the
                                               scene's ``instance`` or the shape id); ``[0]`` ""
+``t``                float32    (N,)    s     firing time of the point since the sweep's start
+``return_index``     uint8      (N,)    --    which return of its beam: 0 = the first listed
+                                              (the strongest in ``dual`` mode), 1 = the other
+``xyz_deskewed``     float32    (N,3)   m     with ``--deskew``: the point in the LiDAR frame at
+                                              the sweep's start (motion compensated)
 ``intensity_nidar``  float32    (N,)    --    with ``--intensity nidar``: NIDAR's calibrated
                                               intensity in [0, 1], 0 where no camera sees the point
 ``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
@@ -76,6 +83,9 @@ _PLY_TYPES = frozenset({"i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8"})
 # Required trailing width of the simulator's columns (None: 1-D).
 _KNOWN_SHAPES = {
     "xyz_world": 3,
+    "xyz_deskewed": 3,
+    "t": None,
+    "return_index": None,
     **dict.fromkeys(("range", "intensity", "reflectance", "cos_incidence"), None),
     **dict.fromkeys(("ring", "column", "material", "label", "instance"), None),
 }

@@ -1,11 +1,20 @@
 """Beam patterns of spinning LiDARs: sensor presets and the (ring, column) ray grid.
 
 Frame: x forward, y left, z up. Azimuth is measured counter-clockwise from +x, elevation positive
-up. Column ``j`` of ``cols`` points at azimuth ``(j + 0.5) * fov_h / cols`` (degrees); the half-column
-offset keeps rays off axis-aligned edges. Rings are ordered like the rows of a range image:
-ring 0 is the **highest** beam, the last ring the lowest.
+up. Column ``j`` of ``cols`` points at azimuth ``a0 + (j + 0.5) * fov_h / cols`` (degrees), with
+``a0 = 0`` or, for a centred field of view, ``a0 = -fov_h / 2`` (the columns then span
+``±fov_h/2`` around +x); the half-column offset keeps rays off axis-aligned edges. Rings are
+ordered like the rows of a range image: ring 0 is the **highest** beam, the last ring the lowest.
 
-Elevation tables (degrees):
+Timing (:class:`BeamPattern`): the head spins at ``rotation_rate`` Hz, clockwise seen from above
+(Velodyne and Ouster alike; Ouster's SDK numbers columns by decreasing encoder angle) or
+counter-clockwise; a sweep starts when the head points at ``scan_start_azimuth`` (default 180°,
+behind the sensor, where Ouster frames split and Velodyne-on-KITTI scans wrap). Column ``j``
+fires at ``t_j = T · frac(s · (a_j - a_start) / 360°)`` with ``T = 1 / rotation_rate`` and
+``s = -1`` (clockwise) or ``+1``; the laser of ring ``r`` fires ``τ_r`` later (its firing offset,
+:mod:`nidar_mi.lidar.layouts`), when the head has turned on by ``s · 360° · τ_r / T``.
+
+Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.lidar.layouts`):
 
 * ``vlp16`` — Velodyne VLP-16 user manual (63-9243 Rev. E), Table 9-1: -15..+15 in 2 deg steps.
 * ``hdl32e`` — Velodyne HDL-32E user manual (63-9113 Rev. J), laser table: -30.67..+10.67 in 4/3 deg
@@ -13,6 +22,8 @@ Elevation tables (degrees):
 * ``hdl64e`` — Velodyne HDL-64E S2 datasheet: vertical field of view +2 deg up to -24.8 deg down
   with 64 equally spaced subdivisions (~0.4 deg); the sensor of KITTI (Geiger et al., IJRR 2013:
   26.8 deg vertical field of view).
+* ``os1_64`` — Ouster OS1 datasheet (early revision, "High Resolution Imaging LIDAR"): 64 channels,
+  vertical field of view +16.6 .. -16.6 deg, uniform spacing; 1024 columns.
 * ``os1_128`` — Ouster OS1 Rev 6 datasheet: 128 channels, 45 deg vertical field of view, uniform
   spacing (-22.5..+22.5).
 * ``waymo_top`` — Waymo Open Dataset top LiDAR (Sun et al., CVPR 2020, Table 1): 64 beams over
@@ -26,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .layouts import LaserTable
+
 __all__ = [
     "Preset",
     "PRESETS",
@@ -33,6 +46,7 @@ __all__ = [
     "parse_angles",
     "azimuths_deg",
     "beam_directions",
+    "BeamPattern",
 ]
 
 
@@ -41,7 +55,9 @@ class Preset:
     """A sensor's beam pattern and nominal limits.
 
     Attributes:
-        elevations_deg: (R,) elevation of each ring in degrees, ring 0 highest.
+        elevations_deg: (R,) elevation of each ring in degrees, ring 0 highest (the uniform
+            table; the per-laser table, where there is one, is
+            :func:`nidar_mi.lidar.layouts.preset_table`).
         horizontal_resolution: columns per revolution.
         range_min: minimum range in m.
         range_max: maximum range in m.
@@ -86,6 +102,13 @@ PRESETS: dict[str, Preset] = {
         "Velodyne HDL-64E S2 datasheet (KITTI, Geiger et al. IJRR 2013)",
         4.0e-5,  # 0.10 / 50 m²: 10 % at normal incidence detected to 50 m (datasheet)
     ),
+    "os1_64": Preset(
+        _desc(np.linspace(16.6, -16.6, 64)),
+        1024,
+        0.8,
+        120.0,
+        "Ouster OS1 datasheet (early revision): +16.6..-16.6 deg, 0.8-120 m",
+    ),
     "os1_128": Preset(
         _desc(np.linspace(-22.5, 22.5, 128)),
         2048,
@@ -104,7 +127,7 @@ PRESETS: dict[str, Preset] = {
 
 
 def elevation_table(preset: str) -> np.ndarray:
-    """(R,) float64 elevations in degrees of a preset, ring 0 highest."""
+    """(R,) float64 uniform elevations in degrees of a preset, ring 0 highest."""
     return np.asarray(PRESETS[preset].elevations_deg, dtype=np.float64)
 
 
@@ -132,24 +155,139 @@ def parse_angles(text: str) -> np.ndarray:
     return np.sort(np.asarray(values, dtype=np.float64))[::-1].copy()
 
 
-def azimuths_deg(cols: int, fov_h: float = 360.0) -> np.ndarray:
-    """(cols,) azimuth of each column in degrees: ``(j + 0.5) * fov_h / cols``."""
-    return (np.arange(cols, dtype=np.float64) + 0.5) * (fov_h / cols)
+def azimuths_deg(cols: int, fov_h: float = 360.0, start_deg: float = 0.0) -> np.ndarray:
+    """(cols,) azimuth of each column in degrees: ``start_deg + (j + 0.5) * fov_h / cols``."""
+    az = (np.arange(cols, dtype=np.float64) + 0.5) * (fov_h / cols)
+    return az + start_deg if start_deg else az
 
 
-def beam_directions(elevations_deg: np.ndarray, cols: int, fov_h: float = 360.0) -> np.ndarray:
-    """Unit ray directions of the whole scan in the LiDAR frame.
+def beam_directions(
+    elevations_deg: np.ndarray, cols: int, fov_h: float = 360.0, start_deg: float = 0.0
+) -> np.ndarray:
+    """Unit ray directions of a uniform scan in the LiDAR frame.
 
     Args:
         elevations_deg: (R,) ring elevations in degrees.
         cols: columns per scan.
         fov_h: horizontal field of view in degrees.
+        start_deg: azimuth where column 0's edge lies (``-fov_h / 2`` for a centred view).
 
     Returns:
         (R, cols, 3) float64 unit vectors; ``[r, j]`` is ring r, column j.
     """
     el = np.deg2rad(np.asarray(elevations_deg, dtype=np.float64))[:, None]
-    az = np.deg2rad(azimuths_deg(cols, fov_h))[None, :]
+    az = np.deg2rad(azimuths_deg(cols, fov_h, start_deg))[None, :]
     return np.stack(
         [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el) * np.ones_like(az)], axis=-1
     )
+
+
+@dataclass(frozen=True)
+class BeamPattern:
+    """Every beam of one sweep: direction, origin and firing time, for flat beam indices.
+
+    Beam ``b`` is ring ``b // cols``, column ``b % cols`` (row-major over the range image), so any
+    range of beams can be generated on its own (scans are cast in chunks of bounded memory).
+
+    Attributes:
+        table: the per-laser layout (one entry per ring).
+        cols: columns per sweep.
+        fov_h: horizontal field of view, degrees.
+        start_deg: azimuth of column 0's edge, degrees (0, or ``-fov_h/2`` when centred).
+        rotation_rate: spin rate, Hz.
+        spin: -1 clockwise seen from above, +1 counter-clockwise.
+        scan_start_azimuth: azimuth where a sweep starts, degrees.
+    """
+
+    table: LaserTable
+    cols: int
+    fov_h: float = 360.0
+    start_deg: float = 0.0
+    rotation_rate: float = 10.0
+    spin: int = -1
+    scan_start_azimuth: float = 180.0
+
+    @property
+    def rings(self) -> int:
+        return self.table.rings
+
+    @property
+    def size(self) -> int:
+        """Number of beams, rings × columns."""
+        return self.rings * self.cols
+
+    @property
+    def _ideal(self) -> bool:
+        t = self.table
+        return not (t.has_origins or any(t.azimuth_offset_deg) or any(t.firing_offset_s))
+
+    def column_azimuth_deg(self) -> np.ndarray:
+        """(C,) float64 azimuth of each column, degrees."""
+        return azimuths_deg(self.cols, self.fov_h, self.start_deg)
+
+    def column_time_s(self) -> np.ndarray:
+        """(C,) float64 firing time of each column since the sweep's start, s, in [0, T)."""
+        turn = self.spin * (self.column_azimuth_deg() - self.scan_start_azimuth) / 360.0
+        return np.mod(turn, 1.0) / self.rotation_rate
+
+    def time_s(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """(n,) float64 firing time of beams ``start..stop`` since the sweep's start, s."""
+        ring, col = self._index(start, stop)
+        return self.column_time_s()[col] + self.table.array("firing_offset_s")[ring]
+
+    def _index(self, start: int, stop: int | None) -> tuple[np.ndarray, np.ndarray]:
+        stop = self.size if stop is None else stop
+        b = np.arange(start, stop, dtype=np.int64)
+        return b // self.cols, b % self.cols
+
+    def beams(self, start: int = 0, stop: int | None = None):
+        """Directions and origins of beams ``start..stop`` in the LiDAR frame.
+
+        Returns:
+            ``(directions, origins)``: (n, 3) float64 unit vectors and (n, 3) float64 beam origins
+            in m, or None when every beam starts at the origin. An ideal table (no offsets,
+            corrections or firing offsets) gives exactly :func:`beam_directions`.
+        """
+        ring, col = self._index(start, stop)
+        if self._ideal:
+            el = np.deg2rad(self.table.array("elevation_deg"))
+            az = np.deg2rad(self.column_azimuth_deg())
+            cos_el, sin_el, cos_az, sin_az = np.cos(el), np.sin(el), np.cos(az), np.sin(az)
+            d = np.stack(
+                [cos_el[ring] * cos_az[col], cos_el[ring] * sin_az[col], sin_el[ring]], axis=-1
+            )
+            return d, None
+        return self.rays_at(ring, self.column_azimuth_deg()[col])
+
+    def rays_at(self, ring: np.ndarray, column_azimuth_deg: np.ndarray):
+        """Directions and origins of lasers ``ring`` fired in columns at ``column_azimuth_deg``.
+
+        Args:
+            ring: (n,) int ring indices.
+            column_azimuth_deg: (n,) azimuth of the column (the head's angle), degrees.
+
+        Returns:
+            ``(directions, origins)``: (n, 3) float64, origins None when every beam starts at
+            the origin.
+        """
+        t = self.table
+        drift = self.spin * 360.0 * self.rotation_rate * t.array("firing_offset_s")
+        phi_c = np.deg2rad(np.asarray(column_azimuth_deg, dtype=np.float64))
+        phi = phi_c + np.deg2rad(t.array("azimuth_offset_deg") + drift)[ring]
+        theta = np.deg2rad(t.array("elevation_deg"))[ring]
+        cp, sp, ct, st = np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta)
+        d = np.stack([ct * cp, ct * sp, st], axis=-1)
+        if not t.has_origins:
+            return d, None
+        v = t.array("vertical_offset_m")[ring]
+        h = t.array("horizontal_offset_m")[ring]
+        n = t.radial_offset_m
+        o = np.stack(
+            [
+                -v * st * cp - h * sp + n * np.cos(phi_c),
+                -v * st * sp + h * cp + n * np.sin(phi_c),
+                v * ct + t.z_offset_m,
+            ],
+            axis=-1,
+        )
+        return d, o

@@ -19,6 +19,8 @@ lies in ``[range_min, range_max]``, and a uniform draw is not below the dropout 
 ``η`` is zero-mean Gaussian noise added after the detection test (:func:`add_noise`; the
 range gets its own), the result clipped at 0. :func:`compensate` turns written intensities
 back into the range-compensated ``g·ρ·T²·cos θ·exp(-2αd)`` (+ noise).
+:func:`full_scale_intensity` is a sensor's fixed reference for integer or unit-range encodings
+(LAS counts, KITTI's [0, 1]): the same for every frame of the sensor.
 
 Every function takes NumPy arrays (or Python floats) or Dr.Jit arrays alike and returns the
 same kind; arguments broadcast. :func:`nidar_mi.lidar.scan.scan` calls them on Dr.Jit arrays.
@@ -36,6 +38,7 @@ __all__ = [
     "add_noise",
     "box_muller",
     "compensate",
+    "full_scale_intensity",
 ]
 
 #: Values of the sensor's ``intensity_mode``.
@@ -166,3 +169,21 @@ def compensate(intensity, range_m, mode: str):
     if mode == "compensated":
         return intensity.astype(np.float32)
     return (intensity * np.asarray(range_m).astype(np.float64) ** 2).astype(np.float32)
+
+
+def full_scale_intensity(gain: float, mode: str) -> float:
+    """The intensity a sensor encodes as full scale: a ρ = 1 Lambertian target at normal
+    incidence without extinction, at 1 m in ``raw`` mode (``g`` in 1/m²), at any range in
+    ``compensated`` mode (``g``, unitless).
+
+    It depends on the sensor's parameters only, never on a frame's content, so encodings
+    scaled by it (LAS counts, KITTI's [0, 1]) compare across frames. Brighter returns
+    (retroreflectors, specular lobes with ρ > 1, targets closer than 1 m in ``raw`` mode)
+    exceed it and saturate where the encoding is bounded.
+
+    Args:
+        gain: the sensor's ``gain`` g (> 0).
+        mode: ``raw`` or ``compensated``.
+    """
+    _check_mode(mode)
+    return float(gain) * float(attenuation(1.0, 1.0, 0.0, mode))

@@ -19,10 +19,11 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..errors import NidarError
+from ..errors import NidarError, check_seed
 
 __all__ = [
     "STNConfig",
@@ -228,6 +229,16 @@ class TrainConfig:
         ):
             if int(value) < 1:
                 raise NidarError(f"{name} must be a positive integer, got {value}")
+        for name, optim in (("stn_optim", self.stn_optim), ("irnet_optim", self.irnet_optim)):
+            if int(optim.epochs) < 1:
+                raise NidarError(f"{name}.epochs must be >= 1, got {optim.epochs}")
+            if optim.max_steps is not None and int(optim.max_steps) < 1:
+                raise NidarError(f"{name}.max_steps must be >= 1 (or null), got {optim.max_steps}")
+            if not (math.isfinite(optim.lr) and optim.lr > 0):
+                raise NidarError(f"{name}.lr must be a positive number, got {optim.lr}")
+            if not (math.isfinite(optim.weight_decay) and optim.weight_decay >= 0):
+                raise NidarError(f"{name}.weight_decay must be >= 0, got {optim.weight_decay}")
+        check_seed(self.seed, "seed")
         if any(s <= 0 or s > 1 for s in self.loss.scales):
             raise NidarError("loss.scales must lie in (0, 1]")
         if self.device != "auto" and not self.device.startswith(("cpu", "cuda")):

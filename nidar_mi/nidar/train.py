@@ -142,6 +142,7 @@ def train_irnet(
         if stn_weights.resolve() != local.resolve():
             if local.is_file() and local.read_bytes() != stn_weights.read_bytes():
                 raise NidarError(f"{local} exists and differs from {stn_weights}")
+            load_stn(stn_weights, "cpu")  # a file that is no STN fails here, before the copy
             atomic_write(local, stn_weights.read_bytes())
     if cfg.irnet.input == "pseudo_nir":
         if stn_weights is None:

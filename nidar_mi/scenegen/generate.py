@@ -3,9 +3,11 @@
 Scene ``k`` of a run with seed ``S`` is named ``scene_<S>_<k>`` and drawn from
 ``numpy.random.default_rng(SeedSequence(S, spawn_key=(k,)))``: independent streams per scene,
 the same scene for the same (S, k) whatever ``--count`` is. Its XML is written atomically to
-``DIR/scene_<S>_<k>.xml``; a scene whose file already exists is skipped, so an interrupted run
-resumes. ``DIR/index.json`` lists every scene of the folder (entries of earlier runs with other
-seeds are kept), with its seeds, kind, materials and rig calibration. A layout that repeats one
+``DIR/scene_<S>_<k>.xml``; a scene whose file already holds it is skipped, so an interrupted run
+resumes; a file holding the scene of another run (another kind) is refused unless ``--overwrite``;
+a file edited by hand is kept. ``DIR/index.json`` lists every scene file of the folder (entries
+of earlier runs with other seeds are kept), with its seeds, kind, materials, sha256 (of the file
+as it is; ``"edited": true`` when it was changed by hand) and rig calibration. A layout that repeats one
 already in the folder is an error (it would leak across a split by scene).
 """
 
@@ -123,6 +125,14 @@ def _read_index(path: str) -> list[dict]:
         raise NidarError(f"{path}: not a scene index ({e}); move it away to regenerate") from None
 
 
+def _file_sha256(path: str) -> str | None:
+    try:
+        with open(path, "rb") as f:
+            return hashlib.sha256(f.read()).hexdigest()
+    except OSError:
+        return None
+
+
 def generate(
     out_dir: str,
     count: int,
@@ -130,9 +140,17 @@ def generate(
     *,
     kind: str | None = None,
     progress: bool = True,
+    overwrite: bool = False,
     materials: str = "all",
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
+
+    Every scene is generated before anything is written. A scene whose file already holds
+    exactly this scene is skipped (an interrupted run resumes); a file that holds the scene of
+    another run (another ``kind``: its index entry says so) is refused unless ``overwrite``;
+    a file edited by hand is kept and its entry marked ``"edited": true`` with the file's
+    sha256. ``index.json`` always describes the files beside it: entries whose file is gone
+    are dropped.
 
     Args:
         out_dir: destination folder (created).
@@ -140,6 +158,7 @@ def generate(
         seed: run seed (>= 0).
         kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
+        overwrite: replace scene files that differ from this run's.
         materials: material set of every scene (:func:`generate_scene`).
 
     Returns:
@@ -147,25 +166,32 @@ def generate(
         scenes written and skipped.
 
     Raises:
-        NidarError: bad argument, an unreadable index, or a file that cannot be written.
+        NidarError: bad argument, an unreadable index, a scene file of another run (without
+            ``overwrite``), or a file that cannot be written; nothing is written then.
     """
     from tqdm.auto import tqdm
 
-    from ..io.atomic import atomic_write_json, atomic_write_text
+    from ..errors import check_seed
+    from ..io.atomic import atomic_write_json, atomic_write_text, check_output_folder
 
     if count < 1:
         raise NidarError(f"--count must be >= 1 (got {count})")
-    if seed < 0:
-        raise NidarError(f"--seed must be >= 0 (got {seed})")
+    check_seed(seed)
     if kind is not None and kind not in KINDS:
         raise NidarError(f"--kind must be one of {', '.join(KINDS)} (got '{kind}')")
     if os.path.exists(out_dir) and not os.path.isdir(out_dir):
         raise NidarError(f"-o: {out_dir} exists and is not a directory")
+    check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
     index_path = os.path.join(out_dir, INDEX_NAME)
-    entries = {e["id"]: e for e in _read_index(index_path)}
-    written = skipped = 0
+    old_entries = {e["id"]: e for e in _read_index(index_path)}
+    entries = {}  # the index describes the files beside it: gone files drop, edited ones say so
+    for key, e in old_entries.items():
+        sha = _file_sha256(os.path.join(out_dir, e.get("file", "")))
+        if sha is not None:
+            entries[key] = e if sha == e.get("sha256") else e | {"sha256": sha, "edited": True}
     # a layout repeated in the folder would leak across a split by scene
     hashes = {e["layout_sha256"]: e["id"] for e in entries.values() if "layout_sha256" in e}
+    todo = []
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
@@ -176,11 +202,28 @@ def generate(
             raise NidarError(f"{entry['id']} repeats the layout of {other}")
         hashes[entry["layout_sha256"]] = entry["id"]
         path = os.path.join(out_dir, entry["file"])
-        if os.path.exists(path):
-            skipped += 1
-        else:
+        on_disk = _file_sha256(path) if os.path.exists(path) else None
+        action = "write"
+        if on_disk == entry["sha256"]:
+            action = "skip"
+        elif on_disk is not None and not overwrite:
+            old = old_entries.get(entry["id"])
+            if old is not None and old.get("sha256") == on_disk and not old.get("edited"):
+                raise NidarError(
+                    f"{path} holds scene {k} of another run (kind {old.get('kind')}, materials "
+                    f"{old.get('material_set', 'all')}): choose "
+                    "another folder or pass --overwrite"
+                )
+            action = "keep"  # edited by hand (or of unknown origin): kept, marked edited
+            entry = (old or entry) | {"sha256": on_disk, "edited": True}
+        todo.append((path, text, entry, action))
+    written = skipped = 0
+    for path, text, entry, action in todo:
+        if action == "write":
             atomic_write_text(path, text)
             written += 1
+        else:
+            skipped += 1
         entries[entry["id"]] = entry
     scenes = sorted(entries.values(), key=lambda e: (e["seed"], e["index"]))
     index = {"generator": "nidar_mi.scenegen", "scenes": scenes}

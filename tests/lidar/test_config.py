@@ -43,6 +43,21 @@ def test_elevation_angles_imply_channels():
         ({"intensity_mode": "linear"}, "intensity_mode"),
         ({"atmospheric_extinction": -0.1}, "atmospheric_extinction"),
         ({"wavelength": 3000}, "wavelength"),
+        ({"layout": "grid"}, "layout"),
+        ({"preset": "waymo_top", "layout": "per_laser"}, "layout"),
+        ({"elevation_angles": "1,2", "layout": "per_laser"}, "elevation_angles"),
+        ({"calibration_file": "/nonexistent/db.xml"}, "calibration_file"),
+        ({"calibration_file": "x.xml", "layout": "uniform"}, "calibration_file"),
+        ({"fov_h_centred": "maybe"}, "fov_h_centred"),
+        ({"rotation_rate": 0}, "rotation_rate"),
+        ({"rotation_rate": 1000}, "rotation_rate"),
+        ({"spin": "left"}, "spin"),
+        ({"scan_start_azimuth": 400}, "scan_start_azimuth"),
+        ({"beam_divergence": -1}, "beam_divergence"),
+        ({"beam_sample_quality": 0}, "beam_sample_quality"),
+        ({"beam_sample_quality": 13}, "beam_sample_quality"),
+        ({"return_mode": "all"}, "return_mode"),
+        ({"return_separation": 0}, "return_separation"),
     ],
 )
 def test_invalid_values_name_the_parameter(values, param):
@@ -68,6 +83,57 @@ def test_invalid_xml_gives_one_line(variant, write_scene, prop, param):
         load_scene(path)
     msg = str(e.value)
     assert "\n" not in msg and f"parameter '{param}'" in msg and "lidar 'top'" in msg
+
+
+def test_per_laser_layout_and_derived_counts():
+    c = LidarConfig.from_mapping("l", {"preset": "hdl64e", "layout": "per_laser"})
+    assert c.rings == 64 and c.laser_table.has_origins and c.subrays == 1 and c.max_returns == 1
+    assert (
+        c.elevations_deg
+        == c.laser_table.elevation_deg
+        != LidarConfig.from_mapping("l", {"preset": "hdl64e"}).elevations_deg
+    )
+    d = LidarConfig.from_mapping(
+        "l", {"beam_divergence": 2, "beam_sample_quality": 4, "return_mode": "dual"}
+    )
+    assert d.subrays == 37 and d.max_returns == 2
+    assert d.to_dict()["subrays"] == 37
+
+
+def test_calibration_file_keeps_the_preset_timing(tmp_path):
+    import yaml
+
+    from nidar_mi.lidar.layouts import preset_table
+
+    ref = preset_table("vlp16")
+    lasers = [
+        {"laser_id": i, "vert_correction": float(v) * 3.14159265 / 180.0}
+        for i, v in zip(ref.laser_id, ref.elevation_deg)
+    ]
+    path = tmp_path / "vlp16.yaml"
+    path.write_text(yaml.safe_dump({"lasers": lasers}))
+    c = LidarConfig.from_mapping("l", {"preset": "vlp16", "calibration_file": str(path)})
+    assert c.layout == "per_laser" and c.laser_table.firing_offset_s == ref.firing_offset_s
+    assert not c.laser_table.has_origins  # the file has no offsets
+    with pytest.raises(ValueError, match="has 16 lasers .* the preset 32"):
+        LidarConfig.from_mapping("l", {"preset": "hdl32e", "calibration_file": str(path)})
+    alone = LidarConfig.from_mapping("l", {"calibration_file": str(path)})
+    assert alone.preset is None and not any(alone.laser_table.firing_offset_s)
+
+
+def test_calibration_file_relative_to_the_scene(variant, write_scene, tmp_path):
+    from nidar_mi.scene import load_scene
+
+    (tmp_path / "cal.json").write_text(
+        '{"beam_altitude_angles": [2.0, 0.0, -2.0], "beam_azimuth_angles": [0, 0, 0]}'
+    )
+    L = load_scene(
+        write_scene(
+            '<sensor type="lidar" id="top"><string name="calibration_file" value="cal.json"/>'
+            "</sensor>"
+        )
+    )
+    assert L.lidars[0].config.elevations_deg == (2.0, 0.0, -2.0)
 
 
 def test_unknown_property_is_rejected(variant, write_scene):

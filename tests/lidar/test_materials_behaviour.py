@@ -118,6 +118,57 @@ def test_nan_reflectance_is_dropped_with_one_warning(variant, write_scene):
     assert np.isfinite(r.reflectance).all() and np.isfinite(r.intensity).all()
 
 
+def _conductor_dome(material: str, wavelength: float, alpha: float = 0.3) -> str:
+    """A LiDAR at the centre of a rough-conductor dome: every beam at normal incidence."""
+    return f"""
+    <sensor type="lidar" id="lidar">
+        <string name="elevation_angles" value="20, 10, 0, -10, -20"/>
+        <integer name="horizontal_resolution" value="180"/>
+        <float name="wavelength" value="{wavelength}"/></sensor>
+    <bsdf type="roughconductor" id="metal">{material}<float name="alpha" value="{alpha}"/></bsdf>
+    <shape type="sphere" id="dome"><float name="radius" value="10"/><ref id="metal"/>
+        <boolean name="flip_normals" value="true"/></shape>
+    """
+
+
+def test_rough_conductor_monostatic_reflectance_exceeds_one(variant, write_scene):
+    """ρ = π·f_r(ω, ω) is Lambertian-equivalent: a rough conductor at normal incidence gives
+    F(0)·D(0)·G·π/4 = F(0) / (4 α²) (Beckmann or GGX, D(0) = 1/(π α²), G = 1), above 1 for
+    α < √F / 2. F(0) = ((n-1)² + k²) / ((n+1)² + k²) for a conductor of index n + ik."""
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+
+    n, k, alpha = 0.2, 5.0, 0.3
+    eta = f'<spectrum name="eta" value="{n}"/><spectrum name="k" value="{k}"/>'
+    L = load_scene(write_scene(_conductor_dome(eta, 905, alpha)))
+    r = scan(L.scene, L.lidars[0])
+    f0 = ((n - 1) ** 2 + k**2) / ((n + 1) ** 2 + k**2)
+    assert r.valid.all()
+    np.testing.assert_allclose(r.reflectance, f0 / (4 * alpha**2), rtol=1e-4)
+    assert r.reflectance.min() > 2.5
+
+
+def test_a_conductor_preset_past_its_table_loses_every_return(variant, write_scene):
+    """Mitsuba's gold ("Au") has no data past ~886 nm: a warning, and no return at all (not
+    the few beams whose evaluation happened to be finite)."""
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+
+    gold = '<string name="material" value="Au"/>'
+    for wavelength, kept in ((850, True), (905, False)):
+        L = load_scene(write_scene(_conductor_dome(gold, wavelength)))
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            r = scan(L.scene, L.lidars[0])
+        msgs = [str(x.message) for x in w if "no finite reflectance" in str(x.message)]
+        assert r.hit.all()
+        if kept:
+            assert r.valid.all() and not msgs
+        else:
+            assert len(msgs) == 1 and "'metal'" in msgs[0] and "returns are dropped" in msgs[0]
+            assert not r.valid.any() and not r.intensity.any() and not r.range.any()
+
+
 def test_rgb_material_warns(variant, write_scene):
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene

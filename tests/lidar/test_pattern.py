@@ -18,6 +18,7 @@ from nidar_mi.lidar.pattern import (
         ("vlp16", 16, 15.0, -15.0),  # VLP-16 manual: +-15 deg
         ("hdl32e", 32, 10.67, -30.67),  # HDL-32E manual: +10.67 .. -30.67 deg
         ("hdl64e", 64, 2.0, -24.8),  # HDL-64E S2: +2 .. -24.8 deg (KITTI: 26.8 deg FOV)
+        ("os1_64", 64, 16.6, -16.6),  # OS1-64: 33.2 deg vertical FOV
         ("os1_128", 128, 22.5, -22.5),  # OS1: 45 deg vertical FOV
         ("waymo_top", 64, 2.4, -17.6),  # Waymo Open Dataset top LiDAR: [-17.6, +2.4]
     ],
@@ -79,3 +80,35 @@ def test_parse_angles():
 def test_every_preset_has_reference():
     for name, p in PRESETS.items():
         assert p.reference and p.range_max > p.range_min >= 0, name
+
+
+def test_centred_field_of_view():
+    """fov_h 120 centred: columns span -60..+60 deg around +x; not centred: 0..120."""
+    from nidar_mi.lidar.config import LidarConfig
+
+    c = LidarConfig.from_mapping(
+        "l", {"fov_h": 120, "fov_h_centred": True, "horizontal_resolution": 120}
+    )
+    az = c.pattern.column_azimuth_deg()
+    assert az[0] == pytest.approx(-59.5) and az[-1] == pytest.approx(59.5)
+    d, _ = c.pattern.beams()
+    assert np.degrees(np.arctan2(d[:, 1], d[:, 0])).min() == pytest.approx(-59.5)
+    plain = LidarConfig.from_mapping("l", {"fov_h": 120, "horizontal_resolution": 120})
+    assert plain.pattern.column_azimuth_deg()[0] == pytest.approx(0.5)
+
+
+def test_firing_offsets_delay_and_turn_each_laser():
+    """A laser firing τ after its column points s·360°·rate·τ further along the spin."""
+    from nidar_mi.lidar.layouts import uniform_table
+    from nidar_mi.lidar.pattern import BeamPattern
+
+    table = uniform_table([1.0, -1.0]).with_firing([0.0, 50e-6])
+    p = BeamPattern(table, 4, rotation_rate=20.0, spin=-1, scan_start_azimuth=0.0)
+    t = p.time_s().reshape(2, 4)
+    np.testing.assert_allclose(t[1] - t[0], 50e-6)
+    d, o = p.beams()
+    assert o is None
+    az = np.degrees(np.arctan2(d[:, 1], d[:, 0])).reshape(2, 4)
+    np.testing.assert_allclose(az[1] - az[0], -360.0 * 20.0 * 50e-6, atol=1e-9)  # clockwise
+    # clockwise from 0 deg: the column at 45 deg fires at (360 - 45) / 360 / 20 s
+    np.testing.assert_allclose(t[0, 0], (360.0 - 45.0) / 360.0 / 20.0)

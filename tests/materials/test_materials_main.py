@@ -58,3 +58,21 @@ def test_runs_as_a_module_without_traceback():
     )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and proc.stderr.strip().startswith("error:")
+
+
+def test_output_without_plot_is_an_error(tmp_path, capsys):
+    assert main(["-o", str(tmp_path / "s.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: -o/--output names the --plot file") and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_plot_file_mode_follows_the_umask(tmp_path, capsys):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        assert main(["--plot", "grass", "-o", str(tmp_path / "s.png")]) == 0
+    finally:
+        os.umask(old)
+    assert (tmp_path / "s.png").stat().st_mode & 0o777 == 0o644

@@ -1,5 +1,6 @@
 """Generated runs: per-scene seeds, distinct layouts, index.json, resumability, rendering."""
 
+import hashlib
 import json
 import os
 
@@ -60,6 +61,8 @@ def test_run_resumes_and_keeps_existing_files(tmp_path):
     index = generate(str(out), 4, 1, progress=False)
     assert index["run"]["written"] == 3 and index["run"]["skipped"] == 1
     assert kept.read_text().endswith(marker)  # skipped, not rewritten
+    entry = next(e for e in index["scenes"] if e["id"] == "scene_1_0")
+    assert entry["edited"] and entry["sha256"] == hashlib.sha256(kept.read_bytes()).hexdigest()
     assert (out / "scene_1_1.xml").read_text() == generate_scene(1, 1)[1]
     # a second seed in the same folder adds to the index
     index = generate(str(out), 1, 2, progress=False)
@@ -85,11 +88,24 @@ def test_a_repeated_layout_in_the_folder_is_refused(tmp_path):
     layout, _ = generate_scene(0, 0)
     assert layout_hash(layout) == layout_hash(generate_scene(0, 0)[0])
     assert layout_hash(layout) != layout_hash(generate_scene(0, 1)[0])
-    copy = {"id": "scene_copy", "seed": -1, "index": 0, "layout_sha256": layout_hash(layout)}
+    (tmp_path / "scene_copy.xml").write_text("a copy")
+    copy = {"id": "scene_copy", "file": "scene_copy.xml", "seed": -1, "index": 0}
+    copy |= {"layout_sha256": layout_hash(layout), "sha256": hashlib.sha256(b"a copy").hexdigest()}
     (tmp_path / "index.json").write_text(json.dumps({"scenes": [copy]}))
     with pytest.raises(NidarError, match="scene_0_0 repeats the layout of scene_copy"):
         generate(str(tmp_path), 1, 0, progress=False)
     assert not (tmp_path / "scene_0_0.xml").exists()
+
+
+def test_index_entries_describe_the_files_beside_them(tmp_path):
+    """An entry whose file is gone is dropped; an edited file keeps its entry, marked."""
+    out = tmp_path / "gen"
+    generate(str(out), 3, 5, progress=False)
+    (out / "scene_5_1.xml").unlink()
+    index = generate(str(out), 1, 5, progress=False)
+    assert [e["id"] for e in index["scenes"]] == ["scene_5_0", "scene_5_2"]
+    for e in index["scenes"]:
+        assert hashlib.sha256((out / e["file"]).read_bytes()).hexdigest() == e["sha256"]
 
 
 def test_corrupt_index_is_reported(tmp_path):

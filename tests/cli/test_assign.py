@@ -1,0 +1,136 @@
+"""``assign`` on awkward input: non-finite points, images of every PNG colour type, the
+renderer's own calibration file, and the input's per-point columns carried to the outputs."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from nidar_mi.io.images import write_png
+from nidar_mi.io.las import read_las
+from nidar_mi.io.points import read_npz, read_ply, write_ply
+from nidar_mi.nidar.pipeline import shipped_weights_dir
+
+pytestmark = pytest.mark.skipif(
+    not (shipped_weights_dir() / "irnet.safetensors").is_file(), reason="no shipped weights"
+)
+
+
+def _png16(path, rgb16: np.ndarray) -> None:
+    """A 16-bit RGB PNG (colour type 2, bit depth 16), which Pillow cannot write."""
+    h, w, _ = rgb16.shape
+    rows = b"".join(b"\x00" + rgb16[y].astype(">u2").tobytes() for y in range(h))
+
+    def chunk(kind, data):
+        body = kind + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, 2, 0, 0, 0)
+    data = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows))
+    path.write_bytes(data + chunk(b"IEND", b""))
+
+
+def _outputs(out) -> dict:
+    return {
+        "npz": read_npz(out / "points.npz"),
+        "ply": read_ply(out / "points.ply"),
+        "las": read_las(out / "points.las"),
+    }
+
+
+# ------------------------------------------------------------------------ 9: NaN and infinity
+
+
+def test_non_finite_points_are_dropped_with_a_count(tmp_path, call, assign_inputs):
+    cloud = read_ply(assign_inputs[1])
+    n = len(cloud["xyz"])
+    xyz = cloud["xyz"].copy()
+    xyz[3, 0] = np.nan
+    xyz[7, 2] = np.inf
+    xyz[11, 1] = -np.inf
+    intensity = cloud["intensity"].copy()
+    intensity[20] = np.nan
+    path = tmp_path / "holes.ply"
+    write_ply(path, {"xyz": xyz, "intensity": intensity})
+    argv = ["--points", path, *assign_inputs[2:], "-o", tmp_path / "out"]
+    status, out, err = call("assign", argv)
+    assert status == 0, err
+    assert err.strip() == f"warning: {path}: dropped 4 of {n} points with NaN or infinite values"
+    keep = np.ones(n, bool)
+    keep[[3, 7, 11, 20]] = False
+    for fmt, p in _outputs(tmp_path / "out").items():
+        assert len(p["xyz"]) == n - 4, fmt
+        np.testing.assert_array_equal(p["xyz"], xyz[keep], err_msg=fmt) if fmt != "las" else None
+        for key, value in p.items():
+            if np.asarray(value).dtype.kind == "f":
+                assert np.isfinite(value).all(), (fmt, key)
+
+
+def test_a_cloud_without_finite_points_is_refused(tmp_path, call, one_error_line, assign_inputs):
+    path = tmp_path / "nan.ply"
+    write_ply(path, {"xyz": np.full((5, 3), np.nan, np.float32)})
+    status, _, err = call("assign", ["--points", path, *assign_inputs[2:], "-o", tmp_path / "o"])
+    one_error_line(status, err, "none of its 5 points")
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------------ 10: image types
+
+
+def test_every_png_colour_type_gives_the_rgb_result(tmp_path, call, assign_inputs):
+    from nidar_mi.io.images import read_png
+
+    rgb = read_png(assign_inputs[-1])
+    grey = np.round(rgb.mean(axis=2)).astype(np.uint8)
+    variants = {
+        "rgba.png": lambda p: write_png(p, np.dstack([rgb, np.full(rgb.shape[:2], 7, np.uint8)])),
+        "rgb16.png": lambda p: _png16(p, rgb.astype(np.uint16) * 257),
+        "grey.png": lambda p: write_png(p, grey),
+        "grey_as_rgb.png": lambda p: write_png(p, np.dstack([grey] * 3)),
+        "grey16.png": lambda p: (
+            __import__("PIL.Image").Image.fromarray(grey.astype(np.uint16) * 257).save(p)
+        ),
+    }
+    results = {}
+    for name, write in {"rgb.png": lambda p: write_png(p, rgb), **variants}.items():
+        write(tmp_path / name)
+        argv = [*assign_inputs[:4], "--image", tmp_path / name, "-o", tmp_path / name[:-4]]
+        status, _, err = call("assign", argv + ["--formats", "npz"])
+        assert status == 0, err
+        assert ("greyscale" in err) == (name in ("grey.png", "grey16.png")), (name, err)
+        results[name] = read_npz(tmp_path / name[:-4] / "points.npz")["intensity_nidar"]
+    np.testing.assert_array_equal(results["rgba.png"], results["rgb.png"])
+    np.testing.assert_array_equal(results["rgb16.png"], results["rgb.png"])
+    np.testing.assert_array_equal(results["grey.png"], results["grey_as_rgb.png"])
+    np.testing.assert_array_equal(results["grey16.png"], results["grey_as_rgb.png"])
+    assert not np.array_equal(results["grey.png"], results["rgb.png"])
+
+
+def test_an_image_of_the_wrong_size_names_both_sizes(tmp_path, call, one_error_line, assign_inputs):
+    write_png(tmp_path / "wide.png", np.zeros((24, 40, 3), np.uint8))
+    argv = [*assign_inputs[:4], "--image", tmp_path / "wide.png", "-o", tmp_path / "o"]
+    status, _, err = call("assign", argv)
+    one_error_line(status, err, "image 40x24 does not match camera 'front' 32x24")
+
+
+# ------------------------------------------------------------------------ 15: render files
+
+
+def test_the_renderers_own_files_and_columns(tmp_path, call, tiny_scene, variant):
+    render = tmp_path / "render"
+    status, _, err = call("render", [tiny_scene, "-o", render, "-q", "--spp", "1"])
+    assert status == 0, err
+    argv = ["--points", render / "lidar/points.npz", "--calib", render / "cam/calib.json"]
+    argv += ["--image", render / "cam/rgb.png", "-o", tmp_path / "out"]
+    status, _, err = call("assign", argv)
+    assert status == 0, err
+    src = read_npz(render / "lidar/points.npz")
+    outs = _outputs(tmp_path / "out")
+    for fmt, p in outs.items():
+        for key in ("ring", "column", "material", "reflectance", "range", "cos_incidence"):
+            np.testing.assert_array_equal(p[key], src[key], err_msg=f"{fmt} {key}")
+        assert list(p["material_names"]) == list(src["material_names"]), fmt
+        assert p["nidar_observed"].any() and p["intensity_nidar"].dtype == np.float32
