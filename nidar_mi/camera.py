@@ -181,9 +181,8 @@ def _reflectance(scene, camera, W: int, H: int, wavelength: float) -> np.ndarray
     px = (mi.Float(idx % W) + 0.5) / W
     py = (mi.Float(idx // W) + 0.5) / H
     ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5))
-    to_world = camera.world_transform()
     wl = mi.Float(float(wavelength))
-    beams = cast(scene, to_world, to_world.inverse() @ ray.d, wl)
+    beams = cast(scene, mi.Ray3f(ray.o, dr.normalize(ray.d)), wl)
     rho, _, _ = monostatic_reflectance(beams, wl)
     out = (rho * beams.two_way_transmittance).numpy().astype(np.float32).reshape(H, W)
     return np.where(np.isfinite(out), np.maximum(out, 0.0), 0.0).astype(np.float32)
