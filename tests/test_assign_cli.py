@@ -135,10 +135,6 @@ def test_kitti_frame(tmp_path):
         (["--points", "x.ply"], "give --points, --calib and --image"),
         (["--kitti", "/nonexistent"], "--frame"),
         (["--kitti", "/nonexistent", "--frame", "1", "--formats", "xyz"], "--formats"),
-        (
-            ["--points", "x.ply", "--calib", "c.yaml", "--image", "i.png", "--profile", "nope"],
-            "x.ply",
-        ),
     ],
 )
 def test_bad_input(tmp_path, args, needle):
@@ -147,6 +143,14 @@ def test_bad_input(tmp_path, args, needle):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0] and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_unknown_profile_is_a_user_error():
+    from nidar_mi.cli.assign import assign_intensity
+    from nidar_mi.errors import NidarError
+
+    with pytest.raises(NidarError, match="unknown profile 'nope'.*sim-905, kitti-hdl64e"):
+        assign_intensity(np.zeros((1, 3)), [], [], profile="nope")
 
 
 def test_render_with_nidar_intensity(tmp_path):

@@ -61,10 +61,13 @@ def build_parser():
 
 
 def _check_target(path: str, overwrite: bool) -> None:
-    if not os.path.exists(path) or overwrite:
-        return
+    from ..io.atomic import check_output_folder
+
     if os.path.isdir(path):
         raise NidarError(f"{path} is a folder; give a file name for the profile")
+    check_output_folder(os.path.dirname(os.path.abspath(path)), overwrite=True)
+    if not os.path.exists(path) or overwrite:
+        return
     try:
         with open(path, encoding="utf-8") as f:
             is_profile = json.load(f).get("schema", "").startswith("nidar_mi.sensor_profile/")

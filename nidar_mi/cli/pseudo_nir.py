@@ -195,11 +195,12 @@ def _convert(args) -> None:
 
     from tqdm.auto import tqdm
 
-    from ..io.atomic import atomic_write_json, staged_directory
+    from ..io.atomic import atomic_write_json, check_output_folder, staged_directory
     from ..io.images import write_exr, write_png
     from ..nidar.infer import pseudo_nir_linear, reduced_size
     from ..nidar.pipeline import NidarModel
 
+    check_output_folder(args.out, overwrite=args.overwrite, marker=INDEX)
     reduced_size(1, 1, args.scale)
     if args.max_side < 16:
         raise NidarError(f"--max-side must be >= 16 (got {args.max_side})")

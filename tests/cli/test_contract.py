@@ -31,6 +31,8 @@ def _argv(command, out, tiny_scene, assign_inputs, synthetic_data, tmp_path):
         "evaluate": ["--data", tmp_path / "no_data", "-o", out, "-q"],
         "scenegen": ["--count", "1", "-o", out, "-q"],
         "materials": ["--plot", "grass", "-o", os.path.join(out, "spectra.png")],
+        "pseudo_nir": [assign_inputs[5], "-o", out, "-q"],
+        "calibrate": [synthetic_data, "-o", out, "-q"],
     }[command]
 
 
