@@ -26,6 +26,7 @@ __all__ = [
     "configure_llvm",
     "default_variant",
     "set_variant",
+    "prepare_worker",
     "SUPPORTED_VARIANTS",
 ]
 
@@ -148,6 +149,30 @@ def set_variant(variant: str | None = None) -> str:
 
     plugins.register_all()  # once per variant; makes nidar_mi.plugins.<name> this variant's
     return variant
+
+
+def prepare_worker(threads: int | None = None, variant: str | None = None) -> str:
+    """Make a worker process ready to render: Dr.Jit's CPU threads, the variant, the plugins.
+
+    The set-up of every task of :func:`nidar_mi.tasks.run_tasks` that renders (plugins register
+    per variant per process, so each worker process sets the variant itself). Cheap when
+    repeated.
+
+    Args:
+        threads: CPU threads Dr.Jit may use in this process (None: leave Dr.Jit's default,
+            every core).
+        variant: as for :func:`set_variant`.
+
+    Returns:
+        The variant now active.
+    """
+    if threads is not None:
+        configure_llvm()
+        import drjit as dr
+
+        if dr.thread_count() != threads:
+            dr.set_thread_count(threads)
+    return set_variant(variant)
 
 
 if sys.platform == "darwin":  # pragma: no cover

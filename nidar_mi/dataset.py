@@ -384,21 +384,63 @@ def _withdraw(out_dir: str) -> None:
         shutil.rmtree(Path(out_dir) / split, ignore_errors=True)
 
 
-def _render_all(files, names, out_dir: str, used: dict, seed: int, spp: int, progress: bool):
-    """Render every scene into ``DATA/renders/<name>`` (skipped when current); their folders."""
-    from tqdm.auto import tqdm
-
+def _scene_frames(
+    scene_path: str, name: str, render_dir: str, frame_dir: str, lidar_id, options: dict
+) -> None:
+    """One scene's task: render it unless ``render_dir`` holds its render already, then write a
+    frame per camera into ``frame_dir`` (the staged split folder)."""
     from .simulate import ensure_rendered
 
-    dirs = []
-    for path, name in tqdm(
-        list(zip(files, names)), desc="dataset", unit="scene", disable=not progress
-    ):
+    ensure_rendered(scene_path, render_dir, **options)
+    for cam_id, frame, _ in frames_of_render(render_dir, lidar_id):
+        write_frame(os.path.join(frame_dir, f"{name}__{cam_id}.npz"), frame)
+
+
+def _scene_entry(render_dir: str, lidar_id: str | None) -> tuple[list[str], float]:
+    """The camera ids of a render folder and the supervising LiDAR's wavelength, nm."""
+    from .render_folder import read_manifest
+
+    manifest = read_manifest(render_dir)
+    lidars = manifest.get("lidars") or {}
+    lid = lidar_id or (min(lidars) if lidars else None)
+    if lid not in lidars:
+        raise NidarError(f"{render_dir}: no lidar '{lid}' (has {', '.join(sorted(lidars))})")
+    return sorted(manifest.get("cameras", {})), lidars[lid]["parameters"]["wavelength"]
+
+
+def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, parallel):
+    """Run every scene's task (:func:`_scene_frames`) on :mod:`nidar_mi.tasks` (``parallel``:
+    its ``workers``, ``address``, ``progress``); the frame ids per split and the wavelength."""
+    from .backend import prepare_worker
+    from .io.atomic import leftovers
+    from .tasks import Task, run_tasks
+
+    tasks = []
+    for path, name in zip(files, names):
         rdir = os.path.join(out_dir, "renders", name)
-        opts = dict(formats=("npz",), seed=seed, spp=spp, params=used[path], progress=False)
-        ensure_rendered(path, rdir, **opts)
-        dirs.append(rdir)
-    return dirs
+        fdir = os.path.join(stage, split_of[name])
+        options = dict(opts, params=used[path])
+        args = (path, name, rdir, fdir, lidar_id, options)
+        tasks.append(Task(name, _scene_frames, args, output=rdir))
+    report = run_tasks(
+        tasks,
+        workers=parallel["workers"],
+        address=parallel["address"],
+        setup=prepare_worker,
+        progress=parallel["progress"],
+        desc="dataset",
+        unit="scene",
+    )
+    report.raise_on_failure("scenes")
+    frames: dict[str, list[str]] = {s: [] for s in SPLITS}
+    wavelength = None
+    for name in names:
+        cameras, wavelength = _scene_entry(os.path.join(out_dir, "renders", name), lidar_id)
+        frames[split_of[name]] += [f"{name}__{c}" for c in cameras]
+    for split in SPLITS:  # what a worker killed while writing a frame left
+        for _, path in leftovers(os.path.join(stage, split)):
+            path.unlink(missing_ok=True)
+    return frames, wavelength
 
 
 def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
@@ -429,6 +471,8 @@ def build_dataset(
     intensity_scale: float = 1.0,
     progress: bool = True,
     overwrite: bool = False,
+    workers: int | None = None,
+    ray_address: str | None = None,
 ) -> dict:
     """Render every scene (cached per request) and publish the frames and ``meta.json``.
 
@@ -453,12 +497,21 @@ def build_dataset(
         intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
         progress: show a progress bar.
         overwrite: accept a non-empty ``out_dir`` that is no dataset.
+        workers: scenes at once on a local Ray runtime (None: one after the other, in this
+            process); see :mod:`nidar_mi.tasks`.
+        ray_address: run the scenes on this Ray cluster instead.
+
+    Each scene is one task: render (unless cached), then write its frames into the staging
+    folder. A scene that fails is reported by name while the others complete; then
+    :class:`~nidar_mi.tasks.TasksFailed` is raised and nothing is published (the completed
+    renders stay for the next run).
 
     Returns:
         The meta dict (also written to ``DATA/meta.json``).
     """
     from .io.atomic import atomic_write_json, check_output_folder, staged_entries
     from .render_folder import file_sha256
+    from .tasks import check_parallel
 
     if not (isinstance(intensity_scale, (int, float)) and np.isfinite(intensity_scale)):
         raise NidarError(f"--intensity-scale must be a positive number (got {intensity_scale})")
@@ -467,7 +520,8 @@ def build_dataset(
     check_seed(seed)
     if spp < 1:
         raise NidarError(f"--spp must be >= 1 (got {spp})")
-    files = find_scenes(scene_dir)
+    check_parallel(workers, ray_address)
+    files = [os.path.abspath(f) for f in find_scenes(scene_dir)]  # workers may run elsewhere
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
         raise NidarError(f"{scene_dir}: scene file names must be unique")
@@ -494,16 +548,13 @@ def build_dataset(
     if old is not None:
         _withdraw(out_dir)
     split_of = {n: s for s, ns in splits.items() for n in ns}
-    frames: dict[str, list[str]] = {s: [] for s in SPLITS}
-    wavelength = None
+    opts = dict(formats=("npz",), seed=seed, spp=spp, progress=False)
+    parallel = dict(workers=workers, address=ray_address, progress=progress)
+    out_dir = os.path.abspath(out_dir)
     with staged_entries(out_dir, [*SPLITS, "meta.json"], last="meta.json") as stage:
-        dirs = _render_all(files, names, out_dir, used, seed, spp, progress)
-        for rdir, name in zip(dirs, names):
-            for cam_id, frame, lparams in frames_of_render(rdir, lidar_id):
-                wavelength = lparams["wavelength"]
-                fid = f"{name}__{cam_id}"
-                write_frame(os.path.join(stage, split_of[name], fid + ".npz"), frame)
-                frames[split_of[name]].append(fid)
+        frames, wavelength = _build_frames(
+            files, names, out_dir, str(stage), split_of, used, lidar_id, opts, parallel
+        )
         meta = {
             "source": "render",
             "scenes": splits,

@@ -25,7 +25,7 @@ import numpy as np
 from . import render_folder as rf
 from .errors import NidarError, check_seed
 
-__all__ = ["INTENSITY_SOURCES", "render_scene", "ensure_rendered"]
+__all__ = ["INTENSITY_SOURCES", "render_scene", "render_request", "ensure_rendered"]
 
 #: ``physics``: only the simulated intensity; ``nidar``: also NIDAR's prediction from the cameras.
 INTENSITY_SOURCES = ("physics", "nidar")
@@ -382,21 +382,25 @@ def render_scene(
     return manifest
 
 
-def ensure_rendered(scene_path: str, out_dir: str, **options) -> dict:
-    """The manifest of ``out_dir`` when it already holds this render, else :func:`render_scene`.
-
-    ``options`` are :func:`render_scene`'s keyword arguments; every one of them (and the scene
-    file's hash) is part of the cache key, so a folder rendered with other parameters is
-    rendered again (replaced whole).
-    """
+def render_request(scene_path: str, **options) -> rf.RenderRequest:
+    """The cache key of :func:`render_scene` called with ``options`` (its keyword arguments)."""
     keys = ("params", "seed", "spp", "formats", "cameras", "rgb_twin", "intensity", "weights")
     keys += ("bin_intensity",)
-    req = rf.RenderRequest.of(
+    return rf.RenderRequest.of(
         scene_path,
         **{k: options[k] for k in keys if k in options},
         nidar_branch=options.get("nidar_branch") or "R",
         profile=_profile_key(options.get("profile")),
     )
-    if rf.is_current(out_dir, req):
+
+
+def ensure_rendered(scene_path: str, out_dir: str, **options) -> dict:
+    """The manifest of ``out_dir`` when it already holds this render, else :func:`render_scene`.
+
+    ``options`` are :func:`render_scene`'s keyword arguments; every one of them (and the scene
+    file's hash) is part of the cache key (:func:`render_request`), so a folder rendered with
+    other parameters is rendered again (replaced whole).
+    """
+    if rf.is_current(out_dir, render_request(scene_path, **options)):
         return rf.read_manifest(out_dir)
     return render_scene(scene_path, out_dir, overwrite=True, **options)

@@ -76,3 +76,152 @@ def test_frames_from_target_scene(variant, tmp_path):
     stamp = os.path.getmtime(out / "train" / "target__camera.npz")
     build_dataset(str(scenes), str(out), fractions=(1, 0, 0), spp=2, params=params, progress=False)
     assert os.path.getmtime(out / "train" / "target__camera.npz") == stamp
+
+
+# --------------------------------------------------------------------------- parallel runs
+
+TINY = {"width": "64", "height": "48", "cols": "256"}
+#: Scenes whose renders repeat exactly from one load to the next. Not warehouse.xml: Mitsuba
+#: orders its six area lights differently at every load, and so draws other light samples.
+REPEATABLE = ("street", "park", "parking_lot")
+
+
+def _tiny_scenes(root):
+    scenes = root / "scenes"
+    scenes.mkdir()
+    for name in REPEATABLE:
+        shutil.copy(os.path.join(REPO, "scenes", f"{name}.xml"), scenes / f"{name}.xml")
+    return scenes
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (read from /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry))
+    out, todo = [], [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def _kill_a_rendering_worker(renders, stop, killed):
+    """Once a render is being staged, SIGKILL one Ray worker of this process that runs a task."""
+    import signal
+    import time
+
+    while not stop.is_set():
+        if renders.is_dir() and any(".partial-" in p.name for p in renders.iterdir()):
+            for pid in _descendants(os.getpid()):
+                try:
+                    with open(f"/proc/{pid}/cmdline", "rb") as f:
+                        title = f.read()
+                except OSError:
+                    continue
+                if title.startswith(b"ray::_execute"):
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(pid)
+                    return
+        time.sleep(0.01)
+
+
+def _arrays(path):
+    with np.load(path, allow_pickle=False) as f:
+        return {k: f[k] for k in f.files}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_workers_give_the_serial_frames_even_when_a_worker_is_killed(variant, tmp_path):
+    """Two Ray workers, one SIGKILLed mid-render: its scene is rendered again, and every file
+    matches the serial run (LiDAR data exactly; camera images to float32 rounding, since the
+    film sums samples in thread order)."""
+    import threading
+
+    pytest.importorskip("ray")
+    scenes = _tiny_scenes(tmp_path)
+    opts = dict(fractions=(1, 1, 1), spp=1, params=TINY, progress=False)
+    serial = build_dataset(str(scenes), str(tmp_path / "serial"), **opts)
+    stop, killed = threading.Event(), []
+    renders = tmp_path / "ray" / "renders"
+    killer = threading.Thread(target=_kill_a_rendering_worker, args=(renders, stop, killed))
+    killer.start()
+    try:
+        parallel = build_dataset(str(scenes), str(tmp_path / "ray"), workers=2, **opts)
+    finally:
+        stop.set()
+        killer.join()
+    assert killed, "no worker was caught rendering"
+    assert parallel == serial
+    for name in REPEATABLE:
+        a = _arrays(tmp_path / "serial" / "renders" / name / "lidar_top" / "points.npz")
+        b = _arrays(renders / name / "lidar_top" / "points.npz")
+        assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a), name
+    for split, fids in serial["frames"].items():
+        for fid in fids:
+            a = _arrays(tmp_path / "serial" / split / f"{fid}.npz")
+            b = _arrays(tmp_path / "ray" / split / f"{fid}.npz")
+            for k in ("intensity", "reflectance", "range", "mask", "K", "T_cam_lidar"):
+                assert np.array_equal(a[k], b[k]), (fid, k)
+            for k in ("nir", "depth"):
+                np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * a[k].max(), err_msg=k)
+            assert np.abs(a["rgb"].astype(int) - b["rgb"].astype(int)).max() <= 1
+    hidden = [p for p in (tmp_path / "ray").rglob(".*")]
+    assert hidden == []  # the killed render's staging folder was removed
+    stamps = {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")}
+    build_dataset(str(scenes), str(tmp_path / "ray"), workers=2, **opts)  # resumed: all done
+    assert {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")} == stamps
+
+
+def test_a_failing_scene_is_named_and_the_others_are_rendered(variant, tmp_path, capsys):
+    """A scene that fails is named, the others are rendered, nothing is published; the next run
+    reuses the renders."""
+    from nidar_mi.cli.dataset import main
+
+    scenes = _tiny_scenes(tmp_path)
+    (scenes / "broken.xml").write_text(
+        '<scene version="3.0.0"><shape type="sphere"/></scene>\n', encoding="utf-8"
+    )
+    out = tmp_path / "data"
+    args = ["--scenes", str(scenes), "-o", str(out), "--spp", "1", "--split", "1,0,0", "-q"]
+    args += [f"-D{k}={v}" for k, v in TINY.items()]
+    assert main(args) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("error: broken: ") and "no lidar sensor" in err[0]
+    assert err[1:] == [
+        "error: 1 of 4 scenes failed (broken); the other 3 are written; "
+        "run again to retry the failed ones"
+    ]
+    assert sorted(p.name for p in out.iterdir()) == ["renders"]  # no split, no meta.json
+    renders = out / "renders"
+    assert sorted(p.name for p in renders.iterdir()) == sorted(REPEATABLE)
+    stamps = {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")}
+    (scenes / "broken.xml").unlink()
+    assert main(args) == 0
+    assert {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")} == stamps
+    assert sorted(p.name for p in (out / "train").iterdir()) == [
+        f"{n}__cam_front.npz" for n in sorted(REPEATABLE)
+    ]
+
+
+def test_workers_without_ray_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    import sys
+
+    from nidar_mi.cli.dataset import main
+
+    scenes = _tiny_scenes(tmp_path)
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` fails as if not installed
+    out = tmp_path / "data"
+    assert main(["--scenes", str(scenes), "-o", str(out), "--workers", "2", "-q"]) == 2
+    assert capsys.readouterr().err == (
+        "error: --workers and --ray-address need Ray: pip install 'nidar_mi[ray]'\n"
+    )
+    assert not out.exists()

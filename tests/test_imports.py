@@ -140,7 +140,7 @@ LAYERS = {
         ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
         0,
     ),
-    "plugins": 0,
+    **dict.fromkeys(("plugins", "tasks"), 0),
     **dict.fromkeys(
         (
             "scene",

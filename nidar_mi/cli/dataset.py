@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from ..errors import NidarError
 from ._common import parse_defines, parser, run, seed_arg
+from ._workers import add_worker_options
 
 __all__ = ["main", "build_parser"]
 
@@ -67,6 +68,7 @@ def build_parser():
         help="accept an output folder that holds other files (they are removed)",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    add_worker_options(p, "scenes")
     return p
 
 
@@ -100,6 +102,8 @@ def main(argv=None) -> int:
             intensity_scale=args.intensity_scale,
             progress=not args.quiet,
             overwrite=args.overwrite,
+            workers=args.workers,
+            ray_address=args.ray_address,
         )
         if not args.quiet:
             for s in SPLITS:

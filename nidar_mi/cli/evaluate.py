@@ -10,7 +10,8 @@ the ablations.
   ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
   and (e), ``meta.json`` gives ``intensity_scale``.
 * ``--scenes`` renders the hand-made scene files (cached in ``CACHE/renders``) with the
-  dataset's parameters, seed and spp, and evaluates them the same way.
+  dataset's parameters, seed and spp, and evaluates them the same way; ``--workers N`` /
+  ``--ray-address`` render them on Ray (:mod:`nidar_mi.tasks`).
 * ``--heldout-materials`` renders scenes made of materials the training scenes lack
   (``python -m nidar_mi.scenegen --materials heldout``; cached in ``CACHE/renders_heldout``) and
   scores every method on those materials' returns.
@@ -38,6 +39,7 @@ import os
 import sys
 
 from ._common import parser, run
+from ._workers import add_worker_options
 
 __all__ = ["main"]
 
@@ -88,6 +90,7 @@ def _parser():
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
     )
     p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
+    add_worker_options(p, "hand-made scenes to render")
     return p
 
 

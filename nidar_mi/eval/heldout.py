@@ -86,8 +86,14 @@ def render_scenes(
     params: dict[str, str] | None = None,
     seed: int = 0,
     spp: int = 16,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = False,
 ) -> list[str]:
     """Render scenes into ``cache_dir/<name>`` unless already rendered with the same request.
+
+    One task per scene (:mod:`nidar_mi.tasks`); a scene that fails is reported and the others
+    are rendered before the error is raised.
 
     Args:
         scene_files: scene XML files.
@@ -95,27 +101,44 @@ def render_scenes(
         params: scene parameters, passed only to scenes that use them (``$name`` in the XML).
         seed: scan seed.
         spp: camera samples per pixel.
+        workers: scenes at once on a local Ray runtime (None: one after the other).
+        ray_address: run on this Ray cluster instead.
+        progress: show a progress bar.
 
     Returns:
         The render folders, in the order of ``scene_files``.
-    """
-    from ..dataset import scene_params
-    from ..simulate import ensure_rendered
 
-    out = []
-    for path in scene_files:
+    Raises:
+        NidarError: a scene failed (:class:`~nidar_mi.tasks.TasksFailed`), or bad arguments.
+    """
+    from functools import partial
+
+    from ..backend import prepare_worker
+    from ..dataset import scene_params
+    from ..render_folder import is_current
+    from ..simulate import ensure_rendered, render_request
+    from ..tasks import Task, run_tasks
+
+    tasks, out = [], []
+    for path in map(os.path.abspath, scene_files):
         name = os.path.splitext(os.path.basename(path))[0]
-        rdir = os.path.join(cache_dir, name)
-        ensure_rendered(
-            path,
-            rdir,
-            formats=("npz",),
-            seed=seed,
-            spp=spp,
-            params=scene_params(path, params),
-            progress=False,
+        rdir = os.path.join(os.path.abspath(cache_dir), name)
+        opts = dict(
+            formats=("npz",), seed=seed, spp=spp, params=scene_params(path, params), progress=False
         )
+        skip = partial(is_current, rdir, render_request(path, **opts))
+        tasks.append(Task(name, ensure_rendered, (path, rdir), opts, output=rdir, skip=skip))
         out.append(rdir)
+    report = run_tasks(
+        tasks,
+        workers=workers,
+        address=ray_address,
+        setup=prepare_worker,
+        progress=progress,
+        desc="render",
+        unit="scene",
+    )
+    report.raise_on_failure("scenes")
     return out
 
 

@@ -86,6 +86,10 @@ def run(args, argv_text: str) -> dict:
     t0 = time.perf_counter()
     check_output_folder(args.out, overwrite=args.overwrite, marker="results.json")
     meta = _check_inputs(args)
+    if args.scenes or args.heldout_materials:
+        from ..tasks import check_parallel
+
+        check_parallel(args.workers, args.ray_address)
     if args.lpips:
         reason = lpips_unavailable_reason()
         if reason:
@@ -226,7 +230,14 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
 
         files = find_scenes(args.scenes)
         log.info("rendering and evaluating %d hand-made scenes", len(files))
-        dirs = render_scenes(files, os.path.join(cache_dir(args), "renders"), **render_opts)
+        dirs = render_scenes(
+            files,
+            os.path.join(cache_dir(args), "renders"),
+            **render_opts,
+            workers=args.workers,
+            ray_address=args.ray_address,
+            progress=not args.quiet,
+        )
         res = evaluate_renders(dirs, model, scale, **common)
         names = [os.path.basename(d) for d in dirs]
         note = (

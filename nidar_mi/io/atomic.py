@@ -9,7 +9,9 @@ target is left untouched.
 :func:`staged_directory` does the same for a whole output folder: everything is written into a
 hidden sibling folder that takes the target's place only when the ``with`` block succeeds.
 :func:`staged_entries` does it for a set of entries inside a folder that also holds other
-things (a dataset's splits and ``meta.json`` beside its render cache).
+things (a dataset's splits and ``meta.json`` beside its render cache). A writer killed outright
+(SIGKILL, a lost machine) cannot clean up: :func:`leftovers` finds what it left, for a job that
+resumes.
 
 :func:`reading` is the read-side counterpart used by every reader of :mod:`nidar_mi.io`: it
 checks that the file exists and turns any failure to parse it into a one-line
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import secrets
 import shutil
 import tempfile
@@ -38,6 +41,7 @@ __all__ = [
     "staged_entries",
     "atomic_write_text",
     "atomic_write_json",
+    "leftovers",
     "reading",
     "staged_directory",
 ]
@@ -305,3 +309,34 @@ def staged_entries(
         raise NidarError(f"cannot write {folder}: {e.strerror or e}") from None
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+
+
+#: Hidden names of the temporaries above: ``.<name>.tmp-<hex8><suffix>`` (atomic_path),
+#: ``.<name>.partial-<random>`` (the staging folder), ``.<name>.old-<hex8>`` (the replaced folder).
+_LEFTOVER = re.compile(
+    r"^\.(?P<name>.+)\.(?:tmp-[0-9a-f]{8}.*|partial-[A-Za-z0-9_]+|old-[0-9a-f]{8})$"
+)
+
+
+def leftovers(directory: str | os.PathLike) -> list[tuple[str, Path]]:
+    """The temporaries of :func:`atomic_path` and :func:`staged_directory` in ``directory``.
+
+    Only a writer that was killed outright leaves them; removing those of a writer that still
+    runs makes it fail, so a caller removes only the leftovers of outputs it alone writes.
+
+    Args:
+        directory: the folder to list (missing: none).
+
+    Returns:
+        ``(target name, path)`` per leftover, e.g. ``("scene_0001", .../.scene_0001.partial-x1y2)``.
+    """
+    try:
+        entries = list(os.scandir(directory))
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    out = []
+    for entry in entries:
+        m = _LEFTOVER.match(entry.name)
+        if m:
+            out.append((m.group("name"), Path(entry.path)))
+    return sorted(out)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
+from nidar_mi.io import atomic
 from nidar_mi.io.atomic import atomic_path, atomic_write_json, atomic_write_text, reading
 
 
@@ -153,3 +154,34 @@ def test_staged_directory_bad_targets(tmp_path):
     with pytest.raises(NidarError, match="cannot write"):
         with staged_directory(f / "sub" / "out"):
             pass
+
+
+_KILLED_WRITER = """
+import os, signal, sys
+from nidar_mi.io.atomic import atomic_path, staged_directory
+folder = sys.argv[1]
+with atomic_path(os.path.join(folder, "frame.npz")) as tmp:
+    tmp.write_bytes(b"half")
+    with staged_directory(os.path.join(folder, "scene.v1")) as stage:
+        (stage / "manifest.json").write_text("{")
+        os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_leftovers_of_a_killed_writer_are_found_by_target_name(tmp_path):
+    import subprocess
+    import sys
+
+    (tmp_path / "scene.v1").mkdir()  # an earlier output, and a foreign hidden file
+    (tmp_path / ".hidden").write_text("mine")
+    proc = subprocess.run([sys.executable, "-c", _KILLED_WRITER, str(tmp_path)])
+    assert proc.returncode == -9  # really killed inside both with-blocks
+    found = atomic.leftovers(tmp_path)
+    assert [name for name, _ in found] == ["frame.npz", "scene.v1"]
+    tmp_file, partial = (p for _, p in sorted(found, key=lambda f: f[0]))
+    assert tmp_file.name.startswith(".frame.npz.tmp-") and tmp_file.suffix == ".npz"
+    assert partial.name.startswith(".scene.v1.partial-") and (partial / "manifest.json").is_file()
+    old = tmp_path / ".scene.v1.old-0123abcd"
+    old.mkdir()
+    assert ("scene.v1", old) in atomic.leftovers(tmp_path)
+    assert atomic.leftovers(tmp_path / "missing") == []
