@@ -11,6 +11,11 @@
   the lens centre.
 * Depth: z-depth (m, along the optical axis) of the first surface through each pixel centre, by
   casting the camera's own rays; 0 where nothing is hit.
+* Reflectance: ρ(λ) at the LiDAR wavelength of the surface through each pixel centre, seen
+  monostatically along the camera ray (π · f_r(ω, ω; λ), as a LiDAR at the camera would see it:
+  :func:`nidar_mi.lidar.raycast.cast` and :func:`~nidar_mi.lidar.raycast.monostatic_reflectance`),
+  times the two-way transmittance T² of any glass on the way; 0 where nothing is hit, at grazing
+  incidence, or where the material has no finite value at λ.
 * Calibration: OpenCV pinhole intrinsics ``K`` (x right, y down, z forward; the centre of pixel
   (0, 0) at (0, 0)) and ``T_world_cam`` (camera-to-world, OpenCV camera axes). Mitsuba's camera
   space is x left, y up, z forward, hence ``T_world_cam = to_world · diag(-1, -1, 1, 1)``.
@@ -65,6 +70,8 @@ class CameraRender:
         timings: seconds per stage.
         other_nir: further band centre (nm) -> (H,W) float32 band image, when several
             wavelengths were asked for.
+        reflectance: (H,W) float32 monostatic ρ(λ)·T² per pixel centre at ``wavelength``
+            (module docstring), or None when not rendered.
     """
 
     name: str
@@ -76,6 +83,7 @@ class CameraRender:
     wavelength: float
     timings: dict[str, float] = field(default_factory=dict)
     other_nir: dict[float, np.ndarray] = field(default_factory=dict)
+    reflectance: np.ndarray | None = None
 
     def exposure(self) -> float:
         """Auto exposure of this render (:func:`auto_exposure` of its RGB image)."""
@@ -160,6 +168,24 @@ def _depth(scene, camera, W: int, H: int, T_world_cam: np.ndarray) -> np.ndarray
     z = dr.dot(ray.o + si.t * ray.d - eye, fwd)
     z = dr.select(si.is_valid(), z, 0.0)
     return z.numpy().astype(np.float32).reshape(H, W)
+
+
+def _reflectance(scene, camera, W: int, H: int, wavelength: float) -> np.ndarray:
+    """(H, W) float32 monostatic ρ(λ)·T² of the surface through each pixel centre."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from .lidar.raycast import cast, monostatic_reflectance
+
+    idx = dr.arange(mi.UInt32, W * H)
+    px = (mi.Float(idx % W) + 0.5) / W
+    py = (mi.Float(idx // W) + 0.5) / H
+    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5))
+    wl = mi.Float(float(wavelength))
+    beams = cast(scene, mi.Ray3f(ray.o, dr.normalize(ray.d)), wl)
+    rho, _, _ = monostatic_reflectance(beams, wl)
+    out = (rho * beams.two_way_transmittance).numpy().astype(np.float32).reshape(H, W)
+    return np.where(np.isfinite(out), np.maximum(out, 0.0), 0.0).astype(np.float32)
 
 
 def _nir_camera(camera, wavelength: float, spp: int):
@@ -257,7 +283,7 @@ def render_camera(
     other_wavelengths=(),
     nir: bool = True,
 ) -> CameraRender:
-    """Render RGB, NIR band and depth of one camera of a loaded scene.
+    """Render RGB, NIR band, depth and reflectance at λ of one camera of a loaded scene.
 
     Args:
         loaded: a :class:`nidar_mi.scene.LoadedScene`.
@@ -301,6 +327,9 @@ def render_camera(
     K, T_world_cam, (W, H) = camera_calibration(camera)
     depth = _depth(scene, camera, W, H, T_world_cam)
     timings["depth"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    reflectance = _reflectance(scene, camera, W, H, wavelength)
+    timings["reflectance"] = time.perf_counter() - t0
     images = [("rgb", rgb), ("nir", nir)] + [(f"nir {wl:g} nm", b) for wl, b in bands.items()]
     for name, img in images:
         if not np.all(np.isfinite(img)):
@@ -322,4 +351,5 @@ def render_camera(
         wavelength=float(wavelength),
         timings=timings,
         other_nir=bands,
+        reflectance=reflectance,
     )

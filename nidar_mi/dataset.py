@@ -38,8 +38,11 @@ import numpy as np
 from .errors import NidarError, check_seed
 
 __all__ = [
+    "CORE_KEYS",
     "FRAME_KEYS",
+    "FRAME_SOURCES",
     "SPLITS",
+    "check_frame",
     "build_dataset",
     "find_scenes",
     "frames_of_render",
@@ -48,45 +51,73 @@ __all__ = [
     "load_meta",
     "scene_params",
     "split_scenes",
+    "write_frame",
 ]
 
 SPLITS = ("train", "val", "test")
 
 
 class FrameKey(NamedTuple):
-    """dtype, shape (``None`` = image size) and meaning of one frame key."""
+    """dtype, shape and meaning of one frame key.
+
+    A shape entry is an int, ``"H"``/``"W"`` (the camera image's height and width) or ``"N"``
+    (the number of camera-visible LiDAR returns of the frame).
+    """
 
     dtype: type
     shape: tuple
     meaning: str
 
 
-#: Every key of a frame file.
+#: Every key a frame file may hold.
 FRAME_KEYS: dict[str, FrameKey] = {
-    "rgb": FrameKey(np.uint8, (None, None, 3), "8-bit sRGB as a camera delivers it (rgb.png)"),
-    "nir": FrameKey(np.float32, (None, None), "NIR band radiance at the LiDAR wavelength, linear"),
+    "rgb": FrameKey(np.uint8, ("H", "W", 3), "8-bit sRGB as a camera delivers it (rgb.png)"),
+    "nir": FrameKey(np.float32, ("H", "W"), "NIR band radiance at the LiDAR wavelength, linear"),
     "intensity": FrameKey(
-        np.float32, (None, None), "sparse range-compensated LiDAR intensity g·ρ·cosθ·exp(-2αd)"
+        np.float32,
+        ("H", "W"),
+        "sparse LiDAR intensity: range-compensated g·ρ·cosθ·exp(-2αd) (rendered), the stored "
+        "reflectance in [0, 1] (KITTI)",
     ),
-    "reflectance": FrameKey(np.float32, (None, None), "sparse ρ at the LiDAR wavelength"),
-    "range": FrameKey(np.float32, (None, None), "sparse LiDAR range, m"),
-    "mask": FrameKey(np.bool_, (None, None), "M: pixels with a projected, unoccluded return"),
-    "depth": FrameKey(np.float32, (None, None), "camera z-depth, m, 0 where no surface"),
+    "reflectance": FrameKey(np.float32, ("H", "W"), "sparse ρ at the LiDAR wavelength"),
+    "range": FrameKey(np.float32, ("H", "W"), "sparse LiDAR range, m"),
+    "mask": FrameKey(np.bool_, ("H", "W"), "M: pixels with a projected, unoccluded return"),
+    "depth": FrameKey(np.float32, ("H", "W"), "camera z-depth, m, 0 where no surface"),
     "K": FrameKey(np.float64, (3, 3), "OpenCV intrinsics"),
     "T_cam_lidar": FrameKey(np.float64, (4, 4), "LiDAR frame -> camera frame"),
+    "R_true": FrameKey(
+        np.float32,
+        ("H", "W"),
+        "true ρ(λ)·T² per pixel, monostatic along the camera ray (reflectance.exr; frames whose "
+        "LiDAR has the wavelength of nir.exr), 0 on the sky",
+    ),
+    "S_true": FrameKey(
+        np.float32,
+        ("H", "W"),
+        "true shading π·nir/R_true (the irradiance at λ for a Lambertian surface), 0 where "
+        f"R_true < {1e-3:g}",
+    ),
+    "points_xyz": FrameKey(
+        np.float32, ("N", 3), "the LiDAR returns the camera sees (unoccluded), LiDAR frame, m"
+    ),
+    "points_intensity": FrameKey(np.float32, ("N",), "their intensity, as in ``intensity``"),
+    "points_ring": FrameKey(np.int16, ("N",), "their ring (0 = the highest beam), -1 unknown"),
 }
+
+#: Keys every frame holds, whatever its source.
+CORE_KEYS = ("rgb", "intensity", "range", "mask", "K", "T_cam_lidar")
+#: The keys of the frames of each source (``meta.json``'s ``source``).
+FRAME_SOURCES: dict[str, tuple[str, ...]] = {
+    "render": tuple(FRAME_KEYS),
+    "kitti": (*CORE_KEYS, "points_xyz", "points_intensity", "points_ring"),
+}
+#: R_true below this counts as "no reflectance" for S_true.
+R_TRUE_MIN = 1e-3
 
 
 def _keys_table() -> str:
     def shape(s):
-        return (
-            "("
-            + ",".join(
-                "H" if i == 0 and d is None else "W" if d is None else str(d)
-                for i, d in enumerate(s)
-            )
-            + ")"
-        )
+        return "(" + ",".join(str(d) for d in s) + ")"
 
     rows = [
         (f"``{k}``", f"{np.dtype(v.dtype).name} {shape(v.shape)}", v.meaning)
@@ -96,7 +127,15 @@ def _keys_table() -> str:
     rule = "  ".join("=" * w for w in widths)
     body = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     head = "  ".join(c.ljust(w) for c, w in zip(("key", "dtype, shape", "meaning"), widths))
-    return "\n".join([rule, head.rstrip(), rule, *body, rule]) + "\n"
+    sources = "".join(
+        f"* ``{name}``: {', '.join(f'``{k}``' for k in keys)}\n"
+        for name, keys in FRAME_SOURCES.items()
+    )
+    return (
+        "\n".join([rule, head.rstrip(), rule, *body, rule])
+        + "\n\nKeys by source (``meta.json``'s ``source``; ``H x W`` image, ``N`` returns):\n\n"
+        + sources
+    )
 
 
 __doc__ += _keys_table()
@@ -127,8 +166,13 @@ def list_frames(data_dir: str | Path, split: str) -> list[Path]:
     return sorted((Path(data_dir) / split).glob("*.npz"))
 
 
-def load_frame(path: str | Path, keys=tuple(FRAME_KEYS)) -> dict[str, np.ndarray]:
-    """Load and check the given keys of one frame file.
+def load_frame(path: str | Path, keys=None) -> dict[str, np.ndarray]:
+    """Load and check keys of one frame file.
+
+    Args:
+        path: the ``.npz`` frame.
+        keys: the keys to load; None loads every key of :data:`FRAME_KEYS` the file holds
+            (the :data:`CORE_KEYS` must be among them).
 
     Raises:
         NidarError: missing key, wrong dtype or shape, or an unreadable file.
@@ -136,25 +180,45 @@ def load_frame(path: str | Path, keys=tuple(FRAME_KEYS)) -> dict[str, np.ndarray
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as npz:
-            missing = [k for k in keys if k not in npz.files]
+            wanted = [k for k in FRAME_KEYS if k in npz.files] if keys is None else list(keys)
+            need = list(CORE_KEYS) + wanted if keys is None else wanted
+            missing = [k for k in dict.fromkeys(need) if k not in npz.files]
             if missing:
                 raise NidarError(f"{path}: missing key(s) {', '.join(missing)}")
-            arrays = {k: npz[k] for k in keys}
+            unknown = [k for k in wanted if k not in FRAME_KEYS]
+            if unknown:
+                raise NidarError(f"{path}: unknown frame key(s) {', '.join(unknown)}")
+            arrays = {k: npz[k] for k in wanted}
     except (OSError, ValueError, zipfile.BadZipFile) as exc:
         raise NidarError(f"cannot read frame {path}: {exc}") from None
-    size = None
+    check_frame(arrays, str(path))
+    return arrays
+
+
+def check_frame(arrays: dict[str, np.ndarray], where: str = "frame") -> None:
+    """Check dtypes and shapes of frame arrays against :data:`FRAME_KEYS`.
+
+    Image keys must share one ``H x W``, point keys one ``N``.
+
+    Raises:
+        NidarError: an unknown key, a wrong dtype or a wrong shape (one line naming it).
+    """
+    dims: dict[str, int] = {}
     for key, arr in arrays.items():
+        if key not in FRAME_KEYS:
+            raise NidarError(f"{where}: unknown frame key {key!r}")
         dtype, shape, _ = FRAME_KEYS[key]
         if arr.dtype != dtype:
-            raise NidarError(f"{path}: {key} has dtype {arr.dtype}, expected {np.dtype(dtype)}")
-        if len(shape) >= 2 and shape[0] is None:
-            hw = arr.shape[:2]
-            size = size or hw
-            if arr.ndim != len(shape) or hw != size or arr.shape[2:] != shape[2:]:
-                raise NidarError(f"{path}: {key} has shape {arr.shape}, image size is {size}")
-        elif arr.shape != shape:
-            raise NidarError(f"{path}: {key} has shape {arr.shape}, expected {shape}")
-    return arrays
+            raise NidarError(f"{where}: {key} has dtype {arr.dtype}, expected {np.dtype(dtype)}")
+        ok = arr.ndim == len(shape)
+        for n, d in zip(arr.shape, shape):
+            if isinstance(d, str):
+                ok = ok and dims.setdefault(d, n) == n
+            else:
+                ok = ok and n == d
+        if not ok:
+            expected = tuple(dims.get(d, d) if isinstance(d, str) else d for d in shape)
+            raise NidarError(f"{where}: {key} has shape {arr.shape}, expected {expected}")
 
 
 # --------------------------------------------------------------------------- scenes and splits
@@ -225,7 +289,7 @@ def split_scenes(
 
 def frames_of_render(render_dir: str, lidar_id: str | None = None):
     """Yield ``(camera id, frame dict, lidar parameters)`` for every camera of a render folder."""
-    from .geometry import splat_points
+    from .geometry import project, splat_points, visible_mask
     from .render_folder import read_render
 
     r = read_render(render_dir, lidar_id)
@@ -237,9 +301,13 @@ def frames_of_render(render_dir: str, lidar_id: str | None = None):
             cam.model,
             depth_image=cam.depth,
         )
+        uv, z, front = project(pts["xyz"], cam.model)
+        seen = np.flatnonzero(front & visible_mask(uv, z, cam.model, depth_image=cam.depth))
+        wavelength = r.parameters["wavelength"]
+        nir = cam.nir(wavelength)
         frame = {
             "rgb": cam.rgb8(),
-            "nir": cam.nir(r.parameters["wavelength"]),
+            "nir": nir,
             "intensity": maps["intensity"],
             "reflectance": maps["reflectance"],
             "range": maps["range"],
@@ -247,13 +315,28 @@ def frames_of_render(render_dir: str, lidar_id: str | None = None):
             "depth": cam.depth,
             "K": cam.model.K.astype(np.float64),
             "T_cam_lidar": cam.model.T_cam_lidar.astype(np.float64),
+            "points_xyz": pts["xyz"][seen].astype(np.float32),
+            "points_intensity": r.compensated[seen].astype(np.float32),
+            "points_ring": pts["ring"][seen].astype(np.int16),
         }
+        if float(cam.calib.get("nir_wavelength_nm", wavelength)) == float(wavelength):
+            # reflectance.exr is at the wavelength of nir.exr (the render's first LiDAR)
+            r_true = cam.reflectance()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s_true = np.where(r_true >= R_TRUE_MIN, np.pi * nir / r_true, 0.0)
+            frame["R_true"], frame["S_true"] = r_true, s_true.astype(np.float32)
         yield cam.name, frame, r.parameters
 
 
-def _write_frame(path: str, frame: dict) -> None:
+def write_frame(path: str | os.PathLike, frame: dict[str, np.ndarray]) -> None:
+    """Check a frame against :data:`FRAME_KEYS` and write it atomically as ``.npz``.
+
+    Raises:
+        NidarError: a key, dtype or shape that the format does not allow.
+    """
     from .io.atomic import atomic_path
 
+    check_frame(frame, os.fspath(path))
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.savez(f, **frame)
@@ -310,7 +393,7 @@ def _scene_frames(
 
     ensure_rendered(scene_path, render_dir, **options)
     for cam_id, frame, _ in frames_of_render(render_dir, lidar_id):
-        _write_frame(os.path.join(frame_dir, f"{name}__{cam_id}.npz"), frame)
+        write_frame(os.path.join(frame_dir, f"{name}__{cam_id}.npz"), frame)
 
 
 def _scene_entry(render_dir: str, lidar_id: str | None) -> tuple[list[str], float]:
@@ -473,6 +556,7 @@ def build_dataset(
             files, names, out_dir, str(stage), split_of, used, lidar_id, opts, parallel
         )
         meta = {
+            "source": "render",
             "scenes": splits,
             "frames": frames,
             "wavelength_nm": wavelength,

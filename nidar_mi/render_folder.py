@@ -5,7 +5,7 @@ One module owns the layout (the table of files is in the README, "Rendering")::
     OUT/manifest.json                           the request, versions, resolved parameters, timings
     OUT/<lidar_id>/points.{npz,ply,las,bin,pcd} valid returns (schema: nidar_mi.io.points)
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
-    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, calib.json
+    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, reflectance.exr, calib.json
     OUT/<camera_id>/nir_<λ>nm.{png,exr}          further NIR bands (LiDARs at other wavelengths)
 
 Writers take the in-memory results (:class:`~nidar_mi.lidar.scan.ScanResult`,
@@ -52,6 +52,9 @@ DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
 BIN_INTENSITY = ("unit", "raw")
 #: The manifest's file name; its presence marks a folder as a render folder.
 MANIFEST = "manifest.json"
+#: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
+#: without ``reflectance.exr``) are rendered again.
+LAYOUT_VERSION = 2
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -76,7 +79,10 @@ class RenderRequest:
         intensity: ``physics`` or ``nidar``.
         weights: NIDAR weights folder (``nidar`` only; None: the shipped model).
         nidar_branch: NIDAR branch (``nidar`` only).
+        profile: NIDAR sensor profile as ``<name>@<hash of its content>`` (``nidar`` only;
+            None: the weights' own calibration).
         bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
+        layout: :data:`LAYOUT_VERSION` of the folder.
     """
 
     scene: str
@@ -90,7 +96,9 @@ class RenderRequest:
     intensity: str = "physics"
     weights: str | None = None
     nidar_branch: str | None = None
+    profile: str | None = None
     bin_intensity: str = "unit"
+    layout: int = LAYOUT_VERSION
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
@@ -101,7 +109,7 @@ class RenderRequest:
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
-            options["weights"] = options["nidar_branch"] = None
+            options["weights"] = options["nidar_branch"] = options["profile"] = None
         elif options.get("weights") is not None:
             options["weights"] = os.path.abspath(options["weights"])
         return cls(scene=path, scene_sha256=file_sha256(path), params=params, **options)
@@ -265,6 +273,8 @@ def write_camera(
         "nir.exr": lambda p: images.write_exr(p, {"Y": render.nir}),
         "depth.exr": lambda p: images.write_exr(p, {"Z": render.depth}),
     }
+    if render.reflectance is not None:
+        outputs["reflectance.exr"] = lambda p: images.write_exr(p, {"Y": render.reflectance})
     nir_images = {f"{render.wavelength:g}": "nir.exr"}
     for wl, band in render.other_nir.items():
         name = nir_file(wl)
@@ -341,6 +351,16 @@ class RenderedCamera:
                     f"{self.folder}: no NIR image at {wavelength:g} nm (has {', '.join(images)} nm)"
                 )
         return _single_channel(read_exr(os.path.join(self.folder, name)))
+
+    def reflectance(self) -> np.ndarray:
+        """(H, W) float32 monostatic ρ(λ)·T² per pixel centre (reflectance.exr).
+
+        Raises:
+            NidarError: the folder has no reflectance.exr.
+        """
+        from .io.images import read_exr
+
+        return _single_channel(read_exr(os.path.join(self.folder, "reflectance.exr")))
 
 
 @dataclass

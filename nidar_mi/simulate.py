@@ -33,6 +33,17 @@ INTENSITY_SOURCES = ("physics", "nidar")
 NIDAR_BRANCHES = ("R", "I_hat")
 
 
+def _profile_key(profile) -> str | None:
+    """``<name>@<sha256 of its JSON, 16 digits>``: what a render's request records of a profile."""
+    if profile is None:
+        return None
+    import hashlib
+    import json
+
+    text = json.dumps(profile.to_dict(), sort_keys=True)
+    return f"{profile.name}@{hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]}"
+
+
 def _versions() -> dict[str, str]:
     import drjit
     import mitsuba
@@ -197,7 +208,7 @@ def _render_cameras(run: _Run, loaded, spp: int, seed: int | None, bar) -> None:
         bar.update(1)
 
 
-def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dict]:
+def _nidar_columns(run: _Run, weights: str | None, branch: str, profile=None) -> dict[str, dict]:
     """``intensity_nidar`` and ``nidar_observed`` per LiDAR from every rendered camera."""
     from .io.calib import render_camera
     from .nidar.pipeline import NidarModel
@@ -213,13 +224,16 @@ def _nidar_columns(run: _Run, weights: str | None, branch: str) -> dict[str, dic
             cams.append(render_camera(calib, cid, lid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
+        pts = result.points()
         res = model.point_intensity(
-            result.points()["xyz"],
+            pts["xyz"],
             cams,
             [None] * len(cams),
             depth_images=depth,
             maps=cam_maps,
             branch=branch,
+            profile=profile,
+            ring=pts["ring"].astype(np.int64),
         )
         out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
     return out
@@ -254,6 +268,7 @@ def render_scene(
     intensity: str = "physics",
     weights: str | None = None,
     nidar_branch: str | None = None,
+    profile=None,
     overwrite: bool = False,
     bin_intensity: str = "unit",
     max_memory: int | None = None,
@@ -276,7 +291,11 @@ def render_scene(
         progress: show a progress bar on stderr.
         intensity: ``physics``, or ``nidar`` to add NIDAR's intensity from the cameras.
         weights: NIDAR weights folder (None: the shipped model); ``nidar`` only.
-        nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only.
+        nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only (without a
+            profile).
+        profile: a :class:`~nidar_mi.nidar.profile.SensorProfile` for NIDAR's intensity
+            (:func:`nidar_mi.nidar.profiles.resolve_profile` turns a name or file into one);
+            None: the weights' own calibration (the numbers of ``sim-905``); ``nidar`` only.
         overwrite: replace a non-empty ``out_dir``.
         bin_intensity: ``unit`` (KITTI's [0, 1]) or ``raw``: see
             :func:`nidar_mi.render_folder.write_lidar`.
@@ -311,6 +330,7 @@ def render_scene(
         intensity=intensity,
         weights=weights,
         nidar_branch=nidar_branch,
+        profile=_profile_key(profile),
         bin_intensity=bin_intensity,
     )
     _check_request(req)
@@ -332,7 +352,7 @@ def render_scene(
         extra = {}
         if intensity == "nidar":
             t0 = time.perf_counter()
-            extra = _nidar_columns(run, weights, nidar_branch)
+            extra = _nidar_columns(run, weights, nidar_branch, profile)
             run.timings["nidar"] = time.perf_counter() - t0
         _write_lidars(run, formats, extra, bin_intensity, deskew)
         manifest = {
@@ -352,6 +372,7 @@ def render_scene(
             "intensity": intensity,
             "nidar_weights": req.weights,
             "nidar_branch": req.nidar_branch,
+            "nidar_profile": req.profile,
             "lidars": run.lidars,
             "cameras": run.cameras,
             "timings_s": run.timings | {"total": time.perf_counter() - t_start},
@@ -369,6 +390,7 @@ def render_request(scene_path: str, **options) -> rf.RenderRequest:
         scene_path,
         **{k: options[k] for k in keys if k in options},
         nidar_branch=options.get("nidar_branch") or "R",
+        profile=_profile_key(options.get("profile")),
     )
 
 

@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import sys
+import tempfile
 
 import pytest
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if REPO not in sys.path:
     sys.path.insert(0, REPO)
+
+# derived caches (KITTI frames, fitted profiles) go to a throw-away folder, not ~/.cache
+if "NIDAR_MI_CACHE" not in os.environ:
+    _CACHE = tempfile.mkdtemp(prefix="nidar_mi_test_cache-")
+    os.environ["NIDAR_MI_CACHE"] = _CACHE
+    atexit.register(shutil.rmtree, _CACHE, True)
 
 
 @pytest.fixture(scope="session")

@@ -18,9 +18,14 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def run(module, *args):
+def run(module, *args, env=None):
     return subprocess.run(
-        [sys.executable, "-m", module, *args], capture_output=True, text=True, cwd=REPO, timeout=600
+        [sys.executable, "-m", module, *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=600,
+        env=None if env is None else dict(os.environ, **env),
     )
 
 
@@ -90,13 +95,19 @@ def test_points_image_calib(tmp_path):
     not os.path.isdir(KITTI), reason="KITTI frames not available (../shared/data/kitti)"
 )
 def test_kitti_frame(tmp_path):
+    """The default profile with --kitti is kitti-hdl64e, fitted at first use on the KITTI frames
+    under the data root (here a small synthetic stand-in) and cached; a profile file gives the
+    same numbers."""
     from nidar_mi.io.points import read_kitti_bin, read_npz
+    from tests.helpers.synthetic_kitti import make_kitti
 
+    make_kitti(tmp_path / "data" / "kitti", frames=2)
+    env = {"NIDAR_MI_DATA": str(tmp_path / "data"), "NIDAR_MI_CACHE": str(tmp_path / "cache")}
     out = tmp_path / "k"
-    r = run(
-        "nidar_mi.assign", "--kitti", KITTI, "--frame", "000000", "-o", str(out), "--formats", "npz"
-    )
+    args = ("--kitti", KITTI, "--frame", "000000", "--formats", "npz")
+    r = run("nidar_mi.assign", *args, "-o", str(out), env=env)
     assert r.returncode == 0, r.stderr
+    assert "fitting the kitti-hdl64e profile" in r.stderr
     p = read_npz(out / "points.npz")
     xyz, refl = read_kitti_bin(os.path.join(KITTI, "velodyne", "000000.bin"))
     np.testing.assert_array_equal(p["xyz"], xyz)
@@ -104,6 +115,17 @@ def test_kitti_frame(tmp_path):
     frac = p["nidar_observed"].mean()
     assert 0.05 < frac < 0.5  # the camera sees the front sector of the 360 deg scan
     assert np.all(p["xyz"][p["nidar_observed"], 0] > 0)  # only points in front of the car
+    assert np.all((p["intensity_nidar"] >= 0) & (p["intensity_nidar"] <= 1))
+    (cached,) = (tmp_path / "cache" / "profiles").glob("kitti-hdl64e-*.json")
+    r = run("nidar_mi.assign", *args, "-o", str(tmp_path / "k2"), "--profile", str(cached), env=env)
+    assert r.returncode == 0 and "fitting" not in r.stderr, r.stderr
+    q = read_npz(tmp_path / "k2" / "points.npz")
+    np.testing.assert_array_equal(q["intensity_nidar"], p["intensity_nidar"])
+    r = run("nidar_mi.assign", *args, "-o", str(tmp_path / "k3"), "--profile", "sim-905", env=env)
+    assert r.returncode == 0, r.stderr
+    s = read_npz(tmp_path / "k3" / "points.npz")
+    np.testing.assert_array_equal(s["nidar_observed"], p["nidar_observed"])
+    assert not np.array_equal(s["intensity_nidar"], p["intensity_nidar"])
 
 
 @pytest.mark.parametrize(
@@ -121,6 +143,14 @@ def test_bad_input(tmp_path, args, needle):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0] and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_unknown_profile_is_a_user_error():
+    from nidar_mi.cli.assign import assign_intensity
+    from nidar_mi.errors import NidarError
+
+    with pytest.raises(NidarError, match="unknown profile 'nope'.*sim-905, kitti-hdl64e"):
+        assign_intensity(np.zeros((1, 3)), [], [], profile="nope")
 
 
 def test_render_with_nidar_intensity(tmp_path):
@@ -145,8 +175,15 @@ def test_render_with_nidar_intensity(tmp_path):
         "2",
         "--formats",
         "npz,ply",
+        "--profile",
+        "sim-905",
     )
     assert r.returncode == 0, r.stderr
+    import json
+
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["nidar_profile"].startswith("sim-905@")
+    assert manifest["request"]["profile"] == manifest["nidar_profile"]
     p = read_npz(out / "lidar_top/points.npz")
     assert p["intensity_nidar"].dtype == np.float32 and p["nidar_observed"].dtype == bool
     obs = p["nidar_observed"]

@@ -71,3 +71,36 @@ def test_rgb_emitter_warns(variant, write_scene):
         r = _render(write_scene, body)
     assert any("rgb_sky" in str(x.message) and "830 nm" in str(x.message) for x in w)
     assert r.nir.max() < 1e-3  # D65-shaped radiance: nothing at 905 nm
+
+
+def test_reflectance_image_is_rho_at_the_laser_wavelength(variant, write_scene):
+    """ρ(λ) of a Lambertian plane per pixel, 0 on the sky; the same as the LiDAR's monostatic ρ."""
+    body = """
+    <emitter type="constant"><spectrum name="radiance" value="300:2, 1700:2"/></emitter>
+    <shape type="rectangle"><transform name="to_world"><scale value="1000"/></transform>
+        <bsdf type="diffuse"><spectrum name="reflectance" value="400:0.2, 1600:0.8"/></bsdf></shape>
+    """
+    for wl, rho in ((905.0, 0.2 + 0.6 * 505 / 1200), (1550.0, 0.2 + 0.6 * 1150 / 1200)):
+        r = _render(write_scene, body, wl=wl, tx=3, tz=0)
+        ground = r.depth > 0
+        assert r.reflectance.shape == r.depth.shape and r.reflectance.dtype == np.float32
+        np.testing.assert_allclose(r.reflectance[ground], rho, rtol=1e-5)
+        assert (r.reflectance[~ground] == 0).all() and (~ground).sum() > 20
+
+
+def test_reflectance_behind_glass_carries_the_two_way_transmittance(variant, write_scene):
+    """A thin glass pane (n = 1.5) before a white wall: ρ·T², T = 1 - 2R/(1+R), R = 0.04 at normal
+    incidence (Fresnel), for the pixels that look through it near its normal."""
+    body = """
+    <shape type="rectangle"><transform name="to_world"><scale value="20"/><rotate y="1" angle="-90"/>
+        <translate x="4"/></transform><bsdf type="diffuse"><spectrum name="reflectance" value="0.5"/>
+        </bsdf></shape>
+    <shape type="rectangle"><transform name="to_world"><scale value="20"/><rotate y="1" angle="-90"/>
+        <translate x="2"/></transform><bsdf type="thindielectric"><float name="int_ior" value="1.5"/>
+        <float name="ext_ior" value="1.0"/></bsdf></shape>
+    """
+    r = _render(write_scene, body, tx=5, tz=1)
+    centre = r.reflectance[7:9, 11:13]
+    R = 0.04
+    T = 1 - 2 * R / (1 + R)  # thin slab, multiple reflections
+    np.testing.assert_allclose(centre, 0.5 * T**2, rtol=2e-3)  # rays within 2.5 deg of normal

@@ -58,6 +58,20 @@ def test_frames_from_target_scene(variant, tmp_path):
     # the LiDAR return and the camera see the same surface: camera z-depth at the pixel is
     # no larger than the LiDAR range (the camera is 0.2 m above the LiDAR) plus a margin
     assert np.all(f["depth"][m] <= f["range"][m] + 0.3)
+    # the true reflectance per pixel is the same ρ the LiDAR saw there (Lambertian panels; a few
+    # silhouette pixels may see another surface than the return that landed on them)
+    same = np.isclose(f["R_true"][m], rho, atol=1e-4)
+    assert same.mean() > 0.95
+    lit = f["R_true"] >= 1e-3
+    np.testing.assert_allclose(
+        f["R_true"][lit] * f["S_true"][lit], np.pi * f["nir"][lit], rtol=1e-4
+    )
+    assert not f["S_true"][~lit].any()
+    # the visible returns: at least one per masked pixel, their intensities include the map's
+    n = len(f["points_xyz"])
+    assert f["points_intensity"].shape == f["points_ring"].shape == (n,) and n >= m.sum()
+    assert set(np.round(f["intensity"][m], 6)) <= set(np.round(f["points_intensity"], 6))
+    assert f["points_ring"].min() >= 0
     # resumable: a second run renders nothing and keeps the frame
     stamp = os.path.getmtime(out / "train" / "target__camera.npz")
     build_dataset(str(scenes), str(out), fractions=(1, 0, 0), spp=2, params=params, progress=False)

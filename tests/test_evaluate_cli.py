@@ -165,3 +165,51 @@ def test_late_failure_leaves_no_output(tiny_run, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_nothing_to_evaluate_and_flags_that_need_data(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["-o", str(out), "-q"]) == 2
+    assert "nothing to evaluate" in capsys.readouterr().err
+    assert main(["--kitti", str(tmp_path), "--ablation", "-o", str(out), "-q"]) == 2
+    assert "--ablation needs --data" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_real_data_tables(tmp_path):
+    """KITTI leave-one-out and the photo table on synthetic stand-ins, shipped weights."""
+    import numpy as np
+
+    from nidar_mi.io.images import write_png
+    from tests.helpers.synthetic_kitti import make_kitti
+
+    kitti = make_kitti(tmp_path / "kitti", frames=3)
+    photos = tmp_path / "rgbnir"
+    rng = np.random.default_rng(0)
+    for cat in ("a", "b", "c"):
+        (photos / cat).mkdir(parents=True)
+        for i in range(5):
+            write_png(
+                photos / cat / f"{i:04d}_rgb.png", rng.integers(0, 256, (24, 32, 3), np.uint8)
+            )
+            write_png(photos / cat / f"{i:04d}_nir.png", rng.integers(0, 256, (24, 32), np.uint8))
+    out = tmp_path / "out"
+    assert main(["--kitti", str(kitti), "--photos", str(photos), "-o", str(out), "-q"]) == 0
+    payload = json.loads((out / "results.json").read_text())
+    loo = payload["kitti"]
+    assert loo["folds"] == ["kitti__000000", "kitti__000001", "kitti__000002"]
+    assert loo["train_frames"] == 2
+    keys = [m["method"] for m in loo["mean"]]
+    for needed in ("lin9", "linnir_dq", "carla", "nidar_R_distance_quantile", "nidar_R_range_ring"):
+        assert needed in keys
+    assert len(loo["rows"]) == 3 * len(keys)
+    assert all(np.isfinite(r["spearman"]) and 0 <= r["rmse"] <= 1 for r in loo["rows"])
+    ph = payload["photos"]
+    assert {m["method"] for m in ph["mean"]} == {"luminance", "linear", "stn"}
+    assert len(ph["images"]) == 3 and all(-1 <= r["r"] <= 1 for r in ph["rows"])
+    md = (out / "results.md").read_text()
+    assert (
+        "## Real data: KITTI, leave one frame out" in md
+        and "## Pseudo-NIR against real NIR photos" in md
+    )
+    assert not (out / "figures").exists()  # no figure of real data

@@ -140,7 +140,7 @@ LAYERS = {
         ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
         0,
     ),
-    **dict.fromkeys(("datasets", "plugins", "tasks"), 0),
+    **dict.fromkeys(("plugins", "tasks"), 0),
     **dict.fromkeys(
         (
             "scene",
@@ -149,6 +149,7 @@ LAYERS = {
             "simulate",
             "sequence",
             "dataset",
+            "datasets",
             "nidar",
             "scenegen",
         ),

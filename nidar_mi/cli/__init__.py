@@ -18,6 +18,8 @@ COMMANDS = {
     "materials": "list the spectral material library, plot spectra",
     "dataset": "render scenes and build NIDAR training frames",
     "train": "train the NIDAR networks",
+    "pseudo_nir": "pseudo-NIR images from colour photos (NIDAR's spectral translation)",
+    "calibrate": "fit a sensor profile (distance and ring response) on a sensor's own scans",
     "assign": "NIDAR intensity for a point cloud from camera images (or a KITTI frame)",
     "evaluate": "score NIDAR and the baselines (tables, figures)",
     "drive": "odometry and loop closure per intensity source on a simulated drive",

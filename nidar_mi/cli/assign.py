@@ -15,6 +15,14 @@ greyscale image is used as R = G = B with a warning). ``--kitti`` reads ``velody
 Points with a non-finite value (NaN or infinity, e.g. the no-return points of an organised
 cloud) are dropped before any work, with a warning that counts them.
 
+``--profile NAME|FILE`` chooses the sensor profile that turns NIDAR's map into the sensor's
+intensity (:mod:`nidar_mi.nidar.profiles`): ``kitti-hdl64e`` by default with ``--kitti`` (fitted
+on the real KITTI frames at first use and cached), ``sim-905`` (the simulator's) by default
+otherwise, or a file from ``python -m nidar_mi.calibrate``. A cloud's ``ring`` column gives the
+profile its rings; with ``--kitti`` they are recovered from the storage order
+(:func:`nidar_mi.datasets.kitti_rings.checked_rings`) and written as ``ring``. ``--branch I_hat``
+without ``--profile`` assigns the dense head raw.
+
 Output in OUT: ``points.npz`` with every column and metadata entry of the input (``xyz``,
 ``intensity``, ``ring``, ...) plus ``intensity_nidar`` (N float32, 0 where unobserved) and
 ``nidar_observed`` (N bool); plus ``points.ply`` and ``points.las`` (``--formats``). OUT is
@@ -38,19 +46,27 @@ FORMATS = ("npz", "ply", "las")
 
 
 def assign_intensity(
-    xyz, cameras, images, *, weights=None, occlusion=True, branch="R"
+    xyz, cameras, images, *, weights=None, occlusion=True, branch="R", profile=None, ring=None
 ) -> dict[str, np.ndarray]:
-    """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``."""
+    """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``.
+
+    ``profile`` is a profile name or file (None: ``branch`` with the weights' own calibration,
+    or raw for ``I_hat``); ``ring`` the points' rings for it (-1 unknown).
+    """
     from ..nidar.pipeline import NidarModel
+    from ..nidar.profiles import resolve_profile
 
     model = NidarModel.load(weights)
+    prof = resolve_profile(profile, model) if profile is not None else None
     for cam, im in zip(cameras, images):
         if im.shape[:2] != (cam.height, cam.width):
             raise NidarError(
                 f"image {im.shape[1]}x{im.shape[0]} does not match camera '{cam.name}' "
                 f"{cam.width}x{cam.height}"
             )
-    res = model.point_intensity(xyz, cameras, images, occlusion=occlusion, branch=branch)
+    res = model.point_intensity(
+        xyz, cameras, images, occlusion=occlusion, branch=branch, profile=prof, ring=ring
+    )
     return {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
 
 
@@ -126,6 +142,11 @@ def build_parser():
         help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
     )
     p.add_argument(
+        "--profile",
+        help="sensor profile: kitti-hdl64e (default with --kitti), sim-905 (default otherwise) "
+        "or a profile file from python -m nidar_mi.calibrate",
+    )
+    p.add_argument(
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
     )
     return p
@@ -142,9 +163,13 @@ def _inputs(args):
         if not args.frame:
             raise NidarError("--kitti needs --frame")
         from ..datasets.kitti import load_frame
+        from ..datasets.kitti_rings import checked_rings
 
         frame = load_frame(args.kitti, args.frame)
         points = {"xyz": frame.xyz, "intensity": frame.intensity}
+        ring = checked_rings(frame.xyz)
+        if ring is not None:
+            points["ring"] = ring
         return points, [frame.camera], [frame.rgb], f"kitti_{args.frame}"
     if not (args.points and args.calib and args.image):
         raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
@@ -184,6 +209,10 @@ def _assign(args) -> None:
     out = args.out or os.path.join("out", "assign", name)
     check_output_folder(out, overwrite=args.overwrite, marker="points.npz")
     points = finite_points(points, args.points or f"KITTI frame {args.frame}")
+    profile = args.profile
+    if profile is None and args.kitti and args.branch == "R":
+        profile = "kitti-hdl64e"
+    ring = np.asarray(points["ring"], dtype=np.int64) if "ring" in points else None
     points.update(
         assign_intensity(
             points["xyz"],
@@ -192,6 +221,8 @@ def _assign(args) -> None:
             weights=args.weights,
             occlusion=not args.no_occlusion,
             branch=args.branch,
+            profile=profile,
+            ring=ring,
         )
     )
     written = _write(out, points, formats, args.overwrite)

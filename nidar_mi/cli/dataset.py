@@ -1,6 +1,11 @@
-"""``python -m nidar_mi.dataset --scenes DIR -o DATA``: NIDAR training frames from rendered scenes.
+"""``python -m nidar_mi.dataset``: NIDAR training frames from rendered scenes or real KITTI frames.
 
-The work and the frame format are :mod:`nidar_mi.dataset`.
+    python -m nidar_mi.dataset --scenes DIR -o DATA [...]        rendered scenes
+    python -m nidar_mi.dataset --kitti DIR [--kitti DIR ...] -o DATA   real KITTI frames
+
+The frame format is :mod:`nidar_mi.dataset`; KITTI frames are
+:mod:`nidar_mi.datasets.kitti_frames` (held-out frame list, rings, short scans). KITTI data is
+non-commercial: keep ``DATA`` out of any repository.
 """
 
 from __future__ import annotations
@@ -18,8 +23,14 @@ def build_parser():
         "Render scenes (cached in DATA/renders) and turn every camera into a NIDAR training "
         "frame; the frames and meta.json are published together when every scene is done.",
     )
-    p.add_argument(
-        "--scenes", required=True, help="folder of scene XML files (e.g. from nidar_mi.scenegen)"
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--scenes", help="folder of scene XML files (e.g. from nidar_mi.scenegen)")
+    src.add_argument(
+        "--kitti",
+        action="append",
+        metavar="DIR",
+        help="KITTI folder (velodyne/, image_2/, calib/); repeatable, e.g. "
+        "../shared/data/kitti and ../shared/data/kitti_raw_0926",
     )
     p.add_argument("-o", "--out", required=True, help="dataset folder")
     p.add_argument(
@@ -66,6 +77,15 @@ def main(argv=None) -> int:
 
     def work():
         from ..dataset import SPLITS, build_dataset
+
+        if args.kitti:
+            from ..datasets.kitti_frames import build_kitti_frames
+
+            meta = build_kitti_frames(args.kitti, args.out, progress=not args.quiet)
+            if not args.quiet:
+                for s in SPLITS:
+                    print(f"{s:5s}  {len(meta['frames'][s]):5d} frames")
+            return
 
         try:
             fractions = tuple(float(x) for x in args.split.split(","))

@@ -1,9 +1,10 @@
 """``python -m nidar_mi.evaluate``: NIDAR and the baselines on held-out scenes, hand-made scenes,
-real KITTI frames, and the ablations.
+scenes of held-out materials, real KITTI frames (leave one frame out), real RGB/NIR photos, and
+the ablations.
 
-    python -m nidar_mi.evaluate --data DATA [--weights DIR] [--scenes scenes/]
-                                [--kitti ../shared/data/kitti] [--ablation] [--cache DIR]
-                                [--overwrite] -o OUT
+    python -m nidar_mi.evaluate [--data DATA] [--weights DIR] [--scenes scenes/]
+                                [--heldout-materials DIR] [--kitti DIR ...] [--photos DIR]
+                                [--ablation] [--cache DIR] [--overwrite] -o OUT
 
 * ``DATA`` is a dataset from :mod:`nidar_mi.dataset`: its ``test`` scenes (rendered under
   ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
@@ -11,16 +12,24 @@ real KITTI frames, and the ablations.
 * ``--scenes`` renders the hand-made scene files (cached in ``CACHE/renders``) with the
   dataset's parameters, seed and spp, and evaluates them the same way; ``--workers N`` /
   ``--ray-address`` render them on Ray (:mod:`nidar_mi.tasks`).
-* ``--kitti`` evaluates the real frames (skipped with a message when the folder is absent).
+* ``--heldout-materials`` renders scenes made of materials the training scenes lack
+  (``python -m nidar_mi.scenegen --materials heldout``; cached in ``CACHE/renders_heldout``) and
+  scores every method on those materials' returns.
+* ``--kitti`` (repeatable: e.g. ``../shared/data/kitti`` and ``../shared/data/kitti_raw_0926``)
+  runs the leave-one-frame-out protocol (:mod:`nidar_mi.eval.loo`); skipped with a message when
+  the folders hold no frame. The frames are converted once and cached in the user's cache.
+* ``--photos`` (e.g. ``../shared/data/rgbnir``) scores pseudo-NIR against the held-out real NIR
+  photos (:mod:`nidar_mi.eval.photos`) and fits baseline (i)'s linear map for the KITTI table;
+  skipped with a message when absent.
 * ``--ablation`` trains the IRNet variants and the RGB-input model into ``CACHE/ablation``
   (finished runs of the same dataset, STN and settings are reused) and scores them on the
   test frames.
 
-``CACHE`` is ``--cache`` (default ``DATA/cache/evaluate``): a rerun reuses what it holds, and
-nothing of it is written into ``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row
-per frame and method, plus ``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of
-KITTI frames), published whole when everything succeeded. See :mod:`nidar_mi.eval.frames` for
-the methods and the metric scale.
+``--data`` may be left out when only real data is evaluated. ``CACHE`` is ``--cache`` (default
+``DATA/cache/evaluate``): a rerun reuses what it holds, and nothing of it is written into
+``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row per frame and method, plus
+``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of real data), published whole
+when everything succeeded. See :mod:`nidar_mi.eval.frames` for the methods and the metric scale.
 """
 
 from __future__ import annotations
@@ -40,12 +49,24 @@ log = logging.getLogger("nidar_mi.evaluate")
 def _parser():
     p = parser(
         "evaluate",
-        "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, and the ablations.",
+        "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, real "
+        "RGB/NIR photos, and the ablations.",
     )
-    p.add_argument("--data", required=True, help="dataset folder (meta.json, renders/, splits)")
+    p.add_argument("--data", help="dataset folder (meta.json, renders/, splits)")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
     p.add_argument("--scenes", help="folder of hand-made scene XML files to evaluate too")
-    p.add_argument("--kitti", help="KITTI folder (velodyne/, image_2/, calib/)")
+    p.add_argument(
+        "--heldout-materials",
+        metavar="DIR",
+        help="folder of scenes made of held-out materials (scenegen --materials heldout)",
+    )
+    p.add_argument(
+        "--kitti",
+        action="append",
+        metavar="DIR",
+        help="KITTI folder (velodyne/, image_2/, calib/), repeatable: leave-one-frame-out",
+    )
+    p.add_argument("--photos", metavar="DIR", help="RGB/NIR photo pairs (<category>/NNNN_rgb.jpg)")
     p.add_argument("--ablation", action="store_true", help="train and score the ablations")
     p.add_argument(
         "--split", default="test", help="dataset split of the held-out scenes (default test)"

@@ -124,6 +124,12 @@ def build_parser():
         help="intensity in points.bin: unit, KITTI's [0, 1] (intensity / the sensor's full "
         "scale, clipped; default); raw, the simulated intensity as it is",
     )
+    p.add_argument(
+        "--profile",
+        default=None,
+        help="NIDAR sensor profile: sim-905 (the simulator's; default), kitti-hdl64e, or a "
+        "profile file from python -m nidar_mi.calibrate",
+    )
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
     p.add_argument(
@@ -185,9 +191,9 @@ def main(argv=None) -> int:
         if args.trajectory is not None:
             if args.intensity != "physics" or args.rgb_twin:
                 raise NidarError("--trajectory renders physics intensity of the scene itself")
-            if args.weights is not None or args.nidar_branch is not None:
+            if args.weights is not None or args.nidar_branch is not None or args.profile:
                 raise NidarError(
-                    "--weights and --nidar-branch are used only with --intensity nidar"
+                    "--weights, --nidar-branch and --profile are used only with --intensity nidar"
                 )
             from ..sequence import render_sequence
 
@@ -216,6 +222,14 @@ def main(argv=None) -> int:
                 print(_sequence_summary(manifest, out))
             return
 
+        profile = None
+        if args.profile is not None:
+            if args.intensity != "nidar":
+                raise NidarError("--profile applies to --intensity nidar")
+            from ..nidar.pipeline import NidarModel
+            from ..nidar.profiles import resolve_profile
+
+            profile = resolve_profile(args.profile, NidarModel.load(args.weights))
         manifest = render_scene(
             args.scene,
             out,
@@ -230,6 +244,7 @@ def main(argv=None) -> int:
             intensity=args.intensity,
             weights=args.weights,
             nidar_branch=args.nidar_branch,
+            profile=profile,
             overwrite=args.overwrite,
             bin_intensity=args.bin_intensity,
             max_memory=_memory(args.max_memory),

@@ -34,9 +34,17 @@ def build_parser():
         "grids of blocks with a drive",
     )
     p.add_argument(
+        "--materials",
+        choices=("all", "train", "heldout"),
+        default="all",
+        help="all (default); train: none of the held-out materials; heldout: the held-out "
+        "materials wherever a part has one (a test of unseen spectra)",
+    )
+    p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace scene files of another run (another --kind) and files edited by hand",
+        help="replace scene files of another run (another --kind or --materials) and files "
+        "edited by hand",
     )
     p.add_argument(
         "--blocks", default=None, metavar="NX,NY", help="city/suburb: blocks along x and y (4,3)"
@@ -79,6 +87,7 @@ def main(argv=None) -> int:
             blocks=blocks,
             drive=drive,
             overwrite=args.overwrite,
+            materials=args.materials,
         )
         if not args.quiet:
             stats = index["run"]

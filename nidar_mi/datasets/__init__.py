@@ -1,9 +1,17 @@
-"""Readers of real datasets, each in its own layout.
+"""Real datasets: readers in their own layouts, and training data built from them.
 
 * :mod:`~nidar_mi.datasets.kitti`: KITTI object-layout frames (Velodyne scan, camera-2
   image, calibration): :func:`~nidar_mi.datasets.kitti.frame_ids`,
-  :func:`~nidar_mi.datasets.kitti.load_frame`,
-  :func:`~nidar_mi.datasets.kitti.load_kitti_calib`.
+  :func:`~nidar_mi.datasets.kitti.load_frame`, :func:`~nidar_mi.datasets.kitti.load_kitti_calib`.
+* :mod:`~nidar_mi.datasets.kitti_rings`: the laser ring of every point from the storage order
+  (checked by elevation), and the road plane.
+* :mod:`~nidar_mi.datasets.kitti_frames`: KITTI frames as NIDAR training frames (cached, with a
+  held-out frame list).
+* :mod:`~nidar_mi.datasets.rgbnir`: pixel-aligned RGB/NIR photo pairs and their held-out split.
+* :mod:`~nidar_mi.datasets.paths`: where the data and the derived caches live.
+
+The data is read from ``../shared/data`` (or ``$NIDAR_MI_DATA``, or a path given by the user)
+and nothing derived from it is kept inside the project.
 """
 
 from .kitti import KITTI_IMAGE_SIZE, KittiFrame, frame_ids, load_frame, load_kitti_calib

@@ -14,11 +14,18 @@ in ``p``; since ``K`` is invertible, ``P_n = K [I | K^{-1} p]``, so the model is
 ``K`` with extrinsic ``[I | K^{-1} p] R0_rect Tr_velo_to_cam`` (and the depth equals the
 homogeneous coordinate of ``P_n R0_rect Tr_velo_to_cam x_velo``). ``K`` is in pixels with
 pixel centres at integer coordinates (:mod:`nidar_mi.geometry.camera_model`).
+
+Rings (lasers) come from the storage order: :mod:`nidar_mi.datasets.kitti_rings`.
+
+**Short scans.** A scan may end early (a truncated file): it then has fewer than 64 rings, all
+of them the top ones; :func:`load_frame` reads whole points and drops a trailing partial one with
+a warning.
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,9 +34,15 @@ import numpy as np
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.images import read_png
-from nidar_mi.io.points import read_kitti_bin
 
-__all__ = ["KITTI_IMAGE_SIZE", "KittiFrame", "frame_ids", "load_frame", "load_kitti_calib"]
+__all__ = [
+    "KITTI_IMAGE_SIZE",
+    "KittiFrame",
+    "frame_ids",
+    "load_frame",
+    "load_kitti_calib",
+    "read_scan",
+]
 
 KITTI_IMAGE_SIZE = (1242, 375)
 """(width, height) in pixels of most KITTI object ``image_2`` frames; some are a few
@@ -137,6 +150,29 @@ def frame_ids(kitti_dir: str | os.PathLike[str]) -> list[str]:
     return ids
 
 
+def read_scan(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """A KITTI ``.bin`` scan: (N, 3) float32 xyz (m) and (N,) float32 reflectance.
+
+    A file that ends inside a point (a truncated download) gives its whole points and a warning.
+
+    Raises:
+        NidarError: a missing or unreadable file.
+    """
+    from nidar_mi.io.atomic import reading
+
+    with reading(path) as p:
+        size = p.stat().st_size
+        rows = np.fromfile(p, dtype="<f4", count=(size // 16) * 4).reshape(-1, 4)
+    if size % 16:
+        warnings.warn(
+            f"{path}: {size % 16} trailing bytes are not a whole point (a truncated scan); "
+            f"read {len(rows)} points",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return np.ascontiguousarray(rows[:, :3], dtype=np.float32), rows[:, 3].astype(np.float32)
+
+
 @dataclass(frozen=True, eq=False)
 class KittiFrame:
     """One KITTI frame: the Velodyne scan, the camera-2 image and its camera model.
@@ -173,7 +209,7 @@ def load_frame(kitti_dir: str | os.PathLike[str], frame_id: str) -> KittiFrame:
     for what, p in paths.items():
         if not os.path.isfile(p):
             raise NidarError(f"KITTI frame {frame_id}: missing {what} file {p}")
-    xyz, intensity = read_kitti_bin(paths["velodyne"])
+    xyz, intensity = read_scan(paths["velodyne"])
     rgb = read_png(paths["image"])[..., :3]
     cam = load_kitti_calib(paths["calib"], "P2", width=rgb.shape[1], height=rgb.shape[0])
     return KittiFrame(xyz=xyz, intensity=intensity, rgb=rgb, camera=cam, frame_id=frame_id)

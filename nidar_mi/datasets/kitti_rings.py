@@ -7,6 +7,18 @@ next ring begins. :func:`scan_rings` finds the wraps (a fall of more than 100°,
 and, between two wraps, the split that leaves the fewest points on the wrong side of 0 (points near 0 jitter in
 azimuth because of the per-laser corrections).
 
+A scan cut short (a truncated file) ends inside a ring: after its last wrap the azimuth comes
+back to 0 and the next ring starts; that start gets a ring of its own. :func:`checked_rings`
+accepts the result only when it looks like a scan: at most 64 rings, and the median elevation of
+each ring's far returns (> 10 m, where the lasers' mounting offsets no longer matter) decreasing
+from ring to ring. On the 84 shared KITTI scans this recovers 64 rings (39 in the truncated raw
+frame 000077) with strictly decreasing elevations. Where the order is lost (a filtered or
+re-sorted cloud) :func:`elevation_rings` assigns each point the ring of the nearest beam elevation
+in a table instead. That is approximate: measured against the storage order on the shared scans,
+the nearest of the per-ring median elevations gives the right ring for 29 % of the returns closer
+than 5 m, 63 % at 5-10 m and 80 % at 10-20 m (the lasers sit up to ~0.2 m apart, which moves a
+near return by several rings' elevation).
+
 **Ground.** :func:`ground_plane` fits the road plane by RANSAC to the low points near the car
 (3-15 m horizontally, z < -1 m, normal within 14° of vertical), then refines it by least squares.
 Far away a real road leaves that plane (a 0.4° slope lifts it 0.35 m at 50 m), so
@@ -22,13 +34,21 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "HDL64E_RINGS",
     "azimuth_deg",
-    "scan_rings",
+    "checked_rings",
+    "elevation_rings",
     "ground_plane",
     "grow_ground",
     "nearest_in_ring",
     "pose_over_plane",
+    "scan_rings",
 ]
+
+#: Lasers of KITTI's Velodyne HDL-64E.
+HDL64E_RINGS = 64
+#: Returns farther than this (m) date a ring's elevation in :func:`checked_rings`.
+_FAR_M = 10.0
 
 
 def azimuth_deg(xyz: np.ndarray) -> np.ndarray:
@@ -53,8 +73,15 @@ def scan_rings(xyz: np.ndarray) -> np.ndarray:
     ring[: bounds[1]] = 0
     for k in range(1, len(bounds) - 1):
         a, e = bounds[k], bounds[k + 1]
-        if k == len(bounds) - 2:  # after the last wrap: the end of the last ring
-            ring[a:e] = k - 1
+        if k == len(bounds) - 2:  # after the last wrap: the end of the last ring, then (in a
+            # scan cut short) the start of one more: a run of >= 10 points back at azimuth >= 0
+            seg = az[a:e]
+            starts = np.flatnonzero((seg[:-1] < 0.0) & (seg[1:] >= 0.0)) + 1
+            j = e - a
+            if len(starts) and e - a - starts[-1] >= 10 and (seg[starts[-1] :] >= 0).mean() > 0.9:
+                j = int(starts[-1])
+            ring[a : a + j] = k - 1
+            ring[a + j : e] = k
             continue
         positive = az[a:e] >= 0.0
         # points left on the wrong side when splitting before index j (0..e-a)
@@ -65,6 +92,66 @@ def scan_rings(xyz: np.ndarray) -> np.ndarray:
         ring[a : a + j] = k - 1  # the end of the ring that wrapped
         ring[a + j : e] = k
     return ring
+
+
+def _elevation_deg(xyz: np.ndarray) -> np.ndarray:
+    x, y, z = (np.asarray(xyz[:, k], dtype=np.float64) for k in range(3))
+    return np.degrees(np.arctan2(z, np.hypot(x, y)))
+
+
+def checked_rings(xyz: np.ndarray, max_rings: int = HDL64E_RINGS) -> np.ndarray | None:
+    """:func:`scan_rings` when the storage order looks like a scan (module docstring), else None.
+
+    Args:
+        xyz: (N, 3) points in storage order, sensor frame, m.
+        max_rings: most rings the sensor has.
+
+    Returns:
+        (N,) int16 rings, 0 = the highest laser; None when there are more than ``max_rings``
+        rings or the rings' far elevations do not decrease.
+    """
+    xyz = np.asarray(xyz)
+    if len(xyz) == 0:
+        return np.zeros(0, dtype=np.int16)
+    ring = scan_rings(xyz)
+    n = int(ring.max()) + 1
+    if n > max_rings:
+        return None
+    far = np.linalg.norm(xyz, axis=1) > _FAR_M
+    el = _elevation_deg(xyz)
+    med = [
+        np.median(el[far & (ring == r)]) for r in range(n) if np.count_nonzero(far & (ring == r))
+    ]
+    if len(med) >= 2 and np.any(np.diff(med) >= 0.0):
+        return None
+    return ring.astype(np.int16)
+
+
+def elevation_rings(xyz: np.ndarray, elevations_deg: np.ndarray) -> np.ndarray:
+    """Ring of each point as the beam whose elevation is nearest (approximate, see the module).
+
+    Args:
+        xyz: (N, 3) points, sensor frame, m.
+        elevations_deg: (R,) beam elevations in degrees, ring 0 first.
+
+    Returns:
+        (N,) int16 ring indices into ``elevations_deg``.
+
+    Raises:
+        ValueError: an empty or non-finite table.
+    """
+    table = np.asarray(elevations_deg, dtype=np.float64).reshape(-1)
+    if table.size == 0 or not np.all(np.isfinite(table)):
+        raise ValueError("elevation_rings: the elevation table must be finite and non-empty")
+    el = _elevation_deg(np.asarray(xyz))
+    order = np.argsort(table)
+    sorted_t = table[order]
+    if len(sorted_t) == 1:
+        return np.zeros(len(el), dtype=np.int16)
+    pos = np.clip(np.searchsorted(sorted_t, el), 1, len(sorted_t) - 1)
+    left, right = sorted_t[pos - 1], sorted_t[pos]
+    nearest = np.where(np.abs(el - left) <= np.abs(el - right), pos - 1, pos)
+    return order[nearest].astype(np.int16)
 
 
 def ground_plane(

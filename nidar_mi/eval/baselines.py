@@ -7,6 +7,14 @@
 * :class:`ClassConstant`: one reflectance (or intensity) per semantic class, the mean of the
   training points of that class.
 * :func:`carla`: CARLA's ``I = exp(-0.004 d)`` (its default atmosphere attenuation rate).
+* :class:`LinearColourDistance`: (h) a 9-parameter least-squares regression of the intensity
+  on colour and distance, features ``r, g, b, r/Σ, g/Σ, b/Σ, log d, d/50, 1`` (``r, g, b`` the
+  8-bit sRGB values / 255 at the point, bilinear; ``Σ = r + g + b + 1e-6``; ``d`` the range in m,
+  ``log`` of at least 0.1 m).
+* :class:`LinearNIR`: the 4-parameter linear map from linear RGB to linear NIR,
+  ``nir = w_r r + w_g g + w_b b + w_0``, fitted by least squares on RGB/NIR photo pairs (both
+  8-bit images linearised with the sRGB transfer function; 20 000 pixels per pair drawn with a
+  seeded generator).
 
 The NIDAR variants (pseudo-NIR straight into calibration, Î direct, full) come from
 :class:`nidar_mi.nidar.pipeline.NidarModel` (``predict_image`` maps, ``point_intensity``).
@@ -25,6 +33,9 @@ from ..errors import NidarError
 __all__ = [
     "CARLA_ATTENUATION_PER_M",
     "ClassConstant",
+    "LinearColourDistance",
+    "LinearNIR",
+    "colour_distance_features",
     "carla",
     "luminance_rho",
     "rgb_twin_scan",
@@ -181,3 +192,96 @@ def rgb_twin_scan(
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r".*is RGB-only", category=RuntimeWarning)
         return scan(loaded.scene, sensor, seed=seed)
+
+
+def colour_distance_features(colour: Any, range_m: Any) -> np.ndarray:
+    """(N, 9) features of :class:`LinearColourDistance` (module docstring).
+
+    Args:
+        colour: (N, 3) 8-bit sRGB / 255 at the points.
+        range_m: (N,) ranges, m.
+    """
+    c = np.asarray(colour, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(range_m, dtype=np.float64).reshape(-1)
+    if c.shape[0] != d.shape[0]:
+        raise NidarError(f"colour_distance_features: {c.shape[0]} colours but {d.size} ranges")
+    total = c.sum(1, keepdims=True) + 1e-6
+    return np.concatenate(
+        [
+            c,
+            c / total,
+            np.log(np.maximum(d, 0.1))[:, None],
+            d[:, None] / 50.0,
+            np.ones((d.size, 1)),
+        ],
+        axis=1,
+    )
+
+
+@dataclass(frozen=True)
+class LinearColourDistance:
+    """(h) Least-squares intensity from colour and distance (module docstring).
+
+    Attributes:
+        weights: (9,) coefficients of :func:`colour_distance_features`.
+    """
+
+    weights: np.ndarray
+
+    @classmethod
+    def fit(cls, colour: Any, range_m: Any, intensity: Any) -> LinearColourDistance:
+        """Fit on training points: (N, 3) colours, (N,) ranges, (N,) intensities."""
+        X = colour_distance_features(colour, range_m)
+        y = np.asarray(intensity, dtype=np.float64).reshape(-1)
+        if (
+            X.shape[0] != y.size
+            or y.size < 9
+            or not np.all(np.isfinite(X))
+            or not np.all(np.isfinite(y))
+        ):
+            raise NidarError("LinearColourDistance.fit: need >= 9 finite points with intensities")
+        w, *_ = np.linalg.lstsq(X, y, rcond=None)
+        return cls(weights=w)
+
+    def predict(self, colour: Any, range_m: Any) -> np.ndarray:
+        """(N,) float64 predictions, clipped to [0, 1]."""
+        return np.clip(colour_distance_features(colour, range_m) @ self.weights, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class LinearNIR:
+    """The 4-parameter linear RGB -> NIR map (module docstring).
+
+    Attributes:
+        weights: (4,) ``w_r, w_g, w_b, w_0``.
+    """
+
+    weights: np.ndarray
+
+    @classmethod
+    def fit(cls, pairs, pixels_per_pair: int = 20000, seed: int = 0) -> LinearNIR:
+        """Fit on ``(rgb uint8 (H, W, 3), nir uint8 (H, W))`` pairs (an iterable)."""
+        from ..io.images import srgb_to_linear
+
+        rng = np.random.default_rng(seed)
+        X, y = [], []
+        for rgb, nir in pairs:
+            n = nir.size
+            sel = rng.choice(n, min(pixels_per_pair, n), replace=False)
+            X.append(srgb_to_linear(rgb.reshape(-1, 3)[sel].astype(np.float32) / 255.0))
+            y.append(srgb_to_linear(nir.reshape(-1)[sel].astype(np.float32) / 255.0))
+        if not X:
+            raise NidarError("LinearNIR.fit: no pairs")
+        A = np.concatenate(X).astype(np.float64)
+        A = np.concatenate([A, np.ones((len(A), 1))], 1)
+        w, *_ = np.linalg.lstsq(A, np.concatenate(y).astype(np.float64), rcond=None)
+        return cls(weights=w)
+
+    def __call__(self, rgb_uint8: Any) -> np.ndarray:
+        """(H, W) float32 linear pseudo-NIR of an (H, W, 3) uint8 sRGB image."""
+        from ..io.images import srgb_to_linear
+
+        lin = srgb_to_linear(np.asarray(rgb_uint8).astype(np.float32) / 255.0)
+        return (lin @ self.weights[:3].astype(np.float32) + np.float32(self.weights[3])).astype(
+            np.float32
+        )

@@ -5,6 +5,8 @@
 * :func:`render_scenes`: cached renders of scene files (the hand-made scenes).
 * :func:`evaluate_renders`: every frame of a set of rendered scenes through
   :func:`~nidar_mi.eval.frames.predict_frame` and :func:`~nidar_mi.eval.frames.evaluate_frame`.
+* :func:`heldout_material_scores`: the methods on the returns whose material no training scene
+  has (scenes from ``python -m nidar_mi.scenegen --materials heldout``).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from .metrics import scale_intensity
 __all__ = [
     "evaluate_renders",
     "fit_class_constant",
+    "heldout_material_scores",
     "render_scenes",
     "twin_prediction",
 ]
@@ -191,3 +194,56 @@ def evaluate_renders(
                 on_frame(res)
             results.append(res)
     return results
+
+
+def heldout_material_scores(results: Sequence[FrameResult], train_materials) -> dict[str, object]:
+    """Every method on the returns of materials no training scene has.
+
+    Args:
+        results: evaluated frames (:func:`evaluate_renders`).
+        train_materials: material names of the training scenes' returns.
+
+    Returns:
+        ``{"materials": held-out names seen, "rows": per frame and method (``spearman``,
+        ``rmse``, ``n_points``), "mean": per method (unweighted over frames, and ``pooled``:
+        Spearman over all held-out returns together)}``.
+    """
+    from .metrics import rmse, spearman
+
+    train = set(map(str, train_materials))
+    rows, pooled, seen = [], {}, set()
+    for r in results:
+        mat = np.asarray(r.frame.material).astype(str)
+        held = (mat != "") & ~np.isin(mat, list(train))
+        if held.sum() < 2:
+            continue
+        seen |= set(mat[held])
+        for k, p in r.pred.items():
+            rows.append(
+                {
+                    "scene": r.frame.scene,
+                    "camera": r.frame.camera,
+                    "method": k,
+                    "n_points": int(held.sum()),
+                    "spearman": spearman(p[held], r.frame.gt[held]),
+                    "rmse": rmse(p[held], r.frame.gt[held]),
+                }
+            )
+            pooled.setdefault(k, ([], []))
+            pooled[k][0].append(p[held])
+            pooled[k][1].append(r.frame.gt[held])
+    mean = []
+    for k, (ps, gs) in pooled.items():
+        rs = [x for x in rows if x["method"] == k]
+        sp = [x["spearman"] for x in rs if np.isfinite(x["spearman"])]
+        mean.append(
+            {
+                "method": k,
+                "frames": len(rs),
+                "n_points": int(sum(x["n_points"] for x in rs)),
+                "spearman": float(np.mean(sp)) if sp else None,
+                "pooled_spearman": spearman(np.concatenate(ps), np.concatenate(gs)),
+                "rmse": float(np.mean([x["rmse"] for x in rs])),
+            }
+        )
+    return {"materials": sorted(seen), "rows": rows, "mean": mean}

@@ -21,7 +21,9 @@ __all__ = [
     "ablation_markdown",
     "goal_check",
     "group_markdown",
-    "kitti_markdown",
+    "heldout_materials_markdown",
+    "loo_markdown",
+    "photos_markdown",
     "labelled",
     "fmt_value",
     "markdown_table",
@@ -235,35 +237,84 @@ def group_markdown(title: str, group: Mapping[str, Any], labels: Mapping[str, st
     return "".join(parts)
 
 
-def kitti_markdown(kitti: Mapping[str, Any], labels: Mapping[str, str]) -> str:
-    """The KITTI section: mean and per-frame tables, the unavailable baselines, goal check."""
-    if "skipped" in kitti:
-        return f"## Real data: KITTI\n\nSkipped: {kitti['skipped']}\n"
-    mean = labelled(kitti["mean"], labels)
-    cols = [c for c in _mean_columns(mean) if not c[0].startswith("ri_")]
-    parts = [
-        "## Real data: KITTI\n\n",
-        f"Frames {', '.join(kitti['frames'])}; reference: the Velodyne reflectance channel "
-        "(in [0, 1], unscaled) at the returns camera 2 sees. Zero-shot rows use the "
-        "source-domain (synthetic) calibration; `LOO` rows refit the quantile map on the "
-        "other KITTI frames.\n\n",
-        markdown_table(mean, cols, bold_best=BEST),
-        "\nNot available on real data:\n\n",
+def loo_markdown(loo: Mapping[str, Any]) -> str:
+    """The KITTI leave-one-frame-out section: mean and per-fold tables, goal check."""
+    from .scan_metrics import BIN_M, BIN_MIN_POINTS, SCAN_METRICS
+
+    if "skipped" in loo:
+        return f"## Real data: KITTI, leave one frame out\n\nSkipped: {loo['skipped']}\n"
+    cols = [("label", "method", 0), ("folds", "folds", 0)] + [
+        (k, h, d) for k, h, d, _ in SCAN_METRICS
     ]
-    parts.extend(f"- {v}\n" for v in kitti["unavailable"].values())
-    parts.append("\nGoal (NIDAR-Full ahead of the available baselines (b), (d)):\n\n")
-    parts.extend(
-        f"- zero-shot: {c}\n"
-        for c in goal_check(kitti["mean"], "nidar_full", ["luminance", "carla"])
-    )
-    parts.extend(
-        f"- leave-one-out: {c}\n"
-        for c in goal_check(kitti["mean"], "nidar_full_loo", ["luminance_loo", "carla_loo"])
-    )
-    parts.append("\n<details><summary>Per frame</summary>\n\n")
-    parts.append(markdown_table(labelled(kitti["rows"], labels), SCENE_COLUMNS))
+    best = {k: b for k, _, _, b in SCAN_METRICS}
+    parts = [
+        "## Real data: KITTI, leave one frame out\n\n",
+        f"{loo['frames']} frames; folds: {', '.join(loo['folds'])}. Fold k fits every method on "
+        f"the other {loo['train_frames']} frames and scores it on frame k; reference: the stored "
+        "Velodyne reflectance at the returns camera 2 sees. SSIM on the camera map (returns at "
+        "their nearest pixel) and on the range image (rings x 2048 azimuth columns); Spearman "
+        f"in {BIN_M:g} m bins: the count-weighted mean over range bins with at least "
+        f"{BIN_MIN_POINTS} returns. Mean over folds; best value in bold.\n\n",
+        markdown_table(loo["mean"], cols, bold_best=best),
+    ]
+    if loo.get("note"):
+        parts.append(f"\nNote: {loo['note']}.\n")
+    parts.append("\n<details><summary>Per fold</summary>\n\n")
+    parts.append(markdown_table(loo["rows"], [("frame", "frame", 0)] + cols[:1] + cols[2:]))
     parts.append("\n</details>\n")
     return "".join(parts)
+
+
+def photos_markdown(photos: Mapping[str, Any]) -> str:
+    """The held-out RGB/NIR photo section: mean and per-category tables."""
+    from .photos import PHOTO_METRICS
+
+    if "skipped" in photos:
+        return f"## Pseudo-NIR against real NIR photos\n\nSkipped: {photos['skipped']}\n"
+    n = {k: len(v) for k, v in photos["split"].items()}
+    w = photos["linear_weights"]
+    cols = [("label", "method", 0), ("images", "images", 0)] + list(PHOTO_METRICS)
+    parts = [
+        "## Pseudo-NIR against real NIR photos\n\n",
+        f"Held-out split by image, every category represented: {n['train']} train, {n['val']} "
+        f"val, {n['test']} test pairs. The linear map (fitted on {photos['linear_fitted_on']}): "
+        f"nir = {w[0]:.3f} r {w[1]:+.3f} g {w[2]:+.3f} b {w[3]:+.3f} (linear values). Pearson r "
+        "over all pixels; SSIM after the per-image least-squares gain and offset; mean over the "
+        "test images.\n\n",
+        markdown_table(photos["mean"], cols, bold_best={"r": "max", "ssim": "max"}),
+        "\nPer category (Pearson r):\n\n",
+    ]
+    cats = sorted(next(iter(photos["per_category"].values())))
+    rows = [
+        {"label": next(m["label"] for m in photos["mean"] if m["method"] == k)}
+        | {c: v[c]["r"] for c in cats}
+        for k, v in photos["per_category"].items()
+    ]
+    parts.append(markdown_table(rows, [("label", "method", 0)] + [(c, c, 2) for c in cats]))
+    return "".join(parts)
+
+
+def heldout_materials_markdown(h: Mapping[str, Any], labels: Mapping[str, str]) -> str:
+    """The held-out materials section."""
+    mean = labelled(h["mean"], labels)
+    cols = [
+        ("label", "method", 0),
+        ("frames", "frames", 0),
+        ("n_points", "returns", 0),
+        ("spearman", "Spearman↑ (mean over frames)", 3),
+        ("pooled_spearman", "Spearman↑ (all returns)", 3),
+        ("rmse", "RMSE↓", 4),
+    ]
+    return "".join(
+        [
+            "## Scenes of held-out materials\n\n",
+            f"Scenes {', '.join(h['scenes'])}; scored on the returns of the materials no training "
+            f"scene has ({', '.join(h['materials'])}), against the physical intensity.\n\n",
+            markdown_table(
+                mean, cols, bold_best={"spearman": "max", "pooled_spearman": "max", "rmse": "min"}
+            ),
+        ]
+    )
 
 
 def ablation_markdown(ab: Mapping[str, Any]) -> str:

@@ -105,9 +105,12 @@ class IRNetDataset(FrameDataset):
         train: random crops and flips if True, centre crops otherwise.
         input_dir: directory with ``<frame>.npy`` pseudo-NIR images ``(1, H, W)`` float32
             (the frozen STN's output); None gives the prepared RGB image as input.
+        intrinsic_targets: also give the rendered frames' true reflectance and shading
+            (``R_true``, ``S_true``; frames without them are an error).
 
     Items: ``{"x": (1 or 3, c, c), "intensity": (1, c, c), "mask": (1, c, c)}`` float32
-    (the mask as 0/1).
+    (the mask as 0/1), plus ``"R_true"`` and ``"S_true"`` ``(1, c, c)`` float32 (the same crop
+    and flip) with ``intrinsic_targets``.
     """
 
     def __init__(
@@ -118,14 +121,18 @@ class IRNetDataset(FrameDataset):
         seed: int = 0,
         train: bool = True,
         input_dir: str | Path | None = None,
+        intrinsic_targets: bool = False,
     ) -> None:
         super().__init__(frames, crop_size, seed, train)
         self.intensity_scale = float(intensity_scale)
         self.input_dir = Path(input_dir) if input_dir is not None else None
+        self.intrinsic_targets = bool(intrinsic_targets)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         path = self.frames[index]
         keys = ("intensity", "mask") if self.input_dir is not None else ("rgb", "intensity", "mask")
+        if self.intrinsic_targets:
+            keys = (*keys, "R_true", "S_true")
         arrays = load_frame(path, keys)
         if self.input_dir is None:
             x = prepare_rgb(arrays["rgb"])
@@ -138,8 +145,12 @@ class IRNetDataset(FrameDataset):
         # would otherwise dominate every squared loss)
         target = np.clip(arrays["intensity"][None] / np.float32(self.intensity_scale), 0, 1) * mask
         window, flip = self._window(index, *mask.shape[1:])
-        return {
+        item = {
             "x": self._apply(x.astype(np.float32), window, flip),
             "intensity": self._apply(target.astype(np.float32), window, flip),
             "mask": self._apply(mask, window, flip),
         }
+        if self.intrinsic_targets:
+            for key in ("R_true", "S_true"):
+                item[key] = self._apply(arrays[key][None].astype(np.float32), window, flip)
+        return item

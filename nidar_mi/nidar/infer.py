@@ -1,7 +1,19 @@
 """Inference of the trained NIDAR networks on whole camera images.
 
 Images of any size are padded on the bottom and right (edge replication) to a multiple of the
-networks' stride, run in eval mode without gradients, and cropped back.
+networks' stride, run in eval mode without gradients, and cropped back. Networks prepared with
+:func:`nidar_mi.nidar.fold.prepare_for_inference` (channels-last parameters) get channels-last
+inputs.
+
+**Reduced-resolution inference** (``scale < 1``): the image is resized (area averaging) to
+``round(scale · H) x round(scale · W)`` before a network sees it.
+
+* STN: the per-pixel channel weights are predicted at the reduced size, resized bilinearly to the
+  full size and combined with the full-resolution RGB, so the pseudo-NIR keeps the image's own
+  detail (the weights vary slowly; the colours carry the edges).
+* IRNet: R, S and Î are predicted at the reduced size and resized bilinearly to the full size.
+
+The outputs always have the input's size.
 """
 
 from __future__ import annotations
@@ -12,10 +24,17 @@ import torch.nn.functional as F
 
 from ..errors import NidarError
 from .irnet import IRNet
-from .preprocess import prepare_rgb
+from .preprocess import EXPOSURE_TARGET_MEAN, prepare_rgb
 from .stn import STN
 
-__all__ = ["pad_to_multiple", "pseudo_nir", "predict"]
+__all__ = [
+    "pad_to_multiple",
+    "predict",
+    "pseudo_nir",
+    "pseudo_nir_linear",
+    "reduced_size",
+    "run_irnet",
+]
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:
@@ -25,40 +44,143 @@ def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:
     return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
 
 
+def reduced_size(h: int, w: int, scale: float) -> tuple[int, int]:
+    """``(round(scale · h), round(scale · w))``, at least 1 x 1.
+
+    Raises:
+        NidarError: ``scale`` not in (0, 1].
+    """
+    if not 0.0 < float(scale) <= 1.0:
+        raise NidarError(f"inference scale must lie in (0, 1], got {scale}")
+    return max(1, round(scale * h)), max(1, round(scale * w))
+
+
 def _device(module: torch.nn.Module) -> torch.device:
     return next(module.parameters()).device
 
 
+def _is_channels_last(module: torch.nn.Module) -> bool:
+    for p in module.parameters():
+        if p.ndim == 4:
+            return p.is_contiguous(memory_format=torch.channels_last) and not p.is_contiguous()
+    return False
+
+
+def _run(net: torch.nn.Module, x: torch.Tensor):
+    """``net`` on ``(B, C, H, W)`` padded to its stride, in eval mode (the mode is restored)."""
+    was_training = net.training
+    net.eval()
+    try:
+        x = pad_to_multiple(x.to(_device(net)), net.stride)
+        if _is_channels_last(net):
+            x = x.contiguous(memory_format=torch.channels_last)
+        return net(x)
+    finally:
+        net.train(was_training)
+
+
+def _resize(x: torch.Tensor, size: tuple[int, int], mode: str) -> torch.Tensor:
+    if tuple(x.shape[-2:]) == tuple(size):
+        return x
+    if mode == "area":
+        return F.interpolate(x, size=size, mode="area")
+    return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
+
+
+def _stn_forward(stn: STN, x: torch.Tensor, scale: float) -> torch.Tensor:
+    """Full-size ``(1, 1, H, W)`` pseudo-NIR of prepared RGB ``x`` (``(1, 3, H, W)``)."""
+    h, w = x.shape[-2:]
+    if scale == 1.0:
+        return _run(stn, x)[..., :h, :w]
+    small = _resize(x, reduced_size(h, w, scale), "area")
+    was_training = stn.training
+    stn.eval()
+    try:
+        xs = pad_to_multiple(small.to(_device(stn)), stn.stride)
+        if _is_channels_last(stn):
+            xs = xs.contiguous(memory_format=torch.channels_last)
+        weights = stn.channel_weights(xs)[0][..., : small.shape[-2], : small.shape[-1]]
+    finally:
+        stn.train(was_training)
+    weights = _resize(weights, (h, w), "bilinear")
+    return (x.to(weights.device) * weights).sum(1, keepdim=True)
+
+
 @torch.no_grad()
-def pseudo_nir(stn: STN, rgb: np.ndarray) -> np.ndarray:
-    """Pseudo-NIR image of an 8-bit sRGB camera image.
+def pseudo_nir(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
+    """Pseudo-NIR image of an 8-bit sRGB camera image, in the network domain.
 
     Args:
         stn: trained STN.
         rgb: ``(H, W, 3)`` uint8 sRGB.
+        scale: inference resolution relative to the image, in (0, 1] (module docstring).
 
     Returns:
         ``(H, W)`` float32 pseudo-NIR in the exposure-normalised domain (mean ~0.5).
     """
-    was_training = stn.training
-    stn.eval()
-    try:
-        x = torch.from_numpy(prepare_rgb(rgb))[None].to(_device(stn))
-        h, w = x.shape[-2:]
-        out = stn(pad_to_multiple(x, stn.stride))[..., :h, :w]
-    finally:
-        stn.train(was_training)
-    return out[0, 0].float().cpu().numpy()
+    x = torch.from_numpy(prepare_rgb(rgb))[None]
+    return _stn_forward(stn, x, float(scale))[0, 0].float().cpu().numpy()
+
+
+def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
+    """Pseudo-NIR at the input image's own exposure: linear, comparable with a NIR camera.
+
+    The network works on exposure-normalised linear RGB (mean 0.5,
+    :mod:`nidar_mi.nidar.preprocess`); the normalising factor is undone here, so a grey surface
+    the camera records at linear value ``v`` in every channel gets pseudo-NIR ``≈ v · Σ w_c``.
+
+    Args:
+        stn: trained STN.
+        rgb: ``(H, W, 3)`` uint8 sRGB.
+        scale: inference resolution relative to the image, in (0, 1].
+
+    Returns:
+        ``(H, W)`` float32, linear, >= 0.
+    """
+    from ..io.images import srgb_to_linear
+
+    p = pseudo_nir(stn, rgb, scale=scale)
+    mean = float(srgb_to_linear(rgb.astype(np.float32) / np.float32(255.0)).mean(dtype=np.float64))
+    ratio = EXPOSURE_TARGET_MEAN / (mean + 1e-3)  # the factor prepare_rgb applied
+    return np.maximum(p / np.float32(ratio), 0.0).astype(np.float32)
 
 
 @torch.no_grad()
-def predict(stn: STN | None, irnet: IRNet, rgb: np.ndarray) -> dict[str, np.ndarray]:
+def run_irnet(irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0) -> dict[str, np.ndarray]:
+    """IRNet's maps of one prepared input.
+
+    Args:
+        irnet: trained IRNet.
+        x: ``(1, C, H, W)`` float32 network input: pseudo-NIR (``C = 1``, the STN's domain) or
+            prepared RGB (``C = 3``, :func:`~nidar_mi.nidar.preprocess.prepare_rgb`).
+        scale: inference resolution relative to the input, in (0, 1].
+
+    Returns:
+        ``(H, W)`` float32 ``R``, ``S`` and ``I_hat``.
+    """
+    h, w = x.shape[-2:]
+    small = reduced_size(h, w, float(scale))
+    out = _run(irnet, _resize(x, small, "area"))
+    return {
+        key: _resize(out[key][..., : small[0], : small[1]], (h, w), "bilinear")[0, 0]
+        .float()
+        .cpu()
+        .numpy()
+        for key in ("R", "S", "I_hat")
+    }
+
+
+@torch.no_grad()
+def predict(
+    stn: STN | None, irnet: IRNet, rgb: np.ndarray, *, scale: float = 1.0
+) -> dict[str, np.ndarray]:
     """Run NIDAR's learned stages on one camera image.
 
     Args:
         stn: trained STN; may be None when ``irnet`` takes RGB input.
         irnet: trained IRNet.
         rgb: ``(H, W, 3)`` uint8 sRGB.
+        scale: inference resolution relative to the image, in (0, 1] (module docstring).
 
     Returns:
         ``(H, W)`` float32 arrays: ``pseudo_nir`` (only when ``stn`` is given), ``R``
@@ -67,20 +189,12 @@ def predict(stn: STN | None, irnet: IRNet, rgb: np.ndarray) -> dict[str, np.ndar
     """
     if irnet.in_channels == 1 and stn is None:
         raise NidarError("this IRNet takes pseudo-NIR input: an STN is required")
+    x_rgb = torch.from_numpy(prepare_rgb(rgb))[None]
     result: dict[str, np.ndarray] = {}
+    x = x_rgb
     if stn is not None:
-        result["pseudo_nir"] = pseudo_nir(stn, rgb)
-    if irnet.in_channels == 1:
-        x = torch.from_numpy(result["pseudo_nir"])[None, None]
-    else:
-        x = torch.from_numpy(prepare_rgb(rgb))[None]
-    was_training = irnet.training
-    irnet.eval()
-    try:
-        h, w = x.shape[-2:]
-        out = irnet(pad_to_multiple(x.to(_device(irnet)), irnet.stride))
-    finally:
-        irnet.train(was_training)
-    for key in ("R", "S", "I_hat"):
-        result[key] = out[key][0, 0, :h, :w].float().cpu().numpy()
-    return result
+        p = _stn_forward(stn, x_rgb, float(scale))
+        result["pseudo_nir"] = p[0, 0].float().cpu().numpy()
+        if irnet.in_channels == 1:
+            x = p
+    return result | run_irnet(irnet, x, scale=scale)

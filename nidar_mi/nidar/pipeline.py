@@ -16,12 +16,16 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import NidarError
 from ..geometry import CameraModel, sample_cameras
 from .calibration import Calibration
+
+if TYPE_CHECKING:
+    from .profile import SensorProfile
 
 __all__ = [
     "NidarModel",
@@ -38,6 +42,27 @@ BRANCHES = ("R", "I_hat")
 def shipped_weights_dir() -> Path:
     """The weights folder shipped inside the package."""
     return Path(__file__).resolve().parent / "weights"
+
+
+def _optimized(stn, irnet):
+    """The networks with BatchNorm folded and channels-last memory (checked on a small input)."""
+    import torch
+
+    from .fold import prepare_for_inference
+
+    side = 2 * max(irnet.stride, stn.stride if stn is not None else 1)
+    device = next(irnet.parameters()).device
+    irnet = prepare_for_inference(
+        irnet,
+        torch.rand(1, irnet.in_channels, side, side, generator=torch.Generator().manual_seed(0)).to(
+            device
+        ),
+    )
+    if stn is not None:
+        stn = prepare_for_inference(
+            stn, torch.rand(1, 3, side, side, generator=torch.Generator().manual_seed(0)).to(device)
+        )
+    return stn, irnet
 
 
 @dataclass
@@ -65,30 +90,60 @@ class NidarModel:
         self.stn, self.irnet, self.config = stn, irnet, config
         self.calibration = calibration
         self.weights_dir = weights_dir
+        self.scale = 1.0
 
     @classmethod
     def load(
-        cls, weights_dir: str | os.PathLike | None = None, device: str | None = "auto"
+        cls,
+        weights_dir: str | os.PathLike | None = None,
+        device: str | None = "auto",
+        *,
+        optimize: bool = True,
+        scale: float = 1.0,
     ) -> NidarModel:
-        """Load a weights folder (default: the shipped one); safetensors only, nothing unpickled."""
+        """Load a weights folder (default: the shipped one); safetensors only, nothing unpickled.
+
+        Args:
+            weights_dir: the folder; None: the shipped model.
+            device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda[:N]"``.
+            optimize: prepare the networks for inference (BatchNorm folded into the
+                convolutions, channels-last memory: :mod:`nidar_mi.nidar.fold`); the outputs
+                change by less than 1e-5.
+            scale: default inference resolution relative to the image, in (0, 1]
+                (:mod:`nidar_mi.nidar.infer`).
+        """
+        from .infer import reduced_size
         from .model_io import load_pipeline
 
+        reduced_size(1, 1, scale)  # checks the scale
         wdir = Path(weights_dir) if weights_dir is not None else shipped_weights_dir()
         if not (wdir / "irnet.safetensors").is_file():
             raise NidarError(f"{wdir}: no NIDAR weights (irnet.safetensors) found")
         stn, irnet, cfg = load_pipeline(wdir, device=device)
+        if optimize:
+            stn, irnet = _optimized(stn, irnet)
         calib_path = wdir / "calibration.json"
         calib = Calibration.load_json(calib_path) if calib_path.is_file() else None
-        return cls(stn, irnet, cfg, calib, wdir)
+        model = cls(stn, irnet, cfg, calib, wdir)
+        model.scale = float(scale)
+        return model
 
-    def predict_image(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
-        """Dense maps of one (H, W, 3) uint8 sRGB image: pseudo_nir, R, S, I_hat (H, W) float32."""
+    def predict_image(
+        self, rgb: np.ndarray, *, scale: float | None = None
+    ) -> dict[str, np.ndarray]:
+        """Dense maps of one (H, W, 3) uint8 sRGB image: pseudo_nir, R, S, I_hat (H, W) float32.
+
+        Args:
+            rgb: the camera image.
+            scale: inference resolution relative to the image (None: the model's default).
+        """
         from .infer import predict
 
         rgb = np.asarray(rgb)
         if rgb.ndim != 3 or rgb.shape[2] < 3 or rgb.dtype != np.uint8:
             raise NidarError(f"expected an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
-        return predict(self.stn, self.irnet, np.ascontiguousarray(rgb[..., :3]))
+        s = self.scale if scale is None else float(scale)
+        return predict(self.stn, self.irnet, np.ascontiguousarray(rgb[..., :3]), scale=s)
 
     def point_intensity(
         self,
@@ -100,6 +155,8 @@ class NidarModel:
         occlusion: bool = True,
         maps: Sequence[dict[str, np.ndarray]] | None = None,
         branch: str = "R",
+        profile: SensorProfile | None = None,
+        ring: np.ndarray | None = None,
     ) -> PointIntensity:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
 
@@ -117,8 +174,15 @@ class NidarModel:
                 cloud's own z-buffer).
             occlusion: reject points hidden from the camera.
             maps: precomputed :meth:`predict_image` outputs (skips the networks).
-            branch: ``"R"`` or ``"I_hat"``.
+            branch: ``"R"`` or ``"I_hat"`` (ignored with a ``profile``).
+            profile: a sensor profile (:mod:`nidar_mi.nidar.profiles`): its NIDAR map at the
+                points through its mapping (range, ring, elevation) instead of ``branch``.
+            ring: optional (N,) ring of each point (-1 unknown), for a ``range_ring`` profile.
         """
+        if profile is not None:
+            branch = profile.branch
+            if branch is None:
+                raise NidarError(f"profile {profile.name} does not map a NIDAR branch")
         if branch not in BRANCHES:
             raise NidarError(f"branch must be one of {', '.join(BRANCHES)} (got '{branch}')")
         xyz = np.asarray(xyz_lidar, dtype=np.float64)
@@ -128,6 +192,16 @@ class NidarModel:
         values, observed, cam_idx = sample_cameras(
             xyz, cameras, [m[branch] for m in maps], depth_images=depth_images, occlusion=occlusion
         )
+        if profile is not None:
+            observed = observed & np.isfinite(values)
+            out = np.zeros(len(xyz), dtype=np.float32)
+            if observed.any():
+                p = xyz[observed]
+                r = None if ring is None else np.asarray(ring).reshape(-1)[observed]
+                el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
+                out[observed] = profile.apply(values[observed], np.linalg.norm(p, axis=1), r, el)
+            raw = np.where(observed, values, 0.0).astype(np.float32)
+            return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
         if branch == "I_hat":
             observed = observed & np.isfinite(values)
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)

@@ -4,7 +4,9 @@ A frame is a mosaic of rectangular "materials", each with a linear RGB albedo an
 reflectance ``rho``, lit by a smooth shading field. The RGB image is ``albedo * shading``
 encoded as 8-bit sRGB, the NIR image ``rho * shading``, and the LiDAR intensity
 ``intensity_scale * rho * shading`` on every third row of the lower two thirds of the image
-(a scan pattern only partly overlapping the camera's view). The format is the one
+(a scan pattern only partly overlapping the camera's view; each such row is one ring, and each
+return lies on the surface at the pixel's ``depth``). ``R_true = rho`` and ``S_true = π ·
+shading`` (so that ``S_true = π · nir / R_true``, as for rendered frames). The format is the one
 :mod:`nidar_mi.nidar.data` reads; the content only has to be learnable, not realistic.
 """
 
@@ -62,6 +64,12 @@ def synthetic_frame(
     t = np.eye(4)
     t[:3, :3] = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]
     t[:3, 3] = [0.0, 0.3, -0.1]
+    # the returns: every masked pixel's surface point, back in the LiDAR frame
+    rows, cols = np.nonzero(mask)
+    z = depth[rows, cols].astype(np.float64)
+    cam_pts = np.stack([(cols - k[0, 2]) / f * z, (rows - k[1, 2]) / f * z, z], 1)
+    xyz = (cam_pts - t[:3, 3]) @ t[:3, :3]
+    ring = np.searchsorted(np.unique(rows), rows)
     return {
         "rgb": _linear_to_srgb8(rgb_lin),
         "nir": nir,
@@ -72,6 +80,11 @@ def synthetic_frame(
         "reflectance": np.where(mask, rho[labels], 0.0).astype(np.float32),
         "K": k,
         "T_cam_lidar": t,
+        "R_true": rho[labels].astype(np.float32),
+        "S_true": (np.pi * shading).astype(np.float32),
+        "points_xyz": xyz.astype(np.float32),
+        "points_intensity": intensity[rows, cols],
+        "points_ring": ring.astype(np.int16),
     }
 
 
@@ -112,7 +125,8 @@ def write_synthetic_dataset(
         "intensity_scale": float(intensity_scale),
         "wavelength_nm": 905,
         "splits": splits,
-        "source": "nidar_mi.nidar.synthetic",
+        "source": "render",
+        "generator": "nidar_mi.nidar.synthetic",
     }
     (root / "meta.json").write_text(json.dumps(meta, indent=2))
     return root

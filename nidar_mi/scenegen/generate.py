@@ -26,6 +26,7 @@ from ..errors import NidarError
 from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
+from .objects import material_set
 from .primitives import Layout
 from .xml import scene_xml
 
@@ -56,7 +57,11 @@ def scene_rng(seed: int, k: int) -> np.random.Generator:
 
 
 def generate_scene(
-    seed: int, k: int, kind: str | None = None, blocks: tuple[int, int] | None = None
+    seed: int,
+    k: int,
+    kind: str | None = None,
+    blocks: tuple[int, int] | None = None,
+    materials: str = "all",
 ) -> tuple[Layout, str]:
     """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
 
@@ -65,11 +70,15 @@ def generate_scene(
         k: scene index in the run (>= 0).
         kind: one of :data:`KINDS` or None (urban or vegetated, drawn per scene).
         blocks: (nx, ny) blocks of a ``city`` or ``suburb`` layout (None: its default).
+        materials: material set (:data:`nidar_mi.scenegen.objects.MATERIAL_SETS`): ``all``,
+            ``train`` (no held-out material) or ``heldout`` (held-out materials wherever a part
+            has one).
     """
-    if kind in CITY_KINDS:
-        layout = sample_city(scene_rng(seed, k), kind, blocks or DEFAULT_BLOCKS)[0]
-    else:
-        layout = sample_layout(scene_rng(seed, k), kind)
+    with material_set(materials):
+        if kind in CITY_KINDS:
+            layout = sample_city(scene_rng(seed, k), kind, blocks or DEFAULT_BLOCKS)[0]
+        else:
+            layout = sample_layout(scene_rng(seed, k), kind)
     name = scene_id(seed, k)
     text = scene_xml(
         layout,
@@ -85,10 +94,11 @@ def layout_hash(layout: Layout) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def index_entry(seed: int, k: int, layout: Layout, text: str) -> dict:
+def index_entry(seed: int, k: int, layout: Layout, text: str, materials: str = "all") -> dict:
     """The ``index.json`` record of one scene (rig matrices as nested lists)."""
     rig = layout.rig
     return {
+        "material_set": materials,
         "id": scene_id(seed, k),
         "file": f"{scene_id(seed, k)}.xml",
         "seed": seed,
@@ -148,6 +158,7 @@ def generate(
     overwrite: bool = False,
     blocks: tuple[int, int] | None = None,
     drive: dict | None = None,
+    materials: str = "all",
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -168,6 +179,7 @@ def generate(
         blocks: (nx, ny) blocks of ``city`` and ``suburb`` layouts (None: the default).
         drive: keyword arguments of :func:`.drives.write_drive` (``frames``, ``rate_hz``,
             ``speed``) for ``city`` and ``suburb`` scenes.
+        materials: material set of every scene (:func:`generate_scene`).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -204,8 +216,8 @@ def generate(
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
-        layout, text = generate_scene(seed, k, kind, blocks)
-        entry = index_entry(seed, k, layout, text)
+        layout, text = generate_scene(seed, k, kind, blocks, materials)
+        entry = index_entry(seed, k, layout, text, materials)
         other = hashes.get(entry["layout_sha256"], entry["id"])
         if other != entry["id"]:
             raise NidarError(f"{entry['id']} repeats the layout of {other}")
@@ -219,7 +231,8 @@ def generate(
             old = old_entries.get(entry["id"])
             if old is not None and old.get("sha256") == on_disk and not old.get("edited"):
                 raise NidarError(
-                    f"{path} holds scene {k} of another run (kind {old.get('kind')}): choose "
+                    f"{path} holds scene {k} of another run (kind {old.get('kind')}, materials "
+                    f"{old.get('material_set', 'all')}): choose "
                     "another folder or pass --overwrite"
                 )
             action = "keep"  # edited by hand (or of unknown origin): kept, marked edited

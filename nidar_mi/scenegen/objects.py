@@ -9,13 +9,20 @@ the XML written from them is stable.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 import numpy as np
 
+from ..errors import NidarError
 from .primitives import Block, Cylinder, Panel, Shape, Sphere
 
 __all__ = [
+    "HELDOUT_MATERIALS",
     "MATERIALS",
+    "MATERIAL_SETS",
+    "material_set",
+    "part_options",
     "pick",
     "rnd",
     "vehicle",
@@ -58,9 +65,60 @@ MATERIALS: dict[str, tuple[str, ...]] = {
 }
 
 
-def pick(rng: np.random.Generator, part: str) -> str:
-    """A library material for ``part`` (a key of :data:`MATERIALS`), drawn uniformly."""
+#: Materials kept out of the training scenes to test generalisation to unseen spectra: a
+#: soil, a dry vegetation, sand, brick, clay tile, two paints, a tinted glass, iron, red sheeting,
+#: plastic and fabric. Every part keeps at least one other material.
+HELDOUT_MATERIALS = frozenset(
+    {
+        "asphalt_old",
+        "dirt",
+        "sand",
+        "lane_paint_yellow",
+        "grass_dry",
+        "brick_red",
+        "roof_tile_red",
+        "glass_blue",
+        "car_paint_red",
+        "car_paint_silver",
+        "iron",
+        "retro_sheeting_red",
+        "plastic_wrap",
+        "fabric",
+    }
+)
+#: Which materials scenes draw from: ``all``; ``train`` (none of :data:`HELDOUT_MATERIALS`);
+#: ``heldout`` (a part's held-out materials where it has any, else its others).
+MATERIAL_SETS = ("all", "train", "heldout")
+_material_set: ContextVar[str] = ContextVar("material_set", default="all")
+
+
+@contextmanager
+def material_set(name: str):
+    """Draw the materials of :func:`pick` from the set ``name`` (:data:`MATERIAL_SETS`) inside the
+    block."""
+    if name not in MATERIAL_SETS:
+        raise NidarError(f"material set must be one of {', '.join(MATERIAL_SETS)} (got {name!r})")
+    token = _material_set.set(name)
+    try:
+        yield
+    finally:
+        _material_set.reset(token)
+
+
+def part_options(part: str, which: str = "all") -> tuple[str, ...]:
+    """The materials ``part`` draws from in material set ``which``."""
     options = MATERIALS[part]
+    if which == "all":
+        return options
+    held = tuple(m for m in options if m in HELDOUT_MATERIALS)
+    kept = tuple(m for m in options if m not in HELDOUT_MATERIALS)
+    return kept if which == "train" else (held or kept)
+
+
+def pick(rng: np.random.Generator, part: str) -> str:
+    """A library material for ``part`` (a key of :data:`MATERIALS`), drawn uniformly from the
+    current material set (:func:`material_set`)."""
+    options = part_options(part, _material_set.get())
     return options[int(rng.integers(len(options)))]
 
 

@@ -50,6 +50,8 @@ def _argv(command, out, tiny_scene, assign_inputs, synthetic_data, tmp_path):
             "--sources",
             "physics",
         ],
+        "pseudo_nir": [assign_inputs[5], "-o", out, "-q"],
+        "calibrate": [synthetic_data, "-o", out, "-q"],
     }[command]
 
 

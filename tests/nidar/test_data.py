@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from nidar_mi.dataset import FRAME_KEYS, list_frames, load_frame, load_meta
+from nidar_mi.dataset import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
 from nidar_mi.errors import NidarError
 from nidar_mi.nidar.data import IRNetDataset, STNDataset
 from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
@@ -26,13 +26,25 @@ def test_synthetic_frames_follow_the_format(data_dir):
     assert [f.name for f in frames] == [f"frame_{i:04d}.npz" for i in range(4)]
     assert len(list_frames(data_dir, "val")) == 2 and len(list_frames(data_dir, "test")) == 1
     f = load_frame(frames[0])
-    shapes = {"rgb": (48, 64, 3), "K": (3, 3), "T_cam_lidar": (4, 4)}
+    n = int(f["mask"].sum())
+    shapes = {"rgb": (48, 64, 3), "K": (3, 3), "T_cam_lidar": (4, 4), "points_xyz": (n, 3)}
+    shapes |= {"points_intensity": (n,), "points_ring": (n,)}
+    assert set(f) == set(FRAME_KEYS) == set(FRAME_SOURCES[meta["source"]])
     for key, (dtype, _, _) in FRAME_KEYS.items():
         assert f[key].dtype == dtype
         assert f[key].shape == shapes.get(key, (48, 64))
     assert np.all(f["intensity"][~f["mask"]] == 0)
     # Synthetic intensity is scale * NIR radiance on the scan pattern.
     np.testing.assert_allclose(f["intensity"][f["mask"]], 255.0 * f["nir"][f["mask"]], rtol=1e-6)
+    np.testing.assert_allclose(np.pi * f["nir"], f["R_true"] * f["S_true"], rtol=1e-5)
+    # the returns project back onto their pixels, with their intensity
+    from nidar_mi.geometry import CameraModel, project
+
+    cam = CameraModel(K=f["K"], width=64, height=48, T_cam_lidar=f["T_cam_lidar"])
+    uv = project(f["points_xyz"].astype(np.float64), cam)[0]
+    rows, cols = np.rint(uv[:, 1]).astype(int), np.rint(uv[:, 0]).astype(int)
+    assert np.abs(uv - np.rint(uv)).max() < 1e-3 and f["mask"][rows, cols].all()
+    np.testing.assert_array_equal(f["points_intensity"], f["intensity"][rows, cols])
 
 
 def test_reader_errors(tmp_path, data_dir):
@@ -105,6 +117,14 @@ def test_irnet_dataset_keeps_input_and_supervision_aligned(tmp_path, data_dir):
             assert np.all(item["intensity"].numpy()[~m] == 0)
     rgb = IRNetDataset(frames, 255.0, 32, train=False)[0]
     assert rgb["x"].shape == (3, 32, 32) and set(np.unique(rgb["mask"].numpy())) <= {0.0, 1.0}
+    # with the true reflectance and shading: R_true * S_true = π * NIR under the same crop/flip
+    ds = IRNetDataset(frames, 255.0, 32, seed=2, input_dir=tmp_path, intrinsic_targets=True)
+    for epoch in range(3):
+        ds.set_epoch(epoch)
+        item = ds[1]
+        np.testing.assert_allclose(
+            (item["R_true"] * item["S_true"]).numpy(), np.pi * item["x"].numpy(), rtol=1e-5
+        )
 
 
 def test_crop_larger_than_frame_is_a_user_error(data_dir):

@@ -1,0 +1,281 @@
+"""NIDAR inference speed: seconds per frame for pseudo-NIR, IRNet and the point assignment.
+
+``python benchmarks/bench_nidar.py [--threads 2] [--repeats 5] [--sizes 1242x375,1600x900]
+[--weights DIR] [--configs before,fold,fold+cl,fold+cl+half] [--json out.json]``
+
+Per frame and image size, three steps are timed separately (after one warm-up call per
+configuration and size, ``repeats`` rounds that run every configuration and size in turn, so that
+all see the same machine load; medians of the wall time and of the process CPU time):
+
+* ``pseudo_nir``: 8-bit sRGB -> linear exposure-normalised RGB -> STN -> pseudo-NIR
+  (:func:`nidar_mi.nidar.infer.pseudo_nir`);
+* ``irnet``: pseudo-NIR -> R, S, Î (:func:`nidar_mi.nidar.infer.run_irnet`);
+* ``assign``: the point cloud projected into the camera, the occlusion test (the cloud's own
+  z-buffer), bilinear sampling of R and the model's calibration
+  (:meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps).
+
+Inputs are procedural and need no data: a textured street-like image of the given size and an
+HDL-64E-like cloud (64 rings x 2048 columns over a ground plane at -1.73 m and a wall 30 m
+ahead, 131 072 points) seen by a KITTI-like camera (focal length 0.58 x width).
+
+Configurations (``--configs``):
+
+* ``before``: the networks as :func:`nidar_mi.nidar.model_io.load_pipeline` loads them;
+* ``fold``: BatchNorm folded into the convolutions (:func:`nidar_mi.nidar.fold.fold_batchnorm`);
+* ``fold+cl``: and channels-last memory;
+* ``fold+cl+half`` (any ``+s<scale>``, e.g. ``+s0.5``, or ``+half``): and inference at that
+  fraction of the image resolution (:mod:`nidar_mi.nidar.infer`).
+
+torch uses ``--threads`` threads (2 by default, the CI machine's cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+__all__ = ["build_parser", "main", "run_benchmark", "street_image", "hdl64e_cloud"]
+
+DEFAULT_SIZES = ((1242, 375), (1600, 900))
+DEFAULT_CONFIGS = ("before", "fold", "fold+cl", "fold+cl+half")
+STEPS = ("pseudo_nir", "irnet", "assign")
+
+
+def street_image(width: int, height: int, seed: int = 0) -> np.ndarray:
+    """(H, W, 3) uint8 procedural street image: sky, façade blocks, road, noise texture."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    img = np.empty((height, width, 3))
+    img[:] = [0.55, 0.65, 0.85]
+    horizon = int(0.45 * height)
+    img[horizon:] = [0.3, 0.3, 0.32]
+    for _ in range(12):
+        w = int(rng.uniform(0.03, 0.15) * width) + 1
+        x0 = int(rng.uniform(0, width - w))
+        top = int(rng.uniform(0.05, 0.4) * height)
+        img[top:horizon, x0 : x0 + w] = rng.uniform(0.1, 0.9, 3)
+    img += 0.05 * np.sin(x[..., None] / 7.0) * np.cos(y[..., None] / 5.0)
+    img += rng.normal(0.0, 0.02, img.shape)
+    return np.round(np.clip(img, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def hdl64e_cloud(cols: int = 2048) -> np.ndarray:
+    """(64 * cols, 3) float64 points: HDL-64E beams hitting a ground plane and a wall at x = 30 m."""
+    from nidar_mi.lidar.pattern import beam_directions, elevation_table
+
+    d = beam_directions(elevation_table("hdl64e"), cols).reshape(-1, 3).astype(np.float64)
+    t = np.full(len(d), 80.0)
+    down = d[:, 2] < -1e-6
+    t[down] = np.minimum(t[down], 1.73 / -d[down, 2])
+    ahead = d[:, 0] > 1e-6
+    t[ahead] = np.minimum(t[ahead], 30.0 / d[ahead, 0])
+    return d * t[:, None]
+
+
+def kitti_like_camera(width: int, height: int):
+    """A forward camera 0.27 m ahead of the LiDAR (KITTI's axes), focal length 0.58 x width."""
+    from nidar_mi.geometry import CameraModel
+
+    f = 0.58 * width
+    K = np.array([[f, 0.0, width / 2 - 0.5], [0.0, f, height / 2 - 0.5], [0.0, 0.0, 1.0]])
+    T = np.eye(4)
+    T[:3, :3] = [[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]  # x fwd -> z, y left -> -x
+    T[:3, 3] = [0.0, -0.08, -0.27]
+    return CameraModel(K=K, width=width, height=height, T_cam_lidar=T, name="cam")
+
+
+def _parse_config(name: str) -> dict:
+    parts = name.split("+")
+    cfg = {"fold": False, "channels_last": False, "scale": 1.0}
+    if parts[0] != "before":
+        for p in parts:
+            if p == "fold":
+                cfg["fold"] = True
+            elif p == "cl":
+                cfg["channels_last"] = True
+            elif p == "half":
+                cfg["scale"] = 0.5
+            elif p.startswith("s"):
+                cfg["scale"] = float(p[1:])
+            else:
+                raise ValueError(f"unknown configuration part {p!r} in {name!r}")
+    return cfg
+
+
+def _time(fn) -> tuple[float, float, object]:
+    """Wall and process CPU seconds of one call, and its result."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    out = fn()
+    return time.perf_counter() - t0, time.process_time() - c0, out
+
+
+def run_benchmark(
+    sizes=DEFAULT_SIZES,
+    configs=DEFAULT_CONFIGS,
+    *,
+    repeats: int = 5,
+    threads: int = 2,
+    weights: str | None = None,
+    cols: int = 2048,
+) -> dict:
+    """Time the three steps per configuration and size; returns a JSON-safe dict.
+
+    Every (configuration, size) is warmed up once; then the timed rounds run them all in turn,
+    ``repeats`` times, so that every cell sees the same machine load. Medians are reported, of
+    the wall time and of the process CPU time (all threads).
+    """
+    import torch
+
+    from nidar_mi.nidar.fold import prepare_for_inference
+    from nidar_mi.nidar.infer import pseudo_nir, run_irnet
+    from nidar_mi.nidar.pipeline import NidarModel
+
+    torch.set_num_threads(int(threads))
+    base = NidarModel.load(weights, device="cpu", optimize=False)
+    xyz = hdl64e_cloud(cols)
+    cells = []
+    for name in configs:
+        cfg = _parse_config(name)
+        stn, irnet = base.stn, base.irnet
+        if cfg["fold"] or cfg["channels_last"]:
+            s = 2 * max(stn.stride, irnet.stride)
+            opts = {"fold": cfg["fold"], "channels_last": cfg["channels_last"]}
+            stn = prepare_for_inference(stn, torch.rand(1, 3, s, s), **opts)
+            irnet = prepare_for_inference(irnet, torch.rand(1, irnet.in_channels, s, s), **opts)
+        for width, height in sizes:
+            rgb = street_image(width, height)
+            cam = kitti_like_camera(width, height)
+
+            def steps(stn=stn, irnet=irnet, rgb=rgb, cam=cam, scale=cfg["scale"]):
+                out = {}
+                wall, cpu, p = _time(lambda: pseudo_nir(stn, rgb, scale=scale))
+                out["pseudo_nir"] = (wall, cpu)
+                x = torch.from_numpy(p)[None, None]
+                wall, cpu, maps = _time(lambda: run_irnet(irnet, x, scale=scale))
+                out["irnet"] = (wall, cpu)
+                maps = maps | {"pseudo_nir": p}
+                wall, cpu, res = _time(lambda: base.point_intensity(xyz, [cam], [rgb], maps=[maps]))
+                out["assign"] = (wall, cpu)
+                return out, int(res.observed.sum())
+
+            cells.append({"config": name, "size": f"{width}x{height}", "run": steps, "t": []})
+    for cell in cells:  # warm-up
+        cell["observed"] = cell["run"]()[1]
+    for _ in range(int(repeats)):
+        for cell in cells:
+            cell["t"].append(cell["run"]()[0])
+    results = []
+    for cell in cells:
+        wall = {k: float(statistics.median(t[k][0] for t in cell["t"])) for k in STEPS}
+        cpu = {k: float(statistics.median(t[k][1] for t in cell["t"])) for k in STEPS}
+        results.append(
+            {
+                "config": cell["config"],
+                "size": cell["size"],
+                "seconds": wall,
+                "cpu_seconds": cpu,
+                "total_s": float(statistics.median(sum(t[k][0] for k in STEPS) for t in cell["t"])),
+                "points": int(len(xyz)),
+                "observed": cell["observed"],
+            }
+        )
+    return {
+        "threads": int(threads),
+        "repeats": int(repeats),
+        "weights": str(base.weights_dir),
+        "load_average": list(os.getloadavg()),
+        "machine": {
+            "cpu": _cpu_name(),
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+            "torch": torch.__version__,
+        },
+        "results": results,
+    }
+
+
+def _cpu_name() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def markdown(result: dict) -> str:
+    """The results as a Markdown table (seconds per frame)."""
+    lines = [
+        "| configuration | size | pseudo-NIR (s) | IRNet (s) | assignment (s) | total (s) "
+        "| total CPU (s) |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for r in result["results"]:
+        s, c = r["seconds"], r["cpu_seconds"]
+        lines.append(
+            f"| {r['config']} | {r['size']} | {s['pseudo_nir']:.3f} | {s['irnet']:.3f} | "
+            f"{s['assign']:.3f} | **{r['total_s']:.3f}** | {sum(c.values()):.3f} |"
+        )
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bench_nidar.py", description="NIDAR inference speed per frame and step."
+    )
+    p.add_argument("--sizes", default="1242x375,1600x900", help="WxH,WxH,...")
+    p.add_argument("--configs", default=",".join(DEFAULT_CONFIGS), help="comma-separated")
+    p.add_argument("--repeats", type=int, default=5, help="timed calls per step (median)")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
+    p.add_argument("--cols", type=int, default=2048, help="LiDAR columns of the cloud")
+    p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
+    p.add_argument("--json", metavar="PATH", help="also write the results as JSON")
+    return p
+
+
+def main(argv=None) -> int:
+    from nidar_mi.cli._common import run
+
+    args = build_parser().parse_args(argv)
+
+    def work():
+        from nidar_mi.errors import NidarError
+
+        try:
+            sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
+            configs = [c.strip() for c in args.configs.split(",") if c.strip()]
+            for c in configs:
+                _parse_config(c)
+        except ValueError as e:
+            raise NidarError(f"--sizes/--configs: {e}") from None
+        if args.repeats < 1 or args.threads < 1 or any(len(s) != 2 for s in sizes):
+            raise NidarError("--repeats and --threads must be >= 1; sizes are WxH")
+        result = run_benchmark(
+            sizes,
+            configs,
+            repeats=args.repeats,
+            threads=args.threads,
+            weights=args.weights,
+            cols=args.cols,
+        )
+        print(f"{result['machine']['cpu']}, {result['threads']} torch threads")
+        print(markdown(result))
+        if args.json:
+            from nidar_mi.io.atomic import atomic_write_json
+
+            os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
+            atomic_write_json(args.json, result)
+
+    return run(work)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

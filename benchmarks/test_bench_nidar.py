@@ -1,0 +1,48 @@
+"""Checks of the NIDAR speed benchmark's inputs, command line and results file (not its timings)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+if _HERE not in sys.path:
+    sys.path.insert(0, _HERE)
+
+import bench_nidar as bench  # noqa: E402
+
+
+def test_procedural_inputs():
+    img = bench.street_image(120, 40)
+    assert img.shape == (40, 120, 3) and img.dtype == np.uint8
+    xyz = bench.hdl64e_cloud(64)
+    assert xyz.shape == (64 * 64, 3)
+    # every beam hits the ground 1.73 m below or the wall at x = 30 m (or stops at 80 m)
+    r = np.linalg.norm(xyz, axis=1)
+    on_ground = np.isclose(xyz[:, 2], -1.73)
+    on_wall = np.isclose(xyz[:, 0], 30.0)
+    assert np.all(on_ground | on_wall | np.isclose(r, 80.0))
+    cam = bench.kitti_like_camera(120, 40)
+    assert cam.width == 120 and cam.K[0, 0] == pytest.approx(0.58 * 120)
+
+
+def test_main_writes_json(tmp_path, capsys):
+    out = tmp_path / "b.json"
+    args = ["--sizes", "96x48", "--configs", "before,fold+cl+s0.5", "--repeats", "1"]
+    assert bench.main(args + ["--cols", "64", "--threads", "1", "--json", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert [x["config"] for x in r["results"]] == ["before", "fold+cl+s0.5"]
+    for x in r["results"]:
+        assert set(x["seconds"]) == {"pseudo_nir", "irnet", "assign"} and x["observed"] > 0
+        assert x["total_s"] > 0
+    assert "| before | 96x48 |" in capsys.readouterr().out
+
+
+def test_bad_arguments(capsys):
+    assert bench.main(["--configs", "fold+turbo"]) == 2
+    assert "configuration part" in capsys.readouterr().err
+    assert bench.main(["--sizes", "12"]) == 2

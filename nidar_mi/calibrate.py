@@ -1,0 +1,8 @@
+"""``python -m nidar_mi.calibrate``: the ``calibrate`` command (:mod:`nidar_mi.cli.calibrate`)."""
+
+if __name__ == "__main__":
+    import sys
+
+    from nidar_mi.cli.calibrate import main
+
+    sys.exit(main())

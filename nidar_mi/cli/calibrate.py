@@ -1,0 +1,116 @@
+"""``python -m nidar_mi.calibrate``: fit a sensor profile on a sensor's own scans.
+
+    python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
+                                 [--form range_ring|distance_quantile] [--branch R|I_hat]
+                                 [--weights DIR] [--intensity-scale S] [--splits S,...]
+                                 [--overwrite] [-q]
+
+``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
+``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with
+``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
+``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
+its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
+(:func:`nidar_mi.nidar.profiles.fit_scan_profile`). The profile file
+(:mod:`nidar_mi.nidar.profile`) then goes to ``assign --profile FILE`` or
+``render --intensity nidar --profile FILE``.
+
+An existing ``-o`` file is replaced only when it is a profile (an earlier output) or with
+``--overwrite``; the file is written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+from ..errors import NidarError
+from ._common import parser, run
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser():
+    p = parser(
+        "calibrate", "Fit a sensor profile (range and ring response) on a sensor's own scans."
+    )
+    p.add_argument(
+        "scans", nargs="+", metavar="SCANS", help="scan folders (KITTI, data or generic)"
+    )
+    p.add_argument("-o", "--out", required=True, help="profile file to write (.json)")
+    p.add_argument("--name", help="profile name (default: the output file's stem)")
+    p.add_argument("--sensor", default="", help="what the sensor is, free text")
+    p.add_argument(
+        "--form",
+        default="range_ring",
+        choices=("range_ring", "distance_quantile"),
+        help="range_ring: monotone map per range bin + ring gains (default); distance_quantile: "
+        "the paper's distance encoding + quantile map",
+    )
+    p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
+    p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
+    p.add_argument(
+        "--intensity-scale",
+        type=float,
+        help="divide generic clouds' intensities by this (default: 1 or 255, from their range)",
+    )
+    p.add_argument("--splits", help="data folders: only these splits, e.g. train,val")
+    p.add_argument("--overwrite", action="store_true", help="replace any existing -o file")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    return p
+
+
+def _check_target(path: str, overwrite: bool) -> None:
+    from ..io.atomic import check_output_folder
+
+    if os.path.isdir(path):
+        raise NidarError(f"{path} is a folder; give a file name for the profile")
+    check_output_folder(os.path.dirname(os.path.abspath(path)), overwrite=True)
+    if not os.path.exists(path) or overwrite:
+        return
+    try:
+        with open(path, encoding="utf-8") as f:
+            is_profile = json.load(f).get("schema", "").startswith("nidar_mi.sensor_profile/")
+    except (OSError, ValueError, AttributeError, UnicodeDecodeError):
+        is_profile = False
+    if not is_profile:
+        raise NidarError(
+            f"{path} exists and is not a sensor profile; pass --overwrite to replace it"
+        )
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    return run(lambda: _calibrate(args, argv))
+
+
+def _calibrate(args, argv) -> None:
+    from ..datasets.scans import load_scans
+    from ..nidar.pipeline import NidarModel
+    from ..nidar.profiles import fit_scan_profile
+
+    _check_target(args.out, args.overwrite)
+    name = args.name or os.path.splitext(os.path.basename(args.out))[0]
+    splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
+    scans = load_scans(
+        args.scans, splits=splits, intensity_scale=args.intensity_scale, progress=not args.quiet
+    )
+    model = NidarModel.load(args.weights)
+    command = "python -m nidar_mi.calibrate " + " ".join(sys.argv[1:] if argv is None else argv)
+    profile = fit_scan_profile(
+        model,
+        scans,
+        name=name,
+        sensor=args.sensor or "(not described)",
+        form=args.form,
+        branch=args.branch,
+        provenance={"data": [os.path.abspath(s) for s in args.scans], "command": command},
+        progress=not args.quiet,
+    )
+    profile.save(args.out)
+    if not args.quiet:
+        prov = profile.provenance
+        print(
+            f"{profile.form} profile '{profile.name}' fitted on {prov['frames']} frames, "
+            f"{prov['returns']} returns (rings: {prov['rings']}); wrote {args.out}"
+        )

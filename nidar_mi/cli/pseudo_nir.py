@@ -1,0 +1,241 @@
+"""``python -m nidar_mi.pseudo_nir``: pseudo-NIR images from colour photos (NIDAR's STN).
+
+    python -m nidar_mi.pseudo_nir INPUT... -o OUT [--exr] [--weights DIR] [--scale S]
+                                  [--max-side N] [--recursive] [--skip-bad] [--overwrite] [-q]
+
+Each ``INPUT`` is an image file or a folder (its images: ``.png .jpg .jpeg .bmp .tif .tiff
+.webp``; other files in a folder are skipped with one line saying how many; ``--recursive``
+descends into sub-folders). For each image ``OUT/<stem>.png`` is written: the 8-bit pseudo-NIR
+at the input's full size and its own exposure (linear pseudo-NIR, sRGB-encoded like the input;
+:func:`nidar_mi.nidar.infer.pseudo_nir_linear`), pixel-aligned with the stored pixels (EXIF
+orientation is not applied). ``--exr`` adds ``OUT/<stem>.exr``: the linear pseudo-NIR as
+float32 (channel ``Y``). ``OUT/index.json`` lists every input with its outputs, the weights and
+the inference resolution.
+
+Images whose stems clash (``x/a/0001.png`` and ``x/b/0001.jpg``) are named by the shortest tail
+of their folder paths that tells all of them apart, joined with ``__`` (``a__0001``,
+``b__0001``); files that differ only by extension get it appended (``0001_png``, ``0001_jpg``).
+
+Bad input follows the package contract: every input is opened before any work (a missing,
+unreadable or non-image file, or an image that is not colour, is one ``error:`` line and status
+2, nothing written); ``--skip-bad`` skips such files with one ``warning:`` line each instead.
+The outputs are written to a staging folder that replaces ``OUT`` only when every image
+succeeded.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import NidarError
+from ._common import parser, run
+
+__all__ = ["IMAGE_EXTENSIONS", "build_parser", "collect_inputs", "main", "output_names"]
+
+#: File extensions read as images (case-insensitive).
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+#: Marker file of an earlier output folder (it is replaced without ``--overwrite``).
+INDEX = "index.json"
+
+
+@dataclass(frozen=True)
+class _Input:
+    path: Path
+    width: int
+    height: int
+
+
+def _is_image_name(p: Path) -> bool:
+    return p.suffix.lower() in IMAGE_EXTENSIONS
+
+
+def _probe(path: Path) -> _Input:
+    """Open ``path`` as a colour image (header only); one-line NidarError if it is not one."""
+    from PIL import Image, UnidentifiedImageError
+
+    if not path.is_file():
+        raise NidarError(f"{path}: no such file")
+    try:
+        with Image.open(path) as im:
+            mode, (w, h) = im.mode, im.size
+    except UnidentifiedImageError:
+        raise NidarError(f"{path}: not an image (or a format Pillow cannot read)") from None
+    except OSError as e:
+        raise NidarError(f"{path}: cannot read ({e.strerror or e})") from None
+    if mode not in ("RGB", "RGBA", "P", "CMYK", "YCbCr"):
+        raise NidarError(f"{path}: a {mode} image; pseudo-NIR needs a colour image (RGB)")
+    if w < 1 or h < 1:
+        raise NidarError(f"{path}: empty image")
+    return _Input(path, w, h)
+
+
+def collect_inputs(
+    inputs: list[str], *, recursive: bool = False, skip_bad: bool = False
+) -> list[_Input]:
+    """Image files named by ``inputs`` (files and folders), each probed, in the given order.
+
+    Folder contents are sorted by path. Non-image files inside folders are skipped (one warning
+    per folder with their count); a file given by name must be a readable colour image.
+
+    Raises:
+        NidarError: a missing input, a bad image (unless ``skip_bad``), or no image at all.
+    """
+    found: list[_Input] = []
+    seen: set[Path] = set()
+    for item in inputs:
+        p = Path(item)
+        if p.is_dir():
+            files = sorted(q for q in (p.rglob("*") if recursive else p.iterdir()) if q.is_file())
+            images = [q for q in files if _is_image_name(q)]
+            others = len(files) - len(images)
+            if others:
+                warnings.warn(f"{p}: skipped {others} file(s) that are not images", stacklevel=2)
+        elif p.exists():
+            images = [p]
+        else:
+            raise NidarError(f"{p}: no such file or folder")
+        for q in images:
+            key = q.resolve()
+            if key in seen:
+                continue
+            seen.add(key)
+            try:
+                found.append(_probe(q))
+            except NidarError as e:
+                if not skip_bad:
+                    raise
+                warnings.warn(f"skipped {e}", stacklevel=2)
+    if not found:
+        raise NidarError("no image to convert in " + ", ".join(inputs))
+    return found
+
+
+def output_names(paths: list[Path]) -> list[str]:
+    """Unique output stems for input files (module docstring: how clashes are resolved)."""
+    folders = [p.resolve().parent.parts for p in paths]
+    names = [p.stem for p in paths]
+    groups: dict[str, list[int]] = {}
+    for i, n in enumerate(names):
+        groups.setdefault(n, []).append(i)
+    for stem, idx in groups.items():
+        if len(idx) == 1:
+            continue
+        distinct = sorted({folders[i] for i in idx})
+        if len(distinct) > 1:
+            for k in range(1, max(len(f) for f in distinct) + 1):
+                if len({f[-k:] for f in distinct}) == len(distinct):
+                    break
+            for i in idx:
+                names[i] = "__".join(folders[i][-k:] + (stem,)).lstrip("/")
+        for i in idx:  # same folder and stem: only the extension differs
+            if sum(folders[j] == folders[i] for j in idx) > 1:
+                names[i] = f"{names[i]}_{paths[i].suffix.lstrip('.').lower()}"
+    counts: dict[str, int] = {}
+    for i, n in enumerate(names):  # e.g. 'a.PNG' and 'a.png' on a case-sensitive disk
+        counts[n] = counts.get(n, 0) + 1
+        if counts[n] > 1:
+            names[i] = f"{n}_{counts[n]}"
+    return names
+
+
+def _read_rgb(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    from ..io.atomic import reading
+
+    with reading(path) as p, Image.open(p) as im:
+        return np.asarray(im.convert("RGB"), dtype=np.uint8)
+
+
+def _to_png8(nir_linear: np.ndarray) -> np.ndarray:
+    from ..io.images import linear_to_srgb
+
+    enc = linear_to_srgb(np.clip(nir_linear, 0.0, 1.0))
+    return np.round(enc * 255.0).astype(np.uint8)
+
+
+def build_parser():
+    p = parser("pseudo_nir", "Pseudo-NIR images from colour photos with NIDAR's STN.")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="image files or folders")
+    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("--exr", action="store_true", help="also write float32 linear EXR")
+    p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=1.0,
+        help="inference resolution relative to the image, (0, 1] (default 1)",
+    )
+    p.add_argument(
+        "--max-side",
+        type=int,
+        default=2048,
+        help="infer at most at this many pixels on the long side (bounds memory; the output "
+        "keeps the full size; default 2048)",
+    )
+    p.add_argument("-r", "--recursive", action="store_true", help="descend into sub-folders")
+    p.add_argument("--skip-bad", action="store_true", help="skip unreadable files with a warning")
+    p.add_argument("--overwrite", action="store_true", help="replace a non-empty OUT")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    return run(lambda: _convert(args))
+
+
+def _convert(args) -> None:
+    import sys
+
+    from tqdm.auto import tqdm
+
+    from ..io.atomic import atomic_write_json, check_output_folder, staged_directory
+    from ..io.images import write_exr, write_png
+    from ..nidar.infer import pseudo_nir_linear, reduced_size
+    from ..nidar.pipeline import NidarModel
+
+    check_output_folder(args.out, overwrite=args.overwrite, marker=INDEX)
+    reduced_size(1, 1, args.scale)
+    if args.max_side < 16:
+        raise NidarError(f"--max-side must be >= 16 (got {args.max_side})")
+    items = collect_inputs(args.inputs, recursive=args.recursive, skip_bad=args.skip_bad)
+    names = output_names([it.path for it in items])
+    model = NidarModel.load(args.weights)
+    if model.stn is None:
+        raise NidarError(f"{model.weights_dir}: these weights have no STN (pseudo-NIR network)")
+    index = {
+        "weights": str(model.weights_dir),
+        "output": "8-bit sRGB-encoded linear pseudo-NIR at the input's exposure"
+        + ("; float32 linear EXR (channel Y)" if args.exr else ""),
+        "images": [],
+    }
+    with staged_directory(args.out, overwrite=args.overwrite, marker=INDEX) as stage:
+        bar = tqdm(items, desc="pseudo-NIR", unit="image", disable=args.quiet, file=sys.stderr)
+        for it, name in zip(bar, names):
+            rgb = _read_rgb(it.path)
+            scale = min(args.scale, args.max_side / max(rgb.shape[:2]))
+            nir = pseudo_nir_linear(model.stn, rgb, scale=scale)
+            if not np.all(np.isfinite(nir)):
+                raise NidarError(f"{it.path}: the network gave non-finite values")
+            write_png(os.path.join(stage, f"{name}.png"), _to_png8(nir))
+            outputs = [f"{name}.png"]
+            if args.exr:
+                write_exr(os.path.join(stage, f"{name}.exr"), {"Y": nir})
+                outputs.append(f"{name}.exr")
+            index["images"].append(
+                {
+                    "input": str(it.path.resolve()),
+                    "outputs": outputs,
+                    "size": [rgb.shape[1], rgb.shape[0]],
+                    "inference_scale": round(scale, 6),
+                }
+            )
+        atomic_write_json(os.path.join(stage, INDEX), index)
+    if not args.quiet:
+        print(f"wrote {len(items)} pseudo-NIR image(s) to {args.out}")

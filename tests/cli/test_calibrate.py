@@ -1,0 +1,88 @@
+"""``python -m nidar_mi.calibrate``: profiles from KITTI-layout and generic scan folders."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from nidar_mi.cli.calibrate import main
+from nidar_mi.nidar.profile import load_profile
+from tests.helpers.synthetic_kitti import make_kitti
+
+
+def test_kitti_folder_to_profile(tmp_path, capsys):
+    kitti = make_kitti(tmp_path / "drive", frames=2)
+    out = tmp_path / "hdl.json"
+    assert main([str(kitti), "-o", str(out), "--sensor", "my HDL-64E"]) == 0
+    p = load_profile(out)
+    assert (p.name, p.form, p.input, p.sensor) == ("hdl", "range_ring", "nidar:R", "my HDL-64E")
+    assert p.provenance["frames"] == 2 and p.provenance["rings"] == "given"
+    assert "python -m nidar_mi.calibrate" in p.provenance["command"]
+    assert "range_ring profile 'hdl' fitted on 2 frames" in capsys.readouterr().out
+    # the profile maps into [0, 1] and is monotone in the value at a fixed range and ring
+    v = np.linspace(0, 1, 50)
+    y = p.apply(v, np.full(50, 12.0), np.full(50, 30))
+    assert np.all(np.diff(y) >= 0) and 0 <= y.min() and y.max() <= 1
+    # an earlier profile is replaced; another file is not, unless --overwrite
+    assert main([str(kitti), "-o", str(out), "--form", "distance_quantile", "-q"]) == 0
+    assert load_profile(out).form == "distance_quantile"
+    other = tmp_path / "notes.json"
+    other.write_text('{"a": 1}')
+    assert main([str(kitti), "-o", str(other), "-q"]) == 2
+    assert "not a sensor profile" in capsys.readouterr().err and json.loads(other.read_text()) == {
+        "a": 1
+    }
+    assert main([str(kitti), "-o", str(other), "-q", "--overwrite"]) == 0
+
+
+def test_generic_folder_with_rings_and_0_255_intensity(tmp_path, capsys):
+    from nidar_mi.io.images import write_png
+    from nidar_mi.io.points import write_npz
+    from tests.helpers.synthetic_kitti import kitti_order_scan
+
+    root = tmp_path / "scans"
+    (root / "points").mkdir(parents=True)
+    (root / "images").mkdir()
+    cam = {
+        "name": "front",
+        "width": 320,
+        "height": 120,
+        "K": [[160.0, 0, 159.5], [0, 160.0, 59.5], [0, 0, 1]],
+        "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
+    }
+    (root / "calib.yaml").write_text(yaml.safe_dump({"cameras": [cam]}))
+    xyz, ring, rng_m = kitti_order_scan(cols=360, front_only=True, rings=32)
+    rng = np.random.default_rng(0)
+    for k in range(2):
+        inten = np.round(255 * np.clip(np.exp(-rng_m / 20) + rng.normal(0, 0.02, len(xyz)), 0, 1))
+        write_npz(
+            root / "points" / f"{k:04d}.npz",
+            {"xyz": xyz, "intensity": inten.astype(np.float32), "ring": ring.astype(np.uint16)},
+        )
+        write_png(root / "images" / f"{k:04d}.png", rng.integers(0, 256, (120, 320, 3), np.uint8))
+    out = tmp_path / "p.json"
+    assert main([str(root), "-o", str(out), "-q"]) == 0
+    assert "dividing them by 255" in capsys.readouterr().err
+    p = load_profile(out)
+    assert p.provenance["rings"] == "given" and len(p.mapping.gains) == 32
+    # the sensor's response falls with range: the profile learnt it from the scans
+    near, far = p.apply([0.5, 0.5], [4.0, 24.0], [20, 20])
+    assert near > far
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["/nonexistent"], "no such folder"),
+        (["{tmp}"], "not a scan folder"),
+    ],
+)
+def test_bad_input(tmp_path, capsys, args, message):
+    out = tmp_path / "p.json"
+    assert main([a.format(tmp=tmp_path) for a in args] + ["-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and message in err and err.count("\n") == 1
+    assert not out.exists()
