@@ -174,8 +174,23 @@ class TrainConfig:
     irnet_optim: OptimConfig = field(default_factory=OptimConfig)
     """Optimiser of the IRNet stage (paper: Adam 1e-4, wd 1e-5, batch 8, 10 epochs)."""
     crop_size: int = 256
-    """Side of the square random training crops (centre crops for validation), in pixels;
-    a multiple of every network stride."""
+    """Side of the square random training crops (centre crops for validation), in pixels at
+    the network resolution (:attr:`scale`); a multiple of every network stride. With
+    :attr:`crop_width` it is the crops' height."""
+    crop_width: int | None = None
+    """Width of the training crops in pixels at the network resolution (None: square crops of
+    :attr:`crop_size`); a multiple of every network stride (package choice: wide crops suit
+    the wide, short band of a camera image that LiDAR returns cover)."""
+    scale: float = 1.0
+    """Network resolution relative to the frames, in (0, 1]. IRNet trains on frames resized to
+    ``round(scale · H) x round(scale · W)`` (the input area-averaged as at inference, the
+    sparse intensity re-projected with the nearest return winning each pixel), and
+    :class:`~nidar_mi.nidar.pipeline.NidarModel` runs at this scale by default. The STN stage
+    trains at full resolution."""
+    threads: int | None = None
+    """torch intra-op threads while training (None: torch's default). On a loaded machine one
+    thread can be several times faster than more (OpenMP threads spin-wait for busy cores);
+    the result does not depend on it beyond floating-point summation order."""
     seed: int = 0
     """Seed of weight initialisation, shuffling, crops and flips."""
     device: str = "auto"
@@ -201,6 +216,11 @@ class TrainConfig:
             checkpoint_every=1,
         )
 
+    @property
+    def crop_shape(self) -> tuple[int, int]:
+        """``(height, width)`` of the training crops, pixels at the network resolution."""
+        return int(self.crop_size), int(self.crop_width or self.crop_size)
+
     def validate(self) -> None:
         """Raise :class:`NidarError` for values that cannot work."""
         if self.irnet.variant not in IRNET_VARIANTS:
@@ -222,6 +242,8 @@ class TrainConfig:
             ("irnet.width", self.irnet.width),
             ("irnet.unet_depth", self.irnet.unet_depth),
             ("crop_size", self.crop_size),
+            ("crop_width", 1 if self.crop_width is None else self.crop_width),
+            ("threads", 1 if self.threads is None else self.threads),
             ("checkpoint_every", self.checkpoint_every),
             ("keep_checkpoints", self.keep_checkpoints),
             ("stn_optim.batch_size", self.stn_optim.batch_size),
@@ -239,6 +261,8 @@ class TrainConfig:
             if not (math.isfinite(optim.weight_decay) and optim.weight_decay >= 0):
                 raise NidarError(f"{name}.weight_decay must be >= 0, got {optim.weight_decay}")
         check_seed(self.seed, "seed")
+        if not (math.isfinite(self.scale) and 0 < self.scale <= 1):
+            raise NidarError(f"scale must lie in (0, 1], got {self.scale}")
         if any(s <= 0 or s > 1 for s in self.loss.scales):
             raise NidarError("loss.scales must lie in (0, 1]")
         if self.device != "auto" and not self.device.startswith(("cpu", "cuda")):

@@ -19,33 +19,94 @@ from ..errors import NidarError
 from .preprocess import prepare_nir, prepare_rgb
 
 __all__ = [
+    "area_resize",
+    "reduce_sparse",
     "FrameDataset",
     "STNDataset",
     "IRNetDataset",
 ]
 
 
-def _crop_box(h: int, w: int, crop: int, rng: np.random.Generator | None):
-    if crop > h or crop > w:
-        raise NidarError(f"crop size {crop} exceeds the frame size {h}x{w}")
+def _crop_box(h: int, w: int, crop: tuple[int, int], rng: np.random.Generator | None):
+    ch, cw = crop
+    if ch > h or cw > w:
+        raise NidarError(f"crop size {ch}x{cw} exceeds the frame size {h}x{w}")
     if rng is None:
-        return (h - crop) // 2, (w - crop) // 2
-    return int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
+        return (h - ch) // 2, (w - cw) // 2
+    return int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
+
+
+def _crop_shape(crop_size) -> tuple[int, int]:
+    if isinstance(crop_size, (tuple, list)):
+        ch, cw = (int(v) for v in crop_size)
+    else:
+        ch = cw = int(crop_size)
+    return ch, cw
+
+
+def reduce_sparse(
+    mask: np.ndarray, range_m: np.ndarray, maps: dict[str, np.ndarray], size: tuple[int, int]
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Sparse per-pixel maps re-projected onto a coarser pixel grid, the nearest return winning.
+
+    Full-resolution pixel ``(v, u)`` falls into coarse pixel
+    ``(floor((v + 0.5) h / H), floor((u + 0.5) w / W))`` (the coarse pixel whose area holds its
+    centre); of the returns falling into one coarse pixel the one of least range is kept (ties:
+    the first in row-major order), as when the returns are projected at that resolution.
+
+    Args:
+        mask: ``(H, W)`` bool, pixels holding a return.
+        range_m: ``(H, W)`` range of the returns, m.
+        maps: name -> ``(H, W)`` values at the returns.
+        size: ``(h, w)`` of the coarse grid.
+
+    Returns:
+        ``(mask (h, w) bool, {name: (h, w) float32, 0 where no return})``.
+    """
+    big_h, big_w = mask.shape
+    h, w = size
+    v, u = np.nonzero(mask)
+    row = np.minimum(((v + 0.5) * h / big_h).astype(np.int64), h - 1)
+    col = np.minimum(((u + 0.5) * w / big_w).astype(np.int64), w - 1)
+    cell = row * w + col
+    order = np.lexsort((range_m[v, u], cell))  # by cell, then by range (stable)
+    cell = cell[order]
+    first = np.ones(len(cell), bool)
+    first[1:] = cell[1:] != cell[:-1]
+    keep, cells = order[first], cell[first]
+    out_mask = np.zeros(h * w, bool)
+    out_mask[cells] = True
+    out = {}
+    for name, values in maps.items():
+        m = np.zeros(h * w, np.float32)
+        m[cells] = values[v[keep], u[keep]]
+        out[name] = m.reshape(h, w)
+    return out_mask.reshape(h, w), out
+
+
+def area_resize(x: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``(C, H, W)`` float32 resized to ``(C, h, w)`` by area averaging, exactly as inference
+    resizes its input (:func:`torch.nn.functional.interpolate`, ``mode="area"``)."""
+    if tuple(x.shape[-2:]) == tuple(size):
+        return x
+    t = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None]
+    return torch.nn.functional.interpolate(t, size=size, mode="area")[0].numpy()
 
 
 class FrameDataset(Dataset):
-    """Base of the datasets: frame files, square crops, per-(seed, epoch, index) randomness.
+    """Base of the datasets: frame files, crops, per-(seed, epoch, index) randomness.
 
     Args:
         frames: frame files.
-        crop_size: side of the square crops.
+        crop_size: side of the square crops, or ``(height, width)``.
         seed: seed of crops and flips.
         train: random crops and horizontal flips if True, centre crops otherwise.
     """
 
-    def __init__(self, frames, crop_size: int, seed: int = 0, train: bool = True) -> None:
+    def __init__(self, frames, crop_size, seed: int = 0, train: bool = True) -> None:
         self.frames = [Path(f) for f in frames]
-        self.crop_size = int(crop_size)
+        self.crop_shape = _crop_shape(crop_size)
+        self.crop_size = self.crop_shape[0]
         self.seed = int(seed)
         self.train = bool(train)
         self.epoch = 0
@@ -60,9 +121,10 @@ class FrameDataset(Dataset):
     def _window(self, index: int, h: int, w: int):
         """Crop slices and a flip flag for sample ``index``."""
         rng = np.random.default_rng([self.seed, self.epoch, index]) if self.train else None
-        y, x = _crop_box(h, w, self.crop_size, rng)
+        y, x = _crop_box(h, w, self.crop_shape, rng)
         flip = bool(rng.integers(0, 2)) if rng is not None else False
-        return (slice(y, y + self.crop_size), slice(x, x + self.crop_size)), flip
+        ch, cw = self.crop_shape
+        return (slice(y, y + ch), slice(x, x + cw)), flip
 
     @staticmethod
     def _apply(arr: np.ndarray, window, flip: bool) -> torch.Tensor:
@@ -100,37 +162,54 @@ class IRNetDataset(FrameDataset):
         frames: frame files.
         intensity_scale: divisor of the stored intensity (``meta.json``); the quotient is
             clipped to [0, 1].
-        crop_size: side of the square crops.
+        crop_size: side of the square crops, or ``(height, width)``, at the network resolution.
         seed: seed of crops and flips.
         train: random crops and flips if True, centre crops otherwise.
         input_dir: directory with ``<frame>.npy`` pseudo-NIR images ``(1, H, W)`` float32
-            (the frozen STN's output); None gives the prepared RGB image as input.
+            (the frozen STN's output, full resolution); None gives the prepared RGB image as
+            input.
         intrinsic_targets: also give the rendered frames' true reflectance and shading
             (``R_true``, ``S_true``; frames without them are an error).
+        scale: network resolution relative to the frames, in (0, 1]: frames become
+            ``round(scale · H) x round(scale · W)`` (:func:`nidar_mi.nidar.infer.reduced_size`):
+            the input and the dense true maps by area averaging (:func:`area_resize`), the
+            sparse intensity and mask by :func:`reduce_sparse`. Reduced frames are kept in
+            memory (they are read once).
 
-    Items: ``{"x": (1 or 3, c, c), "intensity": (1, c, c), "mask": (1, c, c)}`` float32
-    (the mask as 0/1), plus ``"R_true"`` and ``"S_true"`` ``(1, c, c)`` float32 (the same crop
-    and flip) with ``intrinsic_targets``.
+    Items: ``{"x": (1 or 3, h, w), "intensity": (1, h, w), "mask": (1, h, w)}`` float32
+    (the mask as 0/1), plus ``"R_true"`` and ``"S_true"`` ``(1, h, w)`` float32 (the same crop
+    and flip) with ``intrinsic_targets``; ``(h, w)`` is the crop shape.
     """
 
     def __init__(
         self,
         frames,
         intensity_scale: float,
-        crop_size: int,
+        crop_size,
         seed: int = 0,
         train: bool = True,
         input_dir: str | Path | None = None,
         intrinsic_targets: bool = False,
+        scale: float = 1.0,
     ) -> None:
         super().__init__(frames, crop_size, seed, train)
         self.intensity_scale = float(intensity_scale)
         self.input_dir = Path(input_dir) if input_dir is not None else None
         self.intrinsic_targets = bool(intrinsic_targets)
+        if not 0.0 < float(scale) <= 1.0:
+            raise NidarError(f"scale must lie in (0, 1], got {scale}")
+        self.scale = float(scale)
+        self._reduced: dict[int, dict[str, np.ndarray]] = {}
 
-    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+    def frame_arrays(self, index: int) -> dict[str, np.ndarray]:
+        """The whole frame ``index`` at the network resolution: ``x`` ``(C, h, w)``,
+        ``intensity`` and ``mask`` ``(1, h, w)`` float32 (and ``R_true``, ``S_true``)."""
+        if index in self._reduced:
+            return self._reduced[index]
         path = self.frames[index]
         keys = ("intensity", "mask") if self.input_dir is not None else ("rgb", "intensity", "mask")
+        if self.scale < 1.0:
+            keys = (*keys, "range")
         if self.intrinsic_targets:
             keys = (*keys, "R_true", "S_true")
         arrays = load_frame(path, keys)
@@ -140,17 +219,29 @@ class IRNetDataset(FrameDataset):
             x = np.load(self.input_dir / f"{path.stem}.npy", allow_pickle=False)
             if x.shape != (1, *arrays["mask"].shape):
                 raise NidarError(f"pseudo-NIR cache of {path.name} has shape {x.shape}")
-        mask = arrays["mask"][None].astype(np.float32)
+        mask = arrays["mask"]
         # LiDAR4D-style scaling: divide by the stated scale and clip to [0, 1] (retroreflectors
         # would otherwise dominate every squared loss)
-        target = np.clip(arrays["intensity"][None] / np.float32(self.intensity_scale), 0, 1) * mask
-        window, flip = self._window(index, *mask.shape[1:])
-        item = {
-            "x": self._apply(x.astype(np.float32), window, flip),
-            "intensity": self._apply(target.astype(np.float32), window, flip),
-            "mask": self._apply(mask, window, flip),
-        }
+        target = np.clip(arrays["intensity"] / np.float32(self.intensity_scale), 0, 1) * mask
+        dense = {"x": x.astype(np.float32)}
         if self.intrinsic_targets:
-            for key in ("R_true", "S_true"):
-                item[key] = self._apply(arrays[key][None].astype(np.float32), window, flip)
-        return item
+            dense |= {k: arrays[k][None].astype(np.float32) for k in ("R_true", "S_true")}
+        if self.scale < 1.0:
+            from .infer import reduced_size
+
+            size = reduced_size(*mask.shape, self.scale)
+            dense = {k: area_resize(v, size) for k, v in dense.items()}
+            mask, sparse = reduce_sparse(mask, arrays["range"], {"intensity": target}, size)
+            target = sparse["intensity"]
+        out = dense | {
+            "intensity": target[None].astype(np.float32),
+            "mask": mask[None].astype(np.float32),
+        }
+        if self.scale < 1.0:
+            self._reduced[index] = out
+        return out
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        arrays = self.frame_arrays(index)
+        window, flip = self._window(index, *arrays["mask"].shape[1:])
+        return {k: self._apply(v, window, flip) for k, v in arrays.items()}
