@@ -4,14 +4,21 @@
                              [--variant unet+deeplabv3] [--input pseudo_nir|rgb]
                              [--stn-weights stn.safetensors] [--resume] [--seed N]
                              [--device auto|cpu|cuda] [--epochs N] [--max-steps N]
-                             [--batch-size N] [--crop-size N] [--no-progress]
+                             [--batch-size N] [--crop-size N] [--crop-width N]
+                             [--scale S] [--threads N] [--all-frames] [--no-progress]
 
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
 ``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
 trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted on the training
 split (:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
-``--batch-size`` apply to both stages). See :mod:`nidar_mi.nidar.train`.
+``--batch-size`` apply to both stages). ``--all-frames`` (with ``--stage irnet``) trains
+IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.train`.
+
+A compact IRNet on real KITTI frames (quarter resolution, wide crops, one thread)::
+
+    python -m nidar_mi.train DATA OUT --stage irnet --stn-weights stn.safetensors \
+        --config irnet_kitti.json --all-frames --threads 1
 """
 
 from __future__ import annotations
@@ -63,7 +70,25 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, help="epochs of each stage, >= 1")
     p.add_argument("--max-steps", type=int, help="optimiser steps of each stage at most, >= 1")
     p.add_argument("--batch-size", type=int, help="batch size of each stage")
-    p.add_argument("--crop-size", type=int, help="side of the square training crops (px)")
+    p.add_argument(
+        "--crop-size", type=int, help="side of the square training crops, or their height (px)"
+    )
+    p.add_argument("--crop-width", type=int, help="width of the training crops (px)")
+    p.add_argument(
+        "--scale",
+        type=float,
+        help="IRNet resolution relative to the frames, in (0, 1] (also the model's default "
+        "inference scale)",
+    )
+    p.add_argument(
+        "--threads", type=int, help="torch threads while training (1 is fastest on a busy machine)"
+    )
+    p.add_argument(
+        "--all-frames",
+        action="store_true",
+        help="train IRNet on every frame of DATA (train, val and test splits), without "
+        "validation: the model to ship once the held-out evaluation is done",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
     return p
@@ -73,6 +98,8 @@ def build_config(args: argparse.Namespace):
     """The :class:`~nidar_mi.nidar.config.TrainConfig` selected by parsed arguments."""
     from ..nidar.config import TrainConfig
 
+    if args.all_frames and args.stage != "irnet":
+        raise NidarError("--all-frames applies to IRNet only: use it with --stage irnet")
     cfg = TrainConfig.reduced() if args.reduced else TrainConfig()
     if args.config is not None:
         try:
@@ -99,7 +126,14 @@ def build_config(args: argparse.Namespace):
     }
     top = {
         k: v
-        for k, v in (("seed", args.seed), ("device", args.device), ("crop_size", args.crop_size))
+        for k, v in (
+            ("seed", args.seed),
+            ("device", args.device),
+            ("crop_size", args.crop_size),
+            ("crop_width", args.crop_width),
+            ("scale", args.scale),
+            ("threads", args.threads),
+        )
         if v is not None
     }
     cfg = TrainConfig.from_dict(
@@ -148,7 +182,13 @@ def _train(args: argparse.Namespace, cfg) -> None:
         training.train_stn(cfg, args.data, args.out, resume=args.resume, progress=progress)
     elif args.stage == "irnet":
         training.train_irnet(
-            cfg, args.data, args.out, args.stn_weights, resume=args.resume, progress=progress
+            cfg,
+            args.data,
+            args.out,
+            args.stn_weights,
+            resume=args.resume,
+            progress=progress,
+            frames=_all_frames(args.data) if args.all_frames else None,
         )
     else:
         training.train(
@@ -166,6 +206,12 @@ def _train(args: argparse.Namespace, cfg) -> None:
 
         model = NidarModel.load(args.out, device=cfg.device)
         fit_dataset_calibration(model, args.data, "train").save_json(args.out / "calibration.json")
+
+
+def _all_frames(data: Path) -> dict[str, list[Path]]:
+    from ..dataset import SPLITS, list_frames
+
+    return {"train": [f for split in SPLITS for f in list_frames(data, split)], "val": []}
 
 
 def _after_failure(out: Path, fresh: bool) -> str:

@@ -129,6 +129,8 @@ def run_stage(
     """Optimise ``stage.model`` in place; returns the stage log."""
     run = _StageRun(stage, cfg, out_dir)
     epoch0, skip = run.restore(resume)
+    if stage.val_set is None or len(stage.val_set) == 0:
+        log.warning("%s: no validation frames: the validation loss is not computed", stage.name)
     log.info(
         "%s: %d steps of batch %d on %s", stage.name, run.total, stage.optim.batch_size, run.device
     )
@@ -291,7 +293,6 @@ class _StageRun:
 def validate(model, val_set, loss_fn: LossFn, batch: int, device) -> dict[str, Any]:
     """Mean validation loss (and terms) over centre crops, with full loss weights."""
     if val_set is None or len(val_set) == 0:
-        log.warning("no validation frames: the validation loss is not computed")
         return {"val_loss": None, "val_terms": {}}
     model.eval()
     totals: dict[str, float] = {}

@@ -99,7 +99,7 @@ class NidarModel:
         device: str | None = "auto",
         *,
         optimize: bool = True,
-        scale: float = 1.0,
+        scale: float | None = None,
     ) -> NidarModel:
         """Load a weights folder (default: the shipped one); safetensors only, nothing unpickled.
 
@@ -110,16 +110,20 @@ class NidarModel:
                 convolutions, channels-last memory: :mod:`nidar_mi.nidar.fold`); the outputs
                 change by less than 1e-5.
             scale: default inference resolution relative to the image, in (0, 1]
-                (:mod:`nidar_mi.nidar.infer`).
+                (:mod:`nidar_mi.nidar.infer`); None: the resolution IRNet was trained at
+                (``config.json``'s ``train.scale``, 1 when absent).
         """
         from .infer import reduced_size
         from .model_io import load_pipeline
 
-        reduced_size(1, 1, scale)  # checks the scale
+        if scale is not None:
+            reduced_size(1, 1, scale)  # checks the scale
         wdir = Path(weights_dir) if weights_dir is not None else shipped_weights_dir()
         if not (wdir / "irnet.safetensors").is_file():
             raise NidarError(f"{wdir}: no NIDAR weights (irnet.safetensors) found")
         stn, irnet, cfg = load_pipeline(wdir, device=device)
+        if scale is None:
+            scale = cfg.scale
         if optimize:
             stn, irnet = _optimized(stn, irnet)
         calib_path = wdir / "calibration.json"

@@ -21,9 +21,11 @@ CPU runs use deterministic algorithms; a resumed run continues with the same bat
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -109,7 +111,8 @@ def train_stn(
         return loss, {}
 
     stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
-    run_stage(stage, cfg, out_dir, resume, progress)
+    with _torch_threads(cfg.threads):
+        run_stage(stage, cfg, out_dir, resume, progress)
     path = save_stn(out_dir / "stn.safetensors", model, cfg.stn)
     _mark_done(out_dir, "stn")
     return path
@@ -162,7 +165,8 @@ def train_stn_photos(
         return photo_stn_loss(net(batch["rgb"]), batch["nir"], pc.ssim_weight), {}
 
     stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
-    run_stage(stage, cfg, out_dir, resume, progress)
+    with _torch_threads(cfg.threads):
+        run_stage(stage, cfg, out_dir, resume, progress)
     path = save_stn(out_dir / "stn.safetensors", model, cfg.stn)
     _mark_done(out_dir, "stn")
     return path
@@ -176,23 +180,37 @@ def train_irnet(
     *,
     resume: bool = False,
     progress: bool = True,
+    frames: dict[str, Sequence[str | Path]] | None = None,
+    cache_dir: str | Path | None = None,
 ) -> Path:
     """Train IRNet; returns ``OUT/irnet.safetensors``.
 
     Args:
-        cfg: configuration (``cfg.irnet.input`` selects pseudo-NIR or RGB input).
-        data_dir: training data.
+        cfg: configuration (``cfg.irnet.input`` selects pseudo-NIR or RGB input;
+            ``cfg.scale`` the network resolution).
+        data_dir: training data (its ``meta.json`` gives the intensity scale).
         out_dir: output directory.
         stn_weights: trained STN (default ``OUT/stn.safetensors``); copied into ``OUT`` when
             it lies elsewhere. Required for pseudo-NIR input, optional for RGB input.
         resume: continue from the latest checkpoint in ``OUT/checkpoints``.
         progress: show tqdm progress bars.
+        frames: ``{"train": [...], "val": [...]}`` frame files to use instead of the data's
+            ``train`` and ``val`` splits (e.g. a leave-one-out fold, or every frame for a
+            model to ship; an empty ``val`` list skips validation).
+        cache_dir: folder of the pseudo-NIR cache (default ``OUT/cache``; runs on the same
+            frames with the same STN and scale can share one).
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     meta = load_meta(data_dir)
     _begin(cfg, data_dir, out_dir, "irnet", resume)
     device = resolve_device(cfg.device)
-    train_frames, val_frames = _frames(data_dir, "train"), list_frames(data_dir, "val")
+    if frames is None:
+        split_frames = {"train": _frames(data_dir, "train"), "val": list_frames(data_dir, "val")}
+    else:
+        split_frames = {k: [Path(f) for f in frames.get(k, ())] for k in ("train", "val")}
+        if not split_frames["train"]:
+            raise NidarError("no training frames given")
+        _record_frames(out_dir, split_frames)
     input_dirs: dict[str, Path | None] = {"train": None, "val": None}
     local = out_dir / "stn.safetensors"
     if stn_weights is None and local.is_file():
@@ -206,35 +224,43 @@ def train_irnet(
                 raise NidarError(f"{local} exists and differs from {stn_weights}")
             load_stn(stn_weights, "cpu")  # a file that is no STN fails here, before the copy
             atomic_write(local, stn_weights.read_bytes())
-    if cfg.irnet.input == "pseudo_nir":
-        if stn_weights is None:
-            raise NidarError("IRNet with pseudo-NIR input needs STN weights (train the STN first)")
-        stn = load_stn(local, device)
-        digest = hashlib.sha256(local.read_bytes()).hexdigest()[:16]
-        cache = out_dir / "cache" / f"pseudo_nir_{digest}"
-        for split, frames in (("train", train_frames), ("val", val_frames)):
-            input_dirs[split] = _cache_pseudo_nir(stn, frames, cache / split)
-        del stn
+    with _torch_threads(cfg.threads):
+        if cfg.irnet.input == "pseudo_nir":
+            if stn_weights is None:
+                raise NidarError(
+                    "IRNet with pseudo-NIR input needs STN weights (train the STN first)"
+                )
+            stn = load_stn(local, device)
+            digest = hashlib.sha256(local.read_bytes()).hexdigest()[:16]
+            tag = f"pseudo_nir_{digest}" + (f"_x{cfg.scale:g}" if cfg.scale != 1.0 else "")
+            cache = Path(cache_dir) if cache_dir is not None else out_dir / "cache"
+            for split, fs in split_frames.items():
+                input_dirs[split] = _cache_pseudo_nir(stn, fs, cache / tag, cfg.scale)
+            del stn
 
-    torch.manual_seed(cfg.seed)
-    model = build_irnet(cfg.irnet)
-    _check_crop(cfg.crop_size, model.stride, "IRNet")
-    scale = float(meta["intensity_scale"])
-    train_set = IRNetDataset(
-        train_frames, scale, cfg.crop_size, cfg.seed, True, input_dirs["train"]
-    )
-    val_set = IRNetDataset(val_frames, scale, cfg.crop_size, cfg.seed, False, input_dirs["val"])
-
-    def loss_fn(net, batch, factor):
-        x = batch["x"]
-        loss, terms = irnet_objective(
-            net(x), net.intrinsic_target(x), batch["intensity"], batch["mask"], cfg.loss, factor
+        torch.manual_seed(cfg.seed)
+        model = build_irnet(cfg.irnet)
+        for side in cfg.crop_shape:
+            _check_crop(side, model.stride, "IRNet")
+        scale = float(meta["intensity_scale"])
+        common = dict(crop_size=cfg.crop_shape, seed=cfg.seed, scale=cfg.scale)
+        train_set = IRNetDataset(
+            split_frames["train"], scale, train=True, input_dir=input_dirs["train"], **common
         )
-        return loss, {**terms, "int_factor": factor}
+        val_set = IRNetDataset(
+            split_frames["val"], scale, train=False, input_dir=input_dirs["val"], **common
+        )
 
-    warmup = cfg.loss.int_warmup_epochs
-    stage = Stage("irnet", model, cfg.irnet_optim, train_set, val_set, loss_fn, warmup)
-    run_stage(stage, cfg, out_dir, resume, progress)
+        def loss_fn(net, batch, factor):
+            x = batch["x"]
+            loss, terms = irnet_objective(
+                net(x), net.intrinsic_target(x), batch["intensity"], batch["mask"], cfg.loss, factor
+            )
+            return loss, {**terms, "int_factor": factor}
+
+        warmup = cfg.loss.int_warmup_epochs
+        stage = Stage("irnet", model, cfg.irnet_optim, train_set, val_set, loss_fn, warmup)
+        run_stage(stage, cfg, out_dir, resume, progress)
     path = save_irnet(out_dir / "irnet.safetensors", model, cfg.irnet)
     _mark_done(out_dir, "irnet")
     return path
@@ -261,7 +287,7 @@ def _mark_done(out_dir: Path, stage: str) -> None:
 
 
 #: Settings that may change when a run is resumed (they do not change what a step computes).
-_RESUMABLE_CHANGES = ("device", "num_workers", "checkpoint_every", "keep_checkpoints")
+_RESUMABLE_CHANGES = ("device", "num_workers", "checkpoint_every", "keep_checkpoints", "threads")
 _SCHEDULE_KEYS = ("epochs", "max_steps")
 
 
@@ -306,14 +332,37 @@ def _begin(cfg: TrainConfig, data_dir: Path, out_dir: Path, stage: str, resume: 
     atomic_write(cfg_path, json.dumps(record, indent=2))
 
 
-def _cache_pseudo_nir(stn: nn.Module, frames: list[Path], cache_dir: Path) -> Path:
-    """Write ``<frame>.npy`` pseudo-NIR images ``(1, H, W)`` that are not cached yet."""
+def _cache_pseudo_nir(stn: nn.Module, frames: list[Path], cache_dir: Path, scale: float) -> Path:
+    """Write ``<frame>.npy`` pseudo-NIR images ``(1, H, W)`` (the STN run at ``scale``, as at
+    inference) that are not cached yet."""
     for path in frames:
         target = cache_dir / f"{path.stem}.npy"
         if target.is_file():
             continue
-        image = pseudo_nir(stn, load_frame(path, ("rgb",))["rgb"])
+        image = pseudo_nir(stn, load_frame(path, ("rgb",))["rgb"], scale=scale)
         buf = io.BytesIO()
         np.save(buf, image[None].astype(np.float32), allow_pickle=False)
         atomic_write(target, buf.getvalue())
     return cache_dir
+
+
+@contextlib.contextmanager
+def _torch_threads(threads: int | None):
+    """torch's intra-op thread count set to ``threads`` (None: unchanged), then restored."""
+    if threads is None:
+        yield
+        return
+    previous = torch.get_num_threads()
+    torch.set_num_threads(int(threads))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def _record_frames(out_dir: Path, split_frames: dict[str, list[Path]]) -> None:
+    """Add the frames a run was given to ``OUT/config.json`` (``data.frames``)."""
+    path = out_dir / "config.json"
+    record = json.loads(path.read_text())
+    record["data"]["frames"] = {k: sorted(f.stem for f in v) for k, v in split_frames.items()}
+    atomic_write(path, json.dumps(record, indent=2))

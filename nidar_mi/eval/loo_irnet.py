@@ -1,0 +1,164 @@
+"""Leave-one-frame-out rows for an IRNet trained per fold on the real frames.
+
+:func:`irnet_methods` gives :class:`~nidar_mi.eval.loo.LooMethod` rows for
+:func:`~nidar_mi.eval.loo.leave_one_out`: in each fold an IRNet is trained on the fold's
+training frames only (:func:`nidar_mi.nidar.train.train_irnet` with the fold's frame list, a
+fixed STN, the given configuration: e.g. a compact ``unet`` at quarter resolution) and its
+maps at the returns feed the rows:
+
+* ``irnet_R_<form>``: the reflectance branch ``R`` through a sensor profile of ``form`` fitted
+  on the fold's training frames (:func:`~nidar_mi.eval.loo.profile_method`);
+* ``irnet_I_hat_raw``: the dense intensity head ``Î`` itself, clipped to [0, 1];
+* ``irnet_I_hat_<form>``: ``Î`` through a profile of ``form``.
+
+One network is trained per fold and serves every row of that fold (:class:`FoldModels`). Each
+fold's run lives in ``WORK/fold-<held-out frame>`` (weights, log, checkpoints: an interrupted
+evaluation resumes where it stopped, a finished fold is reused); the pseudo-NIR cache is shared
+by the folds (``WORK/cache``). No row is scored on a frame its network or profile was fitted on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import NidarError
+from .loo import CachedValues, LooMethod, profile_method, raw_method
+
+__all__ = ["FoldModels", "irnet_methods"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class FoldModels:
+    """IRNet trained per fold, on demand, and its maps at the returns.
+
+    Attributes:
+        cfg: training configuration (a :class:`~nidar_mi.nidar.config.TrainConfig`).
+        data_dir: the data folder the scans come from (:func:`nidar_mi.datasets.scans.frames_from_data`;
+            a scan's ``source`` is its frame file).
+        work_dir: where the folds' runs are written.
+        stn_weights: the STN every fold uses (fixed; fitted on other data).
+        progress: show training progress bars.
+    """
+
+    cfg: Any
+    data_dir: Path
+    work_dir: Path
+    stn_weights: Path | None
+    progress: bool = False
+    _values: dict[str, CachedValues] = field(default_factory=dict)
+    train_seconds: dict[str, float] = field(default_factory=dict)
+
+    def fold_dir(self, train: Sequence[Any]) -> Path:
+        """``WORK/fold-<held-out frames>`` of the fold that trains on ``train``."""
+        from ..dataset import SPLITS, list_frames
+
+        names = {s.name for s in train}
+        every = sorted(f.stem for split in SPLITS for f in list_frames(self.data_dir, split))
+        held = [n for n in every if n not in names]
+        if 1 <= len(held) <= 3:
+            return self.work_dir / ("fold-" + "+".join(held))
+        digest = hashlib.sha256("\n".join(sorted(names)).encode()).hexdigest()[:12]
+        return self.work_dir / f"fold-{digest}"
+
+    def values(self, train: Sequence[Any]) -> CachedValues:
+        """``scan -> {"R": (N,), "I_hat": (N,)}`` of the network trained on ``train`` (trained
+        at the first call of a fold)."""
+        fold = self.fold_dir(train)
+        key = str(fold)
+        if key not in self._values:
+            model = self._model(fold, train)
+
+            def branches(scan, model=model):
+                from ..nidar.profiles import scan_branches
+
+                return scan_branches(model, scan, ("R", "I_hat"))
+
+            self._values[key] = CachedValues(branches)
+        return self._values[key]
+
+    def _model(self, fold: Path, train: Sequence[Any]):
+        import time
+
+        from ..nidar.loop import read_train_log
+        from ..nidar.pipeline import NidarModel
+        from ..nidar.train import train_irnet
+
+        done = (fold / "irnet.safetensors").is_file() and read_train_log(fold).get("irnet", {}).get(
+            "done"
+        )
+        if not done:
+            frames = [Path(s.source) for s in train]
+            missing = [f for f in frames if not f.is_file()]
+            if missing:
+                raise NidarError(f"{missing[0]}: frame file not found (scans of another folder?)")
+            log.info("training IRNet for %s on %d frames", fold.name, len(frames))
+            t0 = time.perf_counter()
+            train_irnet(
+                self.cfg,
+                self.data_dir,
+                fold,
+                self.stn_weights,
+                resume=True,
+                progress=self.progress,
+                frames={"train": frames, "val": []},
+                cache_dir=self.work_dir / "cache",
+            )
+            self.train_seconds[fold.name] = time.perf_counter() - t0
+            _write_timing(fold, self.train_seconds[fold.name])
+        return NidarModel.load(fold, device="cpu")
+
+
+def _write_timing(fold: Path, seconds: float) -> None:
+    from ..nidar.checkpoint import atomic_write
+
+    atomic_write(fold / "timing.json", json.dumps({"train_seconds": round(seconds, 1)}))
+
+
+def _branch(models: FoldModels, train, branch: str):
+    vals = models.values(train)
+    return lambda scan: vals(scan)[branch]
+
+
+def irnet_methods(
+    models: FoldModels, forms: Sequence[str] = ("range_ring",)
+) -> dict[str, LooMethod]:
+    """The per-fold IRNet rows of the module docstring, in table order.
+
+    Args:
+        models: the per-fold networks.
+        forms: profile forms (:data:`nidar_mi.nidar.profile.PROFILE_FORMS`).
+    """
+    from ..nidar.profile import PROFILE_FORMS
+
+    unknown = [f for f in forms if f not in PROFILE_FORMS]
+    if unknown:
+        raise NidarError(
+            f"unknown profile form(s) {', '.join(unknown)}; known: {', '.join(PROFILE_FORMS)}"
+        )
+    net = f"IRNet {models.cfg.irnet.variant} w{models.cfg.irnet.width} x{models.cfg.scale:g}"
+
+    def profiled(branch: str, form: str, label: str) -> LooMethod:
+        def fit(train):
+            values = _branch(models, train, branch)
+            return profile_method(label, values, form=form, input=f"nidar:{branch}").fit(train)
+
+        return LooMethod(label, fit, "network and profile fitted on the fold's training frames")
+
+    def raw(label: str) -> LooMethod:
+        def fit(train):
+            return raw_method(label, _branch(models, train, "I_hat")).fit(train)
+
+        return LooMethod(label, fit, "network fitted on the fold's training frames")
+
+    methods = {f"irnet_R_{f}": profiled("R", f, f"{net}: R + {f} profile") for f in forms}
+    methods["irnet_I_hat_raw"] = raw(f"{net}: Î raw")
+    methods |= {f"irnet_I_hat_{f}": profiled("I_hat", f, f"{net}: Î + {f} profile") for f in forms}
+    return methods
