@@ -9,8 +9,9 @@ frames are the folds); ``WORK`` holds one training run per fold (resumable, reus
 JSON (e.g. a compact ``unet`` at ``scale`` 0.25 with 64 x 160 crops). Rows: IRNet ``R`` and
 ``Î`` through each profile form and ``Î`` raw; with ``--baselines`` also the image-free
 ``range_only`` profile and luminance through each form. Prints the per-fold and mean table
-(:func:`nidar_mi.eval.report.loo_markdown`) and the training time of each fold; ``--json``
-writes the whole result. Folds run one after the other; run it under ``nice``.
+(:func:`nidar_mi.eval.report.loo_markdown`), the training time of each fold and, per fold, the
+correlation of the R and S maps over the test image (how much shading R still carries);
+``--json`` writes the whole result. Folds run one after the other; run it under ``nice``.
 """
 
 from __future__ import annotations
@@ -62,13 +63,29 @@ def main(argv: list[str] | None = None) -> int:
         if t.is_file():
             timing[test] = json.loads(t.read_text())["train_seconds"]
     res |= {"config": cfg.to_dict(), "train_seconds": timing, "data": str(args.data)}
+    res["r_of_R_and_S"] = _decomposition_check(scans, tests, models)
     res["frames"] = len(scans)
     print(loo_markdown(res))
     print("training seconds per fold:", timing)
+    print("Pearson r of R and S over the test image, per fold:", res["r_of_R_and_S"])
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(res, indent=1, default=float))
     return 0
+
+
+def _decomposition_check(scans, tests, models) -> dict[str, float]:
+    """Pearson's r of the R and S maps over each test frame's pixels (fold's network): how much
+    shading the reflectance branch still carries (0: none)."""
+    import numpy as np
+
+    out = {}
+    for test in tests:
+        scan = next(s for s in scans if s.name == test)
+        train = [s for s in scans if s.name != test]
+        maps = models.model(train).predict_image(scan.images[0])
+        out[test] = round(float(np.corrcoef(maps["R"].ravel(), maps["S"].ravel())[0, 1]), 3)
+    return out
 
 
 if __name__ == "__main__":

@@ -54,6 +54,7 @@ class FoldModels:
     stn_weights: Path | None
     progress: bool = False
     _values: dict[str, CachedValues] = field(default_factory=dict)
+    _models: dict[str, Any] = field(default_factory=dict)
     train_seconds: dict[str, float] = field(default_factory=dict)
 
     def fold_dir(self, train: Sequence[Any]) -> Path:
@@ -71,10 +72,9 @@ class FoldModels:
     def values(self, train: Sequence[Any]) -> CachedValues:
         """``scan -> {"R": (N,), "I_hat": (N,)}`` of the network trained on ``train`` (trained
         at the first call of a fold)."""
-        fold = self.fold_dir(train)
-        key = str(fold)
+        key = str(self.fold_dir(train))
         if key not in self._values:
-            model = self._model(fold, train)
+            model = self.model(train)
 
             def branches(scan, model=model):
                 from ..nidar.profiles import scan_branches
@@ -84,7 +84,15 @@ class FoldModels:
             self._values[key] = CachedValues(branches)
         return self._values[key]
 
-    def _model(self, fold: Path, train: Sequence[Any]):
+    def model(self, train: Sequence[Any]):
+        """The :class:`~nidar_mi.nidar.pipeline.NidarModel` trained on ``train`` (trained at the
+        first call of a fold, reused after)."""
+        fold = self.fold_dir(train)
+        if str(fold) not in self._models:
+            self._models[str(fold)] = self._train(fold, train)
+        return self._models[str(fold)]
+
+    def _train(self, fold: Path, train: Sequence[Any]):
         import time
 
         from ..nidar.loop import read_train_log
