@@ -159,3 +159,21 @@ def test_loo_rows_train_one_network_per_fold_without_the_test_frame(kitti_data, 
     assert len(list((tmp_path / "work").glob("fold-*"))) == 1  # one network for three rows
     assert {r["method"] for r in res["rows"]} == set(methods)
     assert all(np.isfinite(r["spearman"]) for r in res["rows"])
+
+
+def test_cli_trains_on_every_frame_at_the_given_scale(kitti_data, tmp_path, capsys):
+    from nidar_mi.cli.train import main
+
+    data, stn = kitti_data
+    out = tmp_path / "cli"
+    args = [str(data), str(out), "--reduced", "--stage", "irnet", "--variant", "unet"]
+    args += ["--stn-weights", str(stn), "--scale", "0.25", "--crop-size", "16"]
+    args += ["--crop-width", "48", "--threads", "1", "--all-frames", "--no-progress", "-q"]
+    assert main(args) == 0
+    record = json.loads((out / "config.json").read_text())
+    every = sorted(f.stem for split in ("train", "val", "test") for f in list_frames(data, split))
+    assert record["data"]["frames"] == {"train": every, "val": []}
+    assert (record["train"]["scale"], record["train"]["threads"]) == (0.25, 1)
+    assert main([str(data), str(tmp_path / "no"), "--all-frames", "-q"]) == 2
+    assert "--all-frames applies to IRNet only" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()
