@@ -46,6 +46,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--variant", help="IRNet variant, e.g. unet+deeplabv3, deeplabv3+3conv")
     p.add_argument("--input", choices=("pseudo_nir", "rgb"), help="IRNet input")
     p.add_argument("--stn-weights", type=Path, help="use this trained STN (skips the STN stage)")
+    p.add_argument(
+        "--photos",
+        type=Path,
+        help="train the STN on the real RGB/NIR photo pairs of this folder (e.g. "
+        "../shared/data/rgbnir; its train and val pairs) instead of the dataset's renders",
+    )
     p.add_argument("--resume", action="store_true", help="continue from the latest checkpoint")
     p.add_argument(
         "--no-calibration", action="store_true", help="do not fit calibration.json after training"
@@ -134,7 +140,11 @@ def _train(args: argparse.Namespace, cfg) -> None:
     from ..nidar import train as training
 
     progress = not args.no_progress
-    if args.stage == "stn":
+    if args.stage == "stn" and args.photos is not None:
+        training.train_stn_photos(
+            cfg, args.photos, args.data, args.out, resume=args.resume, progress=progress
+        )
+    elif args.stage == "stn":
         training.train_stn(cfg, args.data, args.out, resume=args.resume, progress=progress)
     elif args.stage == "irnet":
         training.train_irnet(
@@ -148,6 +158,7 @@ def _train(args: argparse.Namespace, cfg) -> None:
             stn_weights=args.stn_weights,
             resume=args.resume,
             progress=progress,
+            photos=args.photos,
         )
     if args.stage != "stn" and not args.no_calibration:
         from ..nidar.dataset_calibration import fit_dataset_calibration

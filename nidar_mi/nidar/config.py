@@ -32,12 +32,15 @@ __all__ = [
     "OptimConfig",
     "TrainConfig",
     "IRNET_VARIANTS",
+    "STN_KINDS",
+    "PhotoConfig",
     "INPUT_MODES",
     "dataclass_from_dict",
 ]
 
 #: IRNet structures of the paper's ablation (Table "IRNet structural ablation"):
 #: ``backbone`` alone, or ``backbone+head``.
+STN_KINDS = ("cs_stereo", "lowres")
 IRNET_VARIANTS = (
     "unet",
     "deeplabv3",
@@ -62,10 +65,14 @@ _STRICT = {"extra": "forbid"}
 
 @dataclass
 class STNConfig:
-    """Spectral translation network (cs-stereo encoder-decoder)."""
+    """Spectral translation network: cs-stereo's encoder-decoder or the low-resolution UNet."""
 
     __pydantic_config__ = _STRICT
 
+    kind: str = "cs_stereo"
+    """One of :data:`STN_KINDS`: ``"cs_stereo"`` (:class:`~nidar_mi.nidar.stn.STN`, trained on
+    renders) or ``"lowres"`` (:class:`~nidar_mi.nidar.stn_lowres.LowResSTN`, trained on real
+    RGB/NIR photos; the shipped model's)."""
     width: int = 16
     """Base channel count; encoder level ``i`` has ``width * 2**min(i, 5)`` channels
     (cs-stereo uses 16)."""
@@ -75,6 +82,27 @@ class STNConfig:
     num_outputs: int = 4
     """Pyramid scales with a weight output (full, 1/2, 1/4, 1/8 in cs-stereo); all are
     supervised during training."""
+    depth: int = 3
+    """``lowres``: down-sampling steps of its UNet."""
+    down: int = 2
+    """``lowres``: average-pooling factor of the image before its UNet."""
+
+
+@dataclass
+class PhotoConfig:
+    """Training of a ``lowres`` STN on real RGB/NIR photo pairs (``train --photos``)."""
+
+    __pydantic_config__ = _STRICT
+
+    crops_per_epoch: int = 2000
+    """Random crops drawn per epoch (epochs are a bookkeeping unit: crops are drawn anew)."""
+    zoom_min: float = 0.5
+    """Crops cover ``crop_size / z`` pixels of the photo, ``z`` uniform in ``[zoom_min, 1]``,
+    resized to ``crop_size``."""
+    render_fraction: float = 0.0
+    """Share of crops drawn from the rendered RGB/NIR pairs of the dataset (0: photos only)."""
+    ssim_weight: float = 0.5
+    """Loss ``(1 - r) + ssim_weight · (1 - SSIM)`` after the per-crop gain and offset."""
 
 
 @dataclass
@@ -155,6 +183,10 @@ class OptimConfig:
     """Passes over the training split."""
     max_steps: int | None = None
     """Stop after this many optimiser steps in total (None: run all epochs)."""
+    schedule: str = "constant"
+    """Learning rate over the run: ``"constant"`` or ``"onecycle"`` (a cosine rise from
+    ``lr / 25`` to ``lr`` over the first 10 % of the steps, then a cosine fall to
+    ``lr / 25 / 1e4``; :func:`nidar_mi.nidar.loop.learning_rate`)."""
 
 
 @dataclass
@@ -173,6 +205,8 @@ class TrainConfig:
     """Optimiser of the STN stage (package choice: the IRNet settings of the paper)."""
     irnet_optim: OptimConfig = field(default_factory=OptimConfig)
     """Optimiser of the IRNet stage (paper: Adam 1e-4, wd 1e-5, batch 8, 10 epochs)."""
+    photos: PhotoConfig = field(default_factory=PhotoConfig)
+    """Training of a ``lowres`` STN on real RGB/NIR photos (``train --photos``)."""
     crop_size: int = 256
     """Side of the square random training crops (centre crops for validation), in pixels;
     a multiple of every network stride."""
@@ -212,6 +246,16 @@ class TrainConfig:
             raise NidarError(
                 f"unknown IRNet input {self.irnet.input!r}; choose one of " + ", ".join(INPUT_MODES)
             )
+        if self.stn.kind not in STN_KINDS:
+            raise NidarError(
+                f"unknown STN kind {self.stn.kind!r}; choose one of " + ", ".join(STN_KINDS)
+            )
+        if not 0.0 < self.photos.zoom_min <= 1.0:
+            raise NidarError(f"photos.zoom_min must lie in (0, 1], got {self.photos.zoom_min}")
+        if not 0.0 <= self.photos.render_fraction <= 1.0:
+            raise NidarError(
+                f"photos.render_fraction must lie in [0, 1], got {self.photos.render_fraction}"
+            )
         if self.stn.num_outputs < 1 or self.stn.num_outputs > self.stn.levels:
             raise NidarError("stn.num_outputs must lie in [1, stn.levels]")
         if self.irnet.output_stride not in (2, 4, 8, 16, 32):
@@ -219,6 +263,9 @@ class TrainConfig:
         for name, value in (
             ("stn.width", self.stn.width),
             ("stn.levels", self.stn.levels),
+            ("stn.depth", self.stn.depth),
+            ("stn.down", self.stn.down),
+            ("photos.crops_per_epoch", self.photos.crops_per_epoch),
             ("irnet.width", self.irnet.width),
             ("irnet.unet_depth", self.irnet.unet_depth),
             ("crop_size", self.crop_size),
@@ -234,6 +281,10 @@ class TrainConfig:
                 raise NidarError(f"{name}.epochs must be >= 1, got {optim.epochs}")
             if optim.max_steps is not None and int(optim.max_steps) < 1:
                 raise NidarError(f"{name}.max_steps must be >= 1 (or null), got {optim.max_steps}")
+            if optim.schedule not in ("constant", "onecycle"):
+                raise NidarError(
+                    f"{name}.schedule must be 'constant' or 'onecycle', got {optim.schedule!r}"
+                )
             if not (math.isfinite(optim.lr) and optim.lr > 0):
                 raise NidarError(f"{name}.lr must be a positive number, got {optim.lr}")
             if not (math.isfinite(optim.weight_decay) and optim.weight_decay >= 0):

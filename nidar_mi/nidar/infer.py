@@ -8,7 +8,7 @@ inputs.
 **Reduced-resolution inference** (``scale < 1``): the image is resized (area averaging) to
 ``round(scale · H) x round(scale · W)`` before a network sees it.
 
-* STN: the per-pixel channel weights are predicted at the reduced size, resized bilinearly to the
+* STN: the per-pixel channel weights (and offset) are predicted at the reduced size, resized bilinearly to the
   full size and combined with the full-resolution RGB, so the pseudo-NIR keeps the image's own
   detail (the weights vary slowly; the colours carry the edges).
 * IRNet: R, S and Î are predicted at the reduced size and resized bilinearly to the full size.
@@ -26,6 +26,7 @@ from ..errors import NidarError
 from .irnet import IRNet
 from .preprocess import EXPOSURE_TARGET_MEAN, prepare_rgb
 from .stn import STN
+from .stn_lowres import LowResSTN
 
 __all__ = [
     "pad_to_multiple",
@@ -99,6 +100,12 @@ def _stn_forward(stn: STN, x: torch.Tensor, scale: float) -> torch.Tensor:
         xs = pad_to_multiple(small.to(_device(stn)), stn.stride)
         if _is_channels_last(stn):
             xs = xs.contiguous(memory_format=torch.channels_last)
+        if isinstance(stn, LowResSTN):  # weights and offset at 1/down of the reduced size
+            coef = stn.coefficients(xs)
+            rows = -(-small.shape[-2] // stn.down)
+            cols = -(-small.shape[-1] // stn.down)
+            coef = _resize(coef[..., :rows, :cols], (h, w), "bilinear")
+            return LowResSTN.apply(x.to(coef.device), coef)
         weights = stn.channel_weights(xs)[0][..., : small.shape[-2], : small.shape[-1]]
     finally:
         stn.train(was_training)

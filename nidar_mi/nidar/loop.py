@@ -41,6 +41,7 @@ from .losses import linear_warmup
 from .model_io import resolve_device
 
 __all__ = [
+    "learning_rate",
     "LossFn",
     "Stage",
     "run_stage",
@@ -86,6 +87,27 @@ def deterministic(device: torch.device):
         yield
     finally:
         torch.use_deterministic_algorithms(previous)
+
+
+def learning_rate(optim: OptimConfig, step: int, total: int) -> float:
+    """Learning rate of optimiser step ``step`` (0-based) of a ``total``-step run.
+
+    ``"constant"``: ``optim.lr``. ``"onecycle"``: PyTorch's ``OneCycleLR`` with its defaults
+    (``pct_start`` 0.1, cosine annealing, ``div_factor`` 25, ``final_div_factor`` 1e4) as a
+    pure function of the step, so that a resumed run continues on the same curve.
+    """
+    if optim.schedule == "constant" or total <= 1:
+        return float(optim.lr)
+    peak, start = float(optim.lr), float(optim.lr) / 25.0
+    end = start / 1e4
+    rise = float(0.1 * total) - 1.0
+    last = total - 1.0
+    if step <= rise:
+        t, lo, hi = step / max(rise, 1e-9), start, peak
+    else:
+        t, lo, hi = (step - rise) / max(last - rise, 1e-9), peak, end
+    t = min(max(t, 0.0), 1.0)
+    return hi + (lo - hi) * (1.0 + np.cos(np.pi * t)) / 2.0
 
 
 @dataclass
@@ -231,6 +253,8 @@ class _StageRun:
         stage = self.stage
         item = {k: v.to(self.device, non_blocking=True) for k, v in item.items()}
         factor = linear_warmup(self.step, stage.warmup_epochs * self.steps_per_epoch)
+        for group in self.optimizer.param_groups:
+            group["lr"] = learning_rate(stage.optim, self.step, self.total)
         loss, terms = stage.loss_fn(stage.model, item, factor)
         if not torch.isfinite(loss):
             raise NidarError(f"{stage.name}: the loss became {float(loss)} at step {self.step}")

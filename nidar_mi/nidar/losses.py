@@ -18,6 +18,9 @@ import torch.nn.functional as F
 from torch import nn
 
 __all__ = [
+    "gain_offset_fit",
+    "pearson_r",
+    "photo_stn_loss",
     "SSIM_K1",
     "SSIM_K2",
     "SSIM_SIGMA",
@@ -142,6 +145,49 @@ def stn_loss(
         else:
             total = total + l1
     return total
+
+
+def gain_offset_fit(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
+    """``a · pred + b`` with the per-image least-squares ``a, b`` against ``target``.
+
+    Args:
+        pred, target: ``(B, 1, H, W)``.
+
+    Returns:
+        ``(B, 1, H, W)``: ``pred`` mapped onto ``target``'s gain and offset.
+    """
+    pm, tm = pred.mean((2, 3), keepdim=True), target.mean((2, 3), keepdim=True)
+    cov = ((pred - pm) * (target - tm)).mean((2, 3), keepdim=True)
+    var = ((pred - pm) ** 2).mean((2, 3), keepdim=True)
+    return cov / (var + eps) * (pred - pm) + tm
+
+
+def pearson_r(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
+    """``(B,)`` Pearson correlation of each image pair over its pixels (``(B, 1, H, W)``)."""
+    pm, tm = pred.mean((2, 3), keepdim=True), target.mean((2, 3), keepdim=True)
+    cov = ((pred - pm) * (target - tm)).mean((1, 2, 3))
+    sp = ((pred - pm) ** 2).mean((1, 2, 3)).add(eps).sqrt()
+    st = ((target - tm) ** 2).mean((1, 2, 3)).add(eps).sqrt()
+    return cov / (sp * st)
+
+
+def photo_stn_loss(
+    pred: torch.Tensor, target: torch.Tensor, ssim_weight: float = 0.5
+) -> torch.Tensor:
+    """Pseudo-NIR against a real NIR photo, blind to the camera's gain and offset.
+
+    ``mean(1 - r) + ssim_weight · mean(1 - SSIM(a · pred + b, target))``: Pearson ``r`` per
+    crop, and SSIM after the per-crop least-squares gain and offset
+    (:func:`gain_offset_fit`) — exactly the two numbers the photo evaluation reports
+    (:mod:`nidar_mi.eval.photos`), since the NIR camera's exposure and black level are unknown.
+
+    Args:
+        pred, target: ``(B, 1, H, W)`` (``target`` linear NIR, any scale).
+        ssim_weight: weight of the SSIM term.
+    """
+    r = pearson_r(pred, target)
+    fitted = gain_offset_fit(pred, target)
+    return (1.0 - r).mean() + ssim_weight * (1.0 - ssim_map(fitted, target)).mean()
 
 
 def reconstruction_loss(r: torch.Tensor, s: torch.Tensor, image: torch.Tensor) -> torch.Tensor:

@@ -18,6 +18,7 @@ from .checkpoint import load_weights, read_weights_metadata, save_weights
 from .config import IRNetConfig, STNConfig, TrainConfig, dataclass_from_dict
 from .irnet import IRNet
 from .stn import STN
+from .stn_lowres import LowResSTN
 
 __all__ = [
     "resolve_device",
@@ -40,8 +41,10 @@ def resolve_device(name: str | None = "auto") -> torch.device:
     return torch.device(name)
 
 
-def build_stn(cfg: STNConfig) -> STN:
-    """Untrained STN of the given configuration."""
+def build_stn(cfg: STNConfig) -> STN | LowResSTN:
+    """Untrained STN of the given configuration (``cfg.kind`` picks the network)."""
+    if cfg.kind == "lowres":
+        return LowResSTN(width=cfg.width, depth=cfg.depth, down=cfg.down)
     return STN(width=cfg.width, levels=cfg.levels, num_outputs=cfg.num_outputs)
 
 

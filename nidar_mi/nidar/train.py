@@ -38,11 +38,11 @@ from .config import TrainConfig
 from .data import IRNetDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
-from .losses import irnet_objective, stn_loss
+from .losses import irnet_objective, photo_stn_loss, stn_loss
 from .model_io import build_irnet, build_stn, load_stn, resolve_device, save_irnet, save_stn
 from .stn import image_pyramid
 
-__all__ = ["train", "train_stn", "train_irnet"]
+__all__ = ["train", "train_stn", "train_stn_photos", "train_irnet"]
 
 
 # --------------------------------------------------------------------------- public API
@@ -56,18 +56,25 @@ def train(
     stn_weights: str | Path | None = None,
     resume: bool = False,
     progress: bool = True,
+    photos: str | Path | None = None,
 ) -> dict[str, Path]:
     """Train both stages (the STN is skipped when ``stn_weights`` is given, and for RGB-input
-    IRNet without ``stn_weights``).
+    IRNet without ``stn_weights``). With ``photos`` (a folder of RGB/NIR photo pairs) the STN
+    is trained on them (:func:`train_stn_photos`), else on the dataset's renders.
 
     Returns:
         ``{"stn": path, "irnet": path}`` (``"stn"`` absent when no STN was used).
     """
     out: dict[str, Path] = {}
     if stn_weights is None and cfg.irnet.input == "pseudo_nir":
-        stn_weights = out["stn"] = train_stn(
-            cfg, data_dir, out_dir, resume=resume, progress=progress
-        )
+        if photos is not None:
+            stn_weights = out["stn"] = train_stn_photos(
+                cfg, photos, data_dir, out_dir, resume=resume, progress=progress
+            )
+        else:
+            stn_weights = out["stn"] = train_stn(
+                cfg, data_dir, out_dir, resume=resume, progress=progress
+            )
     out["irnet"] = train_irnet(
         cfg, data_dir, out_dir, stn_weights, resume=resume, progress=progress
     )
@@ -95,9 +102,64 @@ def train_stn(
     alpha = cfg.loss.stn_ssim_alpha
 
     def loss_fn(net, batch, _factor):
+        if not hasattr(net, "forward_pyramid"):  # a lowres STN: one output, gain-blind loss
+            return photo_stn_loss(net(batch["rgb"]), batch["nir"], cfg.photos.ssim_weight), {}
         preds = net.forward_pyramid(batch["rgb"])
         loss = stn_loss(preds, image_pyramid(batch["nir"], len(preds)), alpha)
         return loss, {}
+
+    stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
+    run_stage(stage, cfg, out_dir, resume, progress)
+    path = save_stn(out_dir / "stn.safetensors", model, cfg.stn)
+    _mark_done(out_dir, "stn")
+    return path
+
+
+def train_stn_photos(
+    cfg: TrainConfig,
+    photos_dir: str | Path,
+    data_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Train the STN on real RGB/NIR photo pairs; returns ``OUT/stn.safetensors``.
+
+    The pairs of ``photos_dir`` (:mod:`nidar_mi.datasets.rgbnir`) are split by image with
+    :func:`~nidar_mi.datasets.rgbnir.split_pairs` (seed 0, every category in every split): the
+    network is fitted on the ``train`` and ``val`` pairs, ``val`` crops are logged, and the
+    ``test`` pairs are never read (the photo evaluation scores them,
+    :mod:`nidar_mi.eval.photos`). With ``cfg.photos.render_fraction > 0`` that share of the
+    crops comes from the rendered RGB/NIR pairs of ``data_dir/train``. Loss:
+    :func:`~nidar_mi.nidar.losses.photo_stn_loss`; crops: :mod:`nidar_mi.nidar.photo_data`.
+    The network is ``cfg.stn`` (``kind`` ``"lowres"`` is the shipped one).
+    """
+    from tqdm.auto import tqdm
+
+    from ..datasets.rgbnir import list_pairs, load_pair, split_pairs
+    from .photo_data import PhotoCropDataset, render_pair
+
+    data_dir, out_dir = Path(data_dir), Path(out_dir)
+    pairs = {p.name: p for p in list_pairs(photos_dir)}
+    split = split_pairs(list(pairs.values()))
+    _begin(cfg, data_dir, out_dir, "stn", resume)
+    torch.manual_seed(cfg.seed)
+    model = build_stn(cfg.stn)
+    _check_crop(cfg.crop_size, model.stride, "STN")
+    pc = cfg.photos
+    names = split["train"] + split["val"]
+    fit = [load_pair(pairs[n]) for n in tqdm(names, desc="photos", disable=not progress)]
+    val = [load_pair(pairs[n]) for n in split["val"]]
+    renders = []
+    if pc.render_fraction > 0:
+        renders = [render_pair(f) for f in _frames(data_dir, "train")]
+    common = dict(zoom_min=pc.zoom_min, renders=renders, render_fraction=pc.render_fraction)
+    train_set = PhotoCropDataset(fit, cfg.crop_size, pc.crops_per_epoch, cfg.seed, True, **common)
+    val_set = PhotoCropDataset(val, cfg.crop_size, 8 * len(val), cfg.seed, False, **common)
+
+    def loss_fn(net, batch, _factor):
+        return photo_stn_loss(net(batch["rgb"]), batch["nir"], pc.ssim_weight), {}
 
     stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
     run_stage(stage, cfg, out_dir, resume, progress)
