@@ -196,18 +196,17 @@ def test_random_corruptions_never_crash_the_parser():
 
 
 def test_a_corrupt_profile_file_is_a_one_line_cli_error(tmp_path, capsys):
-    from nidar_mi.cli.assign import main
-    from tests.helpers.synthetic_kitti import make_kitti
+    """What ``assign --profile FILE`` and ``render --profile FILE`` do with the file, through the
+    commands' runner: one ``error:`` line naming the file, exit status 2, no traceback."""
+    from nidar_mi.cli._common import run
+    from nidar_mi.nidar.profiles import resolve_profile
 
-    kitti = make_kitti(tmp_path / "kitti", frames=1)
     data = _profile().to_dict()
     data["mapping"]["model"] = data["mapping"]["model"].replace("Tree=1", "Tree=2", 1)
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(data))
-    out = tmp_path / "out"
-    code = main(["--kitti", str(kitti), "--frame", "000000", "--profile", str(bad), "-o", str(out)])
+    code = run(lambda: resolve_profile(str(bad), model=None))
     err = capsys.readouterr().err
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1, err
-    assert str(bad) in lines[0] and "gbm" in lines[0] and "Traceback" not in err
-    assert not out.exists()
+    assert lines[0].startswith("error:") and str(bad) in lines[0] and "gbm: tree 1" in lines[0]
