@@ -200,7 +200,16 @@ def test_real_data_tables(tmp_path):
     assert loo["folds"] == ["kitti__000000", "kitti__000001", "kitti__000002"]
     assert loo["train_frames"] == 2
     keys = [m["method"] for m in loo["mean"]]
-    for needed in ("lin9", "linnir_dq", "carla", "nidar_R_distance_quantile", "nidar_R_range_ring"):
+    for needed in (
+        "lin9",
+        "linnir_dq",
+        "carla",
+        "nidar_R_distance_quantile",
+        "nidar_R_range_ring",
+        "nidar_R_gbm",
+        "geometry_gbm",
+        "lum_gbm_free",
+    ):
         assert needed in keys
     assert len(loo["rows"]) == 3 * len(keys)
     assert all(np.isfinite(r["spearman"]) and 0 <= r["rmse"] <= 1 for r in loo["rows"])

@@ -1,7 +1,7 @@
 """``python -m nidar_mi.calibrate``: fit a sensor profile on a sensor's own scans.
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
-                                 [--form range_ring|distance_quantile] [--branch R|I_hat]
+                                 [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--overwrite] [-q]
 
@@ -42,10 +42,11 @@ def build_parser():
     p.add_argument("--sensor", default="", help="what the sensor is, free text")
     p.add_argument(
         "--form",
-        default="range_ring",
-        choices=("range_ring", "distance_quantile"),
-        help="range_ring: monotone map per range bin + ring gains (default); distance_quantile: "
-        "the paper's distance encoding + quantile map",
+        default="gbm",
+        choices=("gbm", "range_ring", "distance_quantile"),
+        help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
+        "value (default); range_ring: monotone map per range bin + ring gains; "
+        "distance_quantile: the paper's distance encoding + quantile map",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")

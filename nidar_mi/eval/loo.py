@@ -189,7 +189,7 @@ def standard_methods(
     model=None,
     linear_nir=None,
     zero_shot_profile=None,
-    forms: Sequence[str] = ("distance_quantile", "range_ring"),
+    forms: Sequence[str] = ("distance_quantile", "range_ring", "gbm"),
 ) -> dict[str, LooMethod]:
     """The baselines and NIDAR rows of the leave-one-out table.
 
@@ -199,7 +199,9 @@ def standard_methods(
             (None: no row (i)).
         zero_shot_profile: a profile fitted elsewhere (e.g. ``sim-905``) for a zero-shot NIDAR
             row that fits nothing on the real frames (None: no such row).
-        forms: the profile forms each value source is shown with.
+        forms: the profile forms each value source is shown with. With ``"gbm"`` there are
+            also a geometry-only ``gbm`` row (range and elevation, no value) and, for
+            luminance and the linear map, a ``gbm`` row without the monotone constraint.
 
     Returns:
         key -> :class:`LooMethod`, in table order.
@@ -228,6 +230,15 @@ def standard_methods(
         input="constant",
         note="what a profile knows without any image",
     )
+    if "gbm" in forms:
+        methods["geometry_gbm"] = profile_method(
+            "range and elevation only (gbm profile without a value)",
+            range_only,
+            form="gbm",
+            input="constant",
+            note="what a regression on the return's geometry knows without any image",
+            use_value=False,
+        )
     sources = [("lum", "(b) luminance", lum, "luminance")]
     if linear_nir is not None:
         sources.append(("linnir", "(i) linear RGB→NIR", nir, "linear_nir"))
@@ -244,6 +255,14 @@ def standard_methods(
             methods[f"{key}_{form}"] = profile_method(
                 f"{name} + {form} profile", vals, form=form, input=inp
             )
+            if form == "gbm" and key in ("lum", "linnir"):
+                methods[f"{key}_gbm_free"] = profile_method(
+                    f"{name} + gbm profile, not monotone in the value",
+                    vals,
+                    form="gbm",
+                    input=inp,
+                    monotone=False,
+                )
             if form == "range_ring" and key.startswith("nidar"):
                 methods[f"{key}_range"] = profile_method(
                     f"{name} + range_ring profile without ring gains",

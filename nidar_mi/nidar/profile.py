@@ -4,12 +4,15 @@ NIDAR's networks rank surfaces (a reflectance-like value per pixel); how bright 
 given surface comes out depends on the sensor: its range response (some sensors report
 range-compensated intensity, some do not), per-laser gains, its intensity scale. A sensor
 profile holds that part, fitted on the sensor's own scans
-(``python -m nidar_mi.calibrate``) and kept out of the model. Two forms:
+(``python -m nidar_mi.calibrate``) and kept out of the model. Three forms:
 
 * ``distance_quantile``: the paper's (§III.E) distance encoding and quantile map
   (:class:`nidar_mi.nidar.calibration.Calibration`);
 * ``range_ring``: a monotone map of the model value per range bin and a gain per ring
-  (:class:`nidar_mi.nidar.range_ring.RangeRingMap`).
+  (:class:`nidar_mi.nidar.range_ring.RangeRingMap`);
+* ``gbm``: a gradient-boosted regression of the intensity on the value, the range and the
+  elevation, monotone in the value, or on the range and elevation alone
+  (:class:`nidar_mi.nidar.gbm_profile.GbmMap`; LightGBM's text model in the file).
 
 **File format** (JSON, UTF-8)::
 
@@ -17,7 +20,7 @@ profile holds that part, fitted on the sensor's own scans
       "schema": "nidar_mi.sensor_profile/1",
       "name": "kitti-hdl64e",                 # letters, digits, '-', '_', '.'
       "sensor": "Velodyne HDL-64E (KITTI)",   # free text
-      "form": "range_ring",                   # or "distance_quantile"
+      "form": "range_ring",                   # or "distance_quantile", "gbm"
       "input": "nidar:R",                     # the value it maps (nidar:<branch>, or a baseline)
       "model": {"irnet_sha256": "...", "stn_sha256": "..."},   # or null: any model
       "mapping": {...},                       # the form's parameters (its to_dict())
@@ -42,6 +45,7 @@ import numpy as np
 
 from ..errors import NidarError
 from .calibration import Calibration, fit_calibration
+from .gbm_profile import GbmMap, fit_gbm
 from .range_ring import RangeRingMap, fit_range_ring
 
 __all__ = [
@@ -54,7 +58,7 @@ __all__ = [
 
 PROFILE_SCHEMA = "nidar_mi.sensor_profile/1"
 #: The forms a profile can take and their mapping classes.
-PROFILE_FORMS = {"distance_quantile": Calibration, "range_ring": RangeRingMap}
+PROFILE_FORMS = {"distance_quantile": Calibration, "range_ring": RangeRingMap, "gbm": GbmMap}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
@@ -66,7 +70,7 @@ class SensorProfile:
     sensor: str
     form: str
     input: str
-    mapping: Calibration | RangeRingMap
+    mapping: Calibration | RangeRingMap | GbmMap
     model: dict[str, str] | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
 
@@ -108,7 +112,8 @@ class SensorProfile:
             values: (N,) model values (the profile's ``input``), finite.
             range_m: (N,) ranges from the sensor, m.
             ring: optional (N,) rings (-1 unknown); used by ``range_ring``.
-            elevation_deg: optional (N,) elevations, degrees (rings of returns without one).
+            elevation_deg: optional (N,) elevations above the sensor's xy plane, degrees
+                (``range_ring``: rings of returns without one; ``gbm``: required).
 
         Returns:
             (N,) float32 intensities in [0, 1].
@@ -172,6 +177,8 @@ class SensorProfile:
                 if not isinstance(mapping, Mapping):
                     raise NidarError("expected an object")
                 mapping = Calibration.from_dict({"schema": "nidar_mi.calibration/1", **mapping})
+            elif form == "gbm":
+                mapping = GbmMap.from_dict(mapping)
             else:
                 mapping = RangeRingMap.from_dict(mapping)
         except NidarError as e:
@@ -246,9 +253,10 @@ def fit_profile(
         form: one of :data:`PROFILE_FORMS`.
         name, sensor, input, model, provenance: the profile's fields.
         ring: optional (N,) rings (``range_ring``).
-        elevation_deg: optional (N,) elevations, degrees (``range_ring``).
-        **options: passed to :func:`~nidar_mi.nidar.calibration.fit_calibration` or
-            :func:`~nidar_mi.nidar.range_ring.fit_range_ring`.
+        elevation_deg: optional (N,) elevations, degrees (``range_ring``; required by ``gbm``).
+        **options: passed to :func:`~nidar_mi.nidar.calibration.fit_calibration`,
+            :func:`~nidar_mi.nidar.range_ring.fit_range_ring` or
+            :func:`~nidar_mi.nidar.gbm_profile.fit_gbm` (``use_value=False``: geometry only).
 
     Raises:
         NidarError: an unknown form or unusable data.
@@ -257,6 +265,8 @@ def fit_profile(
         mapping = fit_calibration(values, range_m, reference, branch=input, **options)
     elif form == "range_ring":
         mapping = fit_range_ring(values, range_m, reference, ring, elevation_deg, **options)
+    elif form == "gbm":
+        mapping = fit_gbm(values, range_m, reference, elevation_deg, **options)
     else:
         raise NidarError(f"profile form must be one of {', '.join(PROFILE_FORMS)} (got {form!r})")
     return SensorProfile(

@@ -56,9 +56,9 @@ DEFAULT_KITTI_PROFILE = "kitti-hdl64e"
 PROFILE_NAMES = (DEFAULT_SIM_PROFILE, DEFAULT_KITTI_PROFILE)
 #: Form of the ``kitti-hdl64e`` profile (the one that generalised better in the
 #: leave-one-frame-out evaluation, docs/RESULTS.md).
-KITTI_PROFILE_FORM = "range_ring"
+KITTI_PROFILE_FORM = "gbm"
 #: Version of the fitting procedure (part of the cache key).
-_FIT_VERSION = 1
+_FIT_VERSION = 2
 _SIM_SENSOR = "simulated 905 nm LiDAR, range-compensated intensity g·ρ·cosθ·exp(-2αd)"
 _KITTI_SENSOR = "Velodyne HDL-64E (KITTI), stored reflectance in [0, 1]"
 
@@ -135,7 +135,7 @@ def fit_values_profile(
         scans: the sensor's scans (:func:`nidar_mi.datasets.scans.load_scans`).
         values: the model value at a scan's returns, ``(N,)`` per scan.
         name, sensor, input, model: the profile's fields.
-        form: ``"range_ring"`` or ``"distance_quantile"``.
+        form: ``"gbm"``, ``"range_ring"`` or ``"distance_quantile"``.
         provenance: extra provenance entries (the data, the command).
         progress: show a progress bar.
         **options: passed to :func:`~nidar_mi.nidar.profile.fit_profile`.
@@ -203,7 +203,7 @@ def fit_scan_profile(
         model: the NIDAR model whose values the profile maps.
         scans: the sensor's scans.
         name, sensor: the profile's name and sensor description.
-        form: ``"range_ring"`` or ``"distance_quantile"``.
+        form: ``"gbm"``, ``"range_ring"`` or ``"distance_quantile"``.
         branch: the NIDAR map (``"R"`` or ``"I_hat"``).
         values: the branch at a scan's returns (default :func:`scan_values`; a cache of it).
         provenance: extra provenance entries (the data, the command).

@@ -18,14 +18,18 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
     out = tmp_path / "hdl.json"
     assert main([str(kitti), "-o", str(out), "--sensor", "my HDL-64E"]) == 0
     p = load_profile(out)
-    assert (p.name, p.form, p.input, p.sensor) == ("hdl", "range_ring", "nidar:R", "my HDL-64E")
+    assert (p.name, p.form, p.input, p.sensor) == ("hdl", "gbm", "nidar:R", "my HDL-64E")
     assert p.provenance["frames"] == 2 and p.provenance["rings"] == "given"
     assert "python -m nidar_mi.calibrate" in p.provenance["command"]
-    assert "range_ring profile 'hdl' fitted on 2 frames" in capsys.readouterr().out
-    # the profile maps into [0, 1] and is monotone in the value at a fixed range and ring
+    assert "gbm profile 'hdl' fitted on 2 frames" in capsys.readouterr().out
+    # the profile maps into [0, 1] and is monotone in the value at a fixed range and elevation
     v = np.linspace(0, 1, 50)
-    y = p.apply(v, np.full(50, 12.0), np.full(50, 30))
+    y = p.apply(v, np.full(50, 12.0), None, np.full(50, -8.0))
     assert np.all(np.diff(y) >= 0) and 0 <= y.min() and y.max() <= 1
+    assert main([str(kitti), "-o", str(out), "--form", "range_ring", "-q"]) == 0
+    p = load_profile(out)
+    y = p.apply(v, np.full(50, 12.0), np.full(50, 30))
+    assert p.form == "range_ring" and np.all(np.diff(y) >= 0)
     # an earlier profile is replaced; another file is not, unless --overwrite
     assert main([str(kitti), "-o", str(out), "--form", "distance_quantile", "-q"]) == 0
     assert load_profile(out).form == "distance_quantile"
@@ -64,7 +68,7 @@ def test_generic_folder_with_rings_and_0_255_intensity(tmp_path, capsys):
         )
         write_png(root / "images" / f"{k:04d}.png", rng.integers(0, 256, (120, 320, 3), np.uint8))
     out = tmp_path / "p.json"
-    assert main([str(root), "-o", str(out), "-q"]) == 0
+    assert main([str(root), "-o", str(out), "-q", "--form", "range_ring"]) == 0
     assert "dividing them by 255" in capsys.readouterr().err
     p = load_profile(out)
     assert p.provenance["rings"] == "given" and len(p.mapping.gains) == 32

@@ -99,12 +99,30 @@ def test_leave_one_out_never_scores_a_frame_a_method_was_fitted_on():
         leave_one_out(scans, ["x"], methods, progress=False)
 
 
-def test_a_profile_method_learns_the_range_response_from_the_other_frames():
+@pytest.mark.parametrize("form", ["range_ring", "gbm"])
+def test_a_profile_method_learns_the_range_response_from_the_other_frames(form):
     scans = [scan(f"f{k}", k) for k in range(4)]
     surface = {s.name: np.clip(s.intensity / np.exp(-s.range_m / 30), 0, 1) for s in scans}
     m = profile_method(
-        "true surface + range_ring", lambda s: surface[s.name], form="range_ring", input="truth"
+        f"true surface + {form}", lambda s: surface[s.name], form=form, input="truth"
     )
     res = leave_one_out(scans, ["f0", "f2"], {"p": m}, progress=False)
     (mean,) = res["mean"]
     assert mean["spearman"] > 0.95 and mean["rmse"] < 0.03
+
+
+def test_a_geometry_only_gbm_profile_gets_the_range_response_but_not_the_surfaces():
+    """The stripes' intensity depends on the surface, not only on the geometry: a profile of
+    range and elevation alone predicts each return's mean over surfaces at its geometry."""
+    scans = [scan(f"f{k}", k) for k in range(4)]
+    m = profile_method(
+        "geometry", lambda s: np.zeros(len(s.xyz)), form="gbm", input="constant", use_value=False
+    )
+    res = leave_one_out(scans, ["f1"], {"g": m}, progress=False)
+    s = scans[1]
+    pred = m.fit(scans[:1] + scans[2:])(s)
+    mean_surface = np.mean([0.2, 0.2 + 1 / 3, 0.2 + 2 / 3])
+    expected = mean_surface * np.exp(-s.range_m / 30)
+    assert np.abs(pred - expected).mean() < 0.03
+    (row,) = res["mean"]
+    assert row["spearman"] < 0.95  # the surfaces' ranking within a range is not there

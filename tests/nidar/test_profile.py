@@ -24,7 +24,7 @@ def _data(n=20_000, seed=0):
     return v, d, ring, el, ref
 
 
-@pytest.mark.parametrize("form", ["distance_quantile", "range_ring"])
+@pytest.mark.parametrize("form", ["distance_quantile", "range_ring", "gbm"])
 def test_round_trip_through_a_file(tmp_path, form):
     v, d, ring, el, ref = _data()
     p = fit_profile(
@@ -158,7 +158,7 @@ def test_kitti_profile_is_fitted_at_first_use_and_cached(tmp_path, monkeypatch):
     model = NidarModel.load(device="cpu")
     with pytest.warns(UserWarning, match="fitting the kitti-hdl64e profile"):
         p = resolve_profile("kitti-hdl64e", model, progress=False)
-    assert p.form == "range_ring" and p.model == model_identity(model)
+    assert p.form == "gbm" and p.model == model_identity(model)
     assert p.provenance["frames"] == 2 and p.provenance["rings"] == "given"
     cached = list((tmp_path / "cache" / "profiles").glob("kitti-hdl64e-*.json"))
     assert len(cached) == 1

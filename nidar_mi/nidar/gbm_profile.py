@@ -1,0 +1,450 @@
+"""A sensor's response as a gradient-boosted regression on the value and the return's geometry.
+
+The sensor-profile form ``"gbm"`` (:mod:`nidar_mi.nidar.profile`). A model value ``v``
+(reflectance-like) at a return of range ``d`` (m) and elevation ``e`` (degrees above the
+sensor's xy plane, from the return's xyz in the sensor frame, so any sensor has it, with or
+without rings) becomes the sensor's intensity
+
+    I = clip(F(v, d, e), 0, 1)
+
+where ``F`` is a LightGBM regression (least squares: the conditional mean of the training
+intensities given the features) of a bounded size (:data:`DEFAULT_TREES` trees of at most
+:data:`DEFAULT_LEAVES` leaves). Where :class:`~nidar_mi.nidar.range_ring.RangeRingMap` maps
+quantiles per range bin and a gain per ring, ``F`` learns the range response, the per-laser
+(per-elevation) response and their interaction with the value jointly; being a conditional mean
+rather than a quantile map it also shrinks towards the mean where the value says little, which
+is what RMSE and SSIM reward.
+
+* ``monotone`` (default on): ``F`` is constrained non-decreasing in ``v`` (LightGBM's
+  ``monotone_constraints``), so at one range and elevation a surface the model ranks brighter
+  never comes out darker: the ranking of surfaces stays the model's.
+* A **geometry-only** map (``use_value=False``) has the features ``(d, e)`` only: what a profile
+  knows without any image (it ignores the values it is given).
+
+Fitting is deterministic (``deterministic``, one thread, row-wise histograms, a fixed seed, no
+bagging): the same data and seed give the same model text. The map is stored in a profile file
+as LightGBM's own text model (``Booster.model_to_string``) with the features it reads; nothing
+is pickled. :meth:`GbmMap.from_dict` checks the text before LightGBM parses it and turns any
+failure into one :class:`~nidar_mi.errors.NidarError` line.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import NidarError
+
+__all__ = [
+    "DEFAULT_LEAVES",
+    "DEFAULT_TREES",
+    "FEATURES",
+    "GbmMap",
+    "fit_gbm",
+]
+
+#: Features of a map with the value, in column order: value, range (m), elevation (degrees).
+FEATURES = ("v", "range_m", "elevation_deg")
+#: Features of a geometry-only map.
+GEOMETRY_FEATURES = ("range_m", "elevation_deg")
+#: Boosting rounds (trees).
+DEFAULT_TREES = 200
+#: Most leaves per tree.
+DEFAULT_LEAVES = 31
+#: Shrinkage per round.
+DEFAULT_LEARNING_RATE = 0.1
+#: Fewest training returns in a leaf (returns of one frame are correlated: keep leaves broad).
+DEFAULT_MIN_LEAF = 100
+#: At most this many training returns are used (a seeded subsample beyond), bounding memory.
+DEFAULT_MAX_SAMPLES = 2_000_000
+#: Bounds on what a profile file may hold (a larger map is not one this module wrote).
+MAX_TREES = 1000
+MAX_LEAVES = 255
+MAX_MODEL_CHARS = 8_000_000
+_FEATURE_SETS = (FEATURES, GEOMETRY_FEATURES)
+
+
+def _lgb():
+    try:
+        import lightgbm
+    except ImportError:  # pragma: no cover - a dependency of the package
+        raise NidarError(
+            "the gbm profile form needs LightGBM (pip install lightgbm==4.7.0)"
+        ) from None
+    return lightgbm
+
+
+def _params(
+    n_features: int,
+    monotone: bool,
+    *,
+    leaves: int,
+    learning_rate: float,
+    min_leaf: int,
+    seed: int,
+) -> dict[str, Any]:
+    p = {
+        "objective": "regression",
+        "num_leaves": int(leaves),
+        "learning_rate": float(learning_rate),
+        "min_data_in_leaf": int(min_leaf),
+        "max_bin": 255,
+        "bagging_fraction": 1.0,
+        "feature_fraction": 1.0,
+        "deterministic": True,
+        "force_row_wise": True,
+        "num_threads": 1,
+        "seed": int(seed),
+        "verbose": -1,
+    }
+    if monotone and n_features == len(FEATURES):
+        p["monotone_constraints"] = [1, 0, 0]
+        p["monotone_constraints_method"] = "basic"
+    return p
+
+
+@dataclass(frozen=True, eq=False)
+class GbmMap:
+    """A fitted gradient-boosted sensor response (module docstring).
+
+    Attributes:
+        features: the feature names in column order, :data:`FEATURES` or
+            ``("range_m", "elevation_deg")`` (geometry only).
+        monotone: whether the map was constrained non-decreasing in ``v``.
+        model: LightGBM's text model (``Booster.model_to_string``).
+        params: the fitting parameters (for the record).
+    """
+
+    features: tuple[str, ...]
+    monotone: bool
+    model: str
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        feats = tuple(self.features)
+        if feats not in _FEATURE_SETS:
+            raise NidarError(
+                f"gbm: features must be {list(FEATURES)} or {list(GEOMETRY_FEATURES)} "
+                f"(got {list(feats)})"
+            )
+        object.__setattr__(self, "features", feats)
+        if not isinstance(self.monotone, bool):
+            raise NidarError("gbm: 'monotone' must be true or false")
+        if not isinstance(self.params, Mapping):
+            raise NidarError("gbm: 'params' must be an object")
+        object.__setattr__(self, "_booster", _load_booster(self.model, feats))
+
+    @property
+    def uses_value(self) -> bool:
+        """Whether the map reads the model value (False: geometry only)."""
+        return self.features[0] == "v"
+
+    @property
+    def n_trees(self) -> int:
+        """Number of trees."""
+        return int(self._booster.num_trees())
+
+    def __call__(
+        self,
+        values: Any,
+        range_m: Any,
+        ring: Any = None,
+        elevation_deg: Any = None,
+    ) -> np.ndarray:
+        """Intensities of returns (module docstring).
+
+        Args:
+            values: (N,) model values (ignored by a geometry-only map).
+            range_m: (N,) ranges, m.
+            ring: ignored (the elevation stands for the laser).
+            elevation_deg: (N,) elevations above the sensor's xy plane, degrees; required.
+
+        Returns:
+            (N,) float64 in [0, 1].
+
+        Raises:
+            NidarError: no elevations, mismatched lengths or non-finite inputs.
+        """
+        if elevation_deg is None:
+            raise NidarError("gbm profile: the returns' elevations are needed")
+        x = _design(values, range_m, elevation_deg, self.uses_value, "gbm profile")
+        out = self._booster.predict(x, num_threads=1)
+        return np.clip(np.asarray(out, dtype=np.float64), 0.0, 1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe representation: the features, the flag, the parameters, the model text."""
+        return {
+            "features": list(self.features),
+            "monotone": self.monotone,
+            "lightgbm": _lgb().__version__,
+            "params": dict(self.params),
+            "model": self.model,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> GbmMap:
+        """Inverse of :meth:`to_dict`; :class:`NidarError` on malformed input."""
+        if not isinstance(data, Mapping):
+            raise NidarError("gbm: expected an object")
+        missing = [k for k in ("features", "monotone", "model") if k not in data]
+        if missing:
+            raise NidarError(f"gbm: missing key(s) {', '.join(missing)}")
+        unknown = sorted(set(data) - {"features", "monotone", "lightgbm", "params", "model"})
+        if unknown:
+            raise NidarError(f"gbm: unknown key(s) {', '.join(unknown)}")
+        feats = data["features"]
+        if not isinstance(feats, list) or not all(isinstance(f, str) for f in feats):
+            raise NidarError("gbm: 'features' must be a list of names")
+        return cls(
+            features=tuple(feats),
+            monotone=data["monotone"],
+            model=data["model"],
+            params=data.get("params") or {},
+        )
+
+
+def _design(values, range_m, elevation_deg, use_value: bool, who: str) -> np.ndarray:
+    """(N, 3) or (N, 2) float64 feature matrix; checks lengths and finiteness."""
+    d = np.asarray(range_m, dtype=np.float64).reshape(-1)
+    e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
+    cols = [d, e]
+    if use_value:
+        v = np.asarray(values, dtype=np.float64).reshape(-1)
+        cols.insert(0, v)
+    if any(c.shape != d.shape for c in cols):
+        raise NidarError(f"{who}: values, ranges and elevations differ in length")
+    x = np.stack(cols, axis=1)
+    if not np.all(np.isfinite(x)):
+        raise NidarError(f"{who}: values, ranges and elevations must be finite")
+    return x
+
+
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_INT = re.compile(r"-?\d+")
+_FLOAT = re.compile(_NUM)
+#: The lines of one tree of LightGBM's text model, in order (numerical splits only).
+_TREE_KEYS = (
+    "num_leaves",
+    "num_cat",
+    "split_feature",
+    "split_gain",
+    "threshold",
+    "decision_type",
+    "left_child",
+    "right_child",
+    "leaf_value",
+    "leaf_weight",
+    "leaf_count",
+    "internal_value",
+    "internal_weight",
+    "internal_count",
+    "is_linear",
+    "shrinkage",
+)
+
+
+def _numbers(text: str, pattern: re.Pattern, what: str) -> list[float]:
+    items = text.split(" ") if text else []
+    if not all(pattern.fullmatch(x) for x in items):
+        raise NidarError(f"gbm: malformed numbers in '{what}'")
+    vals = [float(x) for x in items]
+    if not all(np.isfinite(vals)):
+        raise NidarError(f"gbm: non-finite numbers in '{what}'")
+    return vals
+
+
+def _check_tree(block: str, k: int, n_features: int) -> None:
+    """Checks one ``Tree=k`` block: every field, lengths, a proper binary tree."""
+    lines = block.rstrip("\n").split("\n")
+    if lines[0] != f"Tree={k}" or len(lines) != len(_TREE_KEYS) + 1:
+        raise NidarError(f"gbm: tree {k} is malformed")
+    f = {}
+    for key, line in zip(_TREE_KEYS, lines[1:]):
+        name, sep, val = line.partition("=")
+        if name != key or not sep:
+            raise NidarError(f"gbm: tree {k}: expected '{key}=' (got {line[:40]!r})")
+        f[key] = val
+    (n_leaves,) = _numbers(f["num_leaves"], _INT, "num_leaves") or [0]
+    n_leaves = int(n_leaves)
+    if not 1 <= n_leaves <= MAX_LEAVES or f["num_cat"] != "0" or f["is_linear"] != "0":
+        raise NidarError(f"gbm: tree {k}: 1 to {MAX_LEAVES} leaves, numerical splits expected")
+    n_int = n_leaves - 1
+    ints = {
+        key: _numbers(f[key], _INT, key)
+        for key in ("split_feature", "decision_type", "left_child", "right_child")
+    }
+    for key in ("split_gain", "threshold", "internal_value", "internal_weight"):
+        if len(_numbers(f[key], _FLOAT, key)) != n_int:
+            raise NidarError(f"gbm: tree {k}: '{key}' needs {n_int} numbers")
+    if len(_numbers(f["internal_count"], _INT, "internal_count")) != n_int:
+        raise NidarError(f"gbm: tree {k}: 'internal_count' needs {n_int} numbers")
+    if len(_numbers(f["leaf_value"], _FLOAT, "leaf_value")) != n_leaves:
+        raise NidarError(f"gbm: tree {k}: 'leaf_value' needs {n_leaves} numbers")
+    if len(_numbers(f["leaf_weight"], _FLOAT, "leaf_weight")) not in (0, n_leaves) or len(
+        _numbers(f["leaf_count"], _INT, "leaf_count")
+    ) not in (0, n_leaves):
+        raise NidarError(f"gbm: tree {k}: one weight and count per leaf expected")
+    _numbers(f["shrinkage"], _FLOAT, "shrinkage")
+    if any(len(v) != n_int for v in ints.values()):
+        raise NidarError(f"gbm: tree {k}: one split per internal node expected")
+    if any(not 0 <= int(j) < n_features for j in ints["split_feature"]):
+        raise NidarError(f"gbm: tree {k}: split on a feature the model does not have")
+    if any(int(t) not in (0, 2) for t in ints["decision_type"]):
+        raise NidarError(f"gbm: tree {k}: only numerical splits without missing values")
+    # every node but the root, and every leaf, is a child exactly once, of an earlier node
+    seen_nodes, seen_leaves = set(), set()
+    for i, (a, b) in enumerate(zip(ints["left_child"], ints["right_child"])):
+        for c in (int(a), int(b)):
+            if c >= 0:
+                if not i < c < n_int or c in seen_nodes:
+                    raise NidarError(f"gbm: tree {k}: not a binary tree")
+                seen_nodes.add(c)
+            else:
+                if not 0 <= ~c < n_leaves or ~c in seen_leaves:
+                    raise NidarError(f"gbm: tree {k}: not a binary tree")
+                seen_leaves.add(~c)
+    if len(seen_nodes) != max(n_int - 1, 0) or (n_int and len(seen_leaves) != n_leaves):
+        raise NidarError(f"gbm: tree {k}: not a binary tree")
+
+
+def _check_model_text(text: Any, features: tuple[str, ...]) -> str:
+    """The header and trees of a LightGBM text model, after checking every line of them.
+
+    LightGBM's own parser can abort the process on a malformed text, so nothing reaches it
+    that is not, line by line, a regression model of numerical splits on ``features``.
+    """
+    if not isinstance(text, str) or not text:
+        raise NidarError("gbm: 'model' must be LightGBM's text model")
+    if len(text) > MAX_MODEL_CHARS:
+        raise NidarError(f"gbm: model text over {MAX_MODEL_CHARS} characters")
+    body, sep, _ = text.partition("end of trees\n")
+    head, sep2, trees = body.partition("\n\n")
+    if not sep or not sep2 or not head.startswith("tree\n"):
+        raise NidarError("gbm: 'model' is not a LightGBM text model")
+    h = {}
+    for line in head.split("\n")[1:]:
+        key, eq, val = line.partition("=")
+        if not eq or key in h:
+            raise NidarError("gbm: malformed model header")
+        h[key] = val
+    expect = {
+        "version": "v4",
+        "num_class": "1",
+        "num_tree_per_iteration": "1",
+        "label_index": "0",
+        "max_feature_idx": str(len(features) - 1),
+        "feature_names": " ".join(features),
+    }
+    bad = [k for k, v in expect.items() if h.get(k) != v]
+    if bad or h.get("objective", "").split(" ")[0] != "regression":
+        raise NidarError(
+            f"gbm: the model is not a regression on {list(features)} ({', '.join(bad) or 'objective'})"
+        )
+    if set(h) - set(expect) - {"objective", "monotone_constraints", "feature_infos", "tree_sizes"}:
+        raise NidarError("gbm: unknown lines in the model header")
+    sizes = [int(x) for x in _numbers(h.get("tree_sizes", ""), _INT, "tree_sizes")]
+    if not 1 <= len(sizes) <= MAX_TREES:
+        raise NidarError(f"gbm: the model has {len(sizes)} trees (1 to {MAX_TREES} expected)")
+    if (
+        any(n <= 0 for n in sizes)
+        or sum(sizes) != len(trees.encode("utf-8"))
+        or not trees.isascii()
+    ):
+        raise NidarError("gbm: the trees do not match the model's tree_sizes")
+    pos = 0
+    for k, n in enumerate(sizes):
+        _check_tree(trees[pos : pos + n], k, len(features))
+        pos += n
+    return body + sep
+
+
+def _load_booster(text: Any, features: tuple[str, ...]):
+    """LightGBM booster of a model text, after checks that it is one this module could write."""
+    checked = _check_model_text(text, features)
+    lgb = _lgb()
+    try:
+        booster = lgb.Booster(model_str=checked)
+    except Exception as e:  # LightGBMError, ValueError: a malformed text
+        msg = str(e).strip().splitlines()
+        raise NidarError(
+            f"gbm: LightGBM cannot read the model ({msg[0] if msg else type(e).__name__})"
+        ) from None
+    if booster.num_feature() != len(features) or booster.num_trees() < 1:
+        raise NidarError(f"gbm: the model reads {booster.num_feature()} features")
+    return booster
+
+
+def fit_gbm(
+    values: Any,
+    range_m: Any,
+    reference: Any,
+    elevation_deg: Any,
+    *,
+    use_value: bool = True,
+    monotone: bool = True,
+    trees: int = DEFAULT_TREES,
+    leaves: int = DEFAULT_LEAVES,
+    learning_rate: float = DEFAULT_LEARNING_RATE,
+    min_leaf: int = DEFAULT_MIN_LEAF,
+    max_samples: int = DEFAULT_MAX_SAMPLES,
+    seed: int = 0,
+) -> GbmMap:
+    """Fit a :class:`GbmMap` on training returns (least squares, deterministic).
+
+    Args:
+        values: (N,) model values at the returns (ignored with ``use_value=False``).
+        range_m: (N,) their ranges, m.
+        reference: (N,) the sensor's intensities there, in [0, 1].
+        elevation_deg: (N,) their elevations above the sensor's xy plane, degrees.
+        use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
+        monotone: constrain the map non-decreasing in the value.
+        trees: boosting rounds, 1 to :data:`MAX_TREES`.
+        leaves: most leaves per tree, 2 to :data:`MAX_LEAVES`.
+        learning_rate: shrinkage per round, in (0, 1].
+        min_leaf: fewest training returns per leaf.
+        max_samples: returns beyond this are subsampled (seeded) before fitting.
+        seed: the seed of the subsample and of LightGBM.
+
+    Raises:
+        NidarError: mismatched, empty or non-finite inputs, or parameters out of range.
+    """
+    if elevation_deg is None:
+        raise NidarError("fit_gbm: the returns' elevations are needed")
+    if not 1 <= int(trees) <= MAX_TREES or not 2 <= int(leaves) <= MAX_LEAVES:
+        raise NidarError(f"fit_gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
+    if not 0 < learning_rate <= 1 or min_leaf < 1 or max_samples < 1:
+        raise NidarError("fit_gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
+    x = _design(values, range_m, elevation_deg, use_value, "fit_gbm")
+    y = np.asarray(reference, dtype=np.float64).reshape(-1)
+    if y.shape != (x.shape[0],) or not y.size:
+        raise NidarError(f"fit_gbm: {x.shape[0]} returns but {y.size} references")
+    if not np.all(np.isfinite(y)):
+        raise NidarError("fit_gbm: references must be finite")
+    if y.size > max_samples:
+        keep = np.sort(np.random.default_rng(seed).choice(y.size, max_samples, replace=False))
+        x, y = x[keep], y[keep]
+    feats = FEATURES if use_value else GEOMETRY_FEATURES
+    params = _params(
+        len(feats),
+        monotone,
+        leaves=leaves,
+        learning_rate=learning_rate,
+        min_leaf=min_leaf,
+        seed=seed,
+    )
+    lgb = _lgb()
+    data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
+    booster = lgb.train(params, data, num_boost_round=int(trees))
+    record = {
+        k: params[k] for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
+    } | {"trees": int(trees), "samples": int(y.size)}
+    return GbmMap(
+        features=feats,
+        monotone=bool(monotone and use_value),
+        model=booster.model_to_string(),
+        params=record,
+    )
