@@ -8,7 +8,8 @@ frames are the folds); ``WORK`` holds one training run per fold (resumable, reus
 :mod:`nidar_mi.eval.loo_irnet`). The configuration is a :class:`~nidar_mi.nidar.config.TrainConfig`
 JSON (e.g. a compact ``unet`` at ``scale`` 0.25 with 64 x 160 crops). Rows: IRNet ``R`` and
 ``Î`` through each profile form and ``Î`` raw; with ``--baselines`` also the image-free
-``range_only`` profile and luminance through each form. Prints the per-fold and mean table
+profiles (``range_only``; ``geometry_gbm``, range and elevation) and luminance through each
+form. Prints the per-fold and mean table
 (:func:`nidar_mi.eval.report.loo_markdown`), the training time of each fold and, per fold, the
 correlation of the R and S maps over the test image (how much shading R still carries);
 ``--json`` writes the whole result. Folds run one after the other; run it under ``nice``.
@@ -30,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--stn-weights", type=Path, required=True)
     p.add_argument("--config", type=Path, required=True)
     p.add_argument("--folds", type=int, nargs="*", help="indices of the test frames (default all)")
-    p.add_argument("--forms", nargs="*", default=["range_ring", "distance_quantile"])
+    p.add_argument("--forms", nargs="*", default=["gbm", "range_ring", "distance_quantile"])
     p.add_argument("--baselines", action="store_true")
     p.add_argument("--json", type=Path)
     p.add_argument("--progress", action="store_true")
@@ -54,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     methods = {}
     if args.baselines:
         base = standard_methods(forms=tuple(args.forms))
-        methods |= {k: v for k, v in base.items() if k == "range_only" or k.startswith("lum_")}
+        keep = ("range_only", "geometry_gbm")
+        methods |= {k: v for k, v in base.items() if k in keep or k.startswith("lum_")}
     methods |= irnet_methods(models, forms=tuple(args.forms))
     res = leave_one_out(scans, tests, methods, progress=args.progress)
     timing = {}
