@@ -202,6 +202,9 @@ def train_irnet(
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     meta = load_meta(data_dir)
+    source = Path(stn_weights) if stn_weights is not None else out_dir / "stn.safetensors"
+    if source.is_file():
+        cfg = _with_stn_config(cfg, source)  # config.json describes the STN actually used
     _begin(cfg, data_dir, out_dir, "irnet", resume)
     device = resolve_device(cfg.device)
     if frames is None:
@@ -358,6 +361,23 @@ def _torch_threads(threads: int | None):
         yield
     finally:
         torch.set_num_threads(previous)
+
+
+def _with_stn_config(cfg: TrainConfig, stn_path: Path) -> TrainConfig:
+    """``cfg`` with the network configuration stored in the STN weights file ``stn_path``."""
+    import dataclasses
+
+    from .checkpoint import read_weights_metadata
+    from .config import STNConfig, dataclass_from_dict
+
+    meta = read_weights_metadata(stn_path)
+    if meta.get("format") != "nidar_mi.stn" or "config" not in meta:
+        raise NidarError(f"{stn_path} does not hold STN weights")
+    try:
+        stn_cfg = dataclass_from_dict(STNConfig, json.loads(meta["config"]), f"{stn_path} config")
+    except json.JSONDecodeError:
+        raise NidarError(f"{stn_path}: invalid network configuration") from None
+    return dataclasses.replace(cfg, stn=stn_cfg)
 
 
 def _record_frames(out_dir: Path, split_frames: dict[str, list[Path]]) -> None:

@@ -123,6 +123,15 @@ def test_model_infers_at_its_trained_scale_and_returns_full_size_maps(kitti_data
     data, _ = kitti_data
     record = json.loads((trained / "config.json").read_text())
     assert record["train"]["scale"] == SCALE and record["train"]["crop_width"] == 48
+    # the configuration describes the STN the run was given, not the default one
+    assert record["train"]["stn"] == {
+        "kind": "lowres",
+        "width": 4,
+        "levels": 5,
+        "num_outputs": 4,
+        "depth": 2,
+        "down": 2,
+    }
     model = NidarModel.load(trained, device="cpu")
     assert model.scale == SCALE
     rgb = load_frame(list_frames(data, "train")[0], ("rgb",))["rgb"]
