@@ -51,12 +51,14 @@ def project(
     """
     p = _points(points_lidar)
     T = cam.T_cam_lidar
-    p_cv = (p @ T[:3, :3].T + T[:3, 3]) @ cam.R_opencv_cam.T
+    rot = cam.R_opencv_cam @ T[:3, :3]
+    # einsum, not `@`: a (N, 3) x (3, 3) product through BLAS is ~10x slower on a busy machine
+    p_cv = np.einsum("ij,kj->ik", p, rot) + cam.R_opencv_cam @ T[:3, 3]
     depth = p_cv[:, 2]
     in_front = depth > min_depth
     uv = np.full((p.shape[0], 2), np.nan)
     z = depth[in_front, None]
-    uv[in_front] = (p_cv[in_front] / z) @ cam.K[:2].T
+    uv[in_front] = np.einsum("ij,kj->ik", p_cv[in_front] / z, cam.K[:2])
     return uv, depth, in_front
 
 
