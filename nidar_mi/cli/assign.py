@@ -46,18 +46,32 @@ FORMATS = ("npz", "ply", "las")
 
 
 def assign_intensity(
-    xyz, cameras, images, *, weights=None, occlusion=True, branch="R", profile=None, ring=None
+    xyz, cameras, images, *, weights=None, occlusion=True, branch=None, profile=None, ring=None
 ) -> dict[str, np.ndarray]:
     """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``.
 
     ``profile`` is a profile name or file (None: ``branch`` with the weights' own calibration,
-    or raw for ``I_hat``); ``ring`` the points' rings for it (-1 unknown).
+    or raw for ``I_hat``); ``ring`` the points' rings for it (-1 unknown). ``branch`` None means
+    the profile's branch (``R`` without a profile); a branch the profile was not fitted on is an
+    error.
     """
     from ..nidar.pipeline import NidarModel
     from ..nidar.profiles import resolve_profile
 
     model = NidarModel.load(weights)
     prof = resolve_profile(profile, model) if profile is not None else None
+    if (
+        prof is not None
+        and branch is not None
+        and prof.branch is not None
+        and branch != prof.branch
+    ):
+        raise NidarError(
+            f"--branch {branch}: profile {prof.name} maps the {prof.branch} branch; "
+            f"leave out --branch or fit a profile on {branch} (calibrate --branch {branch})"
+        )
+    if branch is None:
+        branch = prof.branch if prof is not None and prof.branch is not None else "R"
     for cam, im in zip(cameras, images):
         if im.shape[:2] != (cam.height, cam.width):
             raise NidarError(
@@ -137,9 +151,10 @@ def build_parser():
     p.add_argument("--no-occlusion", action="store_true", help="skip the occlusion test")
     p.add_argument(
         "--branch",
-        default="R",
+        default=None,
         choices=("R", "I_hat"),
-        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity head",
+        help="R: calibrated reflectance branch (the paper's, default); I_hat: dense intensity "
+        "head; with --profile: the profile's branch by default, another one is an error",
     )
     p.add_argument(
         "--profile",
@@ -210,7 +225,7 @@ def _assign(args) -> None:
     check_output_folder(out, overwrite=args.overwrite, marker="points.npz")
     points = finite_points(points, args.points or f"KITTI frame {args.frame}")
     profile = args.profile
-    if profile is None and args.kitti and args.branch == "R":
+    if profile is None and args.kitti and args.branch in (None, "R"):
         profile = "kitti-hdl64e"
     ring = np.asarray(points["ring"], dtype=np.int64) if "ring" in points else None
     points.update(

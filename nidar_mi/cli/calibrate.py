@@ -56,7 +56,11 @@ def build_parser():
         help="divide generic clouds' intensities by this (default: 1 or 255, from their range)",
     )
     p.add_argument("--splits", help="data folders: only these splits, e.g. train,val")
-    p.add_argument("--overwrite", action="store_true", help="replace any existing -o file")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing -o file that is not a sensor profile (an earlier profile is always replaced)",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 

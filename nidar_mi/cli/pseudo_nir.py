@@ -50,6 +50,17 @@ class _Input:
     height: int
 
 
+#: Pillow image modes in words, for messages.
+_MODE_NAMES = {
+    "L": "greyscale",
+    "LA": "greyscale+alpha",
+    "1": "1-bit",
+    "I": "32-bit integer",
+    "F": "floating-point",
+    "I;16": "16-bit greyscale",
+}
+
+
 def _is_image_name(p: Path) -> bool:
     return p.suffix.lower() in IMAGE_EXTENSIONS
 
@@ -68,7 +79,9 @@ def _probe(path: Path) -> _Input:
     except OSError as e:
         raise NidarError(f"{path}: cannot read ({e.strerror or e})") from None
     if mode not in ("RGB", "RGBA", "P", "CMYK", "YCbCr"):
-        raise NidarError(f"{path}: a {mode} image; pseudo-NIR needs a colour image (RGB)")
+        raise NidarError(
+            f"{path}: a {_MODE_NAMES.get(mode, mode)} image; pseudo-NIR needs a colour image (RGB)"
+        )
     if w < 1 or h < 1:
         raise NidarError(f"{path}: empty image")
     return _Input(path, w, h)

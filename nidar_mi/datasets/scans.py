@@ -193,11 +193,24 @@ def frames_from_generic(
                     f"{p}: {im.shape[1]}x{im.shape[0]} {im.dtype}, camera {cam.name} is {cam.width}x{cam.height} 8-bit"
                 )
         xyz = np.asarray(cloud["xyz"], dtype=np.float64)
+        inten = np.asarray(cloud["intensity"], dtype=np.float64)
+        ring = np.asarray(cloud.get("ring", np.full(len(xyz), -1)), dtype=np.int64)
+        finite = np.isfinite(xyz).all(axis=1) & np.isfinite(inten)
+        if not finite.all():
+            warnings.warn(
+                f"{pts_path}: {int((~finite).sum())} of {len(finite)} points with a NaN or "
+                "infinite coordinate or intensity are left out",
+                stacklevel=2,
+            )
+            xyz, inten, ring = xyz[finite], inten[finite], ring[finite]
+        if inten.size and float(inten.min()) < 0.0:
+            raise NidarError(
+                f"{pts_path}: negative intensities (down to {float(inten.min()):g}); a LiDAR's "
+                "intensity is >= 0"
+            )
         zeros = [np.zeros((c.height, c.width), np.float32) for c in cameras]
         _, seen, _ = sample_cameras(xyz, cameras, zeros)
-        inten = np.asarray(cloud["intensity"], dtype=np.float64)
         scale = _auto_scale(inten, intensity_scale, str(pts_path))
-        ring = np.asarray(cloud.get("ring", np.full(len(xyz), -1)), dtype=np.int64)
         out.append(
             ScanFrame(
                 name=fid,

@@ -90,3 +90,69 @@ def test_bad_input(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert err.startswith("error:") and message in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def _generic_folder(root, intensity):
+    """A generic scan folder of two frames whose intensities are ``intensity(rng_m, rng)``."""
+    from nidar_mi.io.images import write_png
+    from nidar_mi.io.points import write_npz
+    from tests.helpers.synthetic_kitti import kitti_order_scan
+
+    (root / "points").mkdir(parents=True)
+    (root / "images").mkdir()
+    cam = {
+        "name": "front",
+        "width": 320,
+        "height": 120,
+        "K": [[160.0, 0, 159.5], [0, 160.0, 59.5], [0, 0, 1]],
+        "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
+    }
+    (root / "calib.yaml").write_text(yaml.safe_dump({"cameras": [cam]}))
+    xyz, ring, rng_m = kitti_order_scan(cols=360, front_only=True, rings=32)
+    rng = np.random.default_rng(0)
+    for k in range(2):
+        write_npz(
+            root / "points" / f"{k:04d}.npz",
+            {"xyz": xyz, "intensity": intensity(rng_m, rng).astype(np.float32)},
+        )
+        write_png(root / "images" / f"{k:04d}.png", rng.integers(0, 256, (120, 320, 3), np.uint8))
+    return root
+
+
+def test_non_finite_intensities_are_left_out_with_a_count(tmp_path, capsys):
+    def inten(rng_m, rng):
+        v = np.clip(np.exp(-rng_m / 20) + rng.normal(0, 0.02, len(rng_m)), 0, 1)
+        v[::10] = np.nan  # every tenth return
+        return v
+
+    root = _generic_folder(tmp_path / "scans", inten)
+    out = tmp_path / "p.json"
+    assert main([str(root), "-o", str(out), "--form", "distance_quantile", "-q"]) == 0
+    err = capsys.readouterr().err
+    n = len(np.load(root / "points" / "0000.npz")["xyz"])
+    assert f"{len(range(0, n, 10))} of {n} points with a NaN" in err
+    p = load_profile(out)
+    assert np.isfinite(p.apply([0.2, 0.8], [5.0, 5.0])).all()
+
+
+def test_negative_intensities_are_a_user_error(tmp_path, capsys):
+    root = _generic_folder(tmp_path / "scans", lambda rng_m, rng: -1000.0 + 0 * rng_m)
+    out = tmp_path / "p.json"
+    assert main([str(root), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and "negative intensities" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_a_branch_the_profile_was_not_fitted_on_is_refused(tmp_path):
+    from nidar_mi.cli.assign import assign_intensity
+    from nidar_mi.errors import NidarError
+
+    root = _generic_folder(
+        tmp_path / "scans", lambda rng_m, rng: np.clip(np.exp(-rng_m / 20), 0, 1)
+    )
+    out = tmp_path / "p.json"
+    args = [str(root), "-o", str(out), "--form", "distance_quantile", "--branch", "I_hat", "-q"]
+    assert main(args) == 0
+    with pytest.raises(NidarError, match="maps the I_hat branch"):
+        assign_intensity(np.zeros((1, 3)), [], [], profile=str(out), branch="R")
