@@ -16,9 +16,8 @@ import os
 import sys
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DEFAULT_DIRS = [
-    os.path.join(REPO, "..", "shared", "data", name) for name in ("kitti", "kitti_raw_0926")
-]
+#: Where the real frames are looked for: $NIDAR_MI_DATA, else ../shared/data beside the repository.
+DATA_ROOT = os.environ.get("NIDAR_MI_DATA") or os.path.join(REPO, "..", "shared", "data")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,11 +34,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    from nidar_mi.datasets.kitti_frames import default_kitti_dirs
     from nidar_mi.errors import NidarError
     from nidar_mi.eval.layout_agreement import elevation_agreement
     from nidar_mi.lidar.config import LidarConfig
 
-    dirs = args.kitti or [d for d in DEFAULT_DIRS if os.path.isdir(os.path.join(d, "velodyne"))]
+    dirs = args.kitti or [str(d) for d in default_kitti_dirs(DATA_ROOT)]
     if not dirs:
         print("skipped: no KITTI frames found (give --kitti DIR)", file=sys.stderr)
         return 0

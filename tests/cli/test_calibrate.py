@@ -43,30 +43,10 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
 
 
 def test_generic_folder_with_rings_and_0_255_intensity(tmp_path, capsys):
-    from nidar_mi.io.images import write_png
-    from nidar_mi.io.points import write_npz
-    from tests.helpers.synthetic_kitti import kitti_order_scan
+    def inten(rng_m, rng):
+        return np.round(255 * np.clip(np.exp(-rng_m / 20) + rng.normal(0, 0.02, len(rng_m)), 0, 1))
 
-    root = tmp_path / "scans"
-    (root / "points").mkdir(parents=True)
-    (root / "images").mkdir()
-    cam = {
-        "name": "front",
-        "width": 320,
-        "height": 120,
-        "K": [[160.0, 0, 159.5], [0, 160.0, 59.5], [0, 0, 1]],
-        "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
-    }
-    (root / "calib.yaml").write_text(yaml.safe_dump({"cameras": [cam]}))
-    xyz, ring, rng_m = kitti_order_scan(cols=360, front_only=True, rings=32)
-    rng = np.random.default_rng(0)
-    for k in range(2):
-        inten = np.round(255 * np.clip(np.exp(-rng_m / 20) + rng.normal(0, 0.02, len(xyz)), 0, 1))
-        write_npz(
-            root / "points" / f"{k:04d}.npz",
-            {"xyz": xyz, "intensity": inten.astype(np.float32), "ring": ring.astype(np.uint16)},
-        )
-        write_png(root / "images" / f"{k:04d}.png", rng.integers(0, 256, (120, 320, 3), np.uint8))
+    root = _generic_folder(tmp_path / "scans", inten, with_rings=True)
     out = tmp_path / "p.json"
     assert main([str(root), "-o", str(out), "-q", "--form", "range_ring"]) == 0
     assert "dividing them by 255" in capsys.readouterr().err
@@ -92,8 +72,9 @@ def test_bad_input(tmp_path, capsys, args, message):
     assert not out.exists()
 
 
-def _generic_folder(root, intensity):
-    """A generic scan folder of two frames whose intensities are ``intensity(rng_m, rng)``."""
+def _generic_folder(root, intensity, with_rings=False):
+    """A generic scan folder of two frames whose intensities are ``intensity(rng_m, rng)``
+    (and a ``ring`` column if ``with_rings``)."""
     from nidar_mi.io.images import write_png
     from nidar_mi.io.points import write_npz
     from tests.helpers.synthetic_kitti import kitti_order_scan
@@ -111,10 +92,10 @@ def _generic_folder(root, intensity):
     xyz, ring, rng_m = kitti_order_scan(cols=360, front_only=True, rings=32)
     rng = np.random.default_rng(0)
     for k in range(2):
-        write_npz(
-            root / "points" / f"{k:04d}.npz",
-            {"xyz": xyz, "intensity": intensity(rng_m, rng).astype(np.float32)},
-        )
+        cols = {"xyz": xyz, "intensity": intensity(rng_m, rng).astype(np.float32)}
+        if with_rings:
+            cols["ring"] = ring.astype(np.uint16)
+        write_npz(root / "points" / f"{k:04d}.npz", cols)
         write_png(root / "images" / f"{k:04d}.png", rng.integers(0, 256, (120, 320, 3), np.uint8))
     return root
 
