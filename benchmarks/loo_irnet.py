@@ -1,13 +1,16 @@
 """Leave-one-frame-out evaluation of an IRNet trained per fold on the real KITTI frames.
 
 ``python benchmarks/loo_irnet.py DATA WORK --stn-weights STN --config irnet_kitti.json
-[--folds 0 1 ...] [--forms range_ring distance_quantile] [--baselines] [--json out.json]``
+[--folds 0 1 ...] [--forms range_ring distance_quantile] [--baselines] [--init-irnet W]
+[--renders DATA_SIM] [--json out.json]``
 
 ``DATA`` is a KITTI data folder of ``python -m nidar_mi.dataset --kitti ...`` (its ``test``
 frames are the folds); ``WORK`` holds one training run per fold (resumable, reused when done;
 :mod:`nidar_mi.eval.loo_irnet`). The configuration is a :class:`~nidar_mi.nidar.config.TrainConfig`
 JSON (e.g. a compact ``unet`` at ``scale`` 0.25 with 64 x 160 crops). Rows: IRNet ``R`` and
-``Î`` through each profile form and ``Î`` raw; with ``--baselines`` also the image-free
+``Î`` through each profile form and ``Î`` raw (every fold's IRNet starts from ``--init-irnet``
+when given, e.g. weights pretrained on renders, and mixes the train frames of ``--renders`` into
+its crops to supervise R and S with their true maps); with ``--baselines`` also the image-free
 profiles (``range_only``; ``geometry_gbm``, range and elevation) and luminance through each
 form. Prints the per-fold and mean table
 (:func:`nidar_mi.eval.report.loo_markdown`), the training time of each fold and, per fold, the
@@ -33,12 +36,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--folds", type=int, nargs="*", help="indices of the test frames (default all)")
     p.add_argument("--forms", nargs="*", default=["gbm", "range_ring", "distance_quantile"])
     p.add_argument("--baselines", action="store_true")
+    p.add_argument("--init-irnet", type=Path, help="IRNet weights every fold starts from")
+    p.add_argument("--renders", type=Path, help="rendered dataset mixed into every fold's crops")
     p.add_argument("--json", type=Path)
     p.add_argument("--progress", action="store_true")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
 
-    from nidar_mi.dataset import load_meta
+    from nidar_mi.dataset import list_frames, load_meta
     from nidar_mi.datasets.scans import frames_from_data
     from nidar_mi.eval.loo import leave_one_out, standard_methods
     from nidar_mi.eval.loo_irnet import FoldModels, irnet_methods
@@ -51,7 +56,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.folds:
         tests = [tests[k] for k in args.folds]
     scans = frames_from_data(args.data)
-    models = FoldModels(cfg, args.data, args.work, args.stn_weights, progress=args.progress)
+    models = FoldModels(
+        cfg,
+        args.data,
+        args.work,
+        args.stn_weights,
+        progress=args.progress,
+        init_weights=args.init_irnet,
+        render_frames=list_frames(args.renders, "train") if args.renders else None,
+    )
     methods = {}
     if args.baselines:
         base = standard_methods(forms=tuple(args.forms))

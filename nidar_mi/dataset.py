@@ -45,6 +45,7 @@ __all__ = [
     "check_frame",
     "build_dataset",
     "find_scenes",
+    "frame_has",
     "frames_of_render",
     "list_frames",
     "load_frame",
@@ -164,6 +165,20 @@ def list_frames(data_dir: str | Path, split: str) -> list[Path]:
     if split not in SPLITS:
         raise NidarError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
     return sorted((Path(data_dir) / split).glob("*.npz"))
+
+
+def frame_has(path: str | Path, keys) -> bool:
+    """True when the frame file holds every key of ``keys`` (e.g. rendered frames hold
+    ``R_true`` and ``S_true``, real ones not).
+
+    Raises:
+        NidarError: the file cannot be read as a frame.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return set(keys) <= set(npz.files)
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise NidarError(f"cannot read frame {path}: {exc}") from None
 
 
 def load_frame(path: str | Path, keys=None) -> dict[str, np.ndarray]:

@@ -5,7 +5,8 @@
                              [--stn-weights stn.safetensors] [--resume] [--seed N]
                              [--device auto|cpu|cuda] [--epochs N] [--max-steps N]
                              [--batch-size N] [--crop-size N] [--crop-width N]
-                             [--scale S] [--threads N] [--all-frames] [--no-progress]
+                             [--scale S] [--threads N] [--all-frames] [--init-irnet W]
+                             [--renders DATA] [--no-progress]
 
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
 ``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
@@ -59,6 +60,19 @@ def _parser() -> argparse.ArgumentParser:
         help="train the STN on the real RGB/NIR photo pairs of this folder (e.g. "
         "../shared/data/rgbnir; its train and val pairs) instead of the dataset's renders",
     )
+    p.add_argument(
+        "--init-irnet",
+        type=Path,
+        help="start IRNet from these weights (same network configuration), e.g. pretrained on "
+        "renders with loss.lambda_r_true / lambda_s_true, then fine-tuned on real frames",
+    )
+    p.add_argument(
+        "--renders",
+        type=Path,
+        metavar="DATA",
+        help="mix the train frames of this rendered dataset into IRNet's crops to supervise R and "
+        "S with their true maps (loss.lambda_r_true / lambda_s_true; their intensity is left out)",
+    )
     p.add_argument("--resume", action="store_true", help="continue from the latest checkpoint")
     p.add_argument(
         "--no-calibration", action="store_true", help="do not fit calibration.json after training"
@@ -98,6 +112,9 @@ def build_config(args: argparse.Namespace):
     """The :class:`~nidar_mi.nidar.config.TrainConfig` selected by parsed arguments."""
     from ..nidar.config import TrainConfig
 
+    for flag, value in (("--init-irnet", args.init_irnet), ("--renders", args.renders)):
+        if value is not None and args.stage != "irnet":
+            raise NidarError(f"{flag} applies to IRNet only: use it with --stage irnet")
     if args.all_frames and args.stage != "irnet":
         raise NidarError("--all-frames applies to IRNet only: use it with --stage irnet")
     cfg = TrainConfig.reduced() if args.reduced else TrainConfig()
@@ -189,6 +206,8 @@ def _train(args: argparse.Namespace, cfg) -> None:
             resume=args.resume,
             progress=progress,
             frames=_all_frames(args.data) if args.all_frames else None,
+            init_weights=args.init_irnet,
+            render_frames=_render_frames(args.renders) if args.renders is not None else None,
         )
     else:
         training.train(
@@ -206,6 +225,15 @@ def _train(args: argparse.Namespace, cfg) -> None:
 
         model = NidarModel.load(args.out, device=cfg.device)
         fit_dataset_calibration(model, args.data, "train").save_json(args.out / "calibration.json")
+
+
+def _render_frames(data: Path) -> list[Path]:
+    from ..dataset import list_frames
+
+    frames = list_frames(data, "train")
+    if not frames:
+        raise NidarError(f"--renders: no frames in {data / 'train'}")
+    return frames
 
 
 def _all_frames(data: Path) -> dict[str, list[Path]]:

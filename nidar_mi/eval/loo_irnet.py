@@ -46,6 +46,10 @@ class FoldModels:
         work_dir: where the folds' runs are written.
         stn_weights: the STN every fold uses (fixed; fitted on other data).
         progress: show training progress bars.
+        init_weights: IRNet weights every fold starts from (e.g. pretrained on renders; not
+            fitted on any real frame), None for a random initialisation.
+        render_frames: rendered frames every fold mixes in to supervise the decomposition
+            (:func:`~nidar_mi.nidar.train.train_irnet`), None for none.
     """
 
     cfg: Any
@@ -53,6 +57,8 @@ class FoldModels:
     work_dir: Path
     stn_weights: Path | None
     progress: bool = False
+    init_weights: Path | None = None
+    render_frames: list[Path] | None = None
     _values: dict[str, CachedValues] = field(default_factory=dict)
     _models: dict[str, Any] = field(default_factory=dict)
     train_seconds: dict[str, float] = field(default_factory=dict)
@@ -118,6 +124,8 @@ class FoldModels:
                 progress=self.progress,
                 frames={"train": frames, "val": []},
                 cache_dir=self.work_dir / "cache",
+                init_weights=self.init_weights,
+                render_frames=self.render_frames,
             )
             self.train_seconds[fold.name] = time.perf_counter() - t0
             _write_timing(fold, self.train_seconds[fold.name])

@@ -294,6 +294,29 @@ def photos_markdown(photos: Mapping[str, Any]) -> str:
     return "".join(parts)
 
 
+def intrinsic_markdown(intr: Mapping[str, Any]) -> str:
+    """The decomposition section: R and S against the rendered frames' true maps."""
+    cols = [
+        ("frame", "frame", 0),
+        ("r_R_shading", "r(R, S_true)", 3),
+        ("r_true_shading", "r(R_true, S_true)", 3),
+        ("r_input_shading", "r(input, S_true)", 3),
+        ("r_R_reflectance", "r(R, R_true)", 3),
+        ("spearman_R_reflectance", "Spearman(R, R_true)", 3),
+        ("r_R_S", "r(R, S)", 3),
+    ]
+    rows = [*intr["rows"], {"frame": "mean", **intr["mean"]}]
+    return "".join(
+        [
+            "## Decomposition against the true maps\n\n",
+            "Rendered test frames, pixels with a surface. r(R, S_true): how much shading (cast "
+            "shadows, incidence) the reflectance branch carries; a perfect R has the true maps' "
+            "own r(R_true, S_true). r(R, R_true): how well R recovers the material.\n\n",
+            markdown_table(rows, cols),
+        ]
+    )
+
+
 def heldout_materials_markdown(h: Mapping[str, Any], labels: Mapping[str, str]) -> str:
     """The held-out materials section."""
     mean = labelled(h["mean"], labels)

@@ -199,6 +199,7 @@ def _evaluate(args, argv_text: str, meta: dict | None, model, fig_dir: str) -> d
 def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
     """The groups on rendered scenes: held-out generated, hand-made, held-out materials,
     ablations."""
+    from ..dataset import frame_has, list_frames
     from ..nidar.dataset_calibration import fit_dataset_calibration
     from .heldout import evaluate_renders, fit_class_constant, render_scenes
 
@@ -222,6 +223,11 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
     )
     payload["groups"]["generated"] = _group(res, "generated", splits[args.split])
     payload["figures"] += _figures(res, "generated", fig_dir, args.figures)
+    frames = list_frames(args.data, args.split)
+    if frames and all(frame_has(f, ("R_true", "S_true")) for f in frames):
+        from .intrinsic import intrinsic_scores
+
+        payload["intrinsic"] = intrinsic_scores(model, frames)
     render_opts = dict(
         params=meta.get("params"), seed=int(meta.get("seed", 0)), spp=int(meta.get("spp", 16))
     )
@@ -311,6 +317,8 @@ def _write(stage: str, payload: dict, out: str) -> None:
         csv_rows += group["rows"] + [
             {"group": key, "scene": "mean", "camera": "", **r} for r in group["mean"]
         ]
+    if "intrinsic" in payload:
+        md.append(report.intrinsic_markdown(payload["intrinsic"]) + "\n")
     if "heldout_materials" in payload:
         h = payload["heldout_materials"]
         md.append(report.heldout_materials_markdown(h, METHOD_LABELS) + "\n")

@@ -158,6 +158,14 @@ class LossConfig:
     """Kernel size of the AvgPool in the shading prior (package choice)."""
     m0: float = 0.5
     """Target mean of R."""
+    lambda_r_true: float = 0.0
+    """Weight of the supervised reflectance term ``mean |R - R_true|`` over the pixels with a
+    surface (``R_true >= 1e-3``): rendered frames only, which know the true reflectance at the
+    LiDAR wavelength (package addition; :func:`~nidar_mi.nidar.losses.reflectance_supervision_loss`)."""
+    lambda_s_true: float = 0.0
+    """Weight of the supervised shading term, scale-invariant in log space (the network
+    input's exposure normalisation leaves the scale of ``S`` free): rendered frames only
+    (package addition; :func:`~nidar_mi.nidar.losses.shading_supervision_loss`)."""
     int_warmup_epochs: float = 2.0
     """Epochs over which lambda_int rises linearly from 0 to its value (package choice;
     the paper warms it up "during the initial training epochs")."""
@@ -221,6 +229,11 @@ class TrainConfig:
     sparse intensity re-projected with the nearest return winning each pixel), and
     :class:`~nidar_mi.nidar.pipeline.NidarModel` runs at this scale by default. The STN stage
     trains at full resolution."""
+    render_scale: float = 1.0
+    """Network resolution of rendered frames mixed into an IRNet run on real frames
+    (``train --renders``), relative to the renders, in (0, 1] (package choice: renders are
+    smaller than camera frames; 1.0 on 320 x 192 renders matches KITTI at 0.25 in pixels per
+    degree)."""
     threads: int | None = None
     """torch intra-op threads while training (None: torch's default). On a loaded machine one
     thread can be several times faster than more (OpenMP threads spin-wait for busy cores);
@@ -249,6 +262,11 @@ class TrainConfig:
             crop_size=32,
             checkpoint_every=1,
         )
+
+    @property
+    def intrinsic_supervision(self) -> bool:
+        """True when IRNet's R or S is supervised with a rendered frame's true maps."""
+        return self.loss.lambda_r_true > 0 or self.loss.lambda_s_true > 0
 
     @property
     def crop_shape(self) -> tuple[int, int]:
@@ -314,6 +332,12 @@ class TrainConfig:
         check_seed(self.seed, "seed")
         if not (math.isfinite(self.scale) and 0 < self.scale <= 1):
             raise NidarError(f"scale must lie in (0, 1], got {self.scale}")
+        if not (math.isfinite(self.render_scale) and 0 < self.render_scale <= 1):
+            raise NidarError(f"render_scale must lie in (0, 1], got {self.render_scale}")
+        for name in ("lambda_r_true", "lambda_s_true"):
+            value = getattr(self.loss, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise NidarError(f"loss.{name} must be >= 0, got {value}")
         if any(s <= 0 or s > 1 for s in self.loss.scales):
             raise NidarError("loss.scales must lie in (0, 1]")
         if self.device != "auto" and not self.device.startswith(("cpu", "cuda")):

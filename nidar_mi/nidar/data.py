@@ -24,6 +24,7 @@ __all__ = [
     "FrameDataset",
     "STNDataset",
     "IRNetDataset",
+    "MixedDataset",
 ]
 
 
@@ -169,7 +170,13 @@ class IRNetDataset(FrameDataset):
             (the frozen STN's output, full resolution); None gives the prepared RGB image as
             input.
         intrinsic_targets: also give the rendered frames' true reflectance and shading
-            (``R_true``, ``S_true``; frames without them are an error).
+            (``R_true``, ``S_true``; frames without them are an error, unless
+            ``missing_targets_zero``).
+        missing_targets_zero: with ``intrinsic_targets``, frames without true maps (real
+            frames) give zero maps, which the supervised terms leave out (their pixel mask is
+            ``R_true >= 1e-3``).
+        supervise_intensity: False gives an empty intensity mask (frames that only supervise
+            the decomposition: renders of another sensor than the real frames').
         scale: network resolution relative to the frames, in (0, 1]: frames become
             ``round(scale · H) x round(scale · W)`` (:func:`nidar_mi.nidar.infer.reduced_size`):
             the input and the dense true maps by area averaging (:func:`area_resize`), the
@@ -191,8 +198,12 @@ class IRNetDataset(FrameDataset):
         input_dir: str | Path | None = None,
         intrinsic_targets: bool = False,
         scale: float = 1.0,
+        missing_targets_zero: bool = False,
+        supervise_intensity: bool = True,
     ) -> None:
         super().__init__(frames, crop_size, seed, train)
+        self.missing_targets_zero = bool(missing_targets_zero)
+        self.supervise_intensity = bool(supervise_intensity)
         self.intensity_scale = float(intensity_scale)
         self.input_dir = Path(input_dir) if input_dir is not None else None
         self.intrinsic_targets = bool(intrinsic_targets)
@@ -210,9 +221,19 @@ class IRNetDataset(FrameDataset):
         keys = ("intensity", "mask") if self.input_dir is not None else ("rgb", "intensity", "mask")
         if self.scale < 1.0:
             keys = (*keys, "range")
+        zero_targets = False
         if self.intrinsic_targets:
-            keys = (*keys, "R_true", "S_true")
+            from ..dataset import frame_has
+
+            zero_targets = self.missing_targets_zero and not frame_has(path, ("R_true",))
+            if not zero_targets:
+                keys = (*keys, "R_true", "S_true")
         arrays = load_frame(path, keys)
+        if zero_targets:
+            zeros = np.zeros(arrays["mask"].shape, np.float32)
+            arrays["R_true"], arrays["S_true"] = zeros, zeros
+        if not self.supervise_intensity:
+            arrays["mask"] = np.zeros_like(arrays["mask"])
         if self.input_dir is None:
             x = prepare_rgb(arrays["rgb"])
         else:
@@ -245,3 +266,32 @@ class IRNetDataset(FrameDataset):
         arrays = self.frame_arrays(index)
         window, flip = self._window(index, *arrays["mask"].shape[1:])
         return {k: self._apply(v, window, flip) for k, v in arrays.items()}
+
+
+class MixedDataset(Dataset):
+    """Several datasets as one (items in order: the first's, then the second's, ...), each
+    keeping its own scale, input and crops; :meth:`set_epoch` reaches every part.
+
+    The parts must give items with the same keys and crop shape (they are batched together).
+    """
+
+    def __init__(self, *parts: FrameDataset) -> None:
+        self.parts = [p for p in parts if len(p)]
+        if not self.parts:
+            raise NidarError("no frames to train on")
+        self.frames = [f for p in self.parts for f in p.frames]
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the crops and flips of epoch ``epoch`` in every part."""
+        for p in self.parts:
+            p.set_epoch(epoch)
+
+    def __len__(self) -> int:
+        return sum(len(p) for p in self.parts)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        for p in self.parts:
+            if index < len(p):
+                return p[index]
+            index -= len(p)
+        raise IndexError(index)

@@ -32,6 +32,9 @@ __all__ = [
     "reflectance_smoothness_loss",
     "shading_prior_loss",
     "mean_reflectance_loss",
+    "reflectance_supervision_loss",
+    "shading_supervision_loss",
+    "TRUE_REFLECTANCE_MIN",
     "masked_multiscale_l1",
     "masked_l2",
     "masked_ssim_loss",
@@ -222,6 +225,50 @@ def mean_reflectance_loss(r: torch.Tensor, m0: float = 0.5) -> torch.Tensor:
     return (r.flatten(1).mean(1) - m0).abs().mean()
 
 
+TRUE_REFLECTANCE_MIN = 1e-3
+"""Pixels whose true reflectance is below this hold no surface (sky) or an undefined shading;
+the supervised intrinsic terms leave them out (the frame format's own threshold for
+``S_true``)."""
+
+
+def _true_mask(r_true: torch.Tensor) -> torch.Tensor:
+    return (r_true >= TRUE_REFLECTANCE_MIN).to(r_true.dtype)
+
+
+def reflectance_supervision_loss(
+    r: torch.Tensor, r_true: torch.Tensor, eps: float = 1e-6
+) -> torch.Tensor:
+    """``sum(M |R - R_true|) / (sum M + eps)`` per image, averaged over the batch.
+
+    ``M``: pixels with ``R_true >= TRUE_REFLECTANCE_MIN``. ``R`` lies in [0, 1] and
+    ``R_true`` (the renderer's monostatic reflectance at the LiDAR wavelength) is clipped to
+    [0, 1] first: retroreflectors and specular peaks exceed 1 by up to several hundred, and
+    are clipped like the intensity target. The term is absolute: it pins the decomposition's
+    scale as well as its pattern.
+    """
+    m = _true_mask(r_true)
+    num = (m * (r - r_true.clamp(0.0, 1.0)).abs()).flatten(1).sum(1)
+    return (num / (m.flatten(1).sum(1) + eps)).mean()
+
+
+def shading_supervision_loss(
+    s: torch.Tensor, s_true: torch.Tensor, r_true: torch.Tensor, eps: float = 1e-6
+) -> torch.Tensor:
+    """Scale-invariant log-L1 between ``S`` and the true shading.
+
+    ``d = log(S + δ) - log(S_true + δ)`` (``δ = 1e-3``) on the pixels ``M`` of
+    :func:`reflectance_supervision_loss`; the term is ``sum(M |d - mean_M(d)|) / sum M`` per
+    image: a per-image gain on ``S`` costs nothing (the network's input is exposure-normalised,
+    so only the pattern of the shading is defined: cast shadows, incidence).
+    """
+    m = _true_mask(r_true)
+    d = torch.log(s + 1e-3) - torch.log(s_true.clamp_min(0) + 1e-3)
+    n = m.flatten(1).sum(1) + eps
+    mean_d = (m * d).flatten(1).sum(1) / n
+    num = (m * (d - mean_d.view(-1, 1, 1, 1)).abs()).flatten(1).sum(1)
+    return (num / n).mean()
+
+
 def _masked(pred, target, mask):
     m = mask.to(pred.dtype)
     return pred * m, target * m, m
@@ -306,8 +353,11 @@ def irnet_objective(
     mask: torch.Tensor,
     cfg,
     int_factor: float = 1.0,
+    r_true: torch.Tensor | None = None,
+    s_true: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, float]]:
-    """Total IRNet loss (paper Eq. 8) and its terms.
+    """Total IRNet loss (paper Eq. 8) and its terms, plus the supervised intrinsic terms on
+    rendered frames.
 
     Args:
         outputs: ``R``, ``S``, ``I_hat``, each ``(B, 1, H, W)``.
@@ -316,10 +366,12 @@ def irnet_objective(
         mask: ``(B, 1, H, W)`` valid projected pixels.
         cfg: a :class:`nidar_mi.nidar.config.LossConfig`.
         int_factor: warm-up factor applied to ``lambda_int``.
+        r_true, s_true: ``(B, 1, H, W)`` true reflectance and shading of rendered frames;
+            required when ``cfg.lambda_r_true`` or ``cfg.lambda_s_true`` is positive.
 
     Returns:
         The scalar loss and a dict of the unweighted terms (``recon``, ``R``, ``S``, ``med``,
-        ``int``) as floats.
+        ``int``, and ``R_true`` / ``S_true`` when their weights are positive) as floats.
     """
     r, s, i_hat = outputs["R"], outputs["S"], outputs["I_hat"]
     terms = {
@@ -336,6 +388,15 @@ def irnet_objective(
         + cfg.lambda_med * terms["med"]
         + cfg.lambda_int * int_factor * terms["int"]
     )
+    if cfg.lambda_r_true > 0 or cfg.lambda_s_true > 0:
+        if r_true is None or s_true is None:
+            raise ValueError("supervised intrinsic terms need r_true and s_true")
+    if cfg.lambda_r_true > 0:
+        terms["R_true"] = reflectance_supervision_loss(r, r_true, cfg.eps)
+        total = total + cfg.lambda_r_true * terms["R_true"]
+    if cfg.lambda_s_true > 0:
+        terms["S_true"] = shading_supervision_loss(s, s_true, r_true, cfg.eps)
+        total = total + cfg.lambda_s_true * terms["S_true"]
     return total, {k: float(v.detach()) for k, v in terms.items()}
 
 

@@ -37,7 +37,7 @@ from ..dataset import list_frames, load_frame, load_meta
 from ..errors import NidarError
 from .checkpoint import atomic_write
 from .config import TrainConfig
-from .data import IRNetDataset, STNDataset
+from .data import IRNetDataset, MixedDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
 from .losses import irnet_objective, photo_stn_loss, stn_loss
@@ -182,6 +182,8 @@ def train_irnet(
     progress: bool = True,
     frames: dict[str, Sequence[str | Path]] | None = None,
     cache_dir: str | Path | None = None,
+    init_weights: str | Path | None = None,
+    render_frames: Sequence[str | Path] | None = None,
 ) -> Path:
     """Train IRNet; returns ``OUT/irnet.safetensors``.
 
@@ -199,6 +201,15 @@ def train_irnet(
             model to ship; an empty ``val`` list skips validation).
         cache_dir: folder of the pseudo-NIR cache (default ``OUT/cache``; runs on the same
             frames with the same STN and scale can share one).
+        init_weights: IRNet weights to start from (e.g. pretrained on renders with the
+            supervised intrinsic terms, then fine-tuned here on real frames); their network
+            configuration must equal ``cfg.irnet``. Recorded in ``config.json``
+            (``data.init``: path and SHA-256). A resumed run continues from its checkpoint.
+        render_frames: rendered frames mixed into the training crops to supervise the
+            decomposition only (``loss.lambda_r_true`` / ``lambda_s_true``; their intensity is
+            another sensor's and is left out), at ``cfg.render_scale``; the real frames then
+            supervise the intensity and carry no true maps. Recorded in ``config.json``
+            (``data.renders``).
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     meta = load_meta(data_dir)
@@ -214,7 +225,25 @@ def train_irnet(
         if not split_frames["train"]:
             raise NidarError("no training frames given")
         _record_frames(out_dir, split_frames)
+    renders = [Path(f) for f in render_frames or ()]
+    if render_frames is not None:
+        if not renders:
+            raise NidarError("no rendered frames given to mix in")
+        if not cfg.intrinsic_supervision:
+            raise NidarError(
+                "rendered frames mixed in supervise the decomposition only: set "
+                "loss.lambda_r_true and/or loss.lambda_s_true above 0"
+            )
+        _check_intrinsic_frames(renders)
+        _record_renders(out_dir, renders)
+    elif cfg.intrinsic_supervision:
+        _check_intrinsic_frames(split_frames["train"] + split_frames["val"])
+    init_state = None
+    if init_weights is not None:
+        init_state = _init_state(cfg, Path(init_weights))
+        _record_init(out_dir, Path(init_weights))
     input_dirs: dict[str, Path | None] = {"train": None, "val": None}
+    render_input: Path | None = None
     local = out_dir / "stn.safetensors"
     if stn_weights is None and local.is_file():
         stn_weights = local
@@ -239,17 +268,40 @@ def train_irnet(
             cache = Path(cache_dir) if cache_dir is not None else out_dir / "cache"
             for split, fs in split_frames.items():
                 input_dirs[split] = _cache_pseudo_nir(stn, fs, cache / tag, cfg.scale)
+            if renders:
+                rtag = f"pseudo_nir_{digest}" + (
+                    f"_x{cfg.render_scale:g}" if cfg.render_scale != 1.0 else ""
+                )
+                render_input = _cache_pseudo_nir(stn, renders, cache / rtag, cfg.render_scale)
             del stn
 
         torch.manual_seed(cfg.seed)
         model = build_irnet(cfg.irnet)
+        if init_state is not None:
+            model.load_state_dict(init_state)
         for side in cfg.crop_shape:
             _check_crop(side, model.stride, "IRNet")
         scale = float(meta["intensity_scale"])
-        common = dict(crop_size=cfg.crop_shape, seed=cfg.seed, scale=cfg.scale)
+        common = dict(
+            crop_size=cfg.crop_shape,
+            seed=cfg.seed,
+            scale=cfg.scale,
+            intrinsic_targets=cfg.intrinsic_supervision,
+            missing_targets_zero=bool(renders),
+        )
         train_set = IRNetDataset(
             split_frames["train"], scale, train=True, input_dir=input_dirs["train"], **common
         )
+        if renders:
+            render_set = IRNetDataset(
+                renders,
+                1.0,
+                train=True,
+                input_dir=render_input if cfg.irnet.input == "pseudo_nir" else None,
+                **(common | {"scale": cfg.render_scale}),
+                supervise_intensity=False,
+            )
+            train_set = MixedDataset(train_set, render_set)
         val_set = IRNetDataset(
             split_frames["val"], scale, train=False, input_dir=input_dirs["val"], **common
         )
@@ -257,7 +309,14 @@ def train_irnet(
         def loss_fn(net, batch, factor):
             x = batch["x"]
             loss, terms = irnet_objective(
-                net(x), net.intrinsic_target(x), batch["intensity"], batch["mask"], cfg.loss, factor
+                net(x),
+                net.intrinsic_target(x),
+                batch["intensity"],
+                batch["mask"],
+                cfg.loss,
+                factor,
+                batch.get("R_true"),
+                batch.get("S_true"),
             )
             return loss, {**terms, "int_factor": factor}
 
@@ -378,6 +437,62 @@ def _with_stn_config(cfg: TrainConfig, stn_path: Path) -> TrainConfig:
     except json.JSONDecodeError:
         raise NidarError(f"{stn_path}: invalid network configuration") from None
     return dataclasses.replace(cfg, stn=stn_cfg)
+
+
+def _check_intrinsic_frames(frames: list[Path]) -> None:
+    """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not)."""
+    from ..dataset import frame_has
+
+    for path in frames:
+        if not frame_has(path, ("R_true", "S_true")):
+            raise NidarError(
+                f"loss.lambda_r_true / lambda_s_true need rendered frames with R_true and "
+                f"S_true; {path} has none (real frames carry no true reflectance)"
+            )
+
+
+def _init_state(cfg: TrainConfig, path: Path) -> dict[str, torch.Tensor]:
+    """State dict of the IRNet weights ``path``, checked against ``cfg.irnet``."""
+    import dataclasses
+
+    from .checkpoint import read_weights_metadata
+    from .config import IRNetConfig, dataclass_from_dict
+    from .model_io import load_irnet
+
+    if not path.is_file():
+        raise NidarError(f"initial IRNet weights {path} not found")
+    meta = read_weights_metadata(path)
+    if meta.get("format") != "nidar_mi.irnet" or "config" not in meta:
+        raise NidarError(f"{path} does not hold IRNet weights")
+    try:
+        given = dataclass_from_dict(IRNetConfig, json.loads(meta["config"]), f"{path} config")
+    except json.JSONDecodeError:
+        raise NidarError(f"{path}: invalid network configuration") from None
+    if dataclasses.asdict(given) != dataclasses.asdict(cfg.irnet):
+        raise NidarError(
+            f"initial IRNet weights {path} are a different network "
+            f"({given.variant}, width {given.width}, depth {given.unet_depth}, input "
+            f"{given.input}) than the configuration's ({cfg.irnet.variant}, width "
+            f"{cfg.irnet.width}, depth {cfg.irnet.unet_depth}, input {cfg.irnet.input})"
+        )
+    return load_irnet(path, "cpu").state_dict()
+
+
+def _record_renders(out_dir: Path, renders: list[Path]) -> None:
+    """Add the rendered frames mixed in to ``OUT/config.json`` (``data.renders``)."""
+    cfg_path = out_dir / "config.json"
+    record = json.loads(cfg_path.read_text())
+    record["data"]["renders"] = sorted(str(f) for f in renders)
+    atomic_write(cfg_path, json.dumps(record, indent=2))
+
+
+def _record_init(out_dir: Path, path: Path) -> None:
+    """Add the initial IRNet weights to ``OUT/config.json`` (``data.init``)."""
+    cfg_path = out_dir / "config.json"
+    record = json.loads(cfg_path.read_text())
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    record["data"]["init"] = {"irnet": str(path), "sha256": digest}
+    atomic_write(cfg_path, json.dumps(record, indent=2))
 
 
 def _record_frames(out_dir: Path, split_frames: dict[str, list[Path]]) -> None:

@@ -322,3 +322,49 @@ def test_gradcheck_float64(name, fn):
     target = _rand(1, 1, 8, 8, seed=27, dtype=torch.float64)
     mask = _mask(1, 1, 8, 8, p=0.6, seed=28)
     assert torch.autograd.gradcheck(lambda p: fn(p, target, mask), (pred,), eps=1e-6, atol=1e-5)
+
+
+# ----------------------------------------------------------- supervised intrinsic terms
+
+
+def test_reflectance_supervision_is_the_mean_error_on_surface_pixels():
+    from nidar_mi.nidar.losses import reflectance_supervision_loss
+
+    r = torch.full((1, 1, 4, 4), 0.5)
+    r_true = torch.zeros(1, 1, 4, 4)  # sky: left out
+    r_true[..., :2, :] = 0.3  # 8 pixels, error 0.2
+    r_true[..., 2, :] = 7.0  # 4 retroreflector pixels, clipped to 1: error 0.5
+    expected = (8 * 0.2 + 4 * 0.5) / 12
+    assert float(reflectance_supervision_loss(r, r_true)) == pytest.approx(expected, rel=1e-5)
+
+
+def test_shading_supervision_ignores_a_gain_and_sees_a_pattern():
+    from nidar_mi.nidar.losses import shading_supervision_loss
+
+    g = torch.Generator().manual_seed(0)
+    s_true = torch.rand(2, 1, 8, 8, generator=g) + 0.1
+    r_true = torch.full_like(s_true, 0.4)
+    gained = 3.7 * (s_true + 1e-3) - 1e-3  # log(S + δ) = log 3.7 + log(S_true + δ)
+    assert float(shading_supervision_loss(gained, s_true, r_true)) == pytest.approx(0, abs=1e-5)
+    # d = log 2 on one pixel of 64, 0 elsewhere: mean |d - mean d| = 2 · 63 · log 2 / 64²
+    doubled = s_true.clone()
+    doubled[:, :, 0, 0] = 2 * (s_true[:, :, 0, 0] + 1e-3) - 1e-3
+    expected = 2 * 63 * np.log(2) / 64**2
+    loss = float(shading_supervision_loss(doubled, s_true, r_true))
+    assert loss == pytest.approx(expected, rel=1e-4)
+
+
+def test_objective_needs_true_maps_when_supervised():
+    from nidar_mi.nidar.config import LossConfig
+    from nidar_mi.nidar.losses import irnet_objective
+
+    x = torch.rand(1, 1, 8, 8)
+    out = {"R": x, "S": x, "I_hat": x}
+    with pytest.raises(ValueError, match="r_true"):
+        irnet_objective(out, x, x, x > 0.5, LossConfig(lambda_r_true=1.0))
+    total, terms = irnet_objective(
+        out, x, x, x > 0.5, LossConfig(lambda_r_true=1.0), r_true=1 - x, s_true=x
+    )
+    base, _ = irnet_objective(out, x, x, x > 0.5, LossConfig())
+    assert terms["R_true"] > 0.1
+    assert float(total - base) == pytest.approx(terms["R_true"], rel=1e-5)
