@@ -96,13 +96,21 @@ def test_init_weights_of_another_network_are_refused(supervised, data_dir, tmp_p
     cfg, out = supervised
     other = dataclasses.replace(cfg, irnet=dataclasses.replace(cfg.irnet, width=6))
     with pytest.raises(NidarError, match="different network"):
-        train_irnet(other, data_dir, tmp_path, progress=False, init_weights=out / "irnet.safetensors")
+        train_irnet(
+            other, data_dir, tmp_path, progress=False, init_weights=out / "irnet.safetensors"
+        )
 
 
 def test_cli_init_irnet_needs_the_irnet_stage(supervised, data_dir, tmp_path, capsys):
     _, out = supervised
     code = main(
-        [str(data_dir), str(tmp_path / "o"), "--reduced", "--init-irnet", str(out / "irnet.safetensors")]
+        [
+            str(data_dir),
+            str(tmp_path / "o"),
+            "--reduced",
+            "--init-irnet",
+            str(out / "irnet.safetensors"),
+        ]
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "--stage irnet" in err[0]
@@ -143,4 +151,6 @@ def test_joint_run_with_renders(data_dir, tmp_path):
     assert np.isfinite(step["R_true"]) and np.isfinite(step["int"])
     # renders must carry the true maps
     with pytest.raises(NidarError, match="real frames carry no true reflectance"):
-        train_irnet(cfg, real, tmp_path / "x", progress=False, render_frames=list_frames(real, "train"))
+        train_irnet(
+            cfg, real, tmp_path / "x", progress=False, render_frames=list_frames(real, "train")
+        )
