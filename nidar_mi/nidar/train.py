@@ -447,7 +447,8 @@ def _check_intrinsic_frames(frames: list[Path]) -> None:
         if not frame_has(path, ("R_true", "S_true")):
             raise NidarError(
                 f"loss.lambda_r_true / lambda_s_true need rendered frames with R_true and "
-                f"S_true; {path} has none (real frames carry no true reflectance)"
+                f"S_true; {path} has none (real frames carry no true reflectance: mix rendered "
+                f"frames in with render_frames, train --renders)"
             )
 
 
