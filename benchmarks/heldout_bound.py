@@ -28,7 +28,11 @@ import numpy as np
 
 
 def returns(path: Path) -> dict[str, np.ndarray]:
-    """Per-return values of one frame: R_true, range, elevation (deg), cos θ, intensity."""
+    """Per-return values of one frame: R_true, range, elevation (deg), cos θ, intensity.
+
+    Pixel ``(u, v)`` has its centre at ``(u, v)`` in the OpenCV convention of ``K``
+    (:mod:`nidar_mi.camera`).
+    """
     from nidar_mi.dataset import load_frame
 
     z = load_frame(path, ("R_true", "mask", "range", "depth", "K", "T_cam_lidar", "intensity"))
@@ -36,7 +40,7 @@ def returns(path: Path) -> dict[str, np.ndarray]:
     h, w = depth.shape
     v, u = np.mgrid[0:h, 0:w]
     p = np.stack(
-        [(u + 0.5 - k[0, 2]) / k[0, 0] * depth, (v + 0.5 - k[1, 2]) / k[1, 1] * depth, depth], -1
+        [(u - k[0, 2]) / k[0, 0] * depth, (v - k[1, 2]) / k[1, 1] * depth, depth], -1
     )
     normal = np.cross(np.gradient(p, axis=1), np.gradient(p, axis=0))
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True) + 1e-12
@@ -64,13 +68,23 @@ def main(argv: list[str] | None = None) -> int:
 
     from scipy.stats import spearmanr
 
-    from nidar_mi.dataset import SPLITS, list_frames
+    from nidar_mi.dataset import SPLITS, list_frames, load_meta
     from nidar_mi.nidar.gbm_profile import fit_gbm
 
-    train = [returns(f) for f in list_frames(args.train_data, "train")]
+    from nidar_mi.errors import NidarError
+
+    try:
+        train = [returns(f) for f in list_frames(args.train_data, "train")]
+        tests = [(f.stem, returns(f)) for s in SPLITS for f in list_frames(args.test_data, s)]
+        if not train or not tests:
+            raise NidarError("no rendered frames in TRAIN_DATA/train or in TEST_DATA")
+    except NidarError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     cat = {k: np.concatenate([t[k] for t in train]) for k in train[0]}
-    gbm = fit_gbm(cat["r_true"], cat["range"], np.clip(cat["intensity"], 0, 1), cat["elevation"])
-    tests = [(f.stem, returns(f)) for s in SPLITS for f in list_frames(args.test_data, s)]
+    scale = float(load_meta(args.train_data).get("intensity_scale", 1.0))
+    reference = np.clip(cat["intensity"] / scale, 0, 1)  # the metric scale of the evaluation
+    gbm = fit_gbm(cat["r_true"], cat["range"], reference, cat["elevation"])
 
     def values(t):
         return {

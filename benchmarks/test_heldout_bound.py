@@ -30,9 +30,15 @@ def test_cos_incidence_of_a_fronto_parallel_plane(tmp_path):
     k = frame["K"]
     sel = frame["mask"] & (frame["R_true"] >= 1e-3)
     v, u = np.nonzero(sel)
-    x = (u + 0.5 - k[0, 2]) / k[0, 0] * 7.0
-    y = (v + 0.5 - k[1, 2]) / k[1, 1] * 7.0
+    x = (u - k[0, 2]) / k[0, 0] * 7.0  # OpenCV: pixel centres at whole numbers
+    y = (v - k[1, 2]) / k[1, 1] * 7.0
     expected = 7.0 / np.sqrt(x**2 + y**2 + 49.0)  # |n · ray| with n = (0, 0, 1)
     assert len(out["cos"]) == sel.sum() > 0
     np.testing.assert_allclose(out["cos"], expected, rtol=1e-9)
     np.testing.assert_array_equal(out["r_true"], np.clip(frame["R_true"][sel], 0, 1))
+
+
+def test_empty_folders_are_one_line_errors(tmp_path, capsys):
+    assert bench.main([str(tmp_path), str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: no rendered frames")

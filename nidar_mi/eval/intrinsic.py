@@ -96,7 +96,8 @@ def intrinsic_scores(model, frames: Sequence[str | Path], scale: float | None = 
         scale: inference resolution relative to the frames (None: the model's default).
 
     Returns:
-        ``{"rows": [{"frame": stem, **scores}], "mean": {key: mean over frames}}``.
+        ``{"rows": [{"frame": stem, **scores}], "mean": {key: mean over frames}, "scale":
+        the inference scale used}``.
     """
     rows = []
     for path in frames:
@@ -107,4 +108,5 @@ def intrinsic_scores(model, frames: Sequence[str | Path], scale: float | None = 
     if not rows:
         raise NidarError("no frames to score the decomposition on")
     mean = {k: float(np.nanmean([r[k] for r in rows])) for k in INTRINSIC_KEYS}
-    return {"rows": rows, "mean": mean}
+    used = float(model.scale if scale is None else scale)
+    return {"rows": rows, "mean": mean, "scale": used}

@@ -98,6 +98,29 @@ class FoldModels:
             self._models[str(fold)] = self._train(fold, train)
         return self._models[str(fold)]
 
+    def _check_finished(self, fold: Path) -> None:
+        """A finished fold is reused only if it was trained as this evaluation would train it
+        (configuration, initial weights, rendered frames)."""
+        import hashlib
+
+        try:
+            record = json.loads((fold / "config.json").read_text())
+            # settings added since the fold was trained take their defaults
+            recorded = type(self.cfg).from_dict(record["train"]).to_dict()
+            have = _fold_identity(recorded, record.get("data", {}))
+        except (OSError, json.JSONDecodeError, KeyError, TypeError, NidarError) as exc:
+            raise NidarError(f"cannot read {fold / 'config.json'}: {exc}") from None
+        init = None
+        if self.init_weights is not None:
+            init = {"sha256": hashlib.sha256(Path(self.init_weights).read_bytes()).hexdigest()}
+        renders = sorted(str(f) for f in self.render_frames) if self.render_frames else None
+        want = _fold_identity(self.cfg.to_dict(), {"init": init, "renders": renders})
+        if have != want:
+            raise NidarError(
+                f"{fold} holds a finished run of another configuration, initial weights or "
+                "renders: use a new WORK folder"
+            )
+
     def _train(self, fold: Path, train: Sequence[Any]):
         import time
 
@@ -108,7 +131,9 @@ class FoldModels:
         done = (fold / "irnet.safetensors").is_file() and read_train_log(fold).get("irnet", {}).get(
             "done"
         )
-        if not done:
+        if done:
+            self._check_finished(fold)
+        else:
             frames = [Path(s.source) for s in train]
             missing = [f for f in frames if not f.is_file()]
             if missing:
@@ -130,6 +155,16 @@ class FoldModels:
             self.train_seconds[fold.name] = time.perf_counter() - t0
             _write_timing(fold, self.train_seconds[fold.name])
         return NidarModel.load(fold, device="cpu")
+
+
+def _fold_identity(train_record: dict, data: dict) -> tuple:
+    from ..nidar.train import _comparable, _input_identity
+
+    return (
+        _comparable({k: v for k, v in train_record.items() if k != "stn"}),
+        _input_identity(data.get("init")),
+        data.get("renders"),
+    )
 
 
 def _write_timing(fold: Path, seconds: float) -> None:

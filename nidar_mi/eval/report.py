@@ -309,7 +309,8 @@ def intrinsic_markdown(intr: Mapping[str, Any]) -> str:
     return "".join(
         [
             "## Decomposition against the true maps\n\n",
-            "Rendered test frames, pixels with a surface. r(R, S_true): how much shading (cast "
+            f"Rendered test frames, pixels with a surface, networks at {intr['scale']:g} of the "
+            "frames' resolution. r(R, S_true): how much shading (cast "
             "shadows, incidence) the reflectance branch carries; a perfect R has the true maps' "
             "own r(R_true, S_true). r(R, R_true): how well R recovers the material.\n\n",
             markdown_table(rows, cols),

@@ -258,8 +258,9 @@ def shading_supervision_loss(
 
     ``d = log(S + δ) - log(S_true + δ)`` (``δ = 1e-3``) on the pixels ``M`` of
     :func:`reflectance_supervision_loss`; the term is ``sum(M |d - mean_M(d)|) / sum M`` per
-    image: a per-image gain on ``S`` costs nothing (the network's input is exposure-normalised,
-    so only the pattern of the shading is defined: cast shadows, incidence).
+    image: a per-image gain on ``S + δ`` costs nothing, and on ``S`` nearly nothing where
+    ``S ≫ δ`` (the network's input is exposure-normalised, so only the pattern of the shading is
+    defined: cast shadows, incidence).
     """
     m = _true_mask(r_true)
     d = torch.log(s + 1e-3) - torch.log(s_true.clamp_min(0) + 1e-3)

@@ -207,25 +207,28 @@ def train_irnet(
             (``data.init``: path and SHA-256). A resumed run continues from its checkpoint.
         render_frames: rendered frames mixed into the training crops to supervise the
             decomposition only (``loss.lambda_r_true`` / ``lambda_s_true``; their intensity is
-            another sensor's and is left out), at ``cfg.render_scale``; the real frames then
-            supervise the intensity and carry no true maps. Recorded in ``config.json``
-            (``data.renders``).
+            another sensor's and is left out), at ``cfg.render_scale``; the run's own frames
+            supervise the intensity (and R and S too, where they carry true maps). In a mixed
+            batch every term is averaged over all of its images, those it does not apply to
+            counting 0 (the SSIM part of the intensity term: 1, without gradient), so the
+            effective weights scale with the share of renders and of real frames. Recorded in
+            ``config.json`` (``data.renders``).
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     meta = load_meta(data_dir)
     source = Path(stn_weights) if stn_weights is not None else out_dir / "stn.safetensors"
     if source.is_file():
         cfg = _with_stn_config(cfg, source)  # config.json describes the STN actually used
-    _begin(cfg, data_dir, out_dir, "irnet", resume)
-    device = resolve_device(cfg.device)
+    cfg.validate()
     if frames is None:
         split_frames = {"train": _frames(data_dir, "train"), "val": list_frames(data_dir, "val")}
     else:
         split_frames = {k: [Path(f) for f in frames.get(k, ())] for k in ("train", "val")}
         if not split_frames["train"]:
             raise NidarError("no training frames given")
-        _record_frames(out_dir, split_frames)
+    # every check of the inputs comes before anything is written into OUT
     renders = [Path(f) for f in render_frames or ()]
+    inputs: dict[str, Any] = {}
     if render_frames is not None:
         if not renders:
             raise NidarError("no rendered frames given to mix in")
@@ -235,13 +238,19 @@ def train_irnet(
                 "loss.lambda_r_true and/or loss.lambda_s_true above 0"
             )
         _check_intrinsic_frames(renders)
-        _record_renders(out_dir, renders)
+        _check_render_sizes(renders, cfg)
+        inputs["renders"] = sorted(str(f) for f in renders)
     elif cfg.intrinsic_supervision:
         _check_intrinsic_frames(split_frames["train"] + split_frames["val"])
     init_state = None
     if init_weights is not None:
         init_state = _init_state(cfg, Path(init_weights))
-        _record_init(out_dir, Path(init_weights))
+        digest = hashlib.sha256(Path(init_weights).read_bytes()).hexdigest()
+        inputs["init"] = {"irnet": str(init_weights), "sha256": digest}
+    _begin(cfg, data_dir, out_dir, "irnet", resume, inputs)
+    if frames is not None:
+        _record_frames(out_dir, split_frames)
+    device = resolve_device(cfg.device)
     input_dirs: dict[str, Path | None] = {"train": None, "val": None}
     render_input: Path | None = None
     local = out_dir / "stn.safetensors"
@@ -269,7 +278,7 @@ def train_irnet(
             for split, fs in split_frames.items():
                 input_dirs[split] = _cache_pseudo_nir(stn, fs, cache / tag, cfg.scale)
             if renders:
-                rtag = f"pseudo_nir_{digest}" + (
+                rtag = f"pseudo_nir_{digest}_renders" + (
                     f"_x{cfg.render_scale:g}" if cfg.render_scale != 1.0 else ""
                 )
                 render_input = _cache_pseudo_nir(stn, renders, cache / rtag, cfg.render_scale)
@@ -348,6 +357,18 @@ def _mark_done(out_dir: Path, stage: str) -> None:
     write_stage_log(out_dir, stage, {**stage_log, "done": True})
 
 
+#: Inputs of a run besides its configuration, recorded under ``data`` in ``config.json``.
+_INPUT_KEYS = ("init", "renders")
+_INPUT_WORDS = {"init": "initial IRNet weights", "renders": "rendered frames mixed in"}
+
+
+def _input_identity(value: Any) -> Any:
+    """What must match for a run to continue: the initial weights' hash, the renders' list."""
+    if isinstance(value, dict):
+        return value.get("sha256")
+    return value
+
+
 #: Settings that may change when a run is resumed (they do not change what a step computes).
 _RESUMABLE_CHANGES = ("device", "num_workers", "checkpoint_every", "keep_checkpoints", "threads")
 _SCHEDULE_KEYS = ("epochs", "max_steps")
@@ -363,12 +384,21 @@ def _comparable(train_cfg: dict[str, Any]) -> dict[str, Any]:
     return d
 
 
-def _begin(cfg: TrainConfig, data_dir: Path, out_dir: Path, stage: str, resume: bool) -> None:
+def _begin(
+    cfg: TrainConfig,
+    data_dir: Path,
+    out_dir: Path,
+    stage: str,
+    resume: bool,
+    inputs: dict[str, Any] | None = None,
+) -> None:
     """Validate the configuration and write ``OUT/config.json``.
 
     A directory may hold one run: its configuration may only differ in the schedule
-    (epochs, max_steps) and in settings that do not change the computation, and a stage that
-    has made progress continues only with ``resume``.
+    (epochs, max_steps) and in settings that do not change the computation, its further
+    inputs (``inputs``: initial weights, rendered frames mixed in; recorded under ``data``)
+    may not differ once the stage has made progress, and a stage that has made progress
+    continues only with ``resume``.
     """
     cfg.validate()
     meta = load_meta(data_dir)
@@ -381,14 +411,21 @@ def _begin(cfg: TrainConfig, data_dir: Path, out_dir: Path, stage: str, resume: 
             "wavelength_nm": meta.get("wavelength_nm"),
         },
     }
+    record["data"] |= dict(inputs or {})
     cfg_path = out_dir / "config.json"
     if cfg_path.is_file():
         try:
-            old = json.loads(cfg_path.read_text())["train"]
-        except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+            previous = json.loads(cfg_path.read_text())
+            old = previous["train"]
+            old_data = previous.get("data", {})
+        except (OSError, json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise NidarError(f"cannot read {cfg_path}: {exc}") from None
         if _comparable(old) != _comparable(record["train"]):
             raise NidarError(f"{out_dir} holds a run with a different configuration")
+        if read_train_log(out_dir).get(stage, {}).get("steps"):  # a stage to continue
+            for key in _INPUT_KEYS:
+                if _input_identity(old_data.get(key)) != _input_identity(record["data"].get(key)):
+                    raise NidarError(f"{out_dir} holds a run with other {_INPUT_WORDS[key]}")
     if read_train_log(out_dir).get(stage, {}).get("steps") and not resume:
         raise NidarError(f"{out_dir} already holds a {stage} run; resume it or use a new directory")
     atomic_write(cfg_path, json.dumps(record, indent=2))
@@ -479,21 +516,19 @@ def _init_state(cfg: TrainConfig, path: Path) -> dict[str, torch.Tensor]:
     return load_irnet(path, "cpu").state_dict()
 
 
-def _record_renders(out_dir: Path, renders: list[Path]) -> None:
-    """Add the rendered frames mixed in to ``OUT/config.json`` (``data.renders``)."""
-    cfg_path = out_dir / "config.json"
-    record = json.loads(cfg_path.read_text())
-    record["data"]["renders"] = sorted(str(f) for f in renders)
-    atomic_write(cfg_path, json.dumps(record, indent=2))
+def _check_render_sizes(renders: list[Path], cfg: TrainConfig) -> None:
+    """Every render, at ``cfg.render_scale``, must hold a training crop."""
+    from .infer import reduced_size
 
-
-def _record_init(out_dir: Path, path: Path) -> None:
-    """Add the initial IRNet weights to ``OUT/config.json`` (``data.init``)."""
-    cfg_path = out_dir / "config.json"
-    record = json.loads(cfg_path.read_text())
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    record["data"]["init"] = {"irnet": str(path), "sha256": digest}
-    atomic_write(cfg_path, json.dumps(record, indent=2))
+    ch, cw = cfg.crop_shape
+    for path in renders:
+        h, w = load_frame(path, ("mask",))["mask"].shape
+        rh, rw = reduced_size(h, w, cfg.render_scale)
+        if rh < ch or rw < cw:
+            raise NidarError(
+                f"{path}: {rh}x{rw} pixels at render_scale {cfg.render_scale:g}, smaller than "
+                f"the {ch}x{cw} training crops"
+            )
 
 
 def _record_frames(out_dir: Path, split_frames: dict[str, list[Path]]) -> None:

@@ -69,6 +69,8 @@ def test_scores_over_frame_files(tmp_path):
     frames = list_frames(data, "test")
 
     class Oracle:  # predicts the frame's own true maps
+        scale = 1.0
+
         def __init__(self):
             self.arrays = {}
 
@@ -88,3 +90,4 @@ def test_scores_over_frame_files(tmp_path):
     assert [r["frame"] for r in out["rows"]] == [f.stem for f in frames]
     assert out["mean"]["r_R_reflectance"] == pytest.approx(1.0)
     assert out["mean"]["r_R_shading"] == pytest.approx(out["mean"]["r_true_shading"])
+    assert out["scale"] == 1.0

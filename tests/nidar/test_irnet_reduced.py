@@ -168,6 +168,16 @@ def test_loo_rows_train_one_network_per_fold_without_the_test_frame(kitti_data, 
     assert len(list((tmp_path / "work").glob("fold-*"))) == 1  # one network for three rows
     assert {r["method"] for r in res["rows"]} == set(methods)
     assert all(np.isfinite(r["spearman"]) for r in res["rows"])
+    # a finished fold is reused by the same evaluation, refused by one of another configuration
+    train = [s for s in scans if s.name != "kitti__000000"]
+    FoldModels(_cfg(), data, tmp_path / "work", stn).model(train)
+    other = dataclasses.replace(_cfg(), seed=7)
+    with pytest.raises(NidarError, match="finished run of another configuration"):
+        FoldModels(other, data, tmp_path / "work", stn).model(train)
+    with pytest.raises(NidarError, match="finished run of another configuration"):
+        FoldModels(
+            _cfg(), data, tmp_path / "work", stn, init_weights=fold / "irnet.safetensors"
+        ).model(train)
 
 
 def test_cli_trains_on_every_frame_at_the_given_scale(kitti_data, tmp_path, capsys):

@@ -154,3 +154,40 @@ def test_joint_run_with_renders(data_dir, tmp_path):
         train_irnet(
             cfg, real, tmp_path / "x", progress=False, render_frames=list_frames(real, "train")
         )
+
+
+def test_a_run_continues_only_with_the_same_inputs(supervised, data_dir, tmp_path):
+    cfg, out = supervised
+    init = out / "irnet.safetensors"
+    run = tmp_path / "run"
+    train_irnet(cfg, data_dir, run, progress=False, init_weights=init)
+    # resuming without the initial weights, or with others, is refused; the record stays
+    with pytest.raises(NidarError, match="other initial IRNet weights"):
+        train_irnet(cfg, data_dir, run, progress=False, resume=True)
+    other = tmp_path / "other.safetensors"
+    other.write_bytes((run / "irnet.safetensors").read_bytes())
+    with pytest.raises(NidarError, match="other initial IRNet weights"):
+        train_irnet(cfg, data_dir, run, progress=False, resume=True, init_weights=other)
+    record = json.loads((run / "config.json").read_text())
+    assert record["data"]["init"]["sha256"] == hashlib.sha256(init.read_bytes()).hexdigest()
+
+
+def test_failed_input_checks_write_nothing(data_dir, tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(NidarError, match="lambda_r_true"):
+        train_irnet(
+            _cfg(), data_dir, out, progress=False, render_frames=list_frames(data_dir, "train")
+        )
+    assert not out.exists()
+
+
+def test_renders_smaller_than_the_crops_are_refused(data_dir, tmp_path):
+    cfg = dataclasses.replace(_cfg(lambda_r_true=1.0), render_scale=0.25)  # 12 x 16 < 32 x 32
+    with pytest.raises(NidarError, match="smaller than the 32x32 training crops"):
+        train_irnet(
+            cfg,
+            data_dir,
+            tmp_path / "o",
+            progress=False,
+            render_frames=list_frames(data_dir, "train"),
+        )
