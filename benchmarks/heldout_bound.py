@@ -39,9 +39,7 @@ def returns(path: Path) -> dict[str, np.ndarray]:
     depth, k = z["depth"].astype(np.float64), z["K"]
     h, w = depth.shape
     v, u = np.mgrid[0:h, 0:w]
-    p = np.stack(
-        [(u - k[0, 2]) / k[0, 0] * depth, (v - k[1, 2]) / k[1, 1] * depth, depth], -1
-    )
+    p = np.stack([(u - k[0, 2]) / k[0, 0] * depth, (v - k[1, 2]) / k[1, 1] * depth, depth], -1)
     normal = np.cross(np.gradient(p, axis=1), np.gradient(p, axis=0))
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True) + 1e-12
     ray = p - z["T_cam_lidar"][:3, 3]  # from the LiDAR origin, camera frame
@@ -69,9 +67,8 @@ def main(argv: list[str] | None = None) -> int:
     from scipy.stats import spearmanr
 
     from nidar_mi.dataset import SPLITS, list_frames, load_meta
-    from nidar_mi.nidar.gbm_profile import fit_gbm
-
     from nidar_mi.errors import NidarError
+    from nidar_mi.nidar.gbm_profile import fit_gbm
 
     try:
         train = [returns(f) for f in list_frames(args.train_data, "train")]
