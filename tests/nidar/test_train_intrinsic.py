@@ -191,3 +191,23 @@ def test_renders_smaller_than_the_crops_are_refused(data_dir, tmp_path):
             progress=False,
             render_frames=list_frames(data_dir, "train"),
         )
+
+
+def test_cli_renders_mixed_into_a_real_run(data_dir, tmp_path, capsys):
+    real = _without_true_maps(data_dir, tmp_path / "real")
+    config = tmp_path / "cfg.json"
+    config.write_text(json.dumps({"loss": {"lambda_r_true": 1.0, "lambda_s_true": 0.2}}))
+    out = tmp_path / "out"
+    args = [str(real), str(out), "--reduced", "--stage", "irnet", "--input", "rgb"]
+    args += ["--config", str(config), "--renders", str(data_dir), "--no-progress", "-q"]
+    assert main(args) == 0
+    record = json.loads((out / "config.json").read_text())
+    assert record["data"]["renders"] == sorted(str(f) for f in list_frames(data_dir, "train"))
+    assert (out / "irnet.safetensors").is_file() and (out / "calibration.json").is_file()
+    # a folder without rendered frames: one line, status 2, nothing written
+    bad = [str(real), str(tmp_path / "no"), "--reduced", "--stage", "irnet", "--input", "rgb"]
+    bad += ["--config", str(config), "--renders", str(tmp_path / "none"), "-q"]
+    assert main(bad) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: --renders: no frames in {tmp_path / 'none' / 'train'}"]
+    assert not (tmp_path / "no").exists()
