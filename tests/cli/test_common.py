@@ -86,6 +86,10 @@ def test_command_list_and_versions():
     assert r.returncode == 0 and "python -m nidar_mi.render" in r.stdout
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize(
     "sig, status, word",
     [
@@ -104,6 +108,9 @@ def test_signal_during_render_leaves_nothing(tmp_path, sig, status, word):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # a test run started as a background job of a non-interactive shell ignores SIGINT, and
+        # children inherit that: give the command the default disposition a terminal gives it
+        preexec_fn=_default_sigint,
     )
     deadline = time.monotonic() + 120
     while not any(p.name.startswith(".street.partial-") for p in tmp_path.iterdir()):
