@@ -9,6 +9,8 @@
   pixel map, nearest point wins).
 * :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
   cameras, fused by a rule).
+* :mod:`~nidar_mi.geometry.normals`: :func:`estimate_normals` (plane fits to each point's
+  neighbours) and :func:`incidence_cosine` (the ray's ``|cos θ|`` on the surface).
 * :mod:`~nidar_mi.geometry.se3`: SE(3) exponential and logarithm, poses interpolated along a
   trajectory (constant twist between samples).
 
@@ -17,6 +19,7 @@ Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are 
 
 from .camera_model import CONVENTIONS, R_OPENCV_FROM_WAYMO, CameraModel
 from .fusion import FUSION_RULES, sample_cameras
+from .normals import estimate_normals, incidence_cosine
 from .projection import bilinear_sample, in_image, project, unproject
 from .visibility import (
     DEFAULT_ABS_TOL,
@@ -35,7 +38,9 @@ __all__ = [
     "R_OPENCV_FROM_WAYMO",
     "CameraModel",
     "bilinear_sample",
+    "estimate_normals",
     "in_image",
+    "incidence_cosine",
     "project",
     "sample_cameras",
     "splat_points",

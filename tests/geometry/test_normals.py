@@ -1,0 +1,94 @@
+"""Normals of a point cloud and the ray's incidence: analytic planes, spheres and the ground
+under a raised sensor."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nidar_mi.errors import NidarError
+from nidar_mi.geometry import estimate_normals, incidence_cosine
+from nidar_mi.geometry import normals as normals_mod
+
+
+def _plane(normal, offset, n=4000, seed=0, extent=6.0):
+    """Points on the plane {x : n·x = offset} around its foot point, uniformly spread."""
+    rng = np.random.default_rng(seed)
+    nrm = np.asarray(normal, float) / np.linalg.norm(normal)
+    a = np.cross(nrm, [0.0, 0.0, 1.0] if abs(nrm[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(nrm, a)
+    st = rng.uniform(-extent, extent, (n, 2))
+    return offset * nrm + st[:, :1] * a + st[:, 1:] * b, nrm
+
+
+@pytest.mark.parametrize("normal", [(1, 0, 0), (1, 1, 0.3), (0.2, -0.5, 1.0)])
+def test_a_planes_normal_and_the_analytic_incidence(normal):
+    """On a plane n·x = 10 every estimated normal is ±n (to 1e-6), oriented to the sensor at
+    the origin, and |cos θ| = 10 / |x| exactly (the foot point is 10 m away along n)."""
+    pts, nrm = _plane(normal, 10.0)
+    est = estimate_normals(pts)
+    assert np.all(np.abs(est @ nrm) > 1 - 1e-6)
+    assert np.all(np.einsum("ni,ni->n", est, pts) < 0)  # towards the origin
+    np.testing.assert_allclose(incidence_cosine(pts), 10.0 / np.linalg.norm(pts, axis=1), atol=1e-6)
+
+
+def test_ground_under_a_raised_sensor():
+    """A flat ground 1.73 m under the sensor (KITTI's mounting height), sampled along rings as
+    a spinning LiDAR does: cos θ = h / range, the grazing far returns included."""
+    h = 1.73
+    elev = np.radians(np.linspace(-24.8, -3.0, 40))
+    az = np.radians(np.arange(0, 360, 0.4))
+    e, a = np.meshgrid(elev, az, indexing="ij")
+    rng = h / np.sin(-e)
+    pts = np.stack(
+        [rng * np.cos(e) * np.cos(a), rng * np.cos(e) * np.sin(a), np.full_like(e, -h)], -1
+    ).reshape(-1, 3)
+    cos = incidence_cosine(pts)
+    np.testing.assert_allclose(cos, h / np.linalg.norm(pts, axis=1), atol=1e-6)
+
+
+def test_a_sphere_around_the_sensor_is_seen_head_on():
+    """Every ray from the centre of a sphere (r = 8 m) meets it along the normal: cos θ ≈ 1
+    (the plane fit over a 20-point patch of a curved surface: within 1e-3)."""
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(20_000, 3))
+    pts = 8.0 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    cos = incidence_cosine(pts)
+    assert cos.min() > 1 - 1e-3
+
+
+def test_given_normals_are_used_as_they_are():
+    pts, nrm = _plane((0, 1, 0), 5.0, n=50)
+    given = np.tile([0.0, 0.0, 3.0], (50, 1))  # not unit, not the plane's: used as given
+    cos = incidence_cosine(pts, normals=given)
+    np.testing.assert_allclose(cos, np.abs(pts[:, 2]) / np.linalg.norm(pts, axis=1), atol=1e-12)
+
+
+def test_chunks_give_the_same_normals(monkeypatch):
+    pts, _ = _plane((0.3, 1.0, 0.2), 7.0, n=3000, seed=2)
+    pts = pts + np.random.default_rng(3).normal(0, 0.02, pts.shape)  # noisy: normals vary
+    whole = estimate_normals(pts)
+    monkeypatch.setattr(normals_mod, "CHUNK", 257)
+    np.testing.assert_allclose(estimate_normals(pts), whole, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: estimate_normals(np.zeros((5, 2))), r"expected \(N, 3\) points"),
+        (lambda: estimate_normals(np.array([[0, 0, np.nan]] * 5)), "finite"),
+        (lambda: estimate_normals(np.ones((2, 3))), "at least 3 points"),
+        (lambda: estimate_normals(np.random.rand(10, 3), k=2), "at least 3 neighbours"),
+        (lambda: incidence_cosine(np.random.rand(10, 3), normals=np.ones((9, 3))), "shaped like"),
+    ],
+)
+def test_bad_input_is_one_error(call, message):
+    with pytest.raises(NidarError, match=message):
+        call()
+
+
+def test_few_points_cap_k():
+    """With fewer points than k every point is a neighbour: 4 coplanar points, their plane."""
+    pts = np.array([[5.0, 0, 0], [5.0, 1, 0], [5.0, 0, 1], [5.0, 1, 1]])
+    np.testing.assert_allclose(np.abs(estimate_normals(pts)[:, 0]), 1.0, atol=1e-12)
