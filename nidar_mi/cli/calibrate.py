@@ -2,6 +2,7 @@
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
+                                 [--incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--overwrite] [-q]
 
@@ -10,7 +11,10 @@
 ``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
 ``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
 its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
-(:func:`nidar_mi.nidar.profiles.fit_scan_profile`). The profile file
+(:func:`nidar_mi.nidar.profiles.fit_scan_profile`). With ``--incidence`` (``gbm`` only) the
+profile also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
+(:func:`nidar_mi.geometry.incidence_cosine`); ``assign`` and ``render`` then estimate it the
+same way on the clouds they are given. The profile file
 (:mod:`nidar_mi.nidar.profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -47,6 +51,12 @@ def build_parser():
         help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
         "value (default); range_ring: monotone map per range bin + ring gains; "
         "distance_quantile: the paper's distance encoding + quantile map",
+    )
+    p.add_argument(
+        "--incidence",
+        action="store_true",
+        help="gbm: also read the incidence |cos θ| of each return, from normals estimated on "
+        "the scan's own points",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -94,6 +104,8 @@ def _calibrate(args, argv) -> None:
     from ..nidar.pipeline import NidarModel
     from ..nidar.profiles import fit_scan_profile
 
+    if args.incidence and args.form != "gbm":
+        raise NidarError(f"--incidence needs --form gbm (got --form {args.form})")
     _check_target(args.out, args.overwrite)
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
@@ -111,11 +123,13 @@ def _calibrate(args, argv) -> None:
         branch=args.branch,
         provenance={"data": [os.path.abspath(s) for s in args.scans], "command": command},
         progress=not args.quiet,
+        incidence=args.incidence,
     )
     profile.save(args.out)
     if not args.quiet:
         prov = profile.provenance
         print(
-            f"{profile.form} profile '{profile.name}' fitted on {prov['frames']} frames, "
+            f"{profile.form} profile '{profile.name}'"
+            f"{' (with incidence)' if profile.uses_incidence else ''} fitted on {prov['frames']} frames, "
             f"{prov['returns']} returns (rings: {prov['rings']}); wrote {args.out}"
         )

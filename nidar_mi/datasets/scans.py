@@ -20,6 +20,7 @@ when asked for, so that many frames fit in memory). :func:`load_scans` reads any
 
 from __future__ import annotations
 
+import functools
 import os
 import warnings
 from collections.abc import Callable, Sequence
@@ -65,6 +66,14 @@ class ScanFrame:
     def range_m(self) -> np.ndarray:
         """(N,) float64 distance of each return from the LiDAR origin, m."""
         return np.linalg.norm(self.xyz, axis=1)
+
+    @functools.cached_property
+    def cos_incidence(self) -> np.ndarray:
+        """(N,) float64 ``|cos θ|`` of the rays on the surfaces at the returns, normals estimated
+        from these returns (:func:`nidar_mi.geometry.incidence_cosine`; computed once)."""
+        from ..geometry import incidence_cosine
+
+        return incidence_cosine(self.xyz)
 
     @property
     def elevation_deg(self) -> np.ndarray:

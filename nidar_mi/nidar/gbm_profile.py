@@ -20,6 +20,11 @@ is what RMSE and SSIM reward.
   never comes out darker: the ranking of surfaces stays the model's.
 * A **geometry-only** map (``use_value=False``) has the features ``(d, e)`` only: what a profile
   knows without any image (it ignores the values it is given).
+* An **incidence-aware** map (``use_incidence=True``) also reads ``c = |cos θ|``, the cosine of
+  the angle between the ray and the surface normal at the return
+  (:func:`nidar_mi.geometry.incidence_cosine`, normals estimated from the scan's own points):
+  ``I = clip(F(v, d, e, c), 0, 1)``, constrained non-decreasing in ``c`` (a surface seen more
+  head-on never comes out darker). The image carries the surface, the scan its orientation.
 
 Fitting is deterministic (``deterministic``, one thread, row-wise histograms, a fixed seed, no
 bagging): the same data and seed give the same model text. The map is stored in a profile file
@@ -43,6 +48,8 @@ __all__ = [
     "DEFAULT_LEAVES",
     "DEFAULT_TREES",
     "FEATURES",
+    "GEOMETRY_FEATURES",
+    "INCIDENCE_FEATURE",
     "GbmMap",
     "fit_gbm",
 ]
@@ -65,7 +72,14 @@ DEFAULT_MAX_SAMPLES = 2_000_000
 MAX_TREES = 1000
 MAX_LEAVES = 255
 MAX_MODEL_CHARS = 8_000_000
-_FEATURE_SETS = (FEATURES, GEOMETRY_FEATURES)
+#: The incidence feature (``|cos θ|`` of the ray on the surface), last column when used.
+INCIDENCE_FEATURE = "cos_incidence"
+_FEATURE_SETS = (
+    FEATURES,
+    GEOMETRY_FEATURES,
+    (*FEATURES, INCIDENCE_FEATURE),
+    (*GEOMETRY_FEATURES, INCIDENCE_FEATURE),
+)
 
 
 def _lgb():
@@ -79,7 +93,7 @@ def _lgb():
 
 
 def _params(
-    n_features: int,
+    features: tuple[str, ...],
     monotone: bool,
     *,
     leaves: int,
@@ -101,8 +115,9 @@ def _params(
         "seed": int(seed),
         "verbose": -1,
     }
-    if monotone and n_features == len(FEATURES):
-        p["monotone_constraints"] = [1, 0, 0]
+    signs = [int((f == "v" and monotone) or f == INCIDENCE_FEATURE) for f in features]
+    if any(signs):
+        p["monotone_constraints"] = signs
         p["monotone_constraints_method"] = "basic"
     return p
 
@@ -112,8 +127,9 @@ class GbmMap:
     """A fitted gradient-boosted sensor response (module docstring).
 
     Attributes:
-        features: the feature names in column order, :data:`FEATURES` or
-            ``("range_m", "elevation_deg")`` (geometry only).
+        features: the feature names in column order: :data:`FEATURES` or
+            :data:`GEOMETRY_FEATURES` (geometry only), each optionally followed by
+            :data:`INCIDENCE_FEATURE`.
         monotone: whether the map was constrained non-decreasing in ``v``.
         model: LightGBM's text model (``Booster.model_to_string``).
         params: the fitting parameters (for the record).
@@ -128,8 +144,8 @@ class GbmMap:
         feats = tuple(self.features)
         if feats not in _FEATURE_SETS:
             raise NidarError(
-                f"gbm: features must be {list(FEATURES)} or {list(GEOMETRY_FEATURES)} "
-                f"(got {list(feats)})"
+                f"gbm: features must be {list(FEATURES)} or {list(GEOMETRY_FEATURES)}, "
+                f"optionally followed by '{INCIDENCE_FEATURE}' (got {list(feats)})"
             )
         object.__setattr__(self, "features", feats)
         if not isinstance(self.monotone, bool):
@@ -144,6 +160,11 @@ class GbmMap:
         return self.features[0] == "v"
 
     @property
+    def uses_incidence(self) -> bool:
+        """Whether the map reads the returns' incidence cosine."""
+        return self.features[-1] == INCIDENCE_FEATURE
+
+    @property
     def n_trees(self) -> int:
         """Number of trees."""
         return int(self._booster.num_trees())
@@ -154,6 +175,7 @@ class GbmMap:
         range_m: Any,
         ring: Any = None,
         elevation_deg: Any = None,
+        cos_incidence: Any = None,
     ) -> np.ndarray:
         """Intensities of returns (module docstring).
 
@@ -162,16 +184,28 @@ class GbmMap:
             range_m: (N,) ranges, m.
             ring: ignored (the elevation stands for the laser).
             elevation_deg: (N,) elevations above the sensor's xy plane, degrees; required.
+            cos_incidence: (N,) ``|cos θ|`` in [0, 1]; required by an incidence-aware map,
+                ignored otherwise.
 
         Returns:
             (N,) float64 in [0, 1].
 
         Raises:
-            NidarError: no elevations, mismatched lengths or non-finite inputs.
+            NidarError: no elevations (or incidences, for a map that reads them), mismatched
+                lengths or non-finite inputs.
         """
         if elevation_deg is None:
             raise NidarError("gbm profile: the returns' elevations are needed")
-        x = _design(values, range_m, elevation_deg, self.uses_value, "gbm profile")
+        if self.uses_incidence and cos_incidence is None:
+            raise NidarError("gbm profile: this profile reads the returns' incidence cosines")
+        x = _design(
+            values,
+            range_m,
+            elevation_deg,
+            self.uses_value,
+            "gbm profile",
+            cos_incidence if self.uses_incidence else None,
+        )
         out = self._booster.predict(x, num_threads=1)
         return np.clip(np.asarray(out, dtype=np.float64), 0.0, 1.0)
 
@@ -207,19 +241,27 @@ class GbmMap:
         )
 
 
-def _design(values, range_m, elevation_deg, use_value: bool, who: str) -> np.ndarray:
-    """(N, 3) or (N, 2) float64 feature matrix; checks lengths and finiteness."""
+def _design(
+    values, range_m, elevation_deg, use_value: bool, who: str, cos_incidence=None
+) -> np.ndarray:
+    """(N, F) float64 feature matrix in a feature set's column order; checks lengths, finiteness
+    and the incidence range."""
     d = np.asarray(range_m, dtype=np.float64).reshape(-1)
     e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
     cols = [d, e]
     if use_value:
         v = np.asarray(values, dtype=np.float64).reshape(-1)
         cols.insert(0, v)
+    if cos_incidence is not None:
+        c = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)
+        cols.append(c)
     if any(c.shape != d.shape for c in cols):
-        raise NidarError(f"{who}: values, ranges and elevations differ in length")
+        raise NidarError(f"{who}: values, ranges, elevations and incidences differ in length")
     x = np.stack(cols, axis=1)
     if not np.all(np.isfinite(x)):
-        raise NidarError(f"{who}: values, ranges and elevations must be finite")
+        raise NidarError(f"{who}: values, ranges, elevations and incidences must be finite")
+    if cos_incidence is not None and not np.all((x[:, -1] >= 0) & (x[:, -1] <= 1)):
+        raise NidarError(f"{who}: incidence cosines must lie in [0, 1]")
     return x
 
 
@@ -384,6 +426,7 @@ def fit_gbm(
     reference: Any,
     elevation_deg: Any,
     *,
+    cos_incidence: Any = None,
     use_value: bool = True,
     monotone: bool = True,
     trees: int = DEFAULT_TREES,
@@ -400,6 +443,8 @@ def fit_gbm(
         range_m: (N,) their ranges, m.
         reference: (N,) the sensor's intensities there, in [0, 1].
         elevation_deg: (N,) their elevations above the sensor's xy plane, degrees.
+        cos_incidence: (N,) ``|cos θ|`` of the returns in [0, 1]: given, the map is
+            incidence-aware (module docstring); None: it is not.
         use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
         monotone: constrain the map non-decreasing in the value.
         trees: boosting rounds, 1 to :data:`MAX_TREES`.
@@ -418,7 +463,7 @@ def fit_gbm(
         raise NidarError(f"fit_gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
     if not 0 < learning_rate <= 1 or min_leaf < 1 or max_samples < 1:
         raise NidarError("fit_gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
-    x = _design(values, range_m, elevation_deg, use_value, "fit_gbm")
+    x = _design(values, range_m, elevation_deg, use_value, "fit_gbm", cos_incidence)
     y = np.asarray(reference, dtype=np.float64).reshape(-1)
     if y.shape != (x.shape[0],) or not y.size:
         raise NidarError(f"fit_gbm: {x.shape[0]} returns but {y.size} references")
@@ -428,8 +473,10 @@ def fit_gbm(
         keep = np.sort(np.random.default_rng(seed).choice(y.size, max_samples, replace=False))
         x, y = x[keep], y[keep]
     feats = FEATURES if use_value else GEOMETRY_FEATURES
+    if cos_incidence is not None:
+        feats = (*feats, INCIDENCE_FEATURE)
     params = _params(
-        len(feats),
+        feats,
         monotone,
         leaves=leaves,
         learning_rate=learning_rate,

@@ -11,7 +11,8 @@ profile holds that part, fitted on the sensor's own scans
 * ``range_ring``: a monotone map of the model value per range bin and a gain per ring
   (:class:`nidar_mi.nidar.range_ring.RangeRingMap`);
 * ``gbm``: a gradient-boosted regression of the intensity on the value, the range and the
-  elevation, monotone in the value, or on the range and elevation alone
+  elevation, monotone in the value, or on the range and elevation alone; optionally also on
+  the incidence ``|cos θ|`` of the ray on the surface, estimated from the scan's own points
   (:class:`nidar_mi.nidar.gbm_profile.GbmMap`; LightGBM's text model in the file).
 
 **File format** (JSON, UTF-8)::
@@ -95,6 +96,12 @@ class SensorProfile:
             raise NidarError(f"profile {self.name}: 'model' must be null or an object of strings")
 
     @property
+    def uses_incidence(self) -> bool:
+        """Whether :meth:`apply` needs the returns' incidence cosines (an incidence-aware
+        ``gbm`` profile)."""
+        return isinstance(self.mapping, GbmMap) and self.mapping.uses_incidence
+
+    @property
     def branch(self) -> str | None:
         """The NIDAR map the profile reads (``"R"``, ``"I_hat"``, ...), None for other inputs."""
         return self.input.split(":", 1)[1] if self.input.startswith("nidar:") else None
@@ -105,6 +112,7 @@ class SensorProfile:
         range_m: Any,
         ring: Any = None,
         elevation_deg: Any = None,
+        cos_incidence: Any = None,
     ) -> np.ndarray:
         """The sensor's intensity of returns with these model values.
 
@@ -114,12 +122,16 @@ class SensorProfile:
             ring: optional (N,) rings (-1 unknown); used by ``range_ring``.
             elevation_deg: optional (N,) elevations above the sensor's xy plane, degrees
                 (``range_ring``: rings of returns without one; ``gbm``: required).
+            cos_incidence: optional (N,) ``|cos θ|`` of the rays on the surfaces, in [0, 1]
+                (:func:`nidar_mi.geometry.incidence_cosine`); required when
+                :attr:`uses_incidence`, ignored otherwise.
 
         Returns:
             (N,) float32 intensities in [0, 1].
 
         Raises:
-            NidarError: mismatched lengths or non-finite values or ranges.
+            NidarError: mismatched lengths, non-finite values or ranges, or no incidences
+                for a profile that reads them.
         """
         v = np.asarray(values, dtype=np.float64).reshape(-1)
         d = np.asarray(range_m, dtype=np.float64).reshape(-1)
@@ -129,6 +141,8 @@ class SensorProfile:
             raise NidarError(f"profile {self.name}: values and ranges must be finite")
         if self.form == "distance_quantile":
             out = self.mapping.quantile_map(self.mapping.encode(v, d))
+        elif self.form == "gbm":
+            out = self.mapping(v, d, ring, elevation_deg, cos_incidence)
         else:
             out = self.mapping(v, d, ring, elevation_deg)
         return out.astype(np.float32)
@@ -240,6 +254,7 @@ def fit_profile(
     input: str,
     ring: Any = None,
     elevation_deg: Any = None,
+    cos_incidence: Any = None,
     model: dict[str, str] | None = None,
     provenance: dict[str, Any] | None = None,
     **options: Any,
@@ -254,6 +269,8 @@ def fit_profile(
         name, sensor, input, model, provenance: the profile's fields.
         ring: optional (N,) rings (``range_ring``).
         elevation_deg: optional (N,) elevations, degrees (``range_ring``; required by ``gbm``).
+        cos_incidence: optional (N,) incidence cosines: given, a ``gbm`` profile reads them
+            (the other forms do not: an error).
         **options: passed to :func:`~nidar_mi.nidar.calibration.fit_calibration`,
             :func:`~nidar_mi.nidar.range_ring.fit_range_ring` or
             :func:`~nidar_mi.nidar.gbm_profile.fit_gbm` (``use_value=False``: geometry only).
@@ -261,12 +278,16 @@ def fit_profile(
     Raises:
         NidarError: an unknown form or unusable data.
     """
+    if cos_incidence is not None and form != "gbm":
+        raise NidarError(f"only a gbm profile reads the incidence (form {form!r} does not)")
     if form == "distance_quantile":
         mapping = fit_calibration(values, range_m, reference, branch=input, **options)
     elif form == "range_ring":
         mapping = fit_range_ring(values, range_m, reference, ring, elevation_deg, **options)
     elif form == "gbm":
-        mapping = fit_gbm(values, range_m, reference, elevation_deg, **options)
+        mapping = fit_gbm(
+            values, range_m, reference, elevation_deg, cos_incidence=cos_incidence, **options
+        )
     else:
         raise NidarError(f"profile form must be one of {', '.join(PROFILE_FORMS)} (got {form!r})")
     return SensorProfile(

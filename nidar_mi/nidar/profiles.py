@@ -124,6 +124,7 @@ def fit_values_profile(
     model: dict[str, str] | None = None,
     provenance: dict[str, Any] | None = None,
     progress: bool = False,
+    incidence: bool = False,
     **options: Any,
 ) -> SensorProfile:
     """Fit a profile mapping per-return values to the scans' intensities.
@@ -138,6 +139,8 @@ def fit_values_profile(
         form: ``"gbm"``, ``"range_ring"`` or ``"distance_quantile"``.
         provenance: extra provenance entries (the data, the command).
         progress: show a progress bar.
+        incidence: the profile also reads the returns' incidence cosines, estimated from each
+            scan's points (``ScanFrame.cos_incidence``; ``gbm`` form only).
         **options: passed to :func:`~nidar_mi.nidar.profile.fit_profile`.
 
     Raises:
@@ -147,7 +150,7 @@ def fit_values_profile(
 
     if not scans:
         raise NidarError("no scans to fit a profile on")
-    vals, rng, ring, elev, ref = [], [], [], [], []
+    vals, rng, ring, elev, ref, cos = [], [], [], [], [], []
     for scan in tqdm(scans, desc=f"profile {name}", unit="frame", disable=not progress):
         v = np.asarray(values(scan), dtype=np.float64).reshape(-1)
         if v.shape != scan.intensity.shape:
@@ -158,6 +161,8 @@ def fit_values_profile(
         ring.append(scan.ring[ok].astype(np.int64))
         elev.append(scan.elevation_deg[ok])
         ref.append(scan.intensity[ok])
+        if incidence:
+            cos.append(scan.cos_incidence[ok])
     n = int(sum(len(v) for v in vals))
     if n == 0:
         raise NidarError("no return of these scans has a value")
@@ -178,6 +183,7 @@ def fit_values_profile(
         input=input,
         ring=ring_all if has_rings else None,
         elevation_deg=np.concatenate(elev),
+        cos_incidence=np.concatenate(cos) if incidence else None,
         model=model,
         provenance=info,
         **options,

@@ -42,6 +42,23 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
     assert main([str(kitti), "-o", str(other), "-q", "--overwrite"]) == 0
 
 
+def test_incidence_aware_profile(tmp_path, capsys):
+    """--incidence: the profile reads |cos θ| (estimated on the scans' points) and is
+    non-decreasing in it; only with the gbm form."""
+    kitti = make_kitti(tmp_path / "drive", frames=2)
+    out = tmp_path / "inc.json"
+    assert main([str(kitti), "-o", str(out), "--incidence"]) == 0
+    assert "(with incidence) fitted on 2 frames" in capsys.readouterr().out
+    p = load_profile(out)
+    assert p.uses_incidence and p.mapping.features[-1] == "cos_incidence"
+    c = np.linspace(0, 1, 50)
+    y = p.apply(np.full(50, 0.5), np.full(50, 12.0), None, np.full(50, -8.0), c)
+    assert np.all(np.diff(y) >= 0)
+    assert main([str(kitti), "-o", str(out), "--incidence", "--form", "range_ring", "-q"]) == 2
+    assert "--incidence needs --form gbm" in capsys.readouterr().err
+    assert load_profile(out).uses_incidence  # the earlier file is untouched
+
+
 def test_generic_folder_with_rings_and_0_255_intensity(tmp_path, capsys):
     def inten(rng_m, rng):
         return np.round(255 * np.clip(np.exp(-rng_m / 20) + rng.normal(0, 0.02, len(rng_m)), 0, 1))
