@@ -12,10 +12,12 @@ against the frame's range-compensated intensity (Spearman per frame and over all
   ``train`` frames;
 * ``cos θ`` alone: the incidence of the LiDAR ray on the surface whose normal comes from the
   depth map (finite differences of the back-projected pixels);
-* ``R_true · cos θ``.
+* ``R_true · cos θ``;
+* ``R_true`` through an incidence-aware ``gbm`` profile (value, range, elevation, ``cos θ``)
+  fitted on ``TRAIN_DATA``'s ``train`` frames.
 
 No network is involved: these bound any method that estimates reflectance from the camera image
-and maps it through a profile of range and elevation.
+and maps it through a profile of range and elevation (and, for the last row, the incidence).
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ def returns(path: Path) -> dict[str, np.ndarray]:
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True) + 1e-12
     ray = p - z["T_cam_lidar"][:3, 3]  # from the LiDAR origin, camera frame
     ray /= np.linalg.norm(ray, axis=-1, keepdims=True) + 1e-12
-    cos = np.abs(np.einsum("hwc,hwc->hw", normal, ray))
+    cos = np.clip(np.abs(np.einsum("hwc,hwc->hw", normal, ray)), 0.0, 1.0)
     sel = z["mask"] & (z["R_true"] >= 1e-3) & np.isfinite(cos)
     lidar_from_cam = np.linalg.inv(z["T_cam_lidar"])
     pts = np.einsum("ij,nj->ni", lidar_from_cam[:3, :3], p[sel]) + lidar_from_cam[:3, 3]
@@ -82,6 +84,9 @@ def main(argv: list[str] | None = None) -> int:
     scale = float(load_meta(args.train_data).get("intensity_scale", 1.0))
     reference = np.clip(cat["intensity"] / scale, 0, 1)  # the metric scale of the evaluation
     gbm = fit_gbm(cat["r_true"], cat["range"], reference, cat["elevation"])
+    gbm_inc = fit_gbm(
+        cat["r_true"], cat["range"], reference, cat["elevation"], cos_incidence=cat["cos"]
+    )
 
     def values(t):
         return {
@@ -89,6 +94,9 @@ def main(argv: list[str] | None = None) -> int:
             "R_true + gbm": gbm(t["r_true"], t["range"], elevation_deg=t["elevation"]),
             "cos": t["cos"],
             "R_true * cos": t["r_true"] * t["cos"],
+            "R_true + gbm with incidence": gbm_inc(
+                t["r_true"], t["range"], elevation_deg=t["elevation"], cos_incidence=t["cos"]
+            ),
         }
 
     per_frame: dict[str, list[float]] = {}

@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     methods = {}
     if args.baselines:
         base = standard_methods(forms=tuple(args.forms))
-        keep = ("range_only", "geometry_gbm")
+        keep = ("range_only", "geometry_gbm", "geometry_gbm_inc")
         methods |= {k: v for k, v in base.items() if k in keep or k.startswith("lum_")}
     methods |= irnet_methods(models, forms=tuple(args.forms))
     res = leave_one_out(scans, tests, methods, progress=args.progress)

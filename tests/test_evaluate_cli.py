@@ -209,6 +209,9 @@ def test_real_data_tables(tmp_path):
         "nidar_R_gbm",
         "geometry_gbm",
         "lum_gbm_free",
+        "geometry_gbm_inc",
+        "linnir_gbm_inc",
+        "nidar_R_gbm_inc",
     ):
         assert needed in keys
     assert len(loo["rows"]) == 3 * len(keys)

@@ -149,7 +149,8 @@ def profile_method(
 
         def predict(scan):
             v = _fill(values(scan), median)
-            return profile.apply(v, scan.range_m, scan.ring, scan.elevation_deg)
+            cos = scan.cos_incidence if profile.uses_incidence else None
+            return profile.apply(v, scan.range_m, scan.ring, scan.elevation_deg, cos)
 
         return predict
 
@@ -200,8 +201,10 @@ def standard_methods(
         zero_shot_profile: a profile fitted elsewhere (e.g. ``sim-905``) for a zero-shot NIDAR
             row that fits nothing on the real frames (None: no such row).
         forms: the profile forms each value source is shown with. With ``"gbm"`` there are
-            also a geometry-only ``gbm`` row (range and elevation, no value) and, for
-            luminance and the linear map, a ``gbm`` row without the monotone constraint.
+            also a geometry-only ``gbm`` row (range and elevation, no value), for luminance
+            and the linear map a ``gbm`` row without the monotone constraint, and
+            incidence-aware ``gbm`` rows (``*_gbm_inc``: the returns' ``|cos θ|`` from normals
+            estimated on each scan) for the geometry, the linear map and NIDAR's R.
 
     Returns:
         key -> :class:`LooMethod`, in table order.
@@ -239,6 +242,15 @@ def standard_methods(
             note="what a regression on the return's geometry knows without any image",
             use_value=False,
         )
+        methods["geometry_gbm_inc"] = profile_method(
+            "range, elevation and incidence only (gbm profile without a value)",
+            range_only,
+            form="gbm",
+            input="constant",
+            note="the return's geometry with the incidence from the scan's normals; no image",
+            use_value=False,
+            incidence=True,
+        )
     sources = [("lum", "(b) luminance", lum, "luminance")]
     if linear_nir is not None:
         sources.append(("linnir", "(i) linear RGB→NIR", nir, "linear_nir"))
@@ -255,6 +267,14 @@ def standard_methods(
             methods[f"{key}_{form}"] = profile_method(
                 f"{name} + {form} profile", vals, form=form, input=inp
             )
+            if form == "gbm" and key in ("linnir", "nidar_R"):
+                methods[f"{key}_gbm_inc"] = profile_method(
+                    f"{name} + gbm profile with incidence",
+                    vals,
+                    form="gbm",
+                    input=inp,
+                    incidence=True,
+                )
             if form == "gbm" and key in ("lum", "linnir"):
                 methods[f"{key}_gbm_free"] = profile_method(
                     f"{name} + gbm profile, not monotone in the value",
@@ -305,7 +325,11 @@ def _zero_shot_method(model, profile, sources) -> LooMethod:
 
     def fit(train):
         return lambda scan: profile.apply(
-            _fill(vals(scan), 0.0), scan.range_m, scan.ring, scan.elevation_deg
+            _fill(vals(scan), 0.0),
+            scan.range_m,
+            scan.ring,
+            scan.elevation_deg,
+            scan.cos_incidence if profile.uses_incidence else None,
         )
 
     return LooMethod(

@@ -9,7 +9,9 @@ maps at the returns feed the rows:
 * ``irnet_R_<form>``: the reflectance branch ``R`` through a sensor profile of ``form`` fitted
   on the fold's training frames (:func:`~nidar_mi.eval.loo.profile_method`);
 * ``irnet_I_hat_raw``: the dense intensity head ``Î`` itself, clipped to [0, 1];
-* ``irnet_I_hat_<form>``: ``Î`` through a profile of ``form``.
+* ``irnet_I_hat_<form>``: ``Î`` through a profile of ``form``;
+* ``irnet_R_gbm_inc`` (with the ``gbm`` form): ``R`` through an incidence-aware ``gbm`` profile
+  (the returns' ``|cos θ|`` from normals estimated on each scan).
 
 One network is trained per fold and serves every row of that fold (:class:`FoldModels`). Each
 fold's run lives in ``WORK/fold-<held-out frame>`` (weights, log, checkpoints: an interrupted
@@ -196,10 +198,12 @@ def irnet_methods(
         )
     net = f"IRNet {models.cfg.irnet.variant} w{models.cfg.irnet.width} x{models.cfg.scale:g}"
 
-    def profiled(branch: str, form: str, label: str) -> LooMethod:
+    def profiled(branch: str, form: str, label: str, **options) -> LooMethod:
         def fit(train):
             values = _branch(models, train, branch)
-            return profile_method(label, values, form=form, input=f"nidar:{branch}").fit(train)
+            return profile_method(label, values, form=form, input=f"nidar:{branch}", **options).fit(
+                train
+            )
 
         return LooMethod(label, fit, "network and profile fitted on the fold's training frames")
 
@@ -210,6 +214,10 @@ def irnet_methods(
         return LooMethod(label, fit, "network fitted on the fold's training frames")
 
     methods = {f"irnet_R_{f}": profiled("R", f, f"{net}: R + {f} profile") for f in forms}
+    if "gbm" in forms:
+        methods["irnet_R_gbm_inc"] = profiled(
+            "R", "gbm", f"{net}: R + gbm profile with incidence", incidence=True
+        )
     methods["irnet_I_hat_raw"] = raw(f"{net}: Î raw")
     methods |= {f"irnet_I_hat_{f}": profiled("I_hat", f, f"{net}: Î + {f} profile") for f in forms}
     return methods
