@@ -34,7 +34,11 @@ def test_wheel_install_ships_plugins(tmp_path):
     # the metadata is clean: no deprecated license table, no data folder outside `packages`
     assert "project.license" not in r.stderr and "absent from the `packages`" not in r.stderr
     assert (target / "nidar_mi" / "plugins" / "lidar.py").is_file()
-    for data in ("nidar/weights/irnet.safetensors", "nidar/weights/MODEL_CARD.md"):
+    for data in (
+        "nidar/weights/irnet.safetensors",
+        "nidar/weights/MODEL_CARD.md",
+        "nidar/weights/profiles/sim-905.json",
+    ):
         assert (target / "nidar_mi" / data).is_file(), data
     assert list((target / "nidar_mi" / "materials" / "data").glob("*.csv"))
     assert (target / "nidar_mi" / "lidar" / "data" / "hdl64e_s2_sztaki.csv").is_file()

@@ -7,7 +7,10 @@ camera sees get 0 and ``observed = False``.
 
 A weights folder holds ``stn.safetensors``, ``irnet.safetensors``, ``config.json`` (written by
 ``python -m nidar_mi.train``) and ``calibration.json`` (written by
-:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`). The package ships one in ``nidar_mi/nidar/weights``.
+:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`), and optionally
+``profiles/sim-905.json``: the simulator's sensor profile (:mod:`nidar_mi.nidar.profiles`),
+which then replaces ``calibration.json`` as the default mapping of the R branch. The package
+ships one in ``nidar_mi/nidar/weights``.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import NidarError
-from ..geometry import CameraModel, sample_cameras
+from ..geometry import CameraModel, incidence_cosine, sample_cameras
 from .calibration import Calibration
 
 if TYPE_CHECKING:
@@ -91,6 +94,17 @@ class NidarModel:
         self.calibration = calibration
         self.weights_dir = weights_dir
         self.scale = 1.0
+        self._default_profile: SensorProfile | None | bool = False  # False: not read yet
+
+    def default_profile(self) -> SensorProfile | None:
+        """The weights folder's ``profiles/sim-905.json`` (read once), None when it has none:
+        the mapping of the R branch when :meth:`point_intensity` is given no profile."""
+        if self._default_profile is False:
+            from .profile import load_profile
+
+            path = Path(self.weights_dir) / "profiles" / "sim-905.json"
+            self._default_profile = load_profile(path) if path.is_file() else None
+        return self._default_profile
 
     @classmethod
     def load(
@@ -161,11 +175,13 @@ class NidarModel:
         branch: str = "R",
         profile: SensorProfile | None = None,
         ring: np.ndarray | None = None,
+        cos_incidence: np.ndarray | None = None,
     ) -> PointIntensity:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
 
         ``branch="R"`` (default, the paper's NIDAR-Full): the reflectance branch through the
-        distance encoding and quantile map. ``branch="I_hat"``: IRNet's dense intensity head
+        weights' ``profiles/sim-905.json`` when the folder has one (:meth:`default_profile`),
+        else through ``calibration.json``'s distance encoding and quantile map. ``branch="I_hat"``: IRNet's dense intensity head
         sampled at the points and clipped to [0, 1], no calibration (it is trained on the
         range-compensated intensity directly); on the held-out scenes of docs/RESULTS.md it
         ranks points far better than R (method (f)).
@@ -182,7 +198,13 @@ class NidarModel:
             profile: a sensor profile (:mod:`nidar_mi.nidar.profiles`): its NIDAR map at the
                 points through its mapping (range, ring, elevation) instead of ``branch``.
             ring: optional (N,) ring of each point (-1 unknown), for a ``range_ring`` profile.
+            cos_incidence: optional (N,) ``|cos θ|`` of the rays on the surfaces, for a profile
+                that reads it; None: estimated from ``xyz_lidar`` itself
+                (:func:`nidar_mi.geometry.incidence_cosine`, the estimate such profiles are
+                fitted with).
         """
+        if profile is None and branch == "R":
+            profile = self.default_profile()
         if profile is not None:
             branch = profile.branch
             if branch is None:
@@ -203,7 +225,18 @@ class NidarModel:
                 p = xyz[observed]
                 r = None if ring is None else np.asarray(ring).reshape(-1)[observed]
                 el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
-                out[observed] = profile.apply(values[observed], np.linalg.norm(p, axis=1), r, el)
+                cos = None
+                if profile.uses_incidence:
+                    if cos_incidence is None:
+                        cos = incidence_cosine(xyz)[observed]
+                    else:
+                        cos = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)
+                        if cos.shape != (len(xyz),):
+                            raise NidarError(f"{cos.size} incidence cosines for {len(xyz)} points")
+                        cos = cos[observed]
+                out[observed] = profile.apply(
+                    values[observed], np.linalg.norm(p, axis=1), r, el, cos
+                )
             raw = np.where(observed, values, 0.0).astype(np.float32)
             return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
         if branch == "I_hat":

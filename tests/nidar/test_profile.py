@@ -115,15 +115,70 @@ def test_non_finite_values_are_an_error_not_nan():
         p.apply([0.5, np.nan], [10.0, 10.0])
 
 
-def test_sim_905_is_the_weights_calibration():
+def test_sim_905_is_the_weights_profile_or_their_calibration(tmp_path):
+    """The shipped weights carry ``profiles/sim-905.json`` (an incidence-aware gbm profile of
+    R); a weights folder without one maps R through its ``calibration.json``."""
+    import shutil
+
     model = NidarModel.load(device="cpu")
     p = resolve_profile("sim-905", model)
-    assert p.form == "distance_quantile" and p.branch == "R" and p.model == model_identity(model)
+    assert p.form == "gbm" and p.branch == "R" and p.model == model_identity(model)
+    assert p.uses_incidence and model.default_profile().mapping.model == p.mapping.model
+    plain = tmp_path / "w"
+    shutil.copytree(model.weights_dir, plain, ignore=shutil.ignore_patterns("profiles"))
+    other = NidarModel.load(plain, device="cpu")
+    q = resolve_profile("sim-905", other)
+    assert q.form == "distance_quantile" and other.default_profile() is None
     v = np.linspace(0, 1, 50)
     d = np.linspace(1, 80, 50)
-    np.testing.assert_allclose(p.apply(v, d), model.calibration.apply(v, d)[0], rtol=1e-7)
+    np.testing.assert_allclose(q.apply(v, d), other.calibration.apply(v, d)[0], rtol=1e-7)
     with pytest.raises(NidarError, match="unknown profile"):
         resolve_profile("kitti-hdl32", model)
+
+
+def _wall_scene():
+    """A camera looking along the LiDAR's +x at a wall tilted 50° about z, 10 m ahead, sampled
+    on a 0.05 m grid, with a constant R map."""
+    from nidar_mi.geometry import CameraModel
+
+    cam = CameraModel(
+        K=np.array([[50.0, 0, 31.5], [0, 50, 23.5], [0, 0, 1]]),
+        width=64,
+        height=48,
+        T_cam_lidar=np.array([[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1.0]]),
+    )
+    n = np.array([np.cos(np.radians(50)), np.sin(np.radians(50)), 0.0])
+    t = np.array([-n[1], n[0], 0.0])
+    s, h = np.meshgrid(np.arange(-3, 3, 0.05), np.arange(-1.5, 1.5, 0.05))
+    xyz = 10.0 * np.array([1.0, 0, 0]) + s.reshape(-1, 1) * t + h.reshape(-1, 1) * [0, 0, 1.0]
+    maps = {"R": np.full((48, 64), 0.4, np.float32), "I_hat": np.zeros((48, 64), np.float32)}
+    return cam, xyz, n, maps
+
+
+def test_default_point_intensity_uses_the_incidence_of_the_cloud():
+    """With no profile given, R goes through the shipped sim-905 profile, and the incidence it
+    reads is estimated from the cloud itself: on a flat wall the output equals the profile at
+    the analytic |cos θ| = |n · x| / |x|, and the wall seen more obliquely comes out no brighter."""
+    model = NidarModel.load(device="cpu")
+    cam, xyz, n, maps = _wall_scene()
+    res = model.point_intensity(xyz, [cam], [None], maps=[maps], occlusion=False)
+    assert res.observed.sum() > 100
+    cos = np.abs(xyz @ n) / np.linalg.norm(xyz, axis=1)
+    given = model.point_intensity(
+        xyz, [cam], [None], maps=[maps], occlusion=False, cos_incidence=cos
+    )
+    np.testing.assert_allclose(res.intensity, given.intensity, atol=1e-6)
+    o = res.observed
+    p = model.default_profile()
+    el = np.degrees(np.arctan2(xyz[o, 2], np.hypot(xyz[o, 0], xyz[o, 1])))
+    rng = np.linalg.norm(xyz[o], axis=1)
+    np.testing.assert_allclose(
+        res.intensity[o], p.apply(np.full(o.sum(), 0.4), rng, None, el, cos[o]), atol=1e-6
+    )
+    grazing = p.apply(np.full(o.sum(), 0.4), rng, None, el, 0.5 * cos[o])
+    assert np.all(grazing <= res.intensity[o] + 1e-7)
+    with pytest.raises(NidarError, match="incidence cosines for"):
+        model.point_intensity(xyz, [cam], [None], maps=[maps], cos_incidence=cos[:3])
 
 
 def test_a_profile_of_other_weights_warns(tmp_path):
