@@ -12,9 +12,9 @@ Names :func:`resolve_profile` knows (besides a path to a profile file):
   (``../shared/data/kitti`` and ``kitti_raw_0926``, or ``$NIDAR_MI_DATA``; or the folders given)
   for the weights in use, and cached in the user's cache folder
   (``<cache>/profiles/kitti-hdl64e-<key>.json``, :func:`nidar_mi.datasets.paths.cache_dir`;
-  the key covers the weights, the folders and the form). Form :data:`KITTI_PROFILE_FORM`, input
-  the ``R`` branch, fitted on every frame of those folders. The default of
-  ``assign --kitti``.
+  the key covers the weights, the folders and the form). Form :data:`KITTI_PROFILE_FORM` with
+  the incidence (:data:`KITTI_PROFILE_INCIDENCE`), input the ``R`` branch, fitted on every frame
+  of those folders. The default of ``assign --kitti``.
 
 A profile fitted for other weights still applies, with a warning: it maps another network's
 values. ``python -m nidar_mi.calibrate`` fits a profile for any sensor (:func:`fit_scan_profile`).
@@ -42,6 +42,7 @@ __all__ = [
     "DEFAULT_KITTI_PROFILE",
     "DEFAULT_SIM_PROFILE",
     "KITTI_PROFILE_FORM",
+    "KITTI_PROFILE_INCIDENCE",
     "PROFILE_NAMES",
     "fit_scan_profile",
     "fit_values_profile",
@@ -57,8 +58,11 @@ PROFILE_NAMES = (DEFAULT_SIM_PROFILE, DEFAULT_KITTI_PROFILE)
 #: Form of the ``kitti-hdl64e`` profile (the one that generalised better in the
 #: leave-one-frame-out evaluation, docs/RESULTS.md).
 KITTI_PROFILE_FORM = "gbm"
+#: Whether ``kitti-hdl64e`` reads the returns' incidence (it lifted every leave-one-frame-out
+#: metric but the camera-map SSIM, docs/RESULTS.md).
+KITTI_PROFILE_INCIDENCE = True
 #: Version of the fitting procedure (part of the cache key).
-_FIT_VERSION = 2
+_FIT_VERSION = 3
 _SIM_SENSOR = "simulated 905 nm LiDAR, range-compensated intensity g·ρ·cosθ·exp(-2αd)"
 _KITTI_SENSOR = "Velodyne HDL-64E (KITTI), stored reflectance in [0, 1]"
 
@@ -269,6 +273,7 @@ def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfi
             "model": model_identity(model),
             "dirs": [str(d.resolve()) for d in dirs],
             "form": KITTI_PROFILE_FORM,
+            "incidence": KITTI_PROFILE_INCIDENCE,
             "version": _FIT_VERSION,
         }
     )
@@ -290,6 +295,7 @@ def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfi
         branch="R",
         provenance={"data": [str(d.resolve()) for d in dirs], "cache": str(path)},
         progress=progress,
+        incidence=KITTI_PROFILE_INCIDENCE,
     )
     os.makedirs(path.parent, exist_ok=True)
     atomic_write_json(path, profile.to_dict())
