@@ -63,6 +63,29 @@ def file_sha256(path: str | os.PathLike) -> str:
         return hashlib.sha256(f.read()).hexdigest()
 
 
+#: The files of a NIDAR weights folder that decide its output (those present are hashed).
+WEIGHTS_FILES = (
+    "stn.safetensors",
+    "irnet.safetensors",
+    "config.json",
+    "calibration.json",
+    "profiles/sim-905.json",
+)
+
+
+def weights_sha256(weights: str | os.PathLike | None) -> str:
+    """Hex SHA-256 over the :data:`WEIGHTS_FILES` of a weights folder (None: the shipped one),
+    each file's name and bytes, in order; a missing file counts as absent."""
+    shipped = os.path.join(os.path.dirname(os.path.abspath(__file__)), "nidar", "weights")
+    root = os.fspath(weights) if weights is not None else shipped
+    h = hashlib.sha256()
+    for name in WEIGHTS_FILES:
+        path = os.path.join(root, name)
+        h.update(name.encode() + b"\0")
+        h.update(file_sha256(path).encode() if os.path.isfile(path) else b"absent")
+    return h.hexdigest()
+
+
 @dataclass(frozen=True)
 class RenderRequest:
     """Every input that determines a render (the cache key of a render folder).
@@ -78,9 +101,12 @@ class RenderRequest:
         rgb_twin: whether the scene's RGB-only twin was loaded.
         intensity: ``physics`` or ``nidar``.
         weights: NIDAR weights folder (``nidar`` only; None: the shipped model).
+        weights_sha256: hash of the weights folder's contents that decide NIDAR's output
+            (:func:`weights_sha256`; ``nidar`` only): retrained weights or a refitted default
+            profile at the same path are a new request.
         nidar_branch: NIDAR branch (``nidar`` only).
         profile: NIDAR sensor profile as ``<name>@<hash of its content>`` (``nidar`` only;
-            None: the weights' own calibration).
+            None: the weights' own ``sim-905``).
         bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
         layout: :data:`LAYOUT_VERSION` of the folder.
     """
@@ -95,6 +121,7 @@ class RenderRequest:
     rgb_twin: bool = False
     intensity: str = "physics"
     weights: str | None = None
+    weights_sha256: str | None = None
     nidar_branch: str | None = None
     profile: str | None = None
     bin_intensity: str = "unit"
@@ -110,8 +137,10 @@ class RenderRequest:
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
             options["weights"] = options["nidar_branch"] = options["profile"] = None
-        elif options.get("weights") is not None:
-            options["weights"] = os.path.abspath(options["weights"])
+        else:
+            if options.get("weights") is not None:
+                options["weights"] = os.path.abspath(options["weights"])
+            options["weights_sha256"] = weights_sha256(options.get("weights"))
         return cls(scene=path, scene_sha256=file_sha256(path), params=params, **options)
 
     def to_dict(self) -> dict[str, Any]:

@@ -295,7 +295,8 @@ def render_scene(
             profile).
         profile: a :class:`~nidar_mi.nidar.profile.SensorProfile` for NIDAR's intensity
             (:func:`nidar_mi.nidar.profiles.resolve_profile` turns a name or file into one);
-            None: the weights' own calibration (the numbers of ``sim-905``); ``nidar`` only.
+            None: the weights' own ``sim-905`` (``profiles/sim-905.json``, else
+            ``calibration.json``); ``nidar`` only.
         overwrite: replace a non-empty ``out_dir``.
         bin_intensity: ``unit`` (KITTI's [0, 1]) or ``raw``: see
             :func:`nidar_mi.render_folder.write_lidar`.

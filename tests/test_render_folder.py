@@ -79,3 +79,23 @@ def test_read_render_errors(tmp_path):
     (tmp_path / rf.MANIFEST).write_text('{"lidars": {}}')
     with pytest.raises(NidarError, match="lists no lidar"):
         rf.read_render(tmp_path)
+
+
+def test_nidar_request_covers_the_weights_contents(tmp_path):
+    """A render with NIDAR intensity is keyed by what its weights folder holds, not only its
+    path: a refitted default profile at the same path is another request; physics renders
+    carry no weights key."""
+    from nidar_mi.nidar.pipeline import shipped_weights_dir
+
+    w = tmp_path / "w"
+    shutil.copytree(shipped_weights_dir(), w)
+    a = rf.RenderRequest.of(TARGET, intensity="nidar", weights=str(w))
+    assert a.weights_sha256 == rf.weights_sha256(w) == rf.weights_sha256(shipped_weights_dir())
+    assert rf.RenderRequest.of(TARGET, intensity="nidar").weights_sha256 == a.weights_sha256
+    prof = w / "profiles" / "sim-905.json"
+    prof.write_text(prof.read_text().replace('"sim-905"', '"sim-905b"', 1))
+    b = rf.RenderRequest.of(TARGET, intensity="nidar", weights=str(w))
+    assert b.weights_sha256 != a.weights_sha256 and b.to_dict() != a.to_dict()
+    prof.unlink()  # without the profile: calibration.json decides, another key again
+    assert rf.weights_sha256(w) not in (a.weights_sha256, b.weights_sha256)
+    assert rf.RenderRequest.of(TARGET).weights_sha256 is None
