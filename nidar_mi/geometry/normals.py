@@ -64,10 +64,10 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
     normals = np.empty_like(p)
     for start in range(0, len(p), CHUNK):
         q = p[start : start + CHUNK]
-        _, idx = tree.query(q, k=k)
+        _, idx = tree.query(q, k=k, workers=-1)
         nb = p[idx]  # (n, k, 3)
         nb -= nb.mean(axis=1, keepdims=True)
-        cov = np.einsum("nki,nkj->nij", nb, nb)
+        cov = np.matmul(nb.transpose(0, 2, 1), nb)  # (n, 3, 3)
         _, vec = np.linalg.eigh(cov)  # ascending eigenvalues
         normals[start : start + CHUNK] = vec[:, :, 0]
     flip = np.einsum("ni,ni->n", normals, p) > 0

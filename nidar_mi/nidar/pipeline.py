@@ -199,9 +199,9 @@ class NidarModel:
                 points through its mapping (range, ring, elevation) instead of ``branch``.
             ring: optional (N,) ring of each point (-1 unknown), for a ``range_ring`` profile.
             cos_incidence: optional (N,) ``|cos θ|`` of the rays on the surfaces, for a profile
-                that reads it; None: estimated from ``xyz_lidar`` itself
-                (:func:`nidar_mi.geometry.incidence_cosine`, the estimate such profiles are
-                fitted with).
+                that reads it; None: estimated from the observed points themselves
+                (:func:`nidar_mi.geometry.incidence_cosine` on the returns the cameras see, as
+                such profiles are fitted: on a scan's camera-visible returns).
         """
         if profile is None and branch == "R":
             profile = self.default_profile()
@@ -228,7 +228,7 @@ class NidarModel:
                 cos = None
                 if profile.uses_incidence:
                     if cos_incidence is None:
-                        cos = incidence_cosine(xyz)[observed]
+                        cos = incidence_cosine(p)
                     else:
                         cos = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)
                         if cos.shape != (len(xyz),):
