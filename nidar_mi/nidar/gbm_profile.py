@@ -27,7 +27,8 @@ is what RMSE and SSIM reward.
   head-on never comes out darker). The image carries the surface, the scan its orientation.
 
 Fitting is deterministic (``deterministic``, one thread, row-wise histograms, a fixed seed, no
-bagging): the same data and seed give the same model text. The map is stored in a profile file
+bagging): the same data and seed give the same model text. Prediction uses up to 8 threads
+(rows are independent: the same output with any number). The map is stored in a profile file
 as LightGBM's own text model (``Booster.model_to_string``) with the features it reads; nothing
 is pickled. :meth:`GbmMap.from_dict` checks the text before LightGBM parses it and turns any
 failure into one :class:`~nidar_mi.errors.NidarError` line.
@@ -206,7 +207,7 @@ class GbmMap:
             "gbm profile",
             cos_incidence if self.uses_incidence else None,
         )
-        out = self._booster.predict(x, num_threads=1)
+        out = self._booster.predict(x, num_threads=_predict_threads())
         return np.clip(np.asarray(out, dtype=np.float64), 0.0, 1.0)
 
     def to_dict(self) -> dict[str, Any]:
@@ -239,6 +240,18 @@ class GbmMap:
             model=data["model"],
             params=data.get("params") or {},
         )
+
+
+def _predict_threads() -> int:
+    """Threads for prediction: the cores this process may use, at most 8 (rows are independent,
+    so the output does not depend on it)."""
+    import os
+
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        n = os.cpu_count() or 1
+    return max(1, min(8, n))
 
 
 def _design(

@@ -270,3 +270,14 @@ def test_incidence_profile_round_trip_and_checks(tmp_path):
         _profile().apply(v[:50], d[:50], None, e[:50], c[:50]),
         _profile().apply(v[:50], d[:50], None, e[:50]),
     )
+
+
+def test_prediction_does_not_depend_on_the_threads(monkeypatch):
+    from nidar_mi.nidar import gbm_profile
+
+    p = _profile()
+    v, d, e, _ = _sample(20_000, seed=2)
+    monkeypatch.setattr(gbm_profile, "_predict_threads", lambda: 1)
+    one = p.apply(v, d, None, e)
+    monkeypatch.setattr(gbm_profile, "_predict_threads", lambda: 4)
+    np.testing.assert_array_equal(p.apply(v, d, None, e), one)
