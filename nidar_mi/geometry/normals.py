@@ -13,21 +13,29 @@ returns of a spinning LiDAR, between widely spaced rings) the plane is ill-deter
 simulator's scans of ``scenes_heldout`` the estimate correlates r ≈ 0.9 with the renderer's
 exact cosine at the default ``k`` (tests/geometry/test_normals.py checks planes of known tilt).
 
+Where no plane can be fitted (fewer than 3 points in all, or a neighbourhood of coincident
+points) :func:`incidence_cosine` takes the ray as head-on (``|cos θ| = 1``) and warns with the
+count; :func:`estimate_normals` gives those points a zero normal.
+
 Memory is bounded: neighbours are gathered in chunks of :data:`CHUNK` points.
 """
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["CHUNK", "DEFAULT_NEIGHBOURS", "estimate_normals", "incidence_cosine"]
+__all__ = ["CHUNK", "DEFAULT_NEIGHBOURS", "MAX_COORDINATE", "estimate_normals", "incidence_cosine"]
 
 #: Neighbours per plane fit (the point itself included).
 DEFAULT_NEIGHBOURS = 20
 #: Points whose neighbourhoods are processed at once (bounds memory to ~CHUNK·k·72 bytes).
 CHUNK = 100_000
+#: Largest accepted coordinate magnitude, m (beyond it squared distances lose all precision).
+MAX_COORDINATE = 1e7
 
 
 def _points(xyz) -> np.ndarray:
@@ -36,6 +44,8 @@ def _points(xyz) -> np.ndarray:
         raise NidarError(f"expected (N, 3) points, got shape {p.shape}")
     if not np.all(np.isfinite(p)):
         raise NidarError("points must be finite")
+    if p.size and np.abs(p).max() > MAX_COORDINATE:
+        raise NidarError(f"points lie beyond {MAX_COORDINATE:g} m of the origin")
     return p
 
 
@@ -47,10 +57,12 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
         k: neighbours per fit, the point included (3 or more; capped at N).
 
     Returns:
-        (N, 3) float64 unit normals, oriented towards the origin (``n · p <= 0``).
+        (N, 3) float64 unit normals, oriented towards the origin (``n · p <= 0``); zero where
+        the neighbours all coincide (no plane).
 
     Raises:
-        NidarError: not (N, 3), non-finite, fewer than 3 points, or ``k < 3``.
+        NidarError: not (N, 3), non-finite or beyond :data:`MAX_COORDINATE`, fewer than 3
+            points, or ``k < 3``.
     """
     from scipy.spatial import cKDTree
 
@@ -68,8 +80,9 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
         nb = p[idx]  # (n, k, 3)
         nb -= nb.mean(axis=1, keepdims=True)
         cov = np.matmul(nb.transpose(0, 2, 1), nb)  # (n, 3, 3)
-        _, vec = np.linalg.eigh(cov)  # ascending eigenvalues
-        normals[start : start + CHUNK] = vec[:, :, 0]
+        val, vec = np.linalg.eigh(cov)  # ascending eigenvalues
+        flat = val[:, 2] <= 0.0  # every neighbour at the same place: no plane
+        normals[start : start + CHUNK] = np.where(flat[:, None], 0.0, vec[:, :, 0])
     flip = np.einsum("ni,ni->n", normals, p) > 0
     normals[flip] *= -1.0
     return normals
@@ -86,19 +99,35 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
 
     Returns:
         (N,) float64 in [0, 1]; 1 for a ray along the normal, 0 for a grazing one. A point at the
-        origin gets 1.
+        origin, or one without a plane (module docstring; a warning counts them), gets 1.
 
     Raises:
-        NidarError: as :func:`estimate_normals`, or normals of another shape or not finite.
+        NidarError: as :func:`estimate_normals` (except too few points, taken as head-on), or
+            normals of another shape or not finite.
     """
     p = _points(xyz)
     if normals is None:
+        if len(p) < 3:
+            if len(p):
+                warnings.warn(
+                    f"{len(p)} point(s): too few for a surface normal, incidence taken as head-on",
+                    stacklevel=2,
+                )
+            return np.ones(len(p))
         n = estimate_normals(p, k)
+        flat = ~np.any(n, axis=1)
+        if flat.any():
+            warnings.warn(
+                f"{int(flat.sum())} of {len(p)} points have only coincident neighbours: "
+                "incidence taken as head-on",
+                stacklevel=2,
+            )
+            n[flat] = p[flat]  # along the ray: |cos θ| = 1 (0 at the origin, handled below)
     else:
         n = np.asarray(normals, dtype=np.float64)
         if n.shape != p.shape or not np.all(np.isfinite(n)):
             raise NidarError(f"normals must be finite and shaped like the points {p.shape}")
-        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     r = np.linalg.norm(p, axis=1)
     cos = np.abs(np.einsum("ni,ni->n", n, p)) / np.where(r > 0, r, 1.0)
     return np.where(r > 0, np.clip(cos, 0.0, 1.0), 1.0)

@@ -28,7 +28,7 @@ is what RMSE and SSIM reward.
 
 Fitting is deterministic (``deterministic``, one thread, row-wise histograms, a fixed seed, no
 bagging): the same data and seed give the same model text. Prediction uses up to 8 threads
-(rows are independent: the same output with any number). The map is stored in a profile file
+(at most ``$OMP_NUM_THREADS``; rows are independent: the same output with any number). The map is stored in a profile file
 as LightGBM's own text model (``Booster.model_to_string``) with the features it reads; nothing
 is pickled. :meth:`GbmMap.from_dict` checks the text before LightGBM parses it and turns any
 failure into one :class:`~nidar_mi.errors.NidarError` line.
@@ -243,14 +243,17 @@ class GbmMap:
 
 
 def _predict_threads() -> int:
-    """Threads for prediction: the cores this process may use, at most 8 (rows are independent,
-    so the output does not depend on it)."""
+    """Threads for prediction: the cores this process may use, at most 8 and at most
+    ``$OMP_NUM_THREADS`` when set (rows are independent, so the output does not depend on it)."""
     import os
 
     try:
         n = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # pragma: no cover - not Linux
         n = os.cpu_count() or 1
+    omp = os.environ.get("OMP_NUM_THREADS", "")
+    if omp.isdigit() and int(omp) > 0:
+        n = min(n, int(omp))
     return max(1, min(8, n))
 
 

@@ -1,9 +1,12 @@
 """NIDAR end to end: camera images -> per-point LiDAR intensity.
 
 RGB -> STN pseudo-NIR -> IRNet (R, S, Î) -> the R branch sampled at each point by calibrated
-projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on) -> distance
-encoding and quantile remapping (:class:`nidar_mi.nidar.calibration.Calibration`). Points no
-camera sees get 0 and ``observed = False``.
+projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on) -> the sensor's
+response: a sensor profile (:mod:`nidar_mi.nidar.profile`; by default the weights'
+``profiles/sim-905.json``, which also reads the incidence estimated from the points), or the
+paper's distance encoding and quantile remapping
+(:class:`nidar_mi.nidar.calibration.Calibration`). Points no camera sees get 0 and
+``observed = False``.
 
 A weights folder holds ``stn.safetensors``, ``irnet.safetensors``, ``config.json`` (written by
 ``python -m nidar_mi.train``) and ``calibration.json`` (written by
@@ -97,13 +100,26 @@ class NidarModel:
         self._default_profile: SensorProfile | None | bool = False  # False: not read yet
 
     def default_profile(self) -> SensorProfile | None:
-        """The weights folder's ``profiles/sim-905.json`` (read once), None when it has none:
-        the mapping of the R branch when :meth:`point_intensity` is given no profile."""
+        """The weights folder's ``profiles/sim-905.json`` (read once), None when it has none or
+        when it was fitted for other networks (retrained weights: a warning, and
+        ``calibration.json`` maps R): the mapping of the R branch when :meth:`point_intensity`
+        is given no profile."""
         if self._default_profile is False:
+            import warnings
+
             from .profile import load_profile
+            from .profiles import model_identity
 
             path = Path(self.weights_dir) / "profiles" / "sim-905.json"
-            self._default_profile = load_profile(path) if path.is_file() else None
+            profile = load_profile(path) if path.is_file() else None
+            if profile is not None and profile.model not in (None, model_identity(self)):
+                warnings.warn(
+                    f"{path} was fitted for other networks than {self.weights_dir}'s (retrained?):"
+                    " ignored, calibration.json maps R; refit it with python -m nidar_mi.calibrate",
+                    stacklevel=2,
+                )
+                profile = None
+            self._default_profile = profile
         return self._default_profile
 
     @classmethod
@@ -212,6 +228,8 @@ class NidarModel:
         if branch not in BRANCHES:
             raise NidarError(f"branch must be one of {', '.join(BRANCHES)} (got '{branch}')")
         xyz = np.asarray(xyz_lidar, dtype=np.float64)
+        if ring is not None and np.asarray(ring).reshape(-1).shape != (len(xyz),):
+            raise NidarError(f"{np.asarray(ring).size} rings for {len(xyz)} points")
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
         maps = list(maps) if maps is not None else [self.predict_image(im) for im in images]

@@ -123,7 +123,7 @@ def test_sim_905_is_the_weights_profile_or_their_calibration(tmp_path):
     model = NidarModel.load(device="cpu")
     p = resolve_profile("sim-905", model)
     assert p.form == "gbm" and p.branch == "R" and p.model == model_identity(model)
-    assert p.uses_incidence and model.default_profile().mapping.model == p.mapping.model
+    assert p.uses_incidence
     plain = tmp_path / "w"
     shutil.copytree(model.weights_dir, plain, ignore=shutil.ignore_patterns("profiles"))
     other = NidarModel.load(plain, device="cpu")
@@ -175,10 +175,74 @@ def test_default_point_intensity_uses_the_incidence_of_the_cloud():
     np.testing.assert_allclose(
         res.intensity[o], p.apply(np.full(o.sum(), 0.4), rng, None, el, cos[o]), atol=1e-6
     )
-    grazing = p.apply(np.full(o.sum(), 0.4), rng, None, el, 0.5 * cos[o])
-    assert np.all(grazing <= res.intensity[o] + 1e-7)
+    explicit = model.point_intensity(
+        xyz, [cam], [None], maps=[maps], occlusion=False, profile=resolve_profile("sim-905", model)
+    )
+    np.testing.assert_array_equal(explicit.intensity, res.intensity)
     with pytest.raises(NidarError, match="incidence cosines for"):
         model.point_intensity(xyz, [cam], [None], maps=[maps], cos_incidence=cos[:3])
+    with pytest.raises(NidarError, match="rings for"):
+        model.point_intensity(xyz, [cam], [None], maps=[maps], ring=np.zeros(3, int))
+
+
+def test_one_or_two_observed_points_are_assigned_head_on():
+    """Too few observed points for a normal: the incidence is taken as head-on (a warning), and
+    the output is the profile's at |cos θ| = 1."""
+    model = NidarModel.load(device="cpu")
+    cam, xyz, _, maps = _wall_scene()
+    pts = np.array([[10.0, 0.2, 0.1], [12.0, -0.3, 0.0], [-5.0, 0, 0]])  # the last is behind
+    with pytest.warns(UserWarning, match="too few for a surface normal"):
+        res = model.point_intensity(pts, [cam], [None], maps=[maps], occlusion=False)
+    assert res.observed.tolist() == [True, True, False]
+    el = np.degrees(np.arctan2(pts[:2, 2], np.hypot(pts[:2, 0], pts[:2, 1])))
+    expect = model.default_profile().apply(
+        [0.4, 0.4], np.linalg.norm(pts[:2], axis=1), None, el, [1.0, 1.0]
+    )
+    np.testing.assert_allclose(res.intensity[:2], expect, atol=1e-6)
+
+
+def test_a_default_profile_of_other_networks_is_ignored(tmp_path):
+    """A weights folder whose profiles/sim-905.json was fitted for other networks (retrained
+    into the same folder) warns and maps R through its calibration.json."""
+    import shutil
+
+    w = tmp_path / "w"
+    shutil.copytree(NidarModel.load(device="cpu").weights_dir, w)
+    path = w / "profiles" / "sim-905.json"
+    data = json.loads(path.read_text())
+    data["model"]["irnet_sha256"] = "0" * 64
+    path.write_text(json.dumps(data))
+    model = NidarModel.load(w, device="cpu")
+    with pytest.warns(UserWarning, match="fitted for other networks"):
+        assert model.default_profile() is None
+    cam, xyz, _, maps = _wall_scene()
+    res = model.point_intensity(xyz, [cam], [None], maps=[maps], occlusion=False)
+    o = res.observed
+    expect, _ = model.calibration.apply(
+        np.full(o.sum(), 0.4), np.linalg.norm(xyz[o], axis=1), np.ones(o.sum(), bool)
+    )
+    np.testing.assert_allclose(res.intensity[o], expect, atol=1e-6)
+
+
+def test_incidence_fit_survives_a_scan_with_too_few_returns():
+    """Fitting with the incidence on scans one of which has two returns: that scan's incidence
+    is head-on (a warning), the fit goes on."""
+    from nidar_mi.datasets.scans import ScanFrame
+    from nidar_mi.nidar.profiles import fit_values_profile
+
+    rng = np.random.default_rng(0)
+    scans = []
+    for i, n in enumerate((4000, 2)):
+        xyz = rng.uniform([2, -10, -2], [40, 10, 2], (n, 3))
+        scans.append(
+            ScanFrame(f"s{i}", xyz, rng.uniform(0, 1, n), np.full(n, -1, np.int16), cameras=[])
+        )
+    with pytest.warns(UserWarning, match="too few for a surface normal"):
+        p = fit_values_profile(
+            scans, lambda s: np.linspace(0, 1, len(s.xyz)), name="t", sensor="", input="nidar:R",
+            form="gbm", incidence=True, trees=5,
+        )  # fmt: skip
+    assert p.uses_incidence and p.provenance["returns"] == 4002
 
 
 def test_a_profile_of_other_weights_warns(tmp_path):

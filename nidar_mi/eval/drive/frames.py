@@ -218,16 +218,10 @@ def nidar_columns(
     from ...io.atomic import atomic_path
     from ...io.points import read_npz
     from ...nidar.pipeline import NidarModel, shipped_weights_dir
+    from ...render_folder import weights_sha256
 
     wdir = weights or str(shipped_weights_dir())
-    digest = hashlib.sha256()
-    for name in sorted(os.listdir(wdir)):
-        p = os.path.join(wdir, name)
-        if os.path.isfile(p):
-            digest.update(name.encode())
-            with open(p, "rb") as f:
-                digest.update(f.read())
-    out = os.path.join(folder, f"nidar_{digest.hexdigest()[:12]}")
+    out = os.path.join(folder, f"nidar_{weights_sha256(wdir)[:12]}")
     os.makedirs(out, exist_ok=True)
     todo = [k for k in range(frames) if not os.path.exists(_frame_path(out, k))]
     if not todo:
