@@ -26,7 +26,8 @@ carla           (d) ``exp(-0.004 d)``
 nidar_no_irnet  (e) the STN pseudo-NIR at the point through its own calibration, fitted on the
                 training split like NIDAR's (distance encoding + quantile map)
 nidar_ihat      (f) IRNet's dense head Î at the point, raw (clipped to [0, 1])
-nidar_full      (g) :meth:`NidarModel.point_intensity`: R + distance encoding + quantile remap
+nidar_full      (g) :meth:`NidarModel.point_intensity`: R through the weights' default sensor
+                profile (``profiles/sim-905.json``, else the distance encoding + quantile map)
 ==============  ==================================================================================
 
 **Metrics** per frame and method: point RMSE/MAE/Spearman
