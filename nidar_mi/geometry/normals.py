@@ -13,9 +13,12 @@ returns of a spinning LiDAR, between widely spaced rings) the plane is ill-deter
 simulator's scans of ``scenes_heldout`` the estimate correlates r ≈ 0.9 with the renderer's
 exact cosine at the default ``k`` (tests/geometry/test_normals.py checks planes of known tilt).
 
-Where no plane can be fitted (fewer than 3 points in all, or a neighbourhood of coincident
-points) :func:`incidence_cosine` takes the ray as head-on (``|cos θ| = 1``) and warns with the
-count; :func:`estimate_normals` gives those points a zero normal.
+Where no plane can be fitted (fewer than 3 points in all, or a neighbourhood whose points
+coincide or lie on one line: its second principal spread below :data:`DEGENERATE` of its mean
+squared distance from the origin) :func:`incidence_cosine` takes the ray as head-on
+(``|cos θ| = 1``) and warns with the count; :func:`estimate_normals` gives those points a zero
+normal. Points beyond :data:`MAX_COORDINATE` (no LiDAR return lies there) are head-on too, with
+a warning, and take no part in the others' neighbourhoods.
 
 Memory is bounded: neighbours are gathered in chunks of :data:`CHUNK` points.
 """
@@ -28,14 +31,23 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["CHUNK", "DEFAULT_NEIGHBOURS", "MAX_COORDINATE", "estimate_normals", "incidence_cosine"]
+__all__ = [
+    "CHUNK",
+    "DEFAULT_NEIGHBOURS",
+    "DEGENERATE",
+    "MAX_COORDINATE",
+    "estimate_normals",
+    "incidence_cosine",
+]
 
 #: Neighbours per plane fit (the point itself included).
 DEFAULT_NEIGHBOURS = 20
 #: Points whose neighbourhoods are processed at once (bounds memory to ~CHUNK·k·72 bytes).
 CHUNK = 100_000
-#: Largest accepted coordinate magnitude, m (beyond it squared distances lose all precision).
+#: Largest coordinate magnitude :func:`estimate_normals` accepts, m.
 MAX_COORDINATE = 1e7
+#: Relative second principal spread below which a neighbourhood has no plane (a point or a line).
+DEGENERATE = 1e-12
 
 
 def _points(xyz) -> np.ndarray:
@@ -58,7 +70,7 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
 
     Returns:
         (N, 3) float64 unit normals, oriented towards the origin (``n · p <= 0``); zero where
-        the neighbours all coincide (no plane).
+        the neighbours coincide or lie on one line (no plane; module docstring).
 
     Raises:
         NidarError: not (N, 3), non-finite or beyond :data:`MAX_COORDINATE`, fewer than 3
@@ -78,10 +90,11 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
         q = p[start : start + CHUNK]
         _, idx = tree.query(q, k=k, workers=-1)
         nb = p[idx]  # (n, k, 3)
+        scale = np.einsum("nki,nki->n", nb, nb)  # k × mean squared distance from the origin
         nb -= nb.mean(axis=1, keepdims=True)
         cov = np.matmul(nb.transpose(0, 2, 1), nb)  # (n, 3, 3)
         val, vec = np.linalg.eigh(cov)  # ascending eigenvalues
-        flat = val[:, 2] <= 0.0  # every neighbour at the same place: no plane
+        flat = ~(val[:, 1] > DEGENERATE * scale)  # a point or a line: no plane
         normals[start : start + CHUNK] = np.where(flat[:, None], 0.0, vec[:, :, 0])
     flip = np.einsum("ni,ni->n", normals, p) > 0
     normals[flip] *= -1.0
@@ -93,41 +106,68 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
 
     Args:
         xyz: (N, 3) points in the sensor frame (the sensor at the origin), m.
-        normals: optional (N, 3) normals (e.g. a simulator's exact ones); estimated from the
-            cloud with :func:`estimate_normals` when None.
+        normals: optional (N, 3) normals (e.g. a simulator's exact ones, any length); estimated
+            from the cloud with :func:`estimate_normals` when None.
         k: neighbours per plane fit when estimating.
 
     Returns:
         (N,) float64 in [0, 1]; 1 for a ray along the normal, 0 for a grazing one. A point at the
-        origin, or one without a plane (module docstring; a warning counts them), gets 1.
+        origin, one with a zero normal, and one without a plane (module docstring; a warning
+        counts them) get 1.
 
     Raises:
-        NidarError: as :func:`estimate_normals` (except too few points, taken as head-on), or
-            normals of another shape or not finite.
+        NidarError: points not (N, 3) or not finite, ``k < 3``, or normals of another shape or
+            not finite.
     """
-    p = _points(xyz)
+    p = np.asarray(xyz, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise NidarError(f"expected (N, 3) points, got shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise NidarError("points must be finite")
     if normals is None:
-        if len(p) < 3:
-            if len(p):
-                warnings.warn(
-                    f"{len(p)} point(s): too few for a surface normal, incidence taken as head-on",
-                    stacklevel=2,
-                )
-            return np.ones(len(p))
-        n = estimate_normals(p, k)
-        flat = ~np.any(n, axis=1)
-        if flat.any():
-            warnings.warn(
-                f"{int(flat.sum())} of {len(p)} points have only coincident neighbours: "
-                "incidence taken as head-on",
-                stacklevel=2,
-            )
-            n[flat] = p[flat]  # along the ray: |cos θ| = 1 (0 at the origin, handled below)
+        n = _estimated_normals(p, k)
     else:
         n = np.asarray(normals, dtype=np.float64)
         if n.shape != p.shape or not np.all(np.isfinite(n)):
             raise NidarError(f"normals must be finite and shaped like the points {p.shape}")
-    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    p, n = _unit_scale(p), _unit_scale(n)  # cos θ is scale-free; no overflow for huge values
     r = np.linalg.norm(p, axis=1)
-    cos = np.abs(np.einsum("ni,ni->n", n, p)) / np.where(r > 0, r, 1.0)
-    return np.where(r > 0, np.clip(cos, 0.0, 1.0), 1.0)
+    length = np.linalg.norm(n, axis=1)
+    cos = np.abs(np.einsum("ni,ni->n", n, p)) / np.maximum(length * r, 1e-300)
+    return np.where((r > 0) & (length > 0), np.clip(cos, 0.0, 1.0), 1.0)
+
+
+def _unit_scale(v: np.ndarray) -> np.ndarray:
+    """Rows divided by their largest absolute component (zero rows stay zero)."""
+    m = np.abs(v).max(axis=1, keepdims=True, initial=0.0)
+    return v / np.where(m > 0, m, 1.0)
+
+
+def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:
+    """:func:`estimate_normals` of the points within :data:`MAX_COORDINATE`; zero rows (head-on)
+    where there is no plane, with one warning per cause."""
+    if int(k) < 3:
+        raise NidarError(f"normals need at least 3 neighbours per point (got k={k})")
+    far = np.abs(p).max(axis=1, initial=0.0) > MAX_COORDINATE
+    near = np.flatnonzero(~far)
+    n = np.zeros_like(p)
+    if far.any():
+        warnings.warn(
+            f"{int(far.sum())} point(s) beyond {MAX_COORDINATE:g} m: incidence taken as head-on",
+            stacklevel=3,
+        )
+    if 0 < len(near) < 3:
+        warnings.warn(
+            f"{len(near)} point(s): too few for a surface normal, incidence taken as head-on",
+            stacklevel=3,
+        )
+    elif len(near):
+        n[near] = estimate_normals(p[near], k)
+        flat = int(np.sum(~np.any(n[near], axis=1)))
+        if flat:
+            warnings.warn(
+                f"{flat} of {len(near)} points have neighbours that coincide or lie on one line "
+                "(no plane): incidence taken as head-on",
+                stacklevel=3,
+            )
+    return n

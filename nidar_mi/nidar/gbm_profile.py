@@ -404,6 +404,12 @@ def _check_model_text(text: Any, features: tuple[str, ...]) -> str:
         )
     if set(h) - set(expect) - {"objective", "monotone_constraints", "feature_infos", "tree_sizes"}:
         raise NidarError("gbm: unknown lines in the model header")
+    if "monotone_constraints" in h:
+        signs = _numbers(h["monotone_constraints"], _INT, "monotone_constraints")
+        if len(signs) != len(features) or any(v not in (-1, 0, 1) for v in signs):
+            raise NidarError(
+                f"gbm: 'monotone_constraints' needs one of -1, 0, 1 per feature ({len(features)})"
+            )
     sizes = [int(x) for x in _numbers(h.get("tree_sizes", ""), _INT, "tree_sizes")]
     if not 1 <= len(sizes) <= MAX_TREES:
         raise NidarError(f"gbm: the model has {len(sizes)} trees (1 to {MAX_TREES} expected)")
@@ -485,6 +491,11 @@ def fit_gbm(
         raise NidarError(f"fit_gbm: {x.shape[0]} returns but {y.size} references")
     if not np.all(np.isfinite(y)):
         raise NidarError("fit_gbm: references must be finite")
+    if y.size < 2 * min_leaf:
+        raise NidarError(
+            f"fit_gbm: {y.size} returns are too few for leaves of at least {min_leaf} returns "
+            f"(need {2 * min_leaf}; fewer returns fit a constant)"
+        )
     if y.size > max_samples:
         keep = np.sort(np.random.default_rng(seed).choice(y.size, max_samples, replace=False))
         x, y = x[keep], y[keep]
@@ -504,7 +515,7 @@ def fit_gbm(
     booster = lgb.train(params, data, num_boost_round=int(trees))
     record = {
         k: params[k] for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
-    } | {"trees": int(trees), "samples": int(y.size)}
+    } | {"trees": int(booster.num_trees()), "samples": int(y.size)}
     return GbmMap(
         features=feats,
         monotone=bool(monotone and use_value),

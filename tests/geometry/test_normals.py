@@ -106,7 +106,7 @@ def test_coincident_neighbours_are_head_on_with_a_warning():
     """25 copies of one point beside a plane: their neighbourhoods have no spread."""
     pts, _ = _plane((1, 0, 0), 10.0, n=200)
     dup = np.tile([[3.0, 40.0, 2.0]], (25, 1))
-    with pytest.warns(UserWarning, match="25 of 225 points have only coincident neighbours"):
+    with pytest.warns(UserWarning, match="25 of 225 points have neighbours that coincide"):
         cos = incidence_cosine(np.vstack([pts, dup]))
     np.testing.assert_array_equal(cos[200:], 1.0)
     np.testing.assert_allclose(cos[:200], 10.0 / np.linalg.norm(pts, axis=1), atol=1e-6)
@@ -123,6 +123,24 @@ def test_noise_on_a_densely_sampled_wall():
     assert np.median(err) < 0.03
 
 
-def test_implausible_coordinates_are_an_error():
+def test_implausible_coordinates_are_head_on_and_left_out():
+    """A point beyond 1e7 m (no LiDAR return) is head-on with a warning and takes no part in the
+    plane fits of the others; estimate_normals itself refuses it."""
+    pts, _ = _plane((1, 0, 0), 10.0, n=300)
+    cloud = np.vstack([pts, [[1e160, 0, 0]]])
+    with pytest.warns(UserWarning, match="1 point.s. beyond 1e.07 m"):
+        cos = incidence_cosine(cloud)
+    assert cos[-1] == 1.0
+    np.testing.assert_allclose(cos[:-1], 10.0 / np.linalg.norm(pts, axis=1), atol=1e-6)
     with pytest.raises(NidarError, match="beyond"):
-        incidence_cosine(np.array([[1e160, 0, 0], [0, 1, 0], [0, 0, 1.0]]))
+        estimate_normals(cloud)
+
+
+def test_points_on_one_line_are_head_on_with_a_warning():
+    """Returns along one ray (or any line): no plane, so no incidence to estimate."""
+    line = np.array([[10.0, 0, 0], [11.0, 0, 0], [12.0, 0, 0]])
+    with pytest.warns(UserWarning, match="coincide or lie on one line"):
+        np.testing.assert_array_equal(incidence_cosine(line), 1.0)
+    dup = np.full((25, 3), 1.0 / 3.0)  # rounding leaves the mean a hair off the points
+    with pytest.warns(UserWarning, match="25 of 25 points"):
+        np.testing.assert_array_equal(incidence_cosine(dup), 1.0)

@@ -281,3 +281,16 @@ def test_prediction_does_not_depend_on_the_threads(monkeypatch):
     one = p.apply(v, d, None, e)
     monkeypatch.setattr(gbm_profile, "_predict_threads", lambda: 4)
     np.testing.assert_array_equal(p.apply(v, d, None, e), one)
+
+
+def test_too_few_returns_and_bad_constraint_headers_are_errors():
+    v, d, e, y = _sample(150)
+    with pytest.raises(NidarError, match="150 returns are too few"):
+        fit_gbm(v, d, y, e)  # leaves of >= 100 returns: a constant at best
+    v, d, e, y = _sample(3000)
+    m = fit_gbm(v, d, y, e, trees=5)
+    assert m.params["trees"] == 5
+    bad = m.model.replace("monotone_constraints=1 0 0", "monotone_constraints=1 0 0 1 1")
+    assert bad != m.model
+    with pytest.raises(NidarError, match="monotone_constraints"):
+        GbmMap(m.features, m.monotone, bad)
