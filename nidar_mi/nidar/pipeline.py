@@ -99,6 +99,24 @@ class NidarModel:
         self.scale = 1.0
         self._default_profile: SensorProfile | None | bool = False  # False: not read yet
 
+    def identity(self) -> dict[str, str]:
+        """SHA-256 of the weight files (``irnet_sha256``, ``stn_sha256`` when it has one): what
+        a sensor profile records of the networks it was fitted for (computed once)."""
+        if getattr(self, "_identity", None) is None:
+            import hashlib
+
+            ident = {}
+            for key in ("irnet", "stn"):
+                path = Path(self.weights_dir) / f"{key}.safetensors"
+                if path.is_file():
+                    h = hashlib.sha256()
+                    with open(path, "rb") as f:
+                        for chunk in iter(lambda f=f: f.read(1 << 20), b""):
+                            h.update(chunk)
+                    ident[f"{key}_sha256"] = h.hexdigest()
+            self._identity = ident
+        return dict(self._identity)
+
     def default_profile(self) -> SensorProfile | None:
         """The weights folder's ``profiles/sim-905.json`` (read once), None when it has none or
         when it was fitted for other networks (retrained weights: a warning, and
@@ -108,11 +126,10 @@ class NidarModel:
             import warnings
 
             from .profile import load_profile
-            from .profiles import model_identity
 
             path = Path(self.weights_dir) / "profiles" / "sim-905.json"
             profile = load_profile(path) if path.is_file() else None
-            if profile is not None and profile.model not in (None, model_identity(self)):
+            if profile is not None and profile.model not in (None, self.identity()):
                 warnings.warn(
                     f"{path} was fitted for other networks than {self.weights_dir}'s (retrained?):"
                     " ignored, calibration.json maps R; refit it with python -m nidar_mi.calibrate",

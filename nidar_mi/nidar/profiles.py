@@ -22,7 +22,6 @@ values. ``python -m nidar_mi.calibrate`` fits a profile for any sensor (:func:`f
 
 from __future__ import annotations
 
-import hashlib
 import os
 import warnings
 from collections.abc import Callable, Sequence
@@ -67,25 +66,9 @@ _SIM_SENSOR = "simulated 905 nm LiDAR, range-compensated intensity g·ρ·cosθ�
 _KITTI_SENSOR = "Velodyne HDL-64E (KITTI), stored reflectance in [0, 1]"
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def model_identity(model: NidarModel) -> dict[str, str]:
-    """SHA-256 of the model's weight files (``irnet_sha256``, ``stn_sha256`` when it has one)."""
-    cached = getattr(model, "_identity", None)
-    if cached is None:
-        cached = {}
-        for key in ("irnet", "stn"):
-            path = Path(model.weights_dir) / f"{key}.safetensors"
-            if path.is_file():
-                cached[f"{key}_sha256"] = _sha256(path)
-        model._identity = cached
-    return dict(cached)
+    """SHA-256 of the model's weight files (:meth:`NidarModel.identity`)."""
+    return model.identity()
 
 
 def scan_branches(
