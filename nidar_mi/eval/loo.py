@@ -267,36 +267,27 @@ def standard_methods(
             methods[f"{key}_{form}"] = profile_method(
                 f"{name} + {form} profile", vals, form=form, input=inp
             )
-            if form == "gbm" and key in ("linnir", "nidar_R"):
-                methods[f"{key}_gbm_inc"] = profile_method(
-                    f"{name} + gbm profile with incidence",
-                    vals,
-                    form="gbm",
-                    input=inp,
-                    incidence=True,
-                )
-            if form == "gbm" and key in ("lum", "linnir"):
-                methods[f"{key}_gbm_free"] = profile_method(
-                    f"{name} + gbm profile, not monotone in the value",
-                    vals,
-                    form="gbm",
-                    input=inp,
-                    monotone=False,
-                )
-            if form == "range_ring" and key.startswith("nidar"):
-                methods[f"{key}_range"] = profile_method(
-                    f"{name} + range_ring profile without ring gains",
-                    vals,
-                    form="range_ring",
-                    input=inp,
-                    ring_gains_on=False,
-                )
+            for v_form, keys, suffix, what, options in _VARIANTS:
+                if form == v_form and key in keys:
+                    methods[f"{key}{suffix}"] = profile_method(
+                        f"{name} + {what}", vals, form=form, input=inp, **options
+                    )
     if model is not None:
         raw = next(v for k, _, v, _ in sources if k == "nidar_I_hat")
         methods["nidar_I_hat_raw"] = raw_method("(f) NIDAR Î raw, zero-shot", raw, "no fitting")
         if zero_shot_profile is not None:
             methods["nidar_zero_shot"] = _zero_shot_method(model, zero_shot_profile, sources)
     return methods
+
+
+#: Extra rows per value source: (profile form, sources, key suffix, label, fitting options).
+_VARIANTS = (
+    ("gbm", ("linnir", "nidar_R"), "_gbm_inc", "gbm profile with incidence", {"incidence": True}),
+    ("gbm", ("lum", "linnir"), "_gbm_free", "gbm profile, not monotone in the value",
+     {"monotone": False}),
+    ("range_ring", ("nidar_R", "nidar_I_hat"), "_range",
+     "range_ring profile without ring gains", {"ring_gains_on": False}),
+)  # fmt: skip
 
 
 def _luminance_map(rgb: np.ndarray) -> np.ndarray:
