@@ -463,17 +463,24 @@ def _with_stn_config(cfg: TrainConfig, stn_path: Path) -> TrainConfig:
     """``cfg`` with the network configuration stored in the STN weights file ``stn_path``."""
     import dataclasses
 
-    from .checkpoint import read_weights_metadata
-    from .config import STNConfig, dataclass_from_dict
+    from .config import STNConfig
 
-    meta = read_weights_metadata(stn_path)
-    if meta.get("format") != "nidar_mi.stn" or "config" not in meta:
-        raise NidarError(f"{stn_path} does not hold STN weights")
+    return dataclasses.replace(cfg, stn=_stored_config(stn_path, "stn", STNConfig))
+
+
+def _stored_config(path: Path, kind: str, config_cls):
+    """The network configuration stored in the weights file ``path`` of ``kind`` (``"stn"`` or
+    ``"irnet"``), as a ``config_cls``; one-line errors for another file or a bad configuration."""
+    from .checkpoint import read_weights_metadata
+    from .config import dataclass_from_dict
+
+    meta = read_weights_metadata(path)
+    if meta.get("format") != f"nidar_mi.{kind}" or "config" not in meta:
+        raise NidarError(f"{path} does not hold {'STN' if kind == 'stn' else 'IRNet'} weights")
     try:
-        stn_cfg = dataclass_from_dict(STNConfig, json.loads(meta["config"]), f"{stn_path} config")
+        return dataclass_from_dict(config_cls, json.loads(meta["config"]), f"{path} config")
     except json.JSONDecodeError:
-        raise NidarError(f"{stn_path}: invalid network configuration") from None
-    return dataclasses.replace(cfg, stn=stn_cfg)
+        raise NidarError(f"{path}: invalid network configuration") from None
 
 
 def _check_intrinsic_frames(frames: list[Path]) -> None:
@@ -493,19 +500,12 @@ def _init_state(cfg: TrainConfig, path: Path) -> dict[str, torch.Tensor]:
     """State dict of the IRNet weights ``path``, checked against ``cfg.irnet``."""
     import dataclasses
 
-    from .checkpoint import read_weights_metadata
-    from .config import IRNetConfig, dataclass_from_dict
+    from .config import IRNetConfig
     from .model_io import load_irnet
 
     if not path.is_file():
         raise NidarError(f"initial IRNet weights {path} not found")
-    meta = read_weights_metadata(path)
-    if meta.get("format") != "nidar_mi.irnet" or "config" not in meta:
-        raise NidarError(f"{path} does not hold IRNet weights")
-    try:
-        given = dataclass_from_dict(IRNetConfig, json.loads(meta["config"]), f"{path} config")
-    except json.JSONDecodeError:
-        raise NidarError(f"{path}: invalid network configuration") from None
+    given = _stored_config(path, "irnet", IRNetConfig)
     if dataclasses.asdict(given) != dataclasses.asdict(cfg.irnet):
         raise NidarError(
             f"initial IRNet weights {path} are a different network "
