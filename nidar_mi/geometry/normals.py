@@ -50,13 +50,14 @@ MAX_COORDINATE = 1e7
 DEGENERATE = 1e-12
 
 
-def _points(xyz) -> np.ndarray:
+def _points(xyz, bounded: bool = True) -> np.ndarray:
+    """(N, 3) finite float64 points (within :data:`MAX_COORDINATE` when ``bounded``)."""
     p = np.asarray(xyz, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3:
         raise NidarError(f"expected (N, 3) points, got shape {p.shape}")
     if not np.all(np.isfinite(p)):
         raise NidarError("points must be finite")
-    if p.size and np.abs(p).max() > MAX_COORDINATE:
+    if bounded and p.size and np.abs(p).max() > MAX_COORDINATE:
         raise NidarError(f"points lie beyond {MAX_COORDINATE:g} m of the origin")
     return p
 
@@ -119,11 +120,7 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
         NidarError: points not (N, 3) or not finite, ``k < 3``, or normals of another shape or
             not finite.
     """
-    p = np.asarray(xyz, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise NidarError(f"expected (N, 3) points, got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise NidarError("points must be finite")
+    p = _points(xyz, bounded=False)
     if normals is None:
         n = _estimated_normals(p, k)
     else:

@@ -20,16 +20,16 @@ is what RMSE and SSIM reward.
   never comes out darker: the ranking of surfaces stays the model's.
 * A **geometry-only** map (``use_value=False``) has the features ``(d, e)`` only: what a profile
   knows without any image (it ignores the values it is given).
-* An **incidence-aware** map (``use_incidence=True``) also reads ``c = |cos θ|``, the cosine of
+* An **incidence-aware** map (fitted with ``cos_incidence=``) also reads ``c = |cos θ|``, the cosine of
   the angle between the ray and the surface normal at the return
   (:func:`nidar_mi.geometry.incidence_cosine`, normals estimated from the scan's own points):
   ``I = clip(F(v, d, e, c), 0, 1)``, constrained non-decreasing in ``c`` (a surface seen more
   head-on never comes out darker). The image carries the surface, the scan its orientation.
 
 Fitting is deterministic (``deterministic``, one thread, row-wise histograms, a fixed seed, no
-bagging): the same data and seed give the same model text. Prediction uses up to 8 threads
-(at most ``$OMP_NUM_THREADS``; rows are independent: the same output with any number). The map is stored in a profile file
-as LightGBM's own text model (``Booster.model_to_string``) with the features it reads; nothing
+bagging): the same data and seed give the same model text. Prediction uses up to 8 threads (at
+most ``$OMP_NUM_THREADS``; rows are independent: the same output with any number). The map is
+stored in a profile file as LightGBM's own text model (``Booster.model_to_string``) with the features it reads; nothing
 is pickled. :meth:`GbmMap.from_dict` checks the text before LightGBM parses it and turns any
 failure into one :class:`~nidar_mi.errors.NidarError` line.
 """
