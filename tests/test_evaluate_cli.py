@@ -215,6 +215,11 @@ def test_real_data_tables(tmp_path):
     ):
         assert needed in keys
     assert len(loo["rows"]) == 3 * len(keys)
+    # the incidence rows read something the plain rows do not: their predictions differ
+    by = {(r["frame"], r["method"]): r for r in loo["rows"]}
+    assert any(
+        by[(f, "geometry_gbm_inc")]["rmse"] != by[(f, "geometry_gbm")]["rmse"] for f in loo["folds"]
+    )
     assert all(np.isfinite(r["spearman"]) and 0 <= r["rmse"] <= 1 for r in loo["rows"])
     ph = payload["photos"]
     assert {m["method"] for m in ph["mean"]} == {"luminance", "linear", "stn"}
