@@ -212,6 +212,8 @@ def test_real_data_tables(tmp_path):
         "geometry_gbm_inc",
         "linnir_gbm_inc",
         "nidar_R_gbm_inc",
+        "nidar_pseudo_nir_gbm",
+        "nidar_pseudo_nir_gbm_inc",
     ):
         assert needed in keys
     assert len(loo["rows"]) == 3 * len(keys)
@@ -219,6 +221,11 @@ def test_real_data_tables(tmp_path):
     by = {(r["frame"], r["method"]): r for r in loo["rows"]}
     assert any(
         by[(f, "geometry_gbm_inc")]["rmse"] != by[(f, "geometry_gbm")]["rmse"] for f in loo["folds"]
+    )
+    # the pseudo-NIR rows read the STN's map, not R's
+    assert any(
+        by[(f, "nidar_pseudo_nir_gbm")]["rmse"] != by[(f, "nidar_R_gbm")]["rmse"]
+        for f in loo["folds"]
     )
     assert all(np.isfinite(r["spearman"]) and 0 <= r["rmse"] <= 1 for r in loo["rows"])
     ph = payload["photos"]

@@ -106,6 +106,9 @@ class FrameData:
         scene_path: scene XML (for the RGB-twin scan).
         params: scene parameters the render used.
         seed: scan seed the render used.
+        physics: (N,) float64 noise-free intensity on the ``gt`` scale, ``g·ρ·cos θ·exp(−2αd)``
+            from the renderer's exact ρ and cos θ of each return (without the receiver noise
+            of ``gt``); None where the render stores neither.
     """
 
     scene: str
@@ -124,6 +127,7 @@ class FrameData:
     scene_path: str = ""
     params: dict = field(default_factory=dict)
     seed: int | None = None
+    physics: np.ndarray | None = None
 
 
 @dataclass
@@ -173,6 +177,7 @@ def load_render_frames(
     grid = (int(lparams["rings"]), int(lparams["horizontal_resolution"]))
     scene = os.path.basename(os.path.normpath(render_dir))
     xyz = np.asarray(pts["xyz"], dtype=np.float64)
+    physics = _noise_free(pts, lparams, intensity_scale)
     frames = []
     for cam in r.cameras:
         uv, z, in_front = project(xyz, cam.model)
@@ -196,9 +201,27 @@ def load_render_frames(
                 scene_path=manifest.get("scene", ""),
                 params=dict(manifest.get("params", {})),
                 seed=manifest.get("seed"),
+                physics=None if physics is None else physics[idx],
             )
         )
     return frames
+
+
+def _noise_free(pts: dict, lparams: dict, intensity_scale: float) -> np.ndarray | None:
+    """(N,) ``g·ρ·cos θ·exp(−2αd)`` of every return on the metric scale (None: no ρ, cos θ)."""
+    from ..lidar.return_model import expected_intensity
+
+    if "reflectance" not in pts or "cos_incidence" not in pts:
+        return None
+    value = expected_intensity(
+        float(lparams["gain"]),
+        np.asarray(pts["reflectance"], dtype=np.float64),
+        np.asarray(pts["range"], dtype=np.float64),
+        np.asarray(pts["cos_incidence"], dtype=np.float64),
+        float(lparams["atmospheric_extinction"]),
+        "compensated",
+    )
+    return scale_intensity(value, intensity_scale)
 
 
 def predict_frame(

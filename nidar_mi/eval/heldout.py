@@ -196,6 +196,10 @@ def evaluate_renders(
     return results
 
 
+#: Key of the noise-free physics among the scored values (reported apart, not as a method).
+_CEILING = "physics_noise_free"
+
+
 def heldout_material_scores(results: Sequence[FrameResult], train_materials) -> dict[str, object]:
     """Every method on the returns of materials no training scene has.
 
@@ -206,19 +210,24 @@ def heldout_material_scores(results: Sequence[FrameResult], train_materials) -> 
     Returns:
         ``{"materials": held-out names seen, "rows": per frame and method (``spearman``,
         ``rmse``, ``n_points``), "mean": per method (unweighted over frames, and ``pooled``:
-        Spearman over all held-out returns together)}``.
+        Spearman over all held-out returns together), "ceiling": the same scores of the
+        noise-free physics (:attr:`FrameData.physics`) at the same returns, or None where a
+        frame lacks it}``. The reference carries the receiver noise, which no method can
+        predict: the ceiling is the best ranking of it to be expected.
     """
     from .metrics import rmse, spearman
 
     train = set(map(str, train_materials))
     rows, pooled, seen = [], {}, set()
+    ceiling = all(r.frame.physics is not None for r in results)
     for r in results:
         mat = np.asarray(r.frame.material).astype(str)
         held = (mat != "") & ~np.isin(mat, list(train))
         if held.sum() < 2:
             continue
         seen |= set(mat[held])
-        for k, p in r.pred.items():
+        pred = dict(r.pred) | ({_CEILING: r.frame.physics} if ceiling else {})
+        for k, p in pred.items():
             rows.append(
                 {
                     "scene": r.frame.scene,
@@ -246,4 +255,10 @@ def heldout_material_scores(results: Sequence[FrameResult], train_materials) -> 
                 "rmse": float(np.mean([x["rmse"] for x in rs])),
             }
         )
-    return {"materials": sorted(seen), "rows": rows, "mean": mean}
+    top = next((m for m in mean if m["method"] == _CEILING), None)
+    return {
+        "materials": sorted(seen),
+        "rows": [x for x in rows if x["method"] != _CEILING],
+        "mean": [m for m in mean if m["method"] != _CEILING],
+        "ceiling": top,
+    }

@@ -204,7 +204,7 @@ def standard_methods(
             also a geometry-only ``gbm`` row (range and elevation, no value), for luminance
             and the linear map a ``gbm`` row without the monotone constraint, and
             incidence-aware ``gbm`` rows (``*_gbm_inc``: the returns' ``|cos θ|`` from normals
-            estimated on each scan) for the geometry, the linear map and NIDAR's R.
+            estimated on each scan) for the geometry, the linear map, NIDAR's pseudo-NIR and R.
 
     Returns:
         key -> :class:`LooMethod`, in table order.
@@ -256,7 +256,11 @@ def standard_methods(
         sources.append(("linnir", "(i) linear RGB→NIR", nir, "linear_nir"))
     if model is not None:
         maps = CachedValues(lambda s: _nidar_branches(model, s))
-        for branch, name in (("R", "(g) NIDAR R"), ("I_hat", "(f) NIDAR Î")):
+        for branch, name in (
+            ("pseudo_nir", "(e) NIDAR pseudo-NIR"),
+            ("R", "(g) NIDAR R"),
+            ("I_hat", "(f) NIDAR Î"),
+        ):
             sources.append(
                 (f"nidar_{branch}", name, CachedValues(_branch_of(maps, branch)), f"nidar:{branch}")
             )
@@ -282,7 +286,8 @@ def standard_methods(
 
 #: Extra rows per value source: (profile form, sources, key suffix, label, fitting options).
 _VARIANTS = (
-    ("gbm", ("linnir", "nidar_R"), "_gbm_inc", "gbm profile with incidence", {"incidence": True}),
+    ("gbm", ("linnir", "nidar_pseudo_nir", "nidar_R"), "_gbm_inc", "gbm profile with incidence",
+     {"incidence": True}),
     ("gbm", ("lum", "linnir"), "_gbm_free", "gbm profile, not monotone in the value",
      {"monotone": False}),
     ("range_ring", ("nidar_R", "nidar_I_hat"), "_range",
@@ -301,7 +306,7 @@ def _luminance_map(rgb: np.ndarray) -> np.ndarray:
 def _nidar_branches(model, scan) -> dict[str, np.ndarray]:
     from ..nidar.profiles import scan_branches
 
-    return scan_branches(model, scan, ("R", "I_hat"))
+    return scan_branches(model, scan, ("pseudo_nir", "R", "I_hat"))
 
 
 def _branch_of(maps: CachedValues, branch: str):
