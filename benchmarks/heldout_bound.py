@@ -14,7 +14,9 @@ against the frame's range-compensated intensity (Spearman per frame and over all
   depth map (finite differences of the back-projected pixels);
 * ``R_true · cos θ``;
 * ``R_true`` through an incidence-aware ``gbm`` profile (value, range, elevation, ``cos θ``)
-  fitted on ``TRAIN_DATA``'s ``train`` frames.
+  fitted on ``TRAIN_DATA``'s ``train`` frames;
+* ``R_true`` through a value-and-incidence ``gbm`` profile (value, ``cos θ``; the form of the
+  shipped ``sim-905``) fitted on the same frames.
 
 No network is involved: these bound any method that estimates reflectance from the camera image
 and maps it through a profile of range and elevation (and, for the last row, the incidence).
@@ -87,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
     gbm_inc = fit_gbm(
         cat["r_true"], cat["range"], reference, cat["elevation"], cos_incidence=cat["cos"]
     )
+    gbm_vc = fit_gbm(
+        cat["r_true"], cat["range"], reference, None, cos_incidence=cat["cos"], use_geometry=False
+    )
 
     def values(t):
         return {
@@ -96,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
             "R_true * cos": t["r_true"] * t["cos"],
             "R_true + gbm with incidence": gbm_inc(
                 t["r_true"], t["range"], elevation_deg=t["elevation"], cos_incidence=t["cos"]
+            ),
+            "R_true + gbm of value and incidence": gbm_vc(
+                t["r_true"], t["range"], cos_incidence=t["cos"]
             ),
         }
 

@@ -2,7 +2,7 @@
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
-                                 [--incidence]
+                                 [--incidence [--no-geometry]]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--overwrite] [-q]
 
@@ -14,7 +14,10 @@ its ``--branch`` map at the returns a camera sees is fitted to the sensor's inte
 (:func:`nidar_mi.nidar.profiles.fit_scan_profile`). With ``--incidence`` (``gbm`` only) the
 profile also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
 (:func:`nidar_mi.geometry.incidence_cosine`); ``assign`` and ``render`` then estimate it the
-same way on the clouds they are given. The profile file
+same way on the clouds they are given. With ``--no-geometry`` as well it reads the value and the
+incidence only, not the range and elevation: the form of a range-compensated intensity
+``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
+The profile file
 (:mod:`nidar_mi.nidar.profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -57,6 +60,12 @@ def build_parser():
         action="store_true",
         help="gbm: also read the incidence |cos θ| of each return, from normals estimated on "
         "the scan's own points",
+    )
+    p.add_argument(
+        "--no-geometry",
+        action="store_true",
+        help="gbm with --incidence: read the value and the incidence only, not the range and "
+        "elevation (a range-compensated sensor; carries over to other layouts)",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -106,6 +115,10 @@ def _calibrate(args, argv) -> None:
 
     if args.incidence and args.form != "gbm":
         raise NidarError(f"--incidence needs --form gbm (got --form {args.form})")
+    if args.no_geometry and not args.incidence:
+        raise NidarError(
+            "--no-geometry needs --incidence (the profile reads the value and the incidence)"
+        )
     _check_target(args.out, args.overwrite)
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
@@ -124,12 +137,20 @@ def _calibrate(args, argv) -> None:
         provenance={"data": [os.path.abspath(s) for s in args.scans], "command": command},
         progress=not args.quiet,
         incidence=args.incidence,
+        **({"use_geometry": False} if args.no_geometry else {}),
     )
     profile.save(args.out)
     if not args.quiet:
         prov = profile.provenance
         print(
             f"{profile.form} profile '{profile.name}'"
-            f"{' (with incidence)' if profile.uses_incidence else ''} fitted on {prov['frames']} frames, "
+            f"{_reads(profile)} fitted on {prov['frames']} frames, "
             f"{prov['returns']} returns (rings: {prov['rings']}); wrote {args.out}"
         )
+
+
+def _reads(profile) -> str:
+    """What the summary line adds about the incidence."""
+    if not profile.uses_incidence:
+        return ""
+    return " (with incidence)" if profile.mapping.uses_geometry else " (value and incidence only)"

@@ -25,6 +25,11 @@ is what RMSE and SSIM reward.
   (:func:`nidar_mi.geometry.incidence_cosine`, normals estimated from the scan's own points):
   ``I = clip(F(v, d, e, c), 0, 1)``, constrained non-decreasing in ``c`` (a surface seen more
   head-on never comes out darker). The image carries the surface, the scan its orientation.
+* A **value-and-incidence** map (``use_geometry=False``, with ``cos_incidence=``) reads
+  ``(v, c)`` only: ``I = clip(F(v, c), 0, 1)``, the form of a range-compensated intensity
+  ``g·ρ·cos θ`` with ``F`` in place of the product. It learns nothing about the range response,
+  the lasers or where the training scenes put their surfaces, so it carries over to sensors
+  and scenes of another layout (the simulator's ``sim-905``).
 
 Fitting is deterministic (``deterministic``, one thread, row-wise histograms, a fixed seed, no
 bagging): the same data and seed give the same model text. Prediction uses up to 8 threads (at
@@ -51,6 +56,7 @@ __all__ = [
     "FEATURES",
     "GEOMETRY_FEATURES",
     "INCIDENCE_FEATURE",
+    "VALUE_INCIDENCE_FEATURES",
     "GbmMap",
     "fit_gbm",
 ]
@@ -75,11 +81,14 @@ MAX_LEAVES = 255
 MAX_MODEL_CHARS = 8_000_000
 #: The incidence feature (``|cos θ|`` of the ray on the surface), last column when used.
 INCIDENCE_FEATURE = "cos_incidence"
+#: Features of a value-and-incidence map (no range, no elevation).
+VALUE_INCIDENCE_FEATURES = ("v", INCIDENCE_FEATURE)
 _FEATURE_SETS = (
     FEATURES,
     GEOMETRY_FEATURES,
     (*FEATURES, INCIDENCE_FEATURE),
     (*GEOMETRY_FEATURES, INCIDENCE_FEATURE),
+    VALUE_INCIDENCE_FEATURES,
 )
 
 
@@ -130,7 +139,7 @@ class GbmMap:
     Attributes:
         features: the feature names in column order: :data:`FEATURES` or
             :data:`GEOMETRY_FEATURES` (geometry only), each optionally followed by
-            :data:`INCIDENCE_FEATURE`.
+            :data:`INCIDENCE_FEATURE`, or :data:`VALUE_INCIDENCE_FEATURES`.
         monotone: whether the map was constrained non-decreasing in ``v``.
         model: LightGBM's text model (``Booster.model_to_string``).
         params: the fitting parameters (for the record).
@@ -146,7 +155,8 @@ class GbmMap:
         if feats not in _FEATURE_SETS:
             raise NidarError(
                 f"gbm: features must be {list(FEATURES)} or {list(GEOMETRY_FEATURES)}, "
-                f"optionally followed by '{INCIDENCE_FEATURE}' (got {list(feats)})"
+                f"optionally followed by '{INCIDENCE_FEATURE}', or "
+                f"{list(VALUE_INCIDENCE_FEATURES)} (got {list(feats)})"
             )
         object.__setattr__(self, "features", feats)
         if not isinstance(self.monotone, bool):
@@ -159,6 +169,11 @@ class GbmMap:
     def uses_value(self) -> bool:
         """Whether the map reads the model value (False: geometry only)."""
         return self.features[0] == "v"
+
+    @property
+    def uses_geometry(self) -> bool:
+        """Whether the map reads the range and elevation (False: value and incidence only)."""
+        return "range_m" in self.features
 
     @property
     def uses_incidence(self) -> bool:
@@ -184,7 +199,8 @@ class GbmMap:
             values: (N,) model values (ignored by a geometry-only map).
             range_m: (N,) ranges, m.
             ring: ignored (the elevation stands for the laser).
-            elevation_deg: (N,) elevations above the sensor's xy plane, degrees; required.
+            elevation_deg: (N,) elevations above the sensor's xy plane, degrees; required
+                unless the map reads the value and incidence only.
             cos_incidence: (N,) ``|cos θ|`` in [0, 1]; required by an incidence-aware map,
                 ignored otherwise.
 
@@ -195,7 +211,7 @@ class GbmMap:
             NidarError: no elevations (or incidences, for a map that reads them), mismatched
                 lengths or non-finite inputs.
         """
-        if elevation_deg is None:
+        if elevation_deg is None and self.uses_geometry:
             raise NidarError("gbm profile: the returns' elevations are needed")
         if self.uses_incidence and cos_incidence is None:
             raise NidarError("gbm profile: this profile reads the returns' incidence cosines")
@@ -206,6 +222,7 @@ class GbmMap:
             self.uses_value,
             "gbm profile",
             cos_incidence if self.uses_incidence else None,
+            use_geometry=self.uses_geometry,
         )
         out = self._booster.predict(x, num_threads=_predict_threads())
         return np.clip(np.asarray(out, dtype=np.float64), 0.0, 1.0)
@@ -258,20 +275,26 @@ def _predict_threads() -> int:
 
 
 def _design(
-    values, range_m, elevation_deg, use_value: bool, who: str, cos_incidence=None
+    values,
+    range_m,
+    elevation_deg,
+    use_value: bool,
+    who: str,
+    cos_incidence=None,
+    *,
+    use_geometry: bool = True,
 ) -> np.ndarray:
     """(N, F) float64 feature matrix in a feature set's column order; checks lengths, finiteness
-    and the incidence range."""
+    and the incidence range. Without the geometry the ranges still set the expected length."""
     d = np.asarray(range_m, dtype=np.float64).reshape(-1)
-    e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
-    cols = [d, e]
+    cols = [d, np.asarray(elevation_deg, dtype=np.float64).reshape(-1)] if use_geometry else []
     if use_value:
         v = np.asarray(values, dtype=np.float64).reshape(-1)
         cols.insert(0, v)
     if cos_incidence is not None:
         c = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)
         cols.append(c)
-    if any(c.shape != d.shape for c in cols):
+    if not cols or any(c.shape != d.shape for c in cols):
         raise NidarError(f"{who}: values, ranges, elevations and incidences differ in length")
     x = np.stack(cols, axis=1)
     if not np.all(np.isfinite(x)):
@@ -450,6 +473,7 @@ def fit_gbm(
     *,
     cos_incidence: Any = None,
     use_value: bool = True,
+    use_geometry: bool = True,
     monotone: bool = True,
     trees: int = DEFAULT_TREES,
     leaves: int = DEFAULT_LEAVES,
@@ -464,10 +488,13 @@ def fit_gbm(
         values: (N,) model values at the returns (ignored with ``use_value=False``).
         range_m: (N,) their ranges, m.
         reference: (N,) the sensor's intensities there, in [0, 1].
-        elevation_deg: (N,) their elevations above the sensor's xy plane, degrees.
+        elevation_deg: (N,) their elevations above the sensor's xy plane, degrees (unused
+            with ``use_geometry=False``).
         cos_incidence: (N,) ``|cos θ|`` of the returns in [0, 1]: given, the map is
             incidence-aware (module docstring); None: it is not.
         use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
+        use_geometry: False: a value-and-incidence map of ``(v, cos_incidence)`` (needs
+            ``cos_incidence`` and the value; the ranges only set the number of returns).
         monotone: constrain the map non-decreasing in the value.
         trees: boosting rounds, 1 to :data:`MAX_TREES`.
         leaves: most leaves per tree, 2 to :data:`MAX_LEAVES`.
@@ -479,13 +506,25 @@ def fit_gbm(
     Raises:
         NidarError: mismatched, empty or non-finite inputs, or parameters out of range.
     """
-    if elevation_deg is None:
+    if not use_geometry and (cos_incidence is None or not use_value):
+        raise NidarError(
+            "fit_gbm: a map without range and elevation reads the value and the incidence"
+        )
+    if elevation_deg is None and use_geometry:
         raise NidarError("fit_gbm: the returns' elevations are needed")
     if not 1 <= int(trees) <= MAX_TREES or not 2 <= int(leaves) <= MAX_LEAVES:
         raise NidarError(f"fit_gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
     if not 0 < learning_rate <= 1 or min_leaf < 1 or max_samples < 1:
         raise NidarError("fit_gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
-    x = _design(values, range_m, elevation_deg, use_value, "fit_gbm", cos_incidence)
+    x = _design(
+        values,
+        range_m,
+        elevation_deg,
+        use_value,
+        "fit_gbm",
+        cos_incidence,
+        use_geometry=use_geometry,
+    )
     y = np.asarray(reference, dtype=np.float64).reshape(-1)
     if y.shape != (x.shape[0],) or not y.size:
         raise NidarError(f"fit_gbm: {x.shape[0]} returns but {y.size} references")
@@ -501,7 +540,7 @@ def fit_gbm(
         x, y = x[keep], y[keep]
     feats = FEATURES if use_value else GEOMETRY_FEATURES
     if cos_incidence is not None:
-        feats = (*feats, INCIDENCE_FEATURE)
+        feats = (*feats, INCIDENCE_FEATURE) if use_geometry else VALUE_INCIDENCE_FEATURES
     params = _params(
         feats,
         monotone,

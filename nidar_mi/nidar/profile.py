@@ -12,7 +12,8 @@ profile holds that part, fitted on the sensor's own scans
   (:class:`nidar_mi.nidar.range_ring.RangeRingMap`);
 * ``gbm``: a gradient-boosted regression of the intensity on the value, the range and the
   elevation, monotone in the value, or on the range and elevation alone; optionally also on
-  the incidence ``|cos θ|`` of the ray on the surface, estimated from the scan's own points
+  the incidence ``|cos θ|`` of the ray on the surface, estimated from the scan's own points;
+  or on the value and the incidence alone, without range and elevation
   (:class:`nidar_mi.nidar.gbm_profile.GbmMap`; LightGBM's text model in the file).
 
 **File format** (JSON, UTF-8)::
@@ -121,7 +122,8 @@ class SensorProfile:
             range_m: (N,) ranges from the sensor, m.
             ring: optional (N,) rings (-1 unknown); used by ``range_ring``.
             elevation_deg: optional (N,) elevations above the sensor's xy plane, degrees
-                (``range_ring``: rings of returns without one; ``gbm``: required).
+                (``range_ring``: rings of returns without one; ``gbm``: required unless it
+                reads the value and incidence only).
             cos_incidence: optional (N,) ``|cos θ|`` of the rays on the surfaces, in [0, 1]
                 (:func:`nidar_mi.geometry.incidence_cosine`); required when
                 :attr:`uses_incidence`, ignored otherwise.
@@ -273,7 +275,8 @@ def fit_profile(
             (the other forms do not: an error).
         **options: passed to :func:`~nidar_mi.nidar.calibration.fit_calibration`,
             :func:`~nidar_mi.nidar.range_ring.fit_range_ring` or
-            :func:`~nidar_mi.nidar.gbm_profile.fit_gbm` (``use_value=False``: geometry only).
+            :func:`~nidar_mi.nidar.gbm_profile.fit_gbm` (``use_value=False``: geometry only;
+            ``use_geometry=False``: the value and the incidence only).
 
     Raises:
         NidarError: an unknown form or unusable data.

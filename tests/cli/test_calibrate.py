@@ -57,6 +57,19 @@ def test_incidence_aware_profile(tmp_path, capsys):
     assert main([str(kitti), "-o", str(out), "--incidence", "--form", "range_ring", "-q"]) == 2
     assert "--incidence needs --form gbm" in capsys.readouterr().err
     assert load_profile(out).uses_incidence  # the earlier file is untouched
+    # --no-geometry: the value and the incidence only; range and elevation are not read
+    assert main([str(kitti), "-o", str(out), "--incidence", "--no-geometry"]) == 0
+    assert "(value and incidence only) fitted on 2 frames" in capsys.readouterr().out
+    p = load_profile(out)
+    assert p.mapping.features == ("v", "cos_incidence") and not p.mapping.uses_geometry
+    v = np.linspace(0.1, 0.9, 9)
+    np.testing.assert_array_equal(
+        p.apply(v, np.full(9, 5.0), None, None, np.full(9, 0.7)),
+        p.apply(v, np.full(9, 50.0), None, np.full(9, -20.0), np.full(9, 0.7)),
+    )
+    assert main([str(kitti), "-o", str(out), "--no-geometry", "-q"]) == 2
+    assert "--no-geometry needs --incidence" in capsys.readouterr().err
+    assert not load_profile(out).mapping.uses_geometry  # untouched
 
 
 def test_generic_folder_with_rings_and_0_255_intensity(tmp_path, capsys):
