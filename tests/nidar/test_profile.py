@@ -116,14 +116,19 @@ def test_non_finite_values_are_an_error_not_nan():
 
 
 def test_sim_905_is_the_weights_profile_or_their_calibration(tmp_path):
-    """The shipped weights carry ``profiles/sim-905.json`` (an incidence-aware gbm profile of
-    R); a weights folder without one maps R through its ``calibration.json``."""
+    """The shipped weights carry ``profiles/sim-905.json`` (a gbm profile of R and the
+    incidence, the form of the compensated intensity g·ρ·cos θ, which it ranks like ρ·cos θ
+    over R's range); a weights folder without one maps R through its ``calibration.json``."""
     import shutil
+
+    from scipy.stats import spearmanr
 
     model = NidarModel.load(device="cpu")
     p = resolve_profile("sim-905", model)
     assert p.form == "gbm" and p.branch == "R" and p.model == model_identity(model)
-    assert p.uses_incidence
+    assert p.uses_incidence and p.mapping.features == ("v", "cos_incidence")
+    r, c = (g.ravel() for g in np.meshgrid(np.linspace(0.3, 0.6, 16), np.linspace(0.1, 1, 19)))
+    assert spearmanr(p.apply(r, np.full(r.size, 10.0), None, None, c), r * c).statistic > 0.9
     plain = tmp_path / "w"
     shutil.copytree(model.weights_dir, plain, ignore=shutil.ignore_patterns("profiles"))
     other = NidarModel.load(plain, device="cpu")
