@@ -2,7 +2,7 @@
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
-                                 [--incidence [--no-geometry]]
+                                 [--incidence [--no-geometry] | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--overwrite] [-q]
 
@@ -11,10 +11,11 @@
 ``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
 ``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
 its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
-(:func:`nidar_mi.nidar.profiles.fit_scan_profile`). With ``--incidence`` (``gbm`` only) the
-profile also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
-(:func:`nidar_mi.geometry.incidence_cosine`); ``assign`` and ``render`` then estimate it the
-same way on the clouds they are given. With ``--no-geometry`` as well it reads the value and the
+(:func:`nidar_mi.nidar.profiles.fit_scan_profile`). A ``gbm`` profile (the default form) also
+reads each return's ``|cos θ|``, from normals estimated on the scan's own points
+(:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
+``kitti-hdl64e``. ``assign`` and ``render`` then estimate it the same way on the clouds they are
+given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
 The profile file
@@ -32,6 +33,7 @@ import os
 import sys
 
 from ..errors import NidarError
+from ..nidar.profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
 from ._common import parser, run
 
 __all__ = ["build_parser", "main"]
@@ -49,23 +51,31 @@ def build_parser():
     p.add_argument("--sensor", default="", help="what the sensor is, free text")
     p.add_argument(
         "--form",
-        default="gbm",
+        default=KITTI_PROFILE_FORM,
         choices=("gbm", "range_ring", "distance_quantile"),
         help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
         "value (default); range_ring: monotone map per range bin + ring gains; "
         "distance_quantile: the paper's distance encoding + quantile map",
     )
-    p.add_argument(
+    inc = p.add_mutually_exclusive_group()
+    inc.add_argument(
         "--incidence",
         action="store_true",
+        default=None,
         help="gbm: also read the incidence |cos θ| of each return, from normals estimated on "
-        "the scan's own points",
+        "the scan's own points (the default of the gbm form)",
+    )
+    inc.add_argument(
+        "--no-incidence",
+        dest="incidence",
+        action="store_false",
+        help="gbm: do not read the incidence",
     )
     p.add_argument(
         "--no-geometry",
         action="store_true",
-        help="gbm with --incidence: read the value and the incidence only, not the range and "
-        "elevation (a range-compensated sensor; carries over to other layouts)",
+        help="gbm: read the value and the incidence only, not the range and elevation (a "
+        "range-compensated sensor; carries over to other layouts)",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -115,9 +125,13 @@ def _calibrate(args, argv) -> None:
 
     if args.incidence and args.form != "gbm":
         raise NidarError(f"--incidence needs --form gbm (got --form {args.form})")
-    if args.no_geometry and not args.incidence:
+    incidence = args.form == "gbm" and (
+        KITTI_PROFILE_INCIDENCE if args.incidence is None else args.incidence
+    )
+    if args.no_geometry and not incidence:
         raise NidarError(
-            "--no-geometry needs --incidence (the profile reads the value and the incidence)"
+            "--no-geometry needs the incidence (--form gbm, without --no-incidence): the profile "
+            "reads the value and the incidence"
         )
     _check_target(args.out, args.overwrite)
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
@@ -136,7 +150,7 @@ def _calibrate(args, argv) -> None:
         branch=args.branch,
         provenance={"data": [os.path.abspath(s) for s in args.scans], "command": command},
         progress=not args.quiet,
-        incidence=args.incidence,
+        incidence=incidence,
         **({"use_geometry": False} if args.no_geometry else {}),
     )
     profile.save(args.out)

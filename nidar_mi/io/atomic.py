@@ -182,7 +182,8 @@ def check_output_folder(
     Raises:
         NidarError: ``out_dir`` is a file; it is a non-empty folder that is not an earlier
             output without ``overwrite``; or the nearest existing folder above it is not a
-            writable folder (one line naming the path).
+            writable folder (checked by creating and removing an empty folder there; one line
+            naming the path).
     """
     target = Path(out_dir).absolute()
     if target.exists() and not target.is_dir():
@@ -197,6 +198,10 @@ def check_output_folder(
         raise NidarError(f"cannot write {target}: {parent} is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise NidarError(f"cannot write {target}: {parent} is not writable")
+    try:  # a real write: permission bits do not stop root, a read-only or virtual file system does
+        tempfile.TemporaryDirectory(dir=parent, prefix=".nidar_mi-probe-").cleanup()
+    except OSError as e:
+        raise NidarError(f"cannot write {target}: {e.strerror or e}") from None
     return target
 
 

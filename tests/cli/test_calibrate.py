@@ -16,12 +16,14 @@ from tests.helpers.synthetic_kitti import make_kitti
 def test_kitti_folder_to_profile(tmp_path, capsys):
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "hdl.json"
-    assert main([str(kitti), "-o", str(out), "--sensor", "my HDL-64E"]) == 0
+    argv = [str(kitti), "-o", str(out), "--sensor", "my HDL-64E", "--no-incidence"]
+    assert main(argv) == 0
     p = load_profile(out)
     assert (p.name, p.form, p.input, p.sensor) == ("hdl", "gbm", "nidar:R", "my HDL-64E")
     assert p.provenance["frames"] == 2 and p.provenance["rings"] == "given"
     assert "python -m nidar_mi.calibrate" in p.provenance["command"]
     assert "gbm profile 'hdl' fitted on 2 frames" in capsys.readouterr().out
+    assert not p.uses_incidence
     # the profile maps into [0, 1] and is monotone in the value at a fixed range and elevation
     v = np.linspace(0, 1, 50)
     y = p.apply(v, np.full(50, 12.0), None, np.full(50, -8.0))
@@ -43,11 +45,11 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
 
 
 def test_incidence_aware_profile(tmp_path, capsys):
-    """--incidence: the profile reads |cos θ| (estimated on the scans' points) and is
-    non-decreasing in it; only with the gbm form."""
+    """The gbm form reads |cos θ| (estimated on the scans' points) by default, as
+    kitti-hdl64e does, and is non-decreasing in it; --incidence only with the gbm form."""
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "inc.json"
-    assert main([str(kitti), "-o", str(out), "--incidence"]) == 0
+    assert main([str(kitti), "-o", str(out)]) == 0
     assert "(with incidence) fitted on 2 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.uses_incidence and p.mapping.features[-1] == "cos_incidence"
@@ -67,8 +69,12 @@ def test_incidence_aware_profile(tmp_path, capsys):
         p.apply(v, np.full(9, 5.0), None, None, np.full(9, 0.7)),
         p.apply(v, np.full(9, 50.0), None, np.full(9, -20.0), np.full(9, 0.7)),
     )
-    assert main([str(kitti), "-o", str(out), "--no-geometry", "-q"]) == 2
-    assert "--no-geometry needs --incidence" in capsys.readouterr().err
+    for bad in (["--no-incidence"], ["--form", "range_ring"]):
+        assert main([str(kitti), "-o", str(out), "--no-geometry", "-q", *bad]) == 2
+        assert "--no-geometry needs the incidence" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main([str(kitti), "-o", str(out), "--incidence", "--no-incidence", "-q"])
+    assert exc.value.code == 2 and "not allowed with" in capsys.readouterr().err
     assert not load_profile(out).mapping.uses_geometry  # untouched
 
 
