@@ -23,7 +23,13 @@ from torch import nn
 
 from ..errors import NidarError
 
-__all__ = ["FOLD_TOLERANCE", "fold_batchnorm", "fold_conv_bn", "prepare_for_inference"]
+__all__ = [
+    "FOLD_TOLERANCE",
+    "fold_batchnorm",
+    "fold_conv_bn",
+    "fold_error",
+    "prepare_for_inference",
+]
 
 #: Largest change of any output, relative to max(1, |output|), that folding may cause.
 FOLD_TOLERANCE = 1e-5
@@ -126,20 +132,32 @@ def fold_batchnorm(net: nn.Module, example: torch.Tensor) -> nn.Module:
 
     Raises:
         NidarError: the folded copy differs from ``net`` on ``example`` by more than
-            :data:`FOLD_TOLERANCE` (relative to max(1, |output|)).
+            :data:`FOLD_TOLERANCE` (relative to max(1, |output|)) in float64
+            (:func:`fold_error`).
     """
-    ref_net = copy.deepcopy(net).eval()
     folded = copy.deepcopy(net).eval()
     modules = dict(folded.named_modules())
     for conv_name, bn_name in _trace_pairs(folded, example):
         _set(folded, conv_name, fold_conv_bn(modules[conv_name], modules[bn_name]))
         _set(folded, bn_name, nn.Identity())
-    with torch.no_grad():
-        for a, b in zip(_flat(ref_net(example)), _flat(folded(example)), strict=True):
-            err = ((a - b).abs() / a.abs().clamp(min=1.0)).max().item()
-            if not err <= FOLD_TOLERANCE:
-                raise NidarError(f"fold_batchnorm: folding changed an output by {err:.2e}")
+    err = fold_error(net, folded, example)
+    if not err <= FOLD_TOLERANCE:
+        raise NidarError(f"fold_batchnorm: folding changed an output by {err:.2e}")
     return folded
+
+
+def fold_error(net: nn.Module, folded: nn.Module, example: torch.Tensor) -> float:
+    """Largest change of any output of ``folded`` against ``net`` on ``example``, relative to
+    max(1, |output|), computed on float64 CPU copies of both networks (so the number measures the
+    fold, not the reduced precision, e.g. TF32, that a GPU backend computes float32 in)."""
+    ref64 = copy.deepcopy(net).eval().to("cpu", torch.float64)
+    fold64 = copy.deepcopy(folded).eval().to("cpu", torch.float64)
+    x = example.detach().to("cpu", torch.float64)
+    err = 0.0
+    with torch.no_grad():
+        for a, b in zip(_flat(ref64(x)), _flat(fold64(x)), strict=True):
+            err = max(err, ((a - b).abs() / a.abs().clamp(min=1.0)).max().item())
+    return err
 
 
 def prepare_for_inference(

@@ -8,7 +8,13 @@ from torch import nn
 
 from nidar_mi.errors import NidarError
 from nidar_mi.nidar.config import IRNET_VARIANTS
-from nidar_mi.nidar.fold import fold_batchnorm, fold_conv_bn, prepare_for_inference
+from nidar_mi.nidar.fold import (
+    FOLD_TOLERANCE,
+    fold_batchnorm,
+    fold_conv_bn,
+    fold_error,
+    prepare_for_inference,
+)
 from nidar_mi.nidar.irnet import IRNet
 from nidar_mi.nidar.stn import STN
 
@@ -90,3 +96,68 @@ def test_fold_needs_running_statistics():
     bn = nn.BatchNorm2d(2, track_running_stats=False)
     with pytest.raises(NidarError, match="running statistics"):
         fold_conv_bn(nn.Conv2d(1, 2, 1), bn)
+
+
+def _tf32(x: torch.Tensor) -> torch.Tensor:
+    """``x`` (float32) rounded to TF32's 10-bit mantissa, to nearest (NVIDIA's tensor-core format;
+    the exponent stays float32's)."""
+    bits = x.contiguous().view(torch.int32)
+    return ((bits + 0x1000) & ~0x1FFF).view(torch.float32)
+
+
+@pytest.fixture
+def tf32_convolutions(monkeypatch):
+    """Every float32 2-D convolution computed as a GPU does by default on Ampere and Hopper:
+    inputs and weights rounded to TF32, products accumulated in float32. Float64 is untouched."""
+    conv2d = torch.nn.functional.conv2d
+
+    def tf32_conv2d(x, w, *args, **kwargs):
+        if x.dtype == torch.float32:
+            x, w = _tf32(x), _tf32(w)
+        return conv2d(x, w, *args, **kwargs)
+
+    monkeypatch.setattr(torch.nn.functional, "conv2d", tf32_conv2d)
+
+
+def _irnet() -> nn.Module:
+    torch.manual_seed(3)
+    return _randomise_bn(
+        IRNet("unet+deeplabv3", 1, width=16, unet_depth=2, output_stride=4, aspp_rates=(1, 2))
+    )
+
+
+def test_tf32_rounding_moves_float32_outputs_past_the_tolerance(tf32_convolutions):
+    """The emulation is strong enough to matter: compared in float32 under TF32, the folded and the
+    original network differ by more than FOLD_TOLERANCE (the check of earlier versions failed so)."""
+    net = _irnet()
+    folded = fold_batchnorm(net, torch.rand(1, 1, 16, 16))
+    x = torch.rand(1, 1, 32, 48)
+    with torch.no_grad():
+        a, b = net(x), folded(x)
+    rel = max(((a[k] - b[k]).abs() / a[k].abs().clamp(min=1.0)).max().item() for k in a)
+    assert rel > 10 * FOLD_TOLERANCE
+
+
+def test_folding_holds_under_tf32_convolutions(tf32_convolutions):
+    net = _irnet()
+    example = torch.rand(1, 1, 16, 16)
+    folded = fold_batchnorm(net, example)  # raised "folding changed an output" before
+    # in float64 only the float32 storage of the folded weights is left (2**-24 each)
+    assert fold_error(net, folded, example) < 1e-6
+    assert not any(isinstance(m, nn.BatchNorm2d) for m in folded.modules())
+
+
+def test_a_wrong_fold_is_still_refused(monkeypatch):
+    import nidar_mi.nidar.fold as fold
+
+    right = fold.fold_conv_bn
+
+    def off_by_1e_3(conv, bn):
+        fused = right(conv, bn)
+        with torch.no_grad():
+            fused.bias += 1e-3
+        return fused
+
+    monkeypatch.setattr(fold, "fold_conv_bn", off_by_1e_3)
+    with pytest.raises(NidarError, match="folding changed an output by"):
+        fold_batchnorm(_irnet(), torch.rand(1, 1, 16, 16))
