@@ -16,6 +16,7 @@ from nidar_mi.nidar.fold import (
     prepare_for_inference,
 )
 from nidar_mi.nidar.irnet import IRNet
+from nidar_mi.nidar.precision import emulated_convolutions, round_mantissa
 from nidar_mi.nidar.stn import STN
 
 
@@ -98,25 +99,12 @@ def test_fold_needs_running_statistics():
         fold_conv_bn(nn.Conv2d(1, 2, 1), bn)
 
 
-def _tf32(x: torch.Tensor) -> torch.Tensor:
-    """``x`` (float32) rounded to TF32's 10-bit mantissa, to nearest (NVIDIA's tensor-core format;
-    the exponent stays float32's)."""
-    bits = x.contiguous().view(torch.int32)
-    return ((bits + 0x1000) & ~0x1FFF).view(torch.float32)
-
-
 @pytest.fixture
-def tf32_convolutions(monkeypatch):
+def tf32_convolutions():
     """Every float32 2-D convolution computed as a GPU does by default on Ampere and Hopper:
     inputs and weights rounded to TF32, products accumulated in float32. Float64 is untouched."""
-    conv2d = torch.nn.functional.conv2d
-
-    def tf32_conv2d(x, w, *args, **kwargs):
-        if x.dtype == torch.float32:
-            x, w = _tf32(x), _tf32(w)
-        return conv2d(x, w, *args, **kwargs)
-
-    monkeypatch.setattr(torch.nn.functional, "conv2d", tf32_conv2d)
+    with emulated_convolutions("tf32"):
+        yield
 
 
 def _irnet() -> nn.Module:
@@ -161,3 +149,15 @@ def test_a_wrong_fold_is_still_refused(monkeypatch):
     monkeypatch.setattr(fold, "fold_conv_bn", off_by_1e_3)
     with pytest.raises(NidarError, match="folding changed an output by"):
         fold_batchnorm(_irnet(), torch.rand(1, 1, 16, 16))
+
+
+def test_round_mantissa_keeps_the_stated_bits():
+    # 1 + 2**-11 is halfway between two TF32 numbers (10 bits): rounds up to 1 + 2**-10
+    x = torch.tensor([1.0 + 2.0**-11, 1.0 + 2.0**-12, -3.0 - 2.0**-9, 1e-30], dtype=torch.float32)
+    got = round_mantissa(x, 10)
+    expected = torch.tensor([1.0 + 2.0**-10, 1.0, -3.0 - 2.0**-9, 1e-30], dtype=torch.float32)
+    rel = ((got - expected).abs() / expected.abs()).max().item()
+    assert rel < 2.0**-10
+    assert got[:3].tolist() == expected[:3].tolist()
+    r = torch.rand(10_000) * 100.0
+    assert ((round_mantissa(r, 7) - r).abs() / r).max().item() <= 2.0**-8
