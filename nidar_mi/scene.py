@@ -138,6 +138,22 @@ def load_scene(
     except Exception as e:
         raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
 
+    lidars, cameras = _sensors(path, scene, variant)
+    return LoadedScene(
+        path=path,
+        scene=scene,
+        variant=variant,
+        lidars=lidars,
+        cameras=cameras,
+        rgb_twin=rgb_twin,
+        labels=declared,
+    )
+
+
+def _sensors(path: str, scene, variant: str) -> tuple[list, list]:
+    """The scene's LiDARs and cameras, each sorted by id; a warning names any other sensor (not
+    rendered), a camera with an empty film is refused."""
+    from . import plugins
     from .camera import CAMERA_CLASSES
 
     lidar_cls = plugins.plugin_module("lidar", variant).LidarSensor
@@ -150,7 +166,7 @@ def load_scene(
             f"{path}: sensor(s) {', '.join(others)} not rendered: only lidar, perspective and "
             "thinlens sensors are",
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     for cam in cameras:
         W, H = (int(v) for v in cam.film().crop_size())
@@ -158,12 +174,4 @@ def load_scene(
             raise NidarError(
                 f"{path}: camera '{cam.id()}' has a {W}x{H} film (width and height must be >= 1)"
             )
-    return LoadedScene(
-        path=path,
-        scene=scene,
-        variant=variant,
-        lidars=lidars,
-        cameras=cameras,
-        rgb_twin=rgb_twin,
-        labels=declared,
-    )
+    return lidars, cameras

@@ -101,6 +101,31 @@ def build_parser():
         metavar="NAME=VALUE",
         help="set a scene parameter (<default name=...>), e.g. -D cols=512; repeatable",
     )
+    _add_intensity_args(p)
+    p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
+    p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+    )
+    p.add_argument(
+        "--max-memory",
+        default=None,
+        metavar="SIZE",
+        help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
+        "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
+    )
+    _add_sequence_args(p)
+    p.add_argument(
+        "--deskew",
+        action="store_true",
+        help="also write xyz_deskewed: the points in the lidar frame at the sweep's start",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    return p
+
+
+def _add_intensity_args(p) -> None:
+    """``--intensity`` and what goes with it; the ``.bin`` intensity convention."""
     p.add_argument(
         "--intensity",
         default="physics",
@@ -132,18 +157,10 @@ def build_parser():
         help="NIDAR sensor profile: sim-905 (the simulator's; default), kitti-hdl64e, or a "
         "profile file from python -m nidar_mi.calibrate",
     )
-    p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
-    p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
-    p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
-    )
-    p.add_argument(
-        "--max-memory",
-        default=None,
-        metavar="SIZE",
-        help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
-        "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
-    )
+
+
+def _add_sequence_args(p) -> None:
+    """Rendering along a trajectory."""
     seq = p.add_argument_group("sequences (rendering along a trajectory)")
     seq.add_argument(
         "--trajectory",
@@ -169,13 +186,6 @@ def build_parser():
         help="whole-sequence outputs beside the frame folders: kitti (KITTI odometry layout), "
         "rosbag (ROS 2 bag); comma-separated",
     )
-    p.add_argument(
-        "--deskew",
-        action="store_true",
-        help="also write xyz_deskewed: the points in the lidar frame at the sweep's start",
-    )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    return p
 
 
 def _sequence_options(args):
