@@ -25,7 +25,6 @@ from pydantic import (
     ValidationInfo,
     model_validator,
 )
-from pydantic_core import PydanticCustomError
 
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
@@ -225,10 +224,13 @@ class LidarConfig:
 # --------------------------------------------------------------------------- one value each
 
 
-def _problem(why: str, param: str | None = None) -> PydanticCustomError:
-    """A validation error whose message is ``why`` (``param``: the parameter it names, when
-    not the field that raised it)."""
-    return PydanticCustomError("lidar_parameter", "{why}", {"why": why, "param": param})
+class _Problem(ValueError):
+    """A value refused by a validator: ``why`` in the plugin's words; ``param``, the parameter
+    it names when not the field that raised it."""
+
+    def __init__(self, why: str, param: str | None = None) -> None:
+        super().__init__(why)
+        self.why, self.param = why, param
 
 
 def _number(*, lo: float | None = None, lo_open: bool = False, hi: float | None = None):
@@ -238,13 +240,13 @@ def _number(*, lo: float | None = None, lo_open: bool = False, hi: float | None 
         try:
             v = float(raw)
         except (TypeError, ValueError):
-            raise _problem(f"must be a number (got '{raw}')") from None
+            raise _Problem(f"must be a number (got '{raw}')") from None
         if isinstance(raw, bool) or not math.isfinite(v):
-            raise _problem(f"must be a finite number (got '{raw}')")
+            raise _Problem(f"must be a finite number (got '{raw}')")
         if lo is not None and (v <= lo if lo_open else v < lo):
-            raise _problem(f"must be {'>' if lo_open else '>='} {lo:g} (got {v:g})")
+            raise _Problem(f"must be {'>' if lo_open else '>='} {lo:g} (got {v:g})")
         if hi is not None and v > hi:
-            raise _problem(f"must be <= {hi:g} (got {v:g})")
+            raise _Problem(f"must be <= {hi:g} (got {v:g})")
         return v
 
     return BeforeValidator(check)
@@ -257,13 +259,13 @@ def _integer(*, lo: int, hi: int | None = None):
         try:
             f = float(raw)
         except (TypeError, ValueError):
-            raise _problem(f"must be an integer (got '{raw}')") from None
+            raise _Problem(f"must be an integer (got '{raw}')") from None
         if not math.isfinite(f) or f != int(f):
-            raise _problem(f"must be an integer (got '{raw}')")
+            raise _Problem(f"must be an integer (got '{raw}')")
         if int(f) < lo:
-            raise _problem(f"must be >= {lo} (got {int(f)})")
+            raise _Problem(f"must be >= {lo} (got {int(f)})")
         if hi is not None and int(f) > hi:
-            raise _problem(f"must be <= {hi} (got {int(f)})")
+            raise _Problem(f"must be <= {hi} (got {int(f)})")
         return int(f)
 
     return BeforeValidator(check)
@@ -275,7 +277,7 @@ def _choice(options: tuple[str, ...]):
     def check(raw: Any) -> str:
         v = str(raw).strip().lower()
         if v not in options:
-            raise _problem(f"must be one of {', '.join(options)} (got '{v}')")
+            raise _Problem(f"must be one of {', '.join(options)} (got '{v}')")
         return v
 
     return BeforeValidator(check)
@@ -286,7 +288,7 @@ def _boolean(raw: Any) -> bool:
         return raw
     text = str(raw).strip().lower()
     if text not in ("true", "false"):
-        raise _problem(f"must be true or false (got '{raw}')")
+        raise _Problem(f"must be true or false (got '{raw}')")
     return text == "true"
 
 
@@ -295,7 +297,7 @@ def _preset(raw: Any) -> str | None:
         return None
     preset = str(raw).strip().lower()
     if preset not in PRESETS:
-        raise _problem(f"is unknown: '{preset}' (known: {', '.join(PRESETS)})")
+        raise _Problem(f"is unknown: '{preset}' (known: {', '.join(PRESETS)})")
     return preset
 
 
@@ -305,7 +307,7 @@ def _angles(raw: Any) -> tuple[float, ...] | None:
     try:
         return tuple(float(a) for a in parse_angles(str(raw)))
     except ValueError as e:
-        raise _problem(str(e)) from None
+        raise _Problem(str(e)) from None
 
 
 def _optional(validator: BeforeValidator) -> BeforeValidator:
@@ -344,12 +346,12 @@ class LayoutParameters(BaseModel):
         if self.layout is None:
             self.layout = "per_laser" if real else "uniform"
         if angles is not None and (self.layout == "per_laser" or calib is not None):
-            raise _problem("cannot be combined with a per-laser layout", "elevation_angles")
+            raise _Problem("cannot be combined with a per-laser layout", "elevation_angles")
         if calib is not None and self.layout != "per_laser":
-            raise _problem("needs layout 'per_laser'", "calibration_file")
+            raise _Problem("needs layout 'per_laser'", "calibration_file")
         if calib is None and self.layout == "per_laser" and self.preset not in TABLE_FILES:
             known = ", ".join(TABLE_FILES)
-            raise _problem(f"'per_laser' needs a preset with a table ({known})", "layout")
+            raise _Problem(f"'per_laser' needs a preset with a table ({known})", "layout")
         return self
 
     def defaults(self, intensity_mode: Any) -> dict[str, Any]:
@@ -372,7 +374,7 @@ def _below_range_max(range_max: float, info: ValidationInfo) -> float:
     range_min = info.data.get("range_min")
     if range_min is not None and range_min >= range_max:
         why = f"must be < range_max (got {range_min:g} >= {range_max:g})"
-        raise _problem(why, "range_min")
+        raise _Problem(why, "range_min")
     return range_max
 
 
@@ -413,9 +415,11 @@ class SensorParameters(BaseModel):
 def _first_error(error: ValidationError, fail: Callable[[str, str], ValueError]) -> ValueError:
     """The first problem of a validation, as the plugin's one-line message."""
     e = error.errors()[0]
-    ctx = e.get("ctx") or {}
-    param = ctx.get("param") or (str(e["loc"][0]) if e["loc"] else "?")
-    return fail(param, ctx.get("why", e["msg"]))
+    problem = (e.get("ctx") or {}).get("error")
+    field = str(e["loc"][0]) if e["loc"] else "?"
+    if not isinstance(problem, _Problem):  # not one of ours: pydantic's own words
+        return fail(field, e["msg"])
+    return fail(problem.param or field, problem.why)
 
 
 # --------------------------------------------------------------------------- the laser table
