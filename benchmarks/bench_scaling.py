@@ -78,6 +78,7 @@ def _stages(scene_files: list[str], work: str, args) -> dict:
     from nidar_mi.dataset import frames_of_render
     from nidar_mi.nidar.pipeline import NidarModel
     from nidar_mi.render_folder import read_render
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.simulate import render_scene
 
     prepare_worker(None, args.variant)
@@ -88,17 +89,10 @@ def _stages(scene_files: list[str], work: str, args) -> dict:
     for i, path in enumerate(scene_files):
         rdir = os.path.join(work, "renders", f"s{i}")
         w0, c0 = time.perf_counter(), time.process_time()
-        manifest = render_scene(
-            path,
-            rdir,
-            formats=("npz",),
-            seed=0,
-            spp=args.spp,
-            params=_params(args),
-            variant=args.variant,
-            progress=False,
-            overwrite=True,
+        options = RenderOptions(
+            path, formats=("npz",), seed=0, spp=args.spp, params=_params(args), progress=False
         )
+        manifest = render_scene(options, rdir, overwrite=True)
         render = (time.perf_counter() - w0, time.process_time() - c0)
         lidar = next(iter(manifest["lidars"].values()))
         cams = list(manifest["cameras"].values())
@@ -173,10 +167,13 @@ def _stages(scene_files: list[str], work: str, args) -> dict:
 _FIRST_RENDER = """
 import json, sys, time
 t0 = time.perf_counter()
+from nidar_mi.backend import set_variant
+from nidar_mi.render_session import RenderOptions
 from nidar_mi.simulate import render_scene
-m = render_scene(sys.argv[1], sys.argv[2], formats=("npz",), seed=0, spp=int(sys.argv[3]),
-                 params=json.loads(sys.argv[4]), variant=sys.argv[5], progress=False,
-                 overwrite=True)
+set_variant(sys.argv[5])
+m = render_scene(RenderOptions(sys.argv[1], formats=("npz",), seed=0, spp=int(sys.argv[3]),
+                               params=json.loads(sys.argv[4]), progress=False),
+                 sys.argv[2], overwrite=True)
 print(json.dumps({"process_s": time.perf_counter() - t0, "render_s": m["timings_s"]["total"]}))
 """
 

@@ -257,6 +257,9 @@ def main(argv=None) -> int:
             raise NidarError(
                 f"Open3D is not importable ({e}); install it with: pip install -e '.[bench]'"
             ) from None
+        from nidar_mi.backend import set_variant
+
+        set_variant(args.variant)
         result = run_benchmark(
             repeats=args.repeats,
             rings=args.rings,

@@ -82,7 +82,7 @@ def run_benchmark(*, frames: int, cols: int, variant: str) -> dict:
     from nidar_mi.io.trajectory import read_trajectory
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
-    from nidar_mi.sequence import render_sequence
+    from nidar_mi.sequence import SequenceOptions, render_sequence
 
     out = {"frames": frames, "cols": cols, "variant": variant, "setups": {}}
     with tempfile.TemporaryDirectory(prefix="nidar_seq_") as tmp:
@@ -113,18 +113,17 @@ def run_benchmark(*, frames: int, cols: int, variant: str) -> dict:
             misses = sum(1 for h in dr.kernel_history() if "hash" in h and not h.get("cache_hit"))
             dr.set_flag(dr.JitFlag.KernelHistory, False)
             seq_dir = os.path.join(tmp, f"seq_{len(out['setups'])}")
-            m = render_sequence(
+            options = SequenceOptions(
                 scene,
-                seq_dir,
                 traj_path,
                 rate=10.0,
                 frames=frames + 1,
                 formats=("npz",),
                 params={"cols": str(cols)},
-                variant=variant,
                 cameras=False,
                 progress=False,
             )
+            m = render_sequence(options, seq_dir)
             per_frame = [f["timings_s"]["frame_total"] for f in m["frames"][1:]]
             out["setups"][name] = {
                 "rays_per_frame": sensor.config.rings * cols * sensor.config.subrays,
@@ -193,6 +192,9 @@ def main(argv=None) -> int:
         for name in ("frames", "cols"):
             if getattr(args, name) < 1:
                 raise NidarError(f"--{name} must be >= 1 (got {getattr(args, name)})")
+        from nidar_mi.backend import set_variant
+
+        set_variant(args.variant)
         result = run_benchmark(frames=args.frames, cols=args.cols, variant=args.variant)
         if args.json:
             from nidar_mi.io.atomic import atomic_write_json

@@ -50,6 +50,9 @@ def test_city_mesh_counts_and_winding():
 
 @pytest.fixture(scope="module")
 def small_city():
+    from nidar_mi.backend import set_variant
+
+    set_variant(VARIANT)
     loaded, meshes = city.load_city(rings=8, cols=256, grid=241, variant=VARIANT)
     return loaded, meshes
 

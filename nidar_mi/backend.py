@@ -8,7 +8,8 @@ imported, before Dr.Jit initialises its LLVM back end.
 :func:`set_variant` picks ``cuda_ad_spectral`` when a CUDA device works, else
 ``llvm_ad_spectral``, and registers this package's Mitsuba plugins for that variant
 (Python plugin classes are bound to the variant active when they are defined; see
-:mod:`nidar_mi.plugins`).
+:mod:`nidar_mi.plugins`). Only entry points (commands, workers' set-up, test fixtures) call it;
+library code reads the variant they chose with :func:`active_variant`.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ __all__ = [
     "configure_llvm",
     "default_variant",
     "set_variant",
+    "active_variant",
     "prepare_worker",
     "SUPPORTED_VARIANTS",
 ]
@@ -148,6 +150,32 @@ def set_variant(variant: str | None = None) -> str:
     from . import plugins
 
     plugins.register_all()  # once per variant; makes nidar_mi.plugins.<name> this variant's
+    return variant
+
+
+def active_variant(expected: str | None = None) -> str:
+    """The active Mitsuba variant, with this package's plugins registered for it.
+
+    Args:
+        expected: the variant the caller expects (None: any spectral one).
+
+    Raises:
+        NidarError: no spectral variant is active, or another than ``expected``.
+    """
+    configure_llvm()
+    import mitsuba as mi
+
+    from . import plugins
+
+    variant = mi.variant()
+    if variant is None or "spectral" not in variant:
+        raise NidarError(
+            f"no spectral Mitsuba variant is active (active: {variant}): choose one first with "
+            "nidar_mi.backend.set_variant()"
+        )
+    if expected is not None and expected != variant:
+        raise NidarError(f"variant '{expected}' is not the active one ('{variant}')")
+    plugins.register_all()  # once per variant; a variant set by mi.set_variant alone has none
     return variant
 
 

@@ -404,9 +404,10 @@ def _scene_frames(
 ) -> None:
     """One scene's task: render it unless ``render_dir`` holds its render already, then write a
     frame per camera into ``frame_dir`` (the staged split folder)."""
+    from .render_session import RenderOptions
     from .simulate import ensure_rendered
 
-    ensure_rendered(scene_path, render_dir, **options)
+    ensure_rendered(RenderOptions(scene_path, **options), render_dir)
     for cam_id, frame, _ in frames_of_render(render_dir, lidar_id):
         write_frame(os.path.join(frame_dir, f"{name}__{cam_id}.npz"), frame)
 

@@ -1,6 +1,8 @@
 """Load a scene XML with this package's plugins and find the sensor rigs it declares.
 
-Loading runs the material loader pass (:func:`nidar_mi.materials.expand_scene_xml`: ``nidar_material``
+A scene is loaded in the active Mitsuba variant: the entry point (a command's ``main``, a test
+fixture, a notebook's first cell) chooses it with :func:`nidar_mi.backend.set_variant`; this
+module never chooses one. Loading runs the material loader pass (:func:`nidar_mi.materials.expand_scene_xml`: ``nidar_material``
 BSDFs by name, and the RGB-only twin) and the label pass (:func:`nidar_mi.labels.strip_labels`: the
 ``label`` / ``instance`` attributes of shapes) before Mitsuba parses the XML. Any failure becomes a
 :class:`~nidar_mi.errors.NidarError` with one line naming the file and the cause.
@@ -13,7 +15,7 @@ import re
 import warnings
 from dataclasses import dataclass, field
 
-from .backend import set_variant
+from .backend import active_variant
 from .errors import NidarError
 from .labels import SceneLabels, strip_labels
 
@@ -90,7 +92,8 @@ def load_scene(
 
     Args:
         path: scene XML.
-        variant: Mitsuba variant; None picks the default (CUDA if available, else LLVM).
+        variant: the Mitsuba variant the caller expects (None: the active one); it must be
+            the active one (set at the entry point by :func:`nidar_mi.backend.set_variant`).
         rgb_twin: load the RGB-only twin (every material replaced by its sRGB appearance).
         params: values for the scene's ``<default name=...>`` parameters (``$name`` in the XML).
         labels: read the shapes' labels. Labelled shapes stay apart, which slows ray casting on
@@ -98,8 +101,9 @@ def load_scene(
             labels (every point ``unlabeled``) and lets Mitsuba merge meshes that share a BSDF.
 
     Raises:
-        NidarError: missing/unreadable/malformed file or an invalid plugin parameter (the
-            plugin's one-line message, :func:`nidar_mi.plugins.parameter_error`).
+        NidarError: missing/unreadable/malformed file, an invalid plugin parameter (the
+            plugin's one-line message, :func:`nidar_mi.plugins.parameter_error`), or no
+            spectral variant active (or another than ``variant``).
     """
     if not os.path.isfile(path):
         raise NidarError(f"{path}: no such scene file")
@@ -108,7 +112,7 @@ def load_scene(
             xml = f.read()
     except (OSError, UnicodeDecodeError) as e:
         raise NidarError(f"{path}: cannot read ({e})") from None
-    variant = set_variant(variant)
+    variant = active_variant(variant)
     import mitsuba as mi
 
     from . import plugins
@@ -134,6 +138,22 @@ def load_scene(
     except Exception as e:
         raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
 
+    lidars, cameras = _sensors(path, scene, variant)
+    return LoadedScene(
+        path=path,
+        scene=scene,
+        variant=variant,
+        lidars=lidars,
+        cameras=cameras,
+        rgb_twin=rgb_twin,
+        labels=declared,
+    )
+
+
+def _sensors(path: str, scene, variant: str) -> tuple[list, list]:
+    """The scene's LiDARs and cameras, each sorted by id; a warning names any other sensor (not
+    rendered), a camera with an empty film is refused."""
+    from . import plugins
     from .camera import CAMERA_CLASSES
 
     lidar_cls = plugins.plugin_module("lidar", variant).LidarSensor
@@ -146,7 +166,7 @@ def load_scene(
             f"{path}: sensor(s) {', '.join(others)} not rendered: only lidar, perspective and "
             "thinlens sensors are",
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     for cam in cameras:
         W, H = (int(v) for v in cam.film().crop_size())
@@ -154,12 +174,4 @@ def load_scene(
             raise NidarError(
                 f"{path}: camera '{cam.id()}' has a {W}x{H} film (width and height must be >= 1)"
             )
-    return LoadedScene(
-        path=path,
-        scene=scene,
-        variant=variant,
-        lidars=lidars,
-        cameras=cameras,
-        rgb_twin=rgb_twin,
-        labels=declared,
-    )
+    return lidars, cameras

@@ -33,18 +33,110 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import render_folder as rf
 from .errors import NidarError
+from .render_session import RenderOptions, RenderSession, check_options
 
-__all__ = ["SEQUENCE_FORMATS", "render_sequence", "camera_trigger_time"]
+__all__ = [
+    "SEQUENCE_FORMATS",
+    "SequenceOptions",
+    "camera_trigger_time",
+    "check_sequence",
+    "render_sequence",
+]
 
 #: Whole-sequence outputs beside the frame folders.
 SEQUENCE_FORMATS = ("kitti", "rosbag")
 #: Points columns kept per frame for the sequence outputs.
 _SEQUENCE_COLUMNS = ("xyz", "intensity", "ring", "t", "label", "instance")
+
+
+@dataclass(frozen=True)
+class SequenceOptions:
+    """What to render of a scene along a trajectory, and how.
+
+    Attributes:
+        scene: scene XML path.
+        trajectory: KITTI odometry, TUM or CSV poses of the rig.
+        rate: frames per second, Hz (None: the first LiDAR's rotation rate); also the sample
+            rate of a KITTI odometry pose file.
+        frames: number of frames (None: as many as the trajectory holds).
+        formats: point formats of each frame (:data:`nidar_mi.render_folder.FORMATS`).
+        sequence_formats: whole-sequence outputs, from :data:`SEQUENCE_FORMATS`.
+        bin_intensity: ``unit`` or ``raw`` KITTI ``.bin`` intensity of each frame
+            (:func:`nidar_mi.render_folder.write_lidar`).
+        seed: base seed; frame ``k`` uses ``seed + k`` modulo 2³² (each LiDAR's own seed + k
+            without it; the camera sampler ``k`` without it).
+        spp: camera samples per pixel.
+        params: the scene's ``<default>`` values (None: none).
+        cameras: render the cameras.
+        deskew: add ``xyz_deskewed`` (points in the LiDAR frame at the sweep's start) to every
+            frame's points.
+        max_memory: bytes one scan or camera render may use (None: the default limit).
+        progress: show a progress bar on stderr.
+    """
+
+    scene: str
+    trajectory: str
+    rate: float | None = None
+    frames: int | None = None
+    formats: tuple[str, ...] = rf.FORMATS
+    sequence_formats: tuple[str, ...] = ()
+    bin_intensity: str = "unit"
+    seed: int | None = None
+    spp: int = 16
+    params: dict[str, str] | None = None
+    cameras: bool = True
+    deskew: bool = False
+    max_memory: int | None = None
+    progress: bool = True
+
+    def frame_options(self) -> RenderOptions:
+        """The options every frame is rendered with (physics intensity, the scene itself)."""
+        return RenderOptions(
+            self.scene,
+            formats=tuple(self.formats),
+            seed=self.seed,
+            spp=self.spp,
+            params=self.params,
+            cameras=self.cameras,
+            bin_intensity=self.bin_intensity,
+            max_memory=self.max_memory,
+            deskew=self.deskew,
+            progress=self.progress,
+        )
+
+
+@dataclass
+class _Rig:
+    """The sensors' mountings on the rig and when each camera fires.
+
+    Attributes:
+        mounts: LiDAR id -> (4, 4) rig-from-LiDAR pose.
+        cam_mounts: camera id -> (4, 4) rig-from-camera pose (empty without cameras).
+        cam_offsets: camera id -> its trigger time after the sweep's start, s.
+        lead: id of the first LiDAR (its poses are ``poses.txt``; its sweeps the sequence
+            outputs).
+    """
+
+    mounts: dict[str, np.ndarray]
+    cam_mounts: dict[str, np.ndarray]
+    cam_offsets: dict[str, float]
+    lead: str
+
+
+@dataclass
+class _Frames:
+    """What the frame loop hands to the sequence's files and manifest."""
+
+    log: list = field(default_factory=list)  # per frame its manifest entry
+    start_poses: list = field(default_factory=list)  # per frame the lead LiDAR's (4, 4) pose
+    keep: list = field(default_factory=list)  # per frame what the sequence outputs need
+    written: list = field(default_factory=list)
 
 
 def camera_trigger_time(lidar_config, T_lidar_mount: np.ndarray, T_camera_mount: np.ndarray):
@@ -96,171 +188,162 @@ def _frame_times(traj, rate: float, frames: int | None, sweep_s: float) -> np.nd
     return t0 + np.arange(frames) / rate
 
 
-def render_sequence(
-    scene_path: str,
-    out_dir: str,
-    trajectory: str,
-    *,
-    rate: float | None = None,
-    frames: int | None = None,
-    formats=rf.FORMATS,
-    sequence_formats=(),
-    bin_intensity: str = "unit",
-    seed: int | None = None,
-    spp: int = 16,
-    variant: str | None = None,
-    params: dict[str, str] | None = None,
-    cameras: bool = True,
-    deskew: bool = False,
-    max_memory: int | None = None,
-    progress: bool = True,
-    overwrite: bool = False,
-) -> dict:
-    """Render ``scene_path`` along ``trajectory`` into ``out_dir`` (layout: module docstring).
+def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool = False) -> dict:
+    """Render a scene along a trajectory into ``out_dir`` (layout: module docstring), in the
+    active Mitsuba variant (:func:`nidar_mi.backend.set_variant`).
 
     Args:
-        scene_path: scene XML.
+        options: what to render (:class:`SequenceOptions`).
         out_dir: the sequence folder (replaced whole; a non-empty folder that is not an earlier
             sequence needs ``overwrite``).
-        trajectory: KITTI odometry, TUM or CSV poses of the rig.
-        rate: frames per second (default: the first LiDAR's rotation rate); also the sample rate
-            of a KITTI odometry pose file.
-        frames: number of frames (default: as many as the trajectory holds).
-        formats: point formats of each frame.
-        sequence_formats: whole-sequence outputs, from :data:`SEQUENCE_FORMATS`.
-        bin_intensity: ``unit`` or ``raw`` KITTI ``.bin`` intensity of each frame
-            (:func:`nidar_mi.render_folder.write_lidar`).
-        seed: base seed; frame ``k`` uses ``seed + k`` modulo 2³² (each LiDAR's own seed + k
-            without it; the camera sampler ``k`` without it).
-        spp: camera samples per pixel.
-        variant: Mitsuba variant.
-        params: the scene's ``<default>`` values.
-        cameras: render the cameras.
-        deskew: add ``xyz_deskewed`` (points in the LiDAR frame at the sweep's start) to every
-            frame's points.
-        max_memory: bytes one scan may use (None: the default limit).
-        progress: show a progress bar on stderr.
         overwrite: replace a non-empty ``out_dir``.
 
     Returns:
         The sequence manifest.
+
+    Raises:
+        NidarError: a bad option, scene or trajectory; ``out_dir`` is then left untouched.
     """
-    from tqdm.auto import tqdm
-
     from .io.atomic import staged_directory
-    from .io.trajectory import read_trajectory, write_kitti_poses, write_times
-    from .simulate import _check_memory, _check_request, _load, _versions, nir_wavelengths
 
+    t_start = time.perf_counter()
+    session, traj, rate, times = _open(options)
+    session.check_memory()
+    rig = _rig(session)
+    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
+        frames = _render_frames(
+            stage, session, traj, times, rig, keep=bool(options.sequence_formats)
+        )
+        frames.written += _write_poses_and_times(stage, frames.start_poses, times)
+        frames.written += _sequence_outputs(
+            stage,
+            options.sequence_formats,
+            frames.keep,
+            np.asarray(frames.start_poses),
+            times,
+            rig.lead,
+        )
+        request = _sequence_request(session, options, rate, len(times))
+        manifest = _sequence_manifest(session, request, rate, times, rig.lead, frames, stage)
+        manifest["timings_s"]["total"] = time.perf_counter() - t_start
+        rf.write_manifest(stage, manifest)
+    return manifest
+
+
+def check_sequence(options: SequenceOptions):
+    """Refuse options that cannot be rendered, before anything is loaded: a bad rate, frame
+    count or sequence format, a bad frame option, a missing trajectory file. The frames' cache
+    key (:class:`~nidar_mi.render_folder.RenderRequest`).
+
+    Raises:
+        NidarError: one line naming the offending option.
+    """
+    rate, frames = options.rate, options.frames
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
         raise NidarError(f"--rate must be > 0 Hz (got {rate})")
     if frames is not None and frames < 1:
         raise NidarError(f"--frames must be >= 1 (got {frames})")
-    bad = [f for f in sequence_formats if f not in SEQUENCE_FORMATS]
+    bad = [f for f in options.sequence_formats if f not in SEQUENCE_FORMATS]
     if bad:
         raise NidarError(
             f"--sequence-formats: unknown '{','.join(bad)}' "
             f"(choose from {', '.join(SEQUENCE_FORMATS)})"
         )
-    req = rf.RenderRequest.of(
-        scene_path,
-        params=params,
-        seed=seed,
-        spp=spp,
-        formats=tuple(formats),
-        cameras=cameras,
-        bin_intensity=bin_intensity,
-    )
-    _check_request(req)
-    if not os.path.isfile(trajectory):
-        raise NidarError(f"{trajectory}: no such trajectory file")
-    t_start = time.perf_counter()
-    loaded = _load(req, variant)
-    lidars = loaded.lidars
-    rate = float(rate if rate is not None else lidars[0].config.rotation_rate)
-    traj = read_trajectory(trajectory, rate=rate)
+    request = check_options(options.frame_options())
+    if not os.path.isfile(options.trajectory):
+        raise NidarError(f"{options.trajectory}: no such trajectory file")
+    return request
+
+
+def _open(options: SequenceOptions):
+    """Check the options, load the scene and the trajectory: the session, the trajectory, the
+    frame rate (Hz) and the (F,) frame start times (s)."""
+    from .io.trajectory import read_trajectory
+
+    request = check_sequence(options)
+    session = RenderSession.open(options.frame_options(), request)
+    lidars = session.lidars
+    rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
+    traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
-    times = _frame_times(traj, rate, frames, sweep_s)
-    _check_memory(loaded, cameras, spp, max_memory)
+    return session, traj, rate, _frame_times(traj, rate, options.frames, sweep_s)
+
+
+def _rig(session: RenderSession) -> _Rig:
+    """Every sensor's scene pose as its mounting on the rig; each camera's trigger time."""
+    lidars, cams = session.lidars, session.cameras
     mounts = {s.id(): _matrix(s.world_transform()) for s in lidars}
-    cams = list(loaded.cameras) if cameras else []
     cam_mounts = {c.id(): _matrix(c.world_transform()) for c in cams}
     lead = lidars[0]
     cam_offsets = {
         c.id(): camera_trigger_time(lead.config, mounts[lead.id()], cam_mounts[c.id()])
         for c in cams
     }
-    request = req.to_dict() | {
-        "trajectory": os.path.abspath(trajectory),
-        "trajectory_sha256": rf.file_sha256(trajectory),
+    return _Rig(mounts, cam_mounts, cam_offsets, lead.id())
+
+
+def _render_frames(stage, session: RenderSession, traj, times, rig: _Rig, keep: bool) -> _Frames:
+    """Render every frame into ``stage/frames/<k>`` under one progress bar (``keep``: hold
+    what the sequence outputs need of each frame)."""
+    from tqdm.auto import tqdm
+
+    frames = _Frames()
+    disable = not session.options.progress
+    bar = tqdm(total=len(times), desc="sequence", unit="frame", disable=disable, file=sys.stderr)
+    try:
+        for k, t_k in enumerate(times):
+            folder = os.path.join(stage, "frames", f"{k:06d}")
+            shot = _FrameShot(session, traj, rig, k, float(t_k))
+            entry = _render_frame(shot, folder, frames.keep if keep else None)
+            frames.written += [os.path.join(folder, f) for f in entry.pop("files")]
+            frames.start_poses.append(entry.pop("lidar_start_pose"))
+            frames.log.append(entry)
+            bar.update(1)
+    finally:
+        bar.close()
+    return frames
+
+
+def _write_poses_and_times(stage, start_poses: list, times: np.ndarray) -> list[str]:
+    """``poses.txt`` (the lead LiDAR's start poses relative to frame 0) and ``times.txt``."""
+    from .io.trajectory import write_kitti_poses, write_times
+
+    P0_inv = np.linalg.inv(start_poses[0])
+    write_kitti_poses(os.path.join(stage, "poses.txt"), [P0_inv @ P for P in start_poses])
+    write_times(os.path.join(stage, "times.txt"), times - times[0])
+    return [os.path.join(stage, "poses.txt"), os.path.join(stage, "times.txt")]
+
+
+def _sequence_request(session: RenderSession, options: SequenceOptions, rate, frames) -> dict:
+    """The request a sequence manifest records: the frames' cache key and the trajectory."""
+    return session.request.to_dict() | {
+        "trajectory": os.path.abspath(options.trajectory),
+        "trajectory_sha256": rf.file_sha256(options.trajectory),
         "rate_hz": rate,
-        "frames": len(times),
-        "deskew": deskew,
-        "sequence_formats": list(sequence_formats),
+        "frames": frames,
+        "deskew": options.deskew,
+        "sequence_formats": list(options.sequence_formats),
     }
-    frame_log = []
-    start_poses = []
-    keep: list[dict] = []  # per frame what the sequence outputs need
-    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
-        written: list[str] = []
-        bar = tqdm(
-            total=len(times), desc="sequence", unit="frame", disable=not progress, file=sys.stderr
-        )
-        try:
-            for k, t_k in enumerate(times):
-                folder = os.path.join(stage, "frames", f"{k:06d}")
-                entry = _render_frame(
-                    loaded,
-                    folder,
-                    k,
-                    t_k,
-                    traj,
-                    mounts,
-                    cam_mounts,
-                    cam_offsets,
-                    formats=formats,
-                    bin_intensity=bin_intensity,
-                    wavelengths=nir_wavelengths(loaded),
-                    seed=seed,
-                    spp=spp,
-                    deskew=deskew,
-                    max_memory=max_memory,
-                    request=req.to_dict() | {"frame": k},
-                    variant=loaded.variant,
-                    versions=_versions(),
-                    keep=keep if sequence_formats else None,
-                )
-                written += [os.path.join(folder, f) for f in entry.pop("files")]
-                start_poses.append(entry.pop("lidar_start_pose"))
-                frame_log.append(entry)
-                bar.update(1)
-        finally:
-            bar.close()
-        P0_inv = np.linalg.inv(start_poses[0])
-        write_kitti_poses(os.path.join(stage, "poses.txt"), [P0_inv @ P for P in start_poses])
-        write_times(os.path.join(stage, "times.txt"), times - times[0])
-        written += [os.path.join(stage, "poses.txt"), os.path.join(stage, "times.txt")]
-        written += _sequence_outputs(
-            stage, sequence_formats, keep, np.asarray(start_poses), times, lead.id()
-        )
-        total = time.perf_counter() - t_start
-        render_s = sum(f["timings_s"]["frame_total"] for f in frame_log)
-        manifest = {
-            "kind": "sequence",
-            "request": request,
-            "scene": req.scene,
-            "variant": loaded.variant,
-            "versions": _versions(),
-            "rate_hz": rate,
-            "frame_count": len(times),
-            "trajectory_start_s": float(times[0]),
-            "poses_lidar": lead.id(),
-            "frames": frame_log,
-            "frames_per_s": len(times) / render_s if render_s > 0 else None,
-            "timings_s": {"total": total, "frames": render_s},
-            "files": sorted(os.path.relpath(p, stage) for p in written) + [rf.MANIFEST],
-        }
-        rf.write_manifest(stage, manifest)
-    return manifest
+
+
+def _sequence_manifest(session, request, rate, times, lead, frames: _Frames, stage) -> dict:
+    """The sequence's ``manifest.json`` (``timings_s.total`` is filled in by the caller)."""
+    render_s = sum(f["timings_s"]["frame_total"] for f in frames.log)
+    return {
+        "kind": "sequence",
+        "request": request,
+        "scene": session.request.scene,
+        "variant": session.variant,
+        "versions": session.versions,
+        "rate_hz": rate,
+        "frame_count": len(times),
+        "trajectory_start_s": float(times[0]),
+        "poses_lidar": lead,
+        "frames": frames.log,
+        "frames_per_s": len(times) / render_s if render_s > 0 else None,
+        "timings_s": {"total": None, "frames": render_s},
+        "files": sorted(os.path.relpath(p, stage) for p in frames.written) + [rf.MANIFEST],
+    }
 
 
 def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> list[str]:
@@ -288,44 +371,69 @@ def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> lis
     return written
 
 
-def _render_frame(
-    loaded,
-    folder,
-    k,
-    t_k,
-    traj,
-    mounts,
-    cam_mounts,
-    cam_offsets,
-    *,
-    formats,
-    bin_intensity,
-    wavelengths,
-    seed,
-    spp,
-    deskew,
-    max_memory,
-    request,
-    variant,
-    versions,
-    keep=None,
-) -> dict:
-    """Scan every LiDAR and render every camera of frame ``k``; write its render folder.
-    With ``keep`` (a list), append what the sequence outputs need of this frame."""
-    from .camera import render_camera
-    from .lidar.scan import scan
+@dataclass
+class _FrameShot:
+    """Frame ``k`` of a sequence: the session, the trajectory, the rig and the start time.
 
+    Attributes:
+        session: the sequence's render session.
+        traj: the rig's trajectory (:class:`~nidar_mi.io.trajectory.Trajectory`).
+        rig: the sensors' mountings and camera trigger times.
+        k: frame index.
+        t_k: the frame's start time on the trajectory, s.
+    """
+
+    session: RenderSession
+    traj: object
+    rig: _Rig
+    k: int
+    t_k: float
+
+    def seed(self, base: int) -> int:
+        """``base + k`` modulo 2³²: the seed of this frame."""
+        return (base + self.k) % 2**32
+
+
+def _render_frame(shot: _FrameShot, folder: str, keep: list | None = None) -> dict:
+    """Scan every LiDAR and render every camera of one frame; write its render folder.
+    With ``keep`` (a list), append what the sequence outputs need of this frame."""
     t0 = time.perf_counter()
     os.makedirs(folder, exist_ok=True)
-    lidar_entries, camera_entries, files = {}, {}, []
-    results, images = {}, {}
-    for sensor in loaded.lidars:
+    results, lidar_entries, files = _scan_frame(shot, folder)
+    camera_entries, images = _shoot_frame(shot, folder, results, files, keep is not None)
+    frame_total = time.perf_counter() - t0
+    _write_frame_manifest(shot, folder, lidar_entries, camera_entries, files, frame_total)
+    lead = shot.rig.lead
+    if keep is not None:
+        pts = results[lead].points()
+        keep.append(
+            {"points": {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}, "cameras": images}
+        )
+    return {
+        "frame": shot.k,
+        "time_s": shot.t_k,
+        "folder": os.path.relpath(folder, os.path.dirname(os.path.dirname(folder))),
+        "cameras_time_s": {c: e["time_s"] for c, e in camera_entries.items()},
+        "timings_s": {"frame_total": frame_total},
+        "files": [os.path.relpath(p, folder) for p in files] + [rf.MANIFEST],
+        "lidar_start_pose": np.asarray(lidar_entries[lead]["to_world"]),
+    }
+
+
+def _scan_frame(shot: _FrameShot, folder: str):
+    """Scan every LiDAR along the trajectory (motion distortion) and write its files: the scan
+    results, their manifest entries and the files written."""
+    from .lidar.scan import scan
+
+    session, traj, t_k = shot.session, shot.traj, shot.t_k
+    opts, loaded = session.options, session.loaded
+    lidar_entries, files, results = {}, [], {}
+    for sensor in session.lidars:
         lid = sensor.id()
         cfg = sensor.config
-        T_rig = traj.at(t_k + cfg.pattern.column_time_s())
-        columns = T_rig @ mounts[lid]
-        start = traj.at(t_k)[0] @ mounts[lid]
-        frame_seed = ((cfg.seed if seed is None else seed) + k) % 2**32
+        columns = traj.at(t_k + cfg.pattern.column_time_s()) @ shot.rig.mounts[lid]
+        start = traj.at(t_k)[0] @ shot.rig.mounts[lid]
+        frame_seed = shot.seed(cfg.seed if opts.seed is None else opts.seed)
         ts = time.perf_counter()
         result = scan(
             loaded.scene,
@@ -333,83 +441,86 @@ def _render_frame(
             seed=frame_seed,
             to_world=start,
             poses_per_column=columns,
-            max_memory=max_memory,
+            max_memory=opts.max_memory,
             labels=loaded.labels,
         )
         scan_s = time.perf_counter() - ts
         results[lid] = result
         tw = time.perf_counter()
-        written = rf.write_lidar(folder, result, formats, None, bin_intensity, deskew=deskew)
-        files += written
+        files += rf.write_lidar(
+            folder, result, opts.formats, None, opts.bin_intensity, deskew=opts.deskew
+        )
         lidar_entries[lid] = {
             "parameters": result.config.to_dict() | {"seed": frame_seed},
             "to_world": start.tolist(),
-            "time_s": float(t_k),
+            "time_s": t_k,
             "rays": int(result.valid.size),
             "hits": int(result.hit.sum()),
             "returns": int(sum(layer.valid.sum() for layer in result.returns)),
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": scan_s, "write": time.perf_counter() - tw},
         }
-    for cam in loaded.cameras if cam_mounts else []:
+    return results, lidar_entries, files
+
+
+def _shoot_frame(shot: _FrameShot, folder: str, results: dict, files: list, keep: bool):
+    """Render every camera from the rig pose of its trigger time and write its files (appended
+    to ``files``); the manifest entries and (``keep``) the images the sequence outputs need."""
+    from .camera import render_camera
+
+    session, rig = shot.session, shot.rig
+    wavelengths = session.nir_wavelengths
+    camera_entries, images = {}, {}
+    for cam in session.cameras:
         cid = cam.id()
-        t_cam = t_k + cam_offsets[cid]
-        rig = traj.at(t_cam)[0]
-        _set_camera_pose(cam, rig @ cam_mounts[cid])
+        t_cam = shot.t_k + rig.cam_offsets[cid]
+        T_rig = shot.traj.at(t_cam)[0]
+        _set_camera_pose(cam, T_rig @ rig.cam_mounts[cid])
         ts = time.perf_counter()
         r = render_camera(
-            loaded,
+            session.loaded,
             cam,
             wavelength=wavelengths[0],
             other_wavelengths=wavelengths[1:],
-            spp=spp,
-            seed=((seed or 0) + k) % 2**32,
+            spp=session.options.spp,
+            seed=shot.seed(session.options.seed or 0),
         )
         render_s = time.perf_counter() - ts
-        lidar_poses = {lid: rig @ mounts[lid] for lid in results}
+        lidar_poses = {lid: T_rig @ rig.mounts[lid] for lid in results}
         calib, written = rf.write_camera(folder, r, lidar_poses)
-        if keep is not None:
+        if keep:
             images[cid] = {"rgb": r.srgb8(), "K": r.K, "T_world_cam": r.T_world_cam}
             images[cid]["stamp_s"] = float(t_cam)
         files += written
         camera_entries[cid] = calib | {
-            "spp": spp,
+            "spp": session.options.spp,
             "time_s": float(t_cam),
             "timings_s": r.timings | {"render_total": render_s},
         }
-    for cam in loaded.cameras if cam_mounts else []:  # back to the scene's own pose
-        _set_camera_pose(cam, cam_mounts[cam.id()])
-    frame_total = time.perf_counter() - t0
+    for cam in session.cameras:  # back to the scene's own pose
+        _set_camera_pose(cam, rig.cam_mounts[cam.id()])
+    return camera_entries, images
+
+
+def _write_frame_manifest(shot, folder, lidar_entries, camera_entries, files, total_s) -> None:
+    """The frame's render-folder ``manifest.json``."""
+    session = shot.session
+    request = session.request.to_dict() | {"frame": shot.k}
     manifest = {
         "request": request,
         "scene": request["scene"],
         "scene_sha256": request["scene_sha256"],
-        "variant": variant,
-        "versions": versions,
-        "frame": k,
-        "time_s": float(t_k),
+        "variant": session.variant,
+        "versions": session.versions,
+        "frame": shot.k,
+        "time_s": shot.t_k,
         "seed": request["seed"],
-        "spp": spp,
-        "formats": list(formats),
+        "spp": session.options.spp,
+        "formats": list(session.options.formats),
         "intensity": "physics",
         "lidars": lidar_entries,
         "cameras": camera_entries,
-        "timings_s": {"total": frame_total},
+        "timings_s": {"total": total_s},
         "files": sorted(os.path.relpath(p, folder) for p in files) + [rf.MANIFEST],
     }
     rf.write_manifest(folder, manifest)
-    lead = loaded.lidars[0].id()
-    if keep is not None:
-        pts = results[lead].points()
-        keep.append(
-            {"points": {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}, "cameras": images}
-        )
-    return {
-        "frame": k,
-        "time_s": float(t_k),
-        "folder": os.path.relpath(folder, os.path.dirname(os.path.dirname(folder))),
-        "cameras_time_s": {c: e["time_s"] for c, e in camera_entries.items()},
-        "timings_s": {"frame_total": frame_total},
-        "files": [os.path.relpath(p, folder) for p in files] + [rf.MANIFEST],
-        "lidar_start_pose": np.asarray(lidar_entries[lead]["to_world"]),
-    }

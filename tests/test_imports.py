@@ -146,6 +146,7 @@ LAYERS = {
             "scene",
             "camera",
             "render_folder",
+            "render_session",
             "simulate",
             "sequence",
             "dataset",

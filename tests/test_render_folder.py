@@ -9,6 +9,7 @@ import pytest
 
 from nidar_mi import render_folder as rf
 from nidar_mi.errors import NidarError
+from nidar_mi.render_session import RenderOptions
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TARGET = os.path.join(REPO, "scenes", "target.xml")
@@ -21,22 +22,24 @@ def test_request_is_the_cache_key(tmp_path, variant):
     scene = tmp_path / "target.xml"
     shutil.copy(TARGET, scene)
     out = tmp_path / "r"
-    m1 = ensure_rendered(str(scene), str(out), seed=1, **FAST)
+    m1 = ensure_rendered(RenderOptions(str(scene), seed=1, **FAST), str(out))
     stamp = os.path.getmtime(out / rf.MANIFEST)
     assert rf.is_current(out, rf.RenderRequest.of(scene, seed=1, **_req(FAST)))
-    assert ensure_rendered(str(scene), str(out), seed=1, **FAST) == m1
+    assert ensure_rendered(RenderOptions(str(scene), seed=1, **FAST), str(out)) == m1
     assert os.path.getmtime(out / rf.MANIFEST) == stamp  # reused
     # another seed, another parameter, an edited scene: each is rendered again
     for change in (
         dict(seed=2),
         dict(seed=1, params={"cols": "64"}),
     ):
-        m = ensure_rendered(str(scene), str(out), **(FAST | change))
+        m = ensure_rendered(RenderOptions(str(scene), **(FAST | change)), str(out))
         assert m["request"]["seed"] == change["seed"]
         assert m["request"]["params"] == change.get("params", FAST["params"])
     rings_cols = m["lidars"]["lidar"]["rays"]
     scene.write_text(scene.read_text().replace('value="905"', 'value="1550"'))
-    m = ensure_rendered(str(scene), str(out), seed=1, **(FAST | {"params": {"cols": "64"}}))
+    m = ensure_rendered(
+        RenderOptions(str(scene), seed=1, **(FAST | {"params": {"cols": "64"}})), str(out)
+    )
     assert m["lidars"]["lidar"]["parameters"]["wavelength"] == 1550.0
     assert m["lidars"]["lidar"]["rays"] == rings_cols
     # a half-deleted folder is not current
@@ -53,9 +56,9 @@ def test_earlier_render_is_replaced_whole_and_user_folders_refused(tmp_path, var
     from nidar_mi.simulate import render_scene
 
     out = tmp_path / "r"
-    render_scene(TARGET, str(out), seed=1, **(FAST | {"formats": ("npz", "ply")}))
+    render_scene(RenderOptions(TARGET, seed=1, **(FAST | {"formats": ("npz", "ply")})), str(out))
     assert (out / "lidar" / "points.ply").is_file()
-    render_scene(TARGET, str(out), seed=1, **FAST)
+    render_scene(RenderOptions(TARGET, seed=1, **FAST), str(out))
     assert not (out / "lidar" / "points.ply").exists()  # nothing stale from the first run
     assert sorted(rf.read_manifest(out)["files"]) == sorted(
         str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()
@@ -64,9 +67,9 @@ def test_earlier_render_is_replaced_whole_and_user_folders_refused(tmp_path, var
     user.mkdir()
     (user / "notes.txt").write_text("keep")
     with pytest.raises(NidarError, match="not empty"):
-        render_scene(TARGET, str(user), seed=1, **FAST)
+        render_scene(RenderOptions(TARGET, seed=1, **FAST), str(user))
     assert [p.name for p in user.iterdir()] == ["notes.txt"]
-    render_scene(TARGET, str(user), seed=1, overwrite=True, **FAST)
+    render_scene(RenderOptions(TARGET, seed=1, **FAST), str(user), overwrite=True)
     assert not (user / "notes.txt").exists()
 
 

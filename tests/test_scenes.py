@@ -41,14 +41,15 @@ def test_scene_renders_small(path, tmp_path, variant):
     from nidar_mi.io.images import read_exr
     from nidar_mi.io.points import read_npz
     from nidar_mi.materials import list_materials
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.simulate import render_scene
 
     params = {k: v for k, v in SMALL.items() if k in _declared(path)}
     out = tmp_path / "out"
-    manifest = render_scene(
-        path, str(out), formats=("npz",), seed=1, spp=2, variant=variant, params=params,
-        progress=False,
+    options = RenderOptions(
+        path, formats=("npz",), seed=1, spp=2, params=params, progress=False
     )  # fmt: skip
+    manifest = render_scene(options, str(out))
     assert manifest["lidars"] and manifest["cameras"]
     for name, lidar in manifest["lidars"].items():
         fraction = lidar["returns"] / lidar["rays"]

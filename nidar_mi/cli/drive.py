@@ -62,6 +62,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
 
     def work():
+        from ..backend import set_variant
         from ..errors import NidarError
         from ..eval.drive.report import markdown_tables
         from ..eval.drive.study import StudyConfig, run_study
@@ -93,6 +94,8 @@ def main(argv=None) -> int:
             sequence=args.sequence,
             body_motion=not args.no_body_motion,
         )
+        cfg.check()  # bad options are named before the variant starts
+        set_variant()
         results = run_study(args.out, cfg, progress=not args.quiet, overwrite=args.overwrite)
         if not args.quiet:
             print(markdown_tables(results))

@@ -1,9 +1,11 @@
 """``python -m nidar_mi.render SCENE.xml -o OUT``: scan every LiDAR and render every camera.
 
-The work is :func:`nidar_mi.simulate.render_scene`; the folder layout is
+The work is :func:`nidar_mi.simulate.render_scene` with the
+:class:`~nidar_mi.render_session.RenderOptions` the flags give; the folder layout is
 :mod:`nidar_mi.render_folder` (table in the README, "Rendering"). With ``--trajectory`` the
 scene is rendered along a trajectory, one render folder per frame
-(:func:`nidar_mi.sequence.render_sequence`).
+(:func:`nidar_mi.sequence.render_sequence`). The command chooses the Mitsuba variant
+(``--variant``) before any work.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from __future__ import annotations
 import os
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
-from ..simulate import INTENSITY_SOURCES, NIDAR_BRANCHES
+from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ._common import parse_defines, parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
@@ -99,6 +101,31 @@ def build_parser():
         metavar="NAME=VALUE",
         help="set a scene parameter (<default name=...>), e.g. -D cols=512; repeatable",
     )
+    _add_intensity_args(p)
+    p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
+    p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+    )
+    p.add_argument(
+        "--max-memory",
+        default=None,
+        metavar="SIZE",
+        help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
+        "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
+    )
+    _add_sequence_args(p)
+    p.add_argument(
+        "--deskew",
+        action="store_true",
+        help="also write xyz_deskewed: the points in the lidar frame at the sweep's start",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    return p
+
+
+def _add_intensity_args(p) -> None:
+    """``--intensity`` and what goes with it; the ``.bin`` intensity convention."""
     p.add_argument(
         "--intensity",
         default="physics",
@@ -130,18 +157,10 @@ def build_parser():
         help="NIDAR sensor profile: sim-905 (the simulator's; default), kitti-hdl64e, or a "
         "profile file from python -m nidar_mi.calibrate",
     )
-    p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
-    p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
-    p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
-    )
-    p.add_argument(
-        "--max-memory",
-        default=None,
-        metavar="SIZE",
-        help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
-        "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
-    )
+
+
+def _add_sequence_args(p) -> None:
+    """Rendering along a trajectory."""
     seq = p.add_argument_group("sequences (rendering along a trajectory)")
     seq.add_argument(
         "--trajectory",
@@ -167,13 +186,69 @@ def build_parser():
         help="whole-sequence outputs beside the frame folders: kitti (KITTI odometry layout), "
         "rosbag (ROS 2 bag); comma-separated",
     )
-    p.add_argument(
-        "--deskew",
-        action="store_true",
-        help="also write xyz_deskewed: the points in the lidar frame at the sweep's start",
+
+
+def _sequence_options(args):
+    """The :class:`~nidar_mi.sequence.SequenceOptions` of ``--trajectory``."""
+    from ..errors import NidarError
+    from ..sequence import SequenceOptions
+
+    if args.intensity != "physics" or args.rgb_twin:
+        raise NidarError("--trajectory renders physics intensity of the scene itself")
+    if args.weights is not None or args.nidar_branch is not None or args.profile:
+        raise NidarError(
+            "--weights, --nidar-branch and --profile are used only with --intensity nidar"
+        )
+    return SequenceOptions(
+        args.scene,
+        args.trajectory,
+        rate=args.rate,
+        frames=args.frames,
+        formats=tuple(_parse_formats(args.formats)),
+        sequence_formats=tuple(
+            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
+        ),
+        bin_intensity=args.bin_intensity,
+        seed=args.seed,
+        spp=args.spp,
+        params=parse_defines(args.params),
+        cameras=not args.no_cameras,
+        deskew=args.deskew,
+        max_memory=_memory(args.max_memory),
+        progress=not args.quiet,
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    return p
+
+
+def _render_options(args):
+    """The :class:`~nidar_mi.render_session.RenderOptions` of a single render."""
+    from ..errors import NidarError
+    from ..render_session import RenderOptions
+
+    profile = None
+    if args.profile is not None:
+        if args.intensity != "nidar":
+            raise NidarError("--profile applies to --intensity nidar")
+        from ..nidar.pipeline import NidarModel
+        from ..nidar.profiles import resolve_profile
+
+        profile = resolve_profile(args.profile, NidarModel.load(args.weights))
+    return RenderOptions(
+        args.scene,
+        formats=tuple(_parse_formats(args.formats)),
+        seed=args.seed,
+        spp=args.spp,
+        rgb_twin=args.rgb_twin,
+        params=parse_defines(args.params),
+        cameras=not args.no_cameras,
+        intensity=args.intensity,
+        weights=args.weights,
+        nidar_branch=args.nidar_branch,
+        profile=profile,
+        bin_intensity=args.bin_intensity,
+        max_memory=_memory(args.max_memory),
+        deskew=args.deskew,
+        progress=not args.quiet,
+    )
 
 
 def main(argv=None) -> int:
@@ -181,75 +256,31 @@ def main(argv=None) -> int:
     out = args.out or os.path.join("out", os.path.splitext(os.path.basename(args.scene))[0])
 
     def work():
+        from ..backend import set_variant
         from ..errors import NidarError
-        from ..simulate import render_scene
 
         if args.trajectory is None and (
             args.rate is not None or args.frames is not None or args.sequence_formats
         ):
             raise NidarError("--rate, --frames and --sequence-formats need --trajectory")
         if args.trajectory is not None:
-            if args.intensity != "physics" or args.rgb_twin:
-                raise NidarError("--trajectory renders physics intensity of the scene itself")
-            if args.weights is not None or args.nidar_branch is not None or args.profile:
-                raise NidarError(
-                    "--weights, --nidar-branch and --profile are used only with --intensity nidar"
-                )
-            from ..sequence import render_sequence
+            from ..sequence import check_sequence, render_sequence
 
-            manifest = render_sequence(
-                args.scene,
-                out,
-                args.trajectory,
-                rate=args.rate,
-                frames=args.frames,
-                formats=_parse_formats(args.formats),
-                bin_intensity=args.bin_intensity,
-                sequence_formats=tuple(
-                    f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
-                ),
-                seed=args.seed,
-                spp=args.spp,
-                variant=args.variant,
-                params=parse_defines(args.params),
-                cameras=not args.no_cameras,
-                deskew=args.deskew,
-                max_memory=_memory(args.max_memory),
-                progress=not args.quiet,
-                overwrite=args.overwrite,
-            )
+            options = _sequence_options(args)
+            check_sequence(options)  # bad options are named before the variant starts
+            set_variant(args.variant)
+            manifest = render_sequence(options, out, overwrite=args.overwrite)
             if not args.quiet:
                 print(_sequence_summary(manifest, out))
             return
 
-        profile = None
-        if args.profile is not None:
-            if args.intensity != "nidar":
-                raise NidarError("--profile applies to --intensity nidar")
-            from ..nidar.pipeline import NidarModel
-            from ..nidar.profiles import resolve_profile
+        from ..render_session import check_options
+        from ..simulate import render_scene
 
-            profile = resolve_profile(args.profile, NidarModel.load(args.weights))
-        manifest = render_scene(
-            args.scene,
-            out,
-            formats=_parse_formats(args.formats),
-            seed=args.seed,
-            spp=args.spp,
-            variant=args.variant,
-            rgb_twin=args.rgb_twin,
-            params=parse_defines(args.params),
-            cameras=not args.no_cameras,
-            progress=not args.quiet,
-            intensity=args.intensity,
-            weights=args.weights,
-            nidar_branch=args.nidar_branch,
-            profile=profile,
-            overwrite=args.overwrite,
-            bin_intensity=args.bin_intensity,
-            max_memory=_memory(args.max_memory),
-            deskew=args.deskew,
-        )
+        options = _render_options(args)
+        check_options(options)  # bad options are named before the variant starts
+        set_variant(args.variant)
+        manifest = render_scene(options, out, overwrite=args.overwrite)
         if not args.quiet:
             print(_summary(manifest, out))
 

@@ -167,7 +167,7 @@ def rgb_twin_scan(
         params: values for the scene's ``<default>`` parameters.
         seed: overrides the sensor's noise/dropout seed.
         lidar: id of the LiDAR to scan; None takes the first (sorted by id).
-        variant: Mitsuba variant; None picks the default.
+        variant: the active Mitsuba variant expected (None: whichever is active).
 
     Returns:
         :class:`nidar_mi.lidar.scan.ScanResult` of the twin.

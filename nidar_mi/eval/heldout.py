@@ -116,18 +116,24 @@ def render_scenes(
     from ..backend import prepare_worker
     from ..dataset import scene_params
     from ..render_folder import is_current
-    from ..simulate import ensure_rendered, render_request
+    from ..render_session import RenderOptions
+    from ..simulate import ensure_rendered
     from ..tasks import Task, run_tasks
 
     tasks, out = [], []
     for path in map(os.path.abspath, scene_files):
         name = os.path.splitext(os.path.basename(path))[0]
         rdir = os.path.join(os.path.abspath(cache_dir), name)
-        opts = dict(
-            formats=("npz",), seed=seed, spp=spp, params=scene_params(path, params), progress=False
+        opts = RenderOptions(
+            path,
+            formats=("npz",),
+            seed=seed,
+            spp=spp,
+            params=scene_params(path, params),
+            progress=False,
         )
-        skip = partial(is_current, rdir, render_request(path, **opts))
-        tasks.append(Task(name, ensure_rendered, (path, rdir), opts, output=rdir, skip=skip))
+        skip = partial(is_current, rdir, opts.key())
+        tasks.append(Task(name, ensure_rendered, (opts, rdir), output=rdir, skip=skip))
         out.append(rdir)
     report = run_tasks(
         tasks,

@@ -1,25 +1,46 @@
 """Validated parameters of a ``lidar`` sensor (the public scene-XML interface).
 
 The parameters, their types, meanings, ranges and defaults are tabled in the docstring of the
-plugin class, :class:`nidar_mi.plugins.lidar.LidarSensor`; :meth:`LidarConfig.from_mapping`
-enforces them.
+plugin class, :class:`nidar_mi.plugins.lidar.LidarSensor`. Two pydantic
+models enforce them: :class:`LayoutParameters` which lasers (preset, layout, angles, calibration
+file, checked together), then :class:`SensorParameters` every other value, one by one, with the
+preset's defaults. :meth:`LidarConfig.from_mapping` turns the first error into the plugin's
+one-line message (``lidar '<id>': parameter '<name>' <why>``) and reads the laser table.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    ValidationError,
+    ValidationInfo,
+    model_validator,
+)
 
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
 from .pattern import PRESETS, BeamPattern, parse_angles
 from .return_model import INTENSITY_MODES
 
-__all__ = ["LidarConfig", "PARAMETERS", "INTENSITY_MODES", "RETURN_MODES", "LAYOUTS", "SPINS"]
+__all__ = [
+    "LidarConfig",
+    "LayoutParameters",
+    "SensorParameters",
+    "PARAMETERS",
+    "INTENSITY_MODES",
+    "RETURN_MODES",
+    "LAYOUTS",
+    "SPINS",
+]
 
 #: Values of ``layout``.
 LAYOUTS = ("uniform", "per_laser")
@@ -163,7 +184,8 @@ class LidarConfig:
 
         Args:
             name: the sensor id, used in error messages.
-            values: parameter name -> value; missing names take their defaults.
+            values: parameter name -> value; missing names take their defaults (unknown names
+                are ignored).
 
         Raises:
             ValueError: one line naming the sensor and the offending parameter.
@@ -172,140 +194,251 @@ class LidarConfig:
         def fail(param: str, why: str) -> ValueError:
             return ValueError(f"lidar '{name}': parameter '{param}' {why}")
 
-        def number(param: str, default: float, *, lo=None, lo_open=False, hi=None) -> float:
-            raw = values.get(param, default)
-            try:
-                v = float(raw)
-            except (TypeError, ValueError):
-                raise fail(param, f"must be a number (got '{raw}')") from None
-            if isinstance(raw, bool) or not math.isfinite(v):
-                raise fail(param, f"must be a finite number (got '{raw}')")
-            if lo is not None and (v <= lo if lo_open else v < lo):
-                raise fail(param, f"must be {'>' if lo_open else '>='} {lo:g} (got {v:g})")
-            if hi is not None and v > hi:
-                raise fail(param, f"must be <= {hi:g} (got {v:g})")
-            return v
-
-        def integer(param: str, default: int, *, lo: int) -> int:
-            raw = values.get(param, default)
-            try:
-                f = float(raw)
-            except (TypeError, ValueError):
-                raise fail(param, f"must be an integer (got '{raw}')") from None
-            if not math.isfinite(f) or f != int(f):
-                raise fail(param, f"must be an integer (got '{raw}')")
-            if int(f) < lo:
-                raise fail(param, f"must be >= {lo} (got {int(f)})")
-            return int(f)
-
-        def choice(param: str, default: str, options: tuple[str, ...]) -> str:
-            v = str(values.get(param, default)).strip().lower()
-            if v not in options:
-                raise fail(param, f"must be one of {', '.join(options)} (got '{v}')")
-            return v
-
-        def boolean(param: str, default: bool) -> bool:
-            raw = values.get(param, default)
-            if isinstance(raw, bool):
-                return raw
-            text = str(raw).strip().lower()
-            if text not in ("true", "false"):
-                raise fail(param, f"must be true or false (got '{raw}')")
-            return text == "true"
-
-        preset = values.get("preset")
-        angles = values.get("elevation_angles")
-        calib = values.get("calibration_file")
-        if preset is None and angles is None and calib is None:
-            preset = "vlp16"
-        if preset is not None:
-            preset = str(preset).strip().lower()
-            if preset not in PRESETS:
-                raise fail("preset", f"is unknown: '{preset}' (known: {', '.join(PRESETS)})")
-        p = PRESETS[preset] if preset is not None else None
-        # a preset with a published table casts it unless its uniform table is asked for (or
-        # replaced by elevation_angles)
-        real = calib is not None or (preset in TABLE_FILES and angles is None)
-        layout = choice("layout", "per_laser" if real else "uniform", LAYOUTS)
-        if angles is not None and (layout == "per_laser" or calib is not None):
-            raise fail("elevation_angles", "cannot be combined with a per-laser layout")
-        table = None
-        if calib is not None:
-            if layout != "per_laser":
-                raise fail("calibration_file", "needs layout 'per_laser'")
-            try:
-                table = read_calibration(str(calib))
-            except ValueError as e:
-                raise fail("calibration_file", str(e)) from None
-            if preset in TABLE_FILES:
-                table = _with_preset_timing(table, preset_table(preset), fail)
-        elif layout == "per_laser":
-            if preset not in TABLE_FILES:
-                known = ", ".join(TABLE_FILES)
-                raise fail("layout", f"'per_laser' needs a preset with a table ({known})")
-            table = preset_table(preset)
+        try:
+            lasers = LayoutParameters.model_validate(dict(values))
+        except ValidationError as e:
+            raise _first_error(e, fail) from None
+        table = _laser_table(lasers, fail)
+        try:
+            given = lasers.defaults(values.get("intensity_mode", "raw")) | dict(values)
+            v = SensorParameters.model_validate(given)
+        except ValidationError as e:
+            raise _first_error(e, fail) from None
         if table is not None:
             elevations = table.elevation_deg
-        elif angles is not None:
-            try:
-                elevations = tuple(float(a) for a in parse_angles(str(angles)))
-            except ValueError as e:
-                raise fail("elevation_angles", str(e)) from None
+        elif v.elevation_angles is not None:
+            elevations = v.elevation_angles
         else:
-            elevations = p.elevations_deg
-        cols = integer("horizontal_resolution", p.horizontal_resolution if p else 1800, lo=1)
-        fov_h = number("fov_h", 360.0, lo=0.0, lo_open=True, hi=360.0)
-        wavelength = number("wavelength", 905.0, lo=360.0, hi=1700.0)
-        gain = number("gain", 1.0, lo=0.0, lo_open=True)
-        range_min = number("range_min", p.range_min if p else 0.5, lo=0.0)
-        range_max = number("range_max", p.range_max if p else 100.0, lo=0.0, lo_open=True)
-        if range_min >= range_max:
-            raise fail("range_min", f"must be < range_max (got {range_min:g} >= {range_max:g})")
-        alpha = number("atmospheric_extinction", 0.0, lo=0.0)
-        mode = choice("intensity_mode", "raw", INTENSITY_MODES)
-        quality = integer("beam_sample_quality", 3, lo=1)
-        if quality > MAX_SAMPLE_QUALITY:
-            raise fail("beam_sample_quality", f"must be <= {MAX_SAMPLE_QUALITY} (got {quality})")
+            elevations = PRESETS[lasers.preset].elevations_deg
         return cls(
             name=name,
-            preset=preset if angles is None else None,
+            preset=lasers.preset if lasers.elevation_angles is None else None,
             elevations_deg=tuple(elevations),
-            horizontal_resolution=cols,
-            fov_h=fov_h,
-            wavelength=wavelength,
-            gain=gain,
-            range_min=range_min,
-            range_max=range_max,
-            atmospheric_extinction=alpha,
-            intensity_mode=mode,
-            noise_intensity_std=number("noise_intensity_std", 0.0, lo=0.0),
-            noise_range_std=number("noise_range_std", 0.0, lo=0.0),
-            # the preset's threshold is in raw units (1/m²): it is the default in raw mode only
-            detection_threshold=number(
-                "detection_threshold",
-                p.detection_threshold if p and mode == "raw" else 0.0,
-                lo=0.0,
-            ),
-            # the receiver noise belongs to the preset's receiver: kept when the threshold is set
-            receiver_noise_std=number(
-                "receiver_noise_std",
-                p.receiver_noise_std if p and mode == "raw" else 0.0,
-                lo=0.0,
-            ),
-            dropout=number("dropout", 0.0, lo=0.0, hi=1.0),
-            seed=integer("seed", 0, lo=0),
-            layout=layout,
-            calibration_file=str(calib) if calib is not None else None,
-            fov_h_centred=boolean("fov_h_centred", False),
-            rotation_rate=number("rotation_rate", 10.0, lo=0.0, lo_open=True, hi=100.0),
-            spin=choice("spin", "cw", SPINS),
-            scan_start_azimuth=number("scan_start_azimuth", 180.0, lo=-360.0, hi=360.0),
-            beam_divergence=number("beam_divergence", 0.0, lo=0.0, hi=100.0),
-            beam_sample_quality=quality,
-            return_mode=choice("return_mode", "strongest", RETURN_MODES),
-            return_separation=number("return_separation", 0.5, lo=0.0, lo_open=True),
+            layout=lasers.layout,
+            calibration_file=lasers.calibration_file,
             table=table,
+            **v.model_dump(exclude={"elevation_angles"}),
         )
+
+
+# --------------------------------------------------------------------------- one value each
+
+
+class _Problem(ValueError):
+    """A value refused by a validator: ``why`` in the plugin's words; ``param``, the parameter
+    it names when not the field that raised it."""
+
+    def __init__(self, why: str, param: str | None = None) -> None:
+        super().__init__(why)
+        self.why, self.param = why, param
+
+
+def _number(*, lo: float | None = None, lo_open: bool = False, hi: float | None = None):
+    """A finite number in [lo, hi] (``lo_open``: > lo)."""
+
+    def check(raw: Any) -> float:
+        try:
+            v = float(raw)
+        except (TypeError, ValueError):
+            raise _Problem(f"must be a number (got '{raw}')") from None
+        if isinstance(raw, bool) or not math.isfinite(v):
+            raise _Problem(f"must be a finite number (got '{raw}')")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            raise _Problem(f"must be {'>' if lo_open else '>='} {lo:g} (got {v:g})")
+        if hi is not None and v > hi:
+            raise _Problem(f"must be <= {hi:g} (got {v:g})")
+        return v
+
+    return BeforeValidator(check)
+
+
+def _integer(*, lo: int, hi: int | None = None):
+    """A whole number in [lo, hi] (``10.0`` is 10, ``10.5`` is refused)."""
+
+    def check(raw: Any) -> int:
+        try:
+            f = float(raw)
+        except (TypeError, ValueError):
+            raise _Problem(f"must be an integer (got '{raw}')") from None
+        if not math.isfinite(f) or f != int(f):
+            raise _Problem(f"must be an integer (got '{raw}')")
+        if int(f) < lo:
+            raise _Problem(f"must be >= {lo} (got {int(f)})")
+        if hi is not None and int(f) > hi:
+            raise _Problem(f"must be <= {hi} (got {int(f)})")
+        return int(f)
+
+    return BeforeValidator(check)
+
+
+def _choice(options: tuple[str, ...]):
+    """One of ``options``, case and surrounding blanks ignored."""
+
+    def check(raw: Any) -> str:
+        v = str(raw).strip().lower()
+        if v not in options:
+            raise _Problem(f"must be one of {', '.join(options)} (got '{v}')")
+        return v
+
+    return BeforeValidator(check)
+
+
+def _boolean(raw: Any) -> bool:
+    if isinstance(raw, bool):
+        return raw
+    text = str(raw).strip().lower()
+    if text not in ("true", "false"):
+        raise _Problem(f"must be true or false (got '{raw}')")
+    return text == "true"
+
+
+def _preset(raw: Any) -> str | None:
+    if raw is None:
+        return None
+    preset = str(raw).strip().lower()
+    if preset not in PRESETS:
+        raise _Problem(f"is unknown: '{preset}' (known: {', '.join(PRESETS)})")
+    return preset
+
+
+def _angles(raw: Any) -> tuple[float, ...] | None:
+    if raw is None:
+        return None
+    try:
+        return tuple(float(a) for a in parse_angles(str(raw)))
+    except ValueError as e:
+        raise _Problem(str(e)) from None
+
+
+def _optional(validator: BeforeValidator) -> BeforeValidator:
+    """``validator`` for a value given; None (not given) is left for the preset's default."""
+    return BeforeValidator(lambda raw: None if raw is None else validator.func(raw))
+
+
+def _text(raw: Any) -> str | None:
+    return None if raw is None else str(raw)
+
+
+class LayoutParameters(BaseModel):
+    """Which lasers a ``lidar`` sensor has: the preset, the layout, the elevation angles or the
+    calibration file (meanings: :class:`nidar_mi.plugins.lidar.LidarSensor`).
+
+    Each field takes the raw XML value; the model then fills in the preset (``vlp16`` when
+    nothing names the lasers) and the layout (``per_laser`` for a preset with a published table
+    or a calibration file), and checks that they go together.
+    """
+
+    model_config = ConfigDict(extra="ignore")
+
+    preset: Annotated[str | None, BeforeValidator(_preset)] = None
+    layout: Annotated[str | None, _optional(_choice(LAYOUTS))] = None
+    elevation_angles: Annotated[str | None, BeforeValidator(_text)] = None
+    calibration_file: Annotated[str | None, BeforeValidator(_text)] = None
+
+    @model_validator(mode="after")
+    def _together(self) -> LayoutParameters:
+        angles, calib = self.elevation_angles, self.calibration_file
+        if self.preset is None and angles is None and calib is None:
+            self.preset = "vlp16"
+        # a preset with a published table casts it unless its uniform table is asked for (or
+        # replaced by elevation_angles)
+        real = calib is not None or (self.preset in TABLE_FILES and angles is None)
+        if self.layout is None:
+            self.layout = "per_laser" if real else "uniform"
+        if angles is not None and (self.layout == "per_laser" or calib is not None):
+            raise _Problem("cannot be combined with a per-laser layout", "elevation_angles")
+        if calib is not None and self.layout != "per_laser":
+            raise _Problem("needs layout 'per_laser'", "calibration_file")
+        if calib is None and self.layout == "per_laser" and self.preset not in TABLE_FILES:
+            known = ", ".join(TABLE_FILES)
+            raise _Problem(f"'per_laser' needs a preset with a table ({known})", "layout")
+        return self
+
+    def defaults(self, intensity_mode: Any) -> dict[str, Any]:
+        """The defaults of :class:`SensorParameters` that come from the preset (or the generic
+        sensor without one), given the raw ``intensity_mode``."""
+        p = PRESETS[self.preset] if self.preset is not None else None
+        raw = str(intensity_mode).strip().lower() == "raw"
+        return {
+            "horizontal_resolution": p.horizontal_resolution if p else 1800,
+            "range_min": p.range_min if p else 0.5,
+            "range_max": p.range_max if p else 100.0,
+            # the preset's threshold is in raw units (1/m²): it is the default in raw mode only
+            "detection_threshold": p.detection_threshold if p and raw else 0.0,
+            # the receiver noise belongs to the preset's receiver: kept when the threshold is set
+            "receiver_noise_std": p.receiver_noise_std if p and raw else 0.0,
+        }
+
+
+def _below_range_max(range_max: float, info: ValidationInfo) -> float:
+    range_min = info.data.get("range_min")
+    if range_min is not None and range_min >= range_max:
+        why = f"must be < range_max (got {range_min:g} >= {range_max:g})"
+        raise _Problem(why, "range_min")
+    return range_max
+
+
+class SensorParameters(BaseModel):
+    """Every other parameter of a ``lidar`` sensor (meanings, units, ranges, defaults:
+    :class:`nidar_mi.plugins.lidar.LidarSensor`), each checked alone from its raw XML value,
+    in this order; ``range_min < range_max`` with ``range_max``. The preset-dependent values
+    have no default here: :meth:`LayoutParameters.defaults` gives them.
+    """
+
+    model_config = ConfigDict(extra="ignore", validate_default=True)
+
+    elevation_angles: Annotated[tuple[float, ...] | None, BeforeValidator(_angles)] = None
+    horizontal_resolution: Annotated[int, _integer(lo=1)]
+    fov_h: Annotated[float, _number(lo=0.0, lo_open=True, hi=360.0)] = 360.0
+    wavelength: Annotated[float, _number(lo=360.0, hi=1700.0)] = 905.0
+    gain: Annotated[float, _number(lo=0.0, lo_open=True)] = 1.0
+    range_min: Annotated[float, _number(lo=0.0)]
+    range_max: Annotated[float, _number(lo=0.0, lo_open=True), AfterValidator(_below_range_max)]
+    atmospheric_extinction: Annotated[float, _number(lo=0.0)] = 0.0
+    intensity_mode: Annotated[str, _choice(INTENSITY_MODES)] = "raw"
+    beam_sample_quality: Annotated[int, _integer(lo=1, hi=MAX_SAMPLE_QUALITY)] = 3
+    noise_intensity_std: Annotated[float, _number(lo=0.0)] = 0.0
+    noise_range_std: Annotated[float, _number(lo=0.0)] = 0.0
+    detection_threshold: Annotated[float, _number(lo=0.0)]
+    receiver_noise_std: Annotated[float, _number(lo=0.0)]
+    dropout: Annotated[float, _number(lo=0.0, hi=1.0)] = 0.0
+    seed: Annotated[int, _integer(lo=0)] = 0
+    fov_h_centred: Annotated[bool, BeforeValidator(_boolean)] = False
+    rotation_rate: Annotated[float, _number(lo=0.0, lo_open=True, hi=100.0)] = 10.0
+    spin: Annotated[str, _choice(SPINS)] = "cw"
+    scan_start_azimuth: Annotated[float, _number(lo=-360.0, hi=360.0)] = 180.0
+    beam_divergence: Annotated[float, _number(lo=0.0, hi=100.0)] = 0.0
+    return_mode: Annotated[str, _choice(RETURN_MODES)] = "strongest"
+    return_separation: Annotated[float, _number(lo=0.0, lo_open=True)] = 0.5
+
+
+def _first_error(error: ValidationError, fail: Callable[[str, str], ValueError]) -> ValueError:
+    """The first problem of a validation, as the plugin's one-line message."""
+    e = error.errors()[0]
+    problem = (e.get("ctx") or {}).get("error")
+    field = str(e["loc"][0]) if e["loc"] else "?"
+    if not isinstance(problem, _Problem):  # not one of ours: pydantic's own words
+        return fail(field, e["msg"])
+    return fail(problem.param or field, problem.why)
+
+
+# --------------------------------------------------------------------------- the laser table
+
+
+def _laser_table(lasers: LayoutParameters, fail) -> LaserTable | None:
+    """The per-laser table: the calibration file's (with the preset's firing times when the
+    preset has a table), the preset's published one, or None for a uniform layout."""
+    if lasers.calibration_file is not None:
+        try:
+            table = read_calibration(lasers.calibration_file)
+        except ValueError as e:
+            raise fail("calibration_file", str(e)) from None
+        if lasers.preset in TABLE_FILES:
+            table = _with_preset_timing(table, preset_table(lasers.preset), fail)
+        return table
+    if lasers.layout == "per_laser":
+        return preset_table(lasers.preset)
+    return None
 
 
 def _with_preset_timing(table: LaserTable, preset: LaserTable, fail) -> LaserTable:

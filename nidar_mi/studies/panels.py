@@ -361,7 +361,7 @@ def load_panel_scene(
 
     Args:
         materials: as in :func:`panel_scene_xml`.
-        variant: Mitsuba variant (None: the default of :func:`nidar_mi.backend.set_variant`).
+        variant: the active Mitsuba variant expected (None: whichever is active).
         rgb_twin: load the RGB-only twin (every material replaced by its sRGB appearance).
         **kwargs: the keyword arguments of :func:`panel_scene_xml`.
 

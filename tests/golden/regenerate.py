@@ -20,8 +20,10 @@ def scan_golden_scene():
 
 
 def main() -> int:
+    from nidar_mi.backend import set_variant
     from nidar_mi.io.points import write_npz
 
+    set_variant("llvm_ad_spectral")
     pts = scan_golden_scene()
     write_npz(GOLDEN, pts)
     print(f"wrote {len(pts['range'])} points to {GOLDEN} ({os.path.getsize(GOLDEN)} bytes)")

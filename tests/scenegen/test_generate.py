@@ -116,22 +116,17 @@ def test_corrupt_index_is_reported(tmp_path):
 
 @pytest.mark.parametrize("kind", ["urban", "vegetated"])
 def test_generated_scene_renders(tmp_path, variant, kind):
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.simulate import render_scene
 
     scenes = tmp_path / "gen"
     index = generate(str(scenes), 1, 3, kind=kind, progress=False)
     entry = index["scenes"][0]
     out = tmp_path / "render"
-    manifest = render_scene(
-        str(scenes / entry["file"]),
-        str(out),
-        formats=("npz",),
-        seed=0,
-        spp=2,
-        variant=variant,
-        params=SMALL,
-        progress=False,
+    options = RenderOptions(
+        str(scenes / entry["file"]), formats=("npz",), seed=0, spp=2, params=SMALL, progress=False
     )
+    manifest = render_scene(options, str(out))
     lidar = manifest["lidars"]["lidar_top"]
     assert lidar["parameters"]["preset"] == entry["lidar"]["preset"]
     # Every beam pointing 10 deg or more below the horizon meets the ground within ~11 m

@@ -80,7 +80,7 @@ def test_source_values():
     assert set(SOURCES) == {"physics", "nidar", "rgb_twin", "carla", "none"}
 
 
-def test_render_drive_caches_frames_and_matches_a_direct_scan(tmp_path):
+def test_render_drive_caches_frames_and_matches_a_direct_scan(tmp_path, variant):
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
@@ -105,7 +105,7 @@ def test_render_drive_caches_frames_and_matches_a_direct_scan(tmp_path):
     assert frame_count(folder) == 1
 
 
-def test_loading_without_labels_scans_the_same_returns(tmp_path):
+def test_loading_without_labels_scans_the_same_returns(tmp_path, variant):
     """``load_scene(labels=False)`` lets Mitsuba merge meshes: the returns do not change."""
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene

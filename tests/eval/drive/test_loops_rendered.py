@@ -12,7 +12,7 @@ from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_city
 
 
 @pytest.fixture(scope="module")
-def drive(tmp_path_factory):
+def drive(tmp_path_factory, variant):
     out = tmp_path_factory.mktemp("loops")
     layout, g = sample_city(np.random.default_rng(5), "city", (2, 1))
     from nidar_mi.scenegen.xml import scene_xml
