@@ -220,6 +220,7 @@ def write_lidar(
     """
     from .io import images
     from .io import points as pio
+    from .io.kitti import write_kitti_bin
     from .io.las import write_las
     from .io.pcd import write_pcd
     from .io.range_preview import write_range_preview
@@ -237,7 +238,7 @@ def write_lidar(
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
-        "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], bin_i),
+        "bin": lambda p: write_kitti_bin(p, pts["xyz"], bin_i),
         "pcd": lambda p: write_pcd(p, pts),
     }
     written = []

@@ -18,7 +18,7 @@ Layout (``OUT``)::
     times.txt           per frame its start time t_k - t_0, s
     frames/000000/ ...  one render folder per frame (:mod:`nidar_mi.render_folder`)
     kitti/              with sequence format ``kitti``: the first LiDAR's sweeps in the KITTI
-                        odometry layout (:func:`nidar_mi.io.kitti_odometry.write_sequence`)
+                        odometry layout (:func:`nidar_mi.io.kitti.write_sequence`)
     rosbag/             with ``rosbag``: a ROS 2 bag of the first LiDAR's sweeps and the camera
                         images (:func:`nidar_mi.io.rosbag.write_ros2_bag`), stamped in trajectory
                         time
@@ -148,7 +148,8 @@ def render_sequence(
     from tqdm.auto import tqdm
 
     from .io.atomic import staged_directory
-    from .io.trajectory import read_trajectory, write_kitti_poses, write_times
+    from .io.kitti import write_kitti_poses, write_kitti_times
+    from .io.trajectory import read_trajectory
     from .simulate import _check_memory, _check_request, _load, _versions, nir_wavelengths
 
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
@@ -237,7 +238,7 @@ def render_sequence(
             bar.close()
         P0_inv = np.linalg.inv(start_poses[0])
         write_kitti_poses(os.path.join(stage, "poses.txt"), [P0_inv @ P for P in start_poses])
-        write_times(os.path.join(stage, "times.txt"), times - times[0])
+        write_kitti_times(os.path.join(stage, "times.txt"), times - times[0])
         written += [os.path.join(stage, "poses.txt"), os.path.join(stage, "times.txt")]
         written += _sequence_outputs(
             stage, sequence_formats, keep, np.asarray(start_poses), times, lead.id()
@@ -267,7 +268,7 @@ def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> lis
     """Write the KITTI odometry layout and the ROS 2 bag of the kept frames."""
     written = []
     if "kitti" in sequence_formats:
-        from .io.kitti_odometry import write_sequence
+        from .io.kitti import write_sequence
 
         clouds = [f["points"] for f in keep]
         written += write_sequence(os.path.join(stage, "kitti"), clouds, poses, times - times[0])

@@ -379,7 +379,7 @@ def kitti_ground_rings(
         pose_over_plane,
         scan_rings,
     )
-    from ..io.points import read_kitti_bin
+    from ..io.kitti import read_kitti_bin
 
     paths = sorted(glob.glob(os.path.join(os.fspath(velodyne_dir), "*.bin")))
     if frames is not None:

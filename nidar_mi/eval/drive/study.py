@@ -252,7 +252,7 @@ def _kiss_on_kitti_layout(cfg: StudyConfig, phys: str, gt: np.ndarray, progress:
     estimate and the loader's ground truth."""
     from kiss_icp.datasets.kitti import KITTIOdometryDataset
 
-    from ...io.kitti_odometry import write_sequence
+    from ...io.kitti import write_sequence
     from .frames import load_frame
     from .kiss import run_odometry
 
