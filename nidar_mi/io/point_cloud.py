@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from .kitti import read_kitti_bin
 from .las import read_las
 from .pcd import read_pcd
-from .kitti import read_kitti_bin
 from .points import read_npz, read_ply
 
 __all__ = ["read_point_cloud"]
