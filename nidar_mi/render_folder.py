@@ -21,7 +21,6 @@ import hashlib
 import json
 import os
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -450,8 +449,3 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
         cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)
-
-
-def scene_name(folder: str | os.PathLike) -> str:
-    """The name a render folder is known by (its base name)."""
-    return Path(folder).resolve().name

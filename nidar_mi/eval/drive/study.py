@@ -27,7 +27,6 @@ columns and the steps after them.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
@@ -491,9 +490,3 @@ def run_study(
         world_poses=poses,
     )
     return results
-
-
-def load_results(out: str) -> dict:
-    """The ``results.json`` of an earlier run."""
-    with open(os.path.join(out, "results.json"), encoding="utf-8") as f:
-        return json.load(f)
