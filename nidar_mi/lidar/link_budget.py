@@ -91,7 +91,7 @@ def noise_for(threshold: float, false_alarm: float = FALSE_ALARM_PROBABILITY) ->
 def threshold_for(reflectivity: float, range_m: float, gain: float = 1.0) -> float:
     """The ``raw``-mode threshold at which a Lambertian target of ``reflectivity`` at normal
     incidence is detected exactly to ``range_m``: its return ``g ρ / d²`` (1/m²)."""
-    return float(expected_intensity(gain, reflectivity, range_m, 1.0, 0.0, "raw"))
+    return expected_intensity(gain, reflectivity, range_m, 1.0, 0.0, "raw")
 
 
 def target_reach(reflectivity: float, threshold: float, gain: float = 1.0) -> float:
@@ -105,10 +105,10 @@ def ground_return(
 ) -> float:
     """The return ``ρ_eff cos θ / d²`` of flat ``roughdiffuse`` ground seen at range ``d`` from
     ``h`` (1/m², gain 1): ``ρ_eff`` the monostatic reflectance ``ρ (A + B sin²θ / cos θ)(1 + B0)``
-    at ``cos θ = h / d``."""
+    at ``cos θ = h / d``. ``range_m`` may be an array (the result has its shape)."""
     c = height_m / range_m
     rho_eff = monostatic_reflectance(rho, c, sigma_deg, amplitude)
-    return float(expected_intensity(1.0, rho_eff, range_m, c, 0.0, "raw"))
+    return expected_intensity(1.0, rho_eff, range_m, c, 0.0, "raw")
 
 
 def ground_detection_probability(
