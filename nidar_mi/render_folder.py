@@ -21,7 +21,6 @@ import hashlib
 import json
 import os
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -220,6 +219,7 @@ def write_lidar(
     """
     from .io import images
     from .io import points as pio
+    from .io.kitti import write_kitti_bin
     from .io.las import write_las
     from .io.pcd import write_pcd
     from .io.range_preview import write_range_preview
@@ -237,7 +237,7 @@ def write_lidar(
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
-        "bin": lambda p: pio.write_kitti_bin(p, pts["xyz"], bin_i),
+        "bin": lambda p: write_kitti_bin(p, pts["xyz"], bin_i),
         "pcd": lambda p: write_pcd(p, pts),
     }
     written = []
@@ -449,8 +449,3 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
         cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)
-
-
-def scene_name(folder: str | os.PathLike) -> str:
-    """The name a render folder is known by (its base name)."""
-    return Path(folder).resolve().name

@@ -18,7 +18,7 @@ Layout (``OUT``)::
     times.txt           per frame its start time t_k - t_0, s
     frames/000000/ ...  one render folder per frame (:mod:`nidar_mi.render_folder`)
     kitti/              with sequence format ``kitti``: the first LiDAR's sweeps in the KITTI
-                        odometry layout (:func:`nidar_mi.io.kitti_odometry.write_sequence`)
+                        odometry layout (:func:`nidar_mi.io.kitti.write_sequence`)
     rosbag/             with ``rosbag``: a ROS 2 bag of the first LiDAR's sweeps and the camera
                         images (:func:`nidar_mi.io.rosbag.write_ros2_bag`), stamped in trajectory
                         time
@@ -306,11 +306,11 @@ def _render_frames(stage, session: RenderSession, traj, times, rig: _Rig, keep: 
 
 def _write_poses_and_times(stage, start_poses: list, times: np.ndarray) -> list[str]:
     """``poses.txt`` (the lead LiDAR's start poses relative to frame 0) and ``times.txt``."""
-    from .io.trajectory import write_kitti_poses, write_times
+    from .io.kitti import write_kitti_poses, write_kitti_times
 
     P0_inv = np.linalg.inv(start_poses[0])
     write_kitti_poses(os.path.join(stage, "poses.txt"), [P0_inv @ P for P in start_poses])
-    write_times(os.path.join(stage, "times.txt"), times - times[0])
+    write_kitti_times(os.path.join(stage, "times.txt"), times - times[0])
     return [os.path.join(stage, "poses.txt"), os.path.join(stage, "times.txt")]
 
 
@@ -350,7 +350,7 @@ def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> lis
     """Write the KITTI odometry layout and the ROS 2 bag of the kept frames."""
     written = []
     if "kitti" in sequence_formats:
-        from .io.kitti_odometry import write_sequence
+        from .io.kitti import write_sequence
 
         clouds = [f["points"] for f in keep]
         written += write_sequence(os.path.join(stage, "kitti"), clouds, poses, times - times[0])

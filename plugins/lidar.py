@@ -117,7 +117,7 @@ class LidarSensor(mi.Sensor):
          - float
          - T: a return is reported when the receiver's output g·ρ·T²·a + σ_n·n reaches it
            (n standard normal), >= 0 (``hdl64e``: 4e-5, the datasheet's 10 % target at 50 m
-           detected half the time, :mod:`nidar_mi.lidar.calibration`)
+           detected half the time, :mod:`nidar_mi.lidar.link_budget`)
          - preset's in ``raw`` mode (0 for the others and in ``compensated`` mode)
        * - ``receiver_noise_std``
          - float

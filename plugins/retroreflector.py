@@ -27,7 +27,7 @@ For a monostatic LiDAR (``wo = wi``) the effective reflectance ``pi f`` is angle
 
 i.e. about ``570 * rho`` for the default 2 degree lobe and ``d = 0``, against ``rho`` for a
 Lambertian panel (engineering-grade sheeting measures 100-300 cd/lx/m^2 at small observation
-angles, a white Lambertian panel about 0.3). The closed forms are in :mod:`nidar_mi.plugins.vmf`.
+angles, a white Lambertian panel about 0.3). The closed forms are in :mod:`nidar_mi.materials.vmf`.
 
 The BSDF is front-facing only (zero below the surface), like Mitsuba's ``diffuse``; wrap it in a
 ``twosided`` BSDF for sheets seen from both sides.
@@ -40,8 +40,9 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from . import PluginParameterError
-from .vmf import lobe_concentration, normalisation
+from nidar_mi.materials.vmf import lobe_concentration, normalisation
+
+from ._validate import bounded, plugin_name
 
 __all__ = ["VARIANT", "Retroreflector"]
 
@@ -193,28 +194,10 @@ class Retroreflector(mi.BSDF):
 
 def _parameters(props: mi.Properties) -> tuple[float, float]:
     """(``lobe_width`` in degrees, ``diffuse_fraction``), validated."""
-    where = f"retroreflector '{props.id()}'" if props.id() else "retroreflector"
-    lobe_width = _number(props, "lobe_width", 2.0, where)
-    if not 0.0 < lobe_width <= 90.0:
-        raise PluginParameterError(
-            f"{where}: parameter 'lobe_width' must be in (0, 90] degrees (got {lobe_width:g})"
-        )
-    diffuse_fraction = _number(props, "diffuse_fraction", 0.0, where)
-    if not 0.0 <= diffuse_fraction <= 1.0:
-        raise PluginParameterError(
-            f"{where}: parameter 'diffuse_fraction' must be in [0, 1] (got {diffuse_fraction:g})"
-        )
+    where = plugin_name("retroreflector", props)
+    lobe_width = bounded(props, where, "lobe_width", 2.0, ("(", 0.0, 90.0, "]"), " degrees")
+    diffuse_fraction = bounded(props, where, "diffuse_fraction", 0.0, ("[", 0.0, 1.0, "]"))
     return lobe_width, diffuse_fraction
-
-
-def _number(props: mi.Properties, name: str, default: float, where: str) -> float:
-    raw = props.get(name, default)
-    try:
-        return float(raw)
-    except (TypeError, ValueError):
-        raise PluginParameterError(
-            f"{where}: parameter '{name}' must be a number (got '{raw}')"
-        ) from None
 
 
 mi.register_bsdf("retroreflector", lambda props: Retroreflector(props))

@@ -3,7 +3,7 @@ for asphalt, concrete and other rough ground that keeps returning LiDAR light at
 incidence.
 
 Executed once per Mitsuba variant by :func:`nidar_mi.plugins.register_all`; see
-:class:`RoughDiffuse`. The model and its closed forms are in :mod:`nidar_mi.plugins.oren_nayar`.
+:class:`RoughDiffuse`. The model and its closed forms are in :mod:`nidar_mi.materials.oren_nayar`.
 """
 
 from __future__ import annotations
@@ -11,8 +11,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from . import PluginParameterError
-from .oren_nayar import coefficients, half_width_h
+from nidar_mi.materials.oren_nayar import coefficients, half_width_h
+
+from ._validate import bounded, plugin_name
 
 __all__ = ["VARIANT", "RoughDiffuse"]
 
@@ -24,7 +25,7 @@ class RoughDiffuse(mi.BSDF):
     """Rough diffuse reflection: Oren–Nayar's qualitative model times a Hapke opposition surge.
 
     ``f(wi, wo) = rho/pi · [A + B max(0, cos Δφ) sin α tan β] · (1 + B0 / (1 + tan(g/2)/h))``
-    (:mod:`nidar_mi.plugins.oren_nayar`); ``sigma = 0`` and ``opposition_amplitude = 0`` give
+    (:mod:`nidar_mi.materials.oren_nayar`); ``sigma = 0`` and ``opposition_amplitude = 0`` give
     Lambert's law. A monostatic LiDAR sees ``rho (A + B sin²θ/cosθ)(1 + B0)``.
 
     .. list-table::
@@ -136,36 +137,11 @@ class RoughDiffuse(mi.BSDF):
 
 def _parameters(props: mi.Properties) -> tuple[float, float, float]:
     """(``sigma`` deg, ``opposition_amplitude``, ``opposition_width`` deg), validated."""
-    where = f"roughdiffuse '{props.id()}'" if props.id() else "roughdiffuse"
-    sigma = _number(props, "sigma", 20.0, where)
-    if not 0.0 <= sigma < 90.0:
-        raise PluginParameterError(
-            f"{where}: parameter 'sigma' must be in [0, 90) degrees (got {sigma:g})"
-        )
-    amplitude = _number(props, "opposition_amplitude", 0.0, where)
-    if not 0.0 <= amplitude <= 1.0:
-        raise PluginParameterError(
-            f"{where}: parameter 'opposition_amplitude' must be in [0, 1] (got {amplitude:g})"
-        )
-    width = _number(props, "opposition_width", 5.0, where)
-    if not 0.0 < width <= 90.0:
-        raise PluginParameterError(
-            f"{where}: parameter 'opposition_width' must be in (0, 90] degrees (got {width:g})"
-        )
+    where = plugin_name("roughdiffuse", props)
+    sigma = bounded(props, where, "sigma", 20.0, ("[", 0.0, 90.0, ")"), " degrees")
+    amplitude = bounded(props, where, "opposition_amplitude", 0.0, ("[", 0.0, 1.0, "]"))
+    width = bounded(props, where, "opposition_width", 5.0, ("(", 0.0, 90.0, "]"), " degrees")
     return sigma, amplitude, width
-
-
-def _number(props: mi.Properties, name: str, default: float, where: str) -> float:
-    raw = props.get(name, default)
-    try:
-        value = float(raw)
-    except (TypeError, ValueError):
-        raise PluginParameterError(
-            f"{where}: parameter '{name}' must be a number (got '{raw}')"
-        ) from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise PluginParameterError(f"{where}: parameter '{name}' must be finite (got '{raw}')")
-    return value
 
 
 mi.register_bsdf("roughdiffuse", lambda props: RoughDiffuse(props))

@@ -98,7 +98,8 @@ def test_kitti_frame(tmp_path):
     """The default profile with --kitti is kitti-hdl64e, fitted at first use on the KITTI frames
     under the data root (here a small synthetic stand-in) and cached; a profile file gives the
     same numbers."""
-    from nidar_mi.io.points import read_kitti_bin, read_npz
+    from nidar_mi.io.kitti import read_kitti_bin
+    from nidar_mi.io.points import read_npz
     from tests.helpers.synthetic_kitti import make_kitti
 
     make_kitti(tmp_path / "data" / "kitti", frames=2)

@@ -56,8 +56,9 @@ def test_every_file_is_written(street_out):
 
 
 def test_points_schema_and_formats_agree(street_out):
+    from nidar_mi.io.kitti import read_kitti_bin
     from nidar_mi.io.las import read_las
-    from nidar_mi.io.points import read_kitti_bin, read_npz, read_ply
+    from nidar_mi.io.points import read_npz, read_ply
 
     p = read_npz(street_out / "lidar_top/points.npz")
     n = len(p["range"])

@@ -85,7 +85,8 @@ def test_frames_are_render_folders_with_time(sequence_out):
 def test_kitti_and_rosbag_sequence_outputs(sequence_out):
     from rosbags.highlevel import AnyReader
 
-    from nidar_mi.io.points import read_kitti_bin, read_npz
+    from nidar_mi.io.kitti import read_kitti_bin
+    from nidar_mi.io.points import read_npz
 
     kitti = sequence_out / "kitti"
     np.testing.assert_allclose(

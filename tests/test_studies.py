@@ -168,9 +168,8 @@ def test_max_detection_range_without_extinction_and_off_normal(variant):
 
 
 def test_retroreflective_sheeting_stays_far_above_lambertian(variant):
-    from nidar_mi.plugins.vmf import monostatic_gain
-
     from nidar_mi.materials import reflectance
+    from nidar_mi.materials.vmf import monostatic_gain
     from nidar_mi.studies import incidence_sweep
 
     angles = np.arange(0.0, 81.0, 10.0)

@@ -41,7 +41,9 @@ __all__ = ["build_parser", "main"]
 
 def build_parser():
     p = parser(
-        "calibrate", "Fit a sensor profile (range and ring response) on a sensor's own scans."
+        "calibrate",
+        "Fit a sensor profile (its response to the value and the return's geometry) on a "
+        "sensor's own scans.",
     )
     p.add_argument(
         "scans", nargs="+", metavar="SCANS", help="scan folders (KITTI, data or generic)"

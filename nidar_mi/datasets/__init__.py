@@ -2,7 +2,7 @@
 
 * :mod:`~nidar_mi.datasets.kitti`: KITTI object-layout frames (Velodyne scan, camera-2
   image, calibration): :func:`~nidar_mi.datasets.kitti.frame_ids`,
-  :func:`~nidar_mi.datasets.kitti.load_frame`, :func:`~nidar_mi.datasets.kitti.load_kitti_calib`.
+  :func:`~nidar_mi.datasets.kitti.load_frame` (the files are read by :mod:`nidar_mi.io.kitti`).
 * :mod:`~nidar_mi.datasets.kitti_rings`: the laser ring of every point from the storage order
   (checked by elevation), and the road plane.
 * :mod:`~nidar_mi.datasets.kitti_frames`: KITTI frames as NIDAR training frames (cached, with a
@@ -14,6 +14,6 @@ The data is read from ``../shared/data`` (or ``$NIDAR_MI_DATA``, or a path given
 and nothing derived from it is kept inside the project.
 """
 
-from .kitti import KITTI_IMAGE_SIZE, KittiFrame, frame_ids, load_frame, load_kitti_calib
+from .kitti import KittiFrame, frame_ids, load_frame
 
-__all__ = ["KITTI_IMAGE_SIZE", "KittiFrame", "frame_ids", "load_frame", "load_kitti_calib"]
+__all__ = ["KittiFrame", "frame_ids", "load_frame"]

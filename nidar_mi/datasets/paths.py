@@ -11,10 +11,10 @@
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 from pathlib import Path
+
+from ..io.cache_key import cache_key
 
 __all__ = ["cache_dir", "cache_key", "data_root"]
 
@@ -34,9 +34,3 @@ def cache_dir(*parts: str) -> Path:
         xdg = os.environ.get("XDG_CACHE_HOME")
         base = (Path(xdg) if xdg else Path.home() / ".cache") / "nidar_mi"
     return base.joinpath(*parts)
-
-
-def cache_key(obj) -> str:
-    """First 16 hex digits of the SHA-256 of ``obj`` as canonical JSON."""
-    text = json.dumps(obj, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]

@@ -112,7 +112,7 @@ def elevation_agreement(pattern, velodyne_dir: str | os.PathLike) -> Agreement:
         NidarError: no readable frame with the pattern's ring count.
     """
     from ..errors import NidarError
-    from ..io.points import read_kitti_bin
+    from ..io.kitti import read_kitti_bin
 
     names = sorted(f for f in os.listdir(velodyne_dir) if f.endswith(".bin"))
     matched, nearest, used, skipped = [], [], [], []

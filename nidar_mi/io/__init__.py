@@ -1,4 +1,5 @@
-"""File writers and readers: point sets, images, camera calibration, and atomic output.
+"""File writers and readers: point sets, images, camera calibration, KITTI files, trajectories,
+and atomic output.
 
 Every writer creates parent directories and writes atomically (a temporary file renamed
 onto the target), so a failure never leaves a half-written file. Every reader raises
@@ -18,17 +19,11 @@ from .images import (
     write_png,
     write_srgb_png,
 )
+from .kitti import read_kitti_bin, write_kitti_bin
 from .las import LAS_SCALE_M, read_las, write_las
 from .pcd import read_pcd, write_pcd
 from .point_cloud import read_point_cloud
-from .points import (
-    read_kitti_bin,
-    read_npz,
-    read_ply,
-    write_kitti_bin,
-    write_npz,
-    write_ply,
-)
+from .points import read_npz, read_ply, write_npz, write_ply
 
 __all__ = [
     "atomic_path",

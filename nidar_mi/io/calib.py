@@ -22,7 +22,7 @@ its (4, 4) LiDAR -> camera transform (plus ``nir_wavelength_nm`` and ``png_expos
 used here). Its camera takes the name of the folder holding the file and the
 ``T_cam_lidar`` of the scene's only LiDAR, or of the one named by ``lidar=``.
 
-KITTI calib files are read by :func:`nidar_mi.datasets.kitti.load_kitti_calib`.
+KITTI calib files are read by :func:`nidar_mi.io.kitti.load_kitti_calib`.
 """
 
 from __future__ import annotations

@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from .kitti import read_kitti_bin
 from .las import read_las
 from .pcd import read_pcd
-from .points import read_kitti_bin, read_npz, read_ply
+from .points import read_npz, read_ply
 
 __all__ = ["read_point_cloud"]
 

@@ -1,7 +1,8 @@
-"""Point sets ("points dicts") and their files: npz, PLY and KITTI ``.bin``.
+"""Point sets ("points dicts") and their files: npz and PLY.
 
-LAS is in :mod:`nidar_mi.io.las`, PCD in :mod:`nidar_mi.io.pcd`, and
-:func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of them.
+LAS is in :mod:`nidar_mi.io.las`, PCD in :mod:`nidar_mi.io.pcd`, KITTI ``.bin`` in
+:mod:`nidar_mi.io.kitti`, and :func:`nidar_mi.io.point_cloud.read_point_cloud` reads any of
+them.
 
 A points dict maps names to numpy arrays. ``xyz`` is required; every other entry is
 optional. This table is the schema of the simulator's points (``points.npz`` in a render
@@ -74,8 +75,6 @@ __all__ = [
     "read_npz",
     "write_ply",
     "read_ply",
-    "write_kitti_bin",
-    "read_kitti_bin",
 ]
 
 _TAG = "nidar_mi.points"  # marks our JSON in PLY obj_info lines and the LAS VLR
@@ -294,47 +293,3 @@ def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
         else:
             out.update(fields)
         return out
-
-
-# --- KITTI velodyne .bin -----------------------------------------------------------------
-
-
-def write_kitti_bin(path: str | os.PathLike, xyz: np.ndarray, intensity: np.ndarray) -> None:
-    """Write points in the KITTI velodyne format: raw little-endian float32 rows x, y, z, i.
-
-    Args:
-        path: output ``.bin`` file.
-        xyz: (N, 3) points in the LiDAR frame, m.
-        intensity: (N,) intensity (KITTI's is in [0, 1]).
-
-    Raises:
-        NidarError: shapes that do not match, or a write failure.
-    """
-    xyz = np.asarray(xyz)
-    intensity = np.asarray(intensity)
-    if xyz.ndim != 2 or xyz.shape[1] != 3 or intensity.shape != (len(xyz),):
-        raise NidarError(
-            f"need xyz (N,3) and intensity (N,), got {xyz.shape} and {intensity.shape}"
-        )
-    rows = np.empty((len(xyz), 4), dtype="<f4")
-    rows[:, :3] = xyz
-    rows[:, 3] = intensity
-    with atomic_path(path) as tmp:
-        rows.tofile(tmp)
-
-
-def read_kitti_bin(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read a KITTI velodyne ``.bin`` file.
-
-    Returns:
-        ``(xyz, intensity)``: (N, 3) and (N,) float32.
-
-    Raises:
-        NidarError: missing file, or a size that is not a multiple of 16 bytes.
-    """
-    with reading(path) as p:
-        size = p.stat().st_size
-        if size % 16:
-            raise ValueError(f"size {size} B is not a multiple of 16 B (4 float32 per point)")
-        rows = np.fromfile(p, dtype="<f4").reshape(-1, 4).astype(np.float32)
-        return np.ascontiguousarray(rows[:, :3]), rows[:, 3].copy()

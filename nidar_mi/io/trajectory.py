@@ -1,4 +1,5 @@
-"""Trajectory files: timed poses of a moving rig, and poses written in KITTI odometry format.
+"""Trajectory files: timed poses of a moving rig, read from three formats and written as TUM
+(KITTI ``poses.txt`` and ``times.txt`` are written by :mod:`nidar_mi.io.kitti`).
 
 Formats read by :func:`read_trajectory` (``#`` starts a comment in all three):
 
@@ -26,7 +27,7 @@ import numpy as np
 from ..errors import NidarError
 from .atomic import atomic_write_text, reading
 
-__all__ = ["Trajectory", "read_trajectory", "write_kitti_poses", "write_times", "write_tum"]
+__all__ = ["Trajectory", "read_trajectory", "write_tum"]
 
 
 @dataclass(frozen=True)
@@ -160,18 +161,6 @@ def read_trajectory(path: str | os.PathLike, *, rate: float | None = None) -> Tr
         bad = int(np.flatnonzero(np.diff(times) <= 0)[0]) + 1
         raise NidarError(f"{path}: times must increase (pose {bad} is not after pose {bad - 1})")
     return Trajectory(np.asarray(times, dtype=np.float64), poses, fmt, path)
-
-
-def write_kitti_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
-    """Write (K, 4, 4) poses as KITTI odometry ``poses.txt`` (row-major 3×4 per line)."""
-    poses = np.asarray(poses, dtype=np.float64)
-    lines = [" ".join(f"{v:.9e}" for v in P[:3, :].ravel()) for P in poses]
-    atomic_write_text(path, "\n".join(lines) + "\n")
-
-
-def write_times(path: str | os.PathLike, times: np.ndarray) -> None:
-    """Write one time per line in s (KITTI odometry ``times.txt``)."""
-    atomic_write_text(path, "".join(f"{t:.6e}\n" for t in np.asarray(times, dtype=np.float64)))
 
 
 def write_tum(

@@ -22,12 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["subray_count", "subray_offsets", "footprint_fraction"]
-
-
-def subray_count(quality: int) -> int:
-    """Sub-rays per beam for sample quality ``q >= 1``: ``1 + 3 q (q - 1)``."""
-    return 1 + 3 * quality * (quality - 1)
+__all__ = ["subray_offsets", "footprint_fraction"]
 
 
 def subray_offsets(quality: int) -> tuple[np.ndarray, np.ndarray]:

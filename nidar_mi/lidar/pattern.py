@@ -64,10 +64,10 @@ class Preset:
         reference: datasheet or paper the table comes from.
         detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
             the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
-            datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.calibration`).
+            datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.link_budget`).
         receiver_noise_std: default ``raw``-mode receiver noise σ_n (1/m², gain 1): the
             threshold over ``Q⁻¹(P_FA)`` for a false-alarm probability of 1e-4 per ranging
-            event (:func:`nidar_mi.lidar.calibration.noise_for`); 0 (a step at the
+            event (:func:`nidar_mi.lidar.link_budget.noise_for`); 0 (a step at the
             threshold) where the threshold is 0.
     """
 

@@ -6,6 +6,9 @@ published (n, k) tables, and the rest from documented models; every :class:`Mate
 ``<bsdf type="nidar_material">`` in scene XML expanded by :func:`expand_scene_xml`, either
 spectrally or as their RGB-only twin (what a graphics-engine asset carries).
 
+The plugin BSDFs' closed forms (NumPy, no Mitsuba) are here too: :mod:`.oren_nayar` for
+``roughdiffuse``, :mod:`.vmf` for ``retroreflector``.
+
 ``python -m nidar_mi.materials --list`` prints the library; ``--plot NAME ...`` plots spectra.
 """
 

@@ -72,7 +72,7 @@ def _earthlib_source(level_2: str, level_3: str, name: str) -> str:
 #: light at grazing incidence. ``sigma`` (facet slope deviation, degrees) is the value at which
 #: ``asphalt_old`` seen from 1.73 m is detected to the HDL-64E datasheet's 50 m for pavement with
 #: its 4e-5 threshold and ``B0 = 1`` (Hapke's shadow-hiding amplitude of a dark surface);
-#: :func:`nidar_mi.lidar.calibration.sigma_for_reach` reproduces it. The surge's 5 degree half
+#: :func:`nidar_mi.lidar.link_budget.sigma_for_reach` reproduces it. The surge's 5 degree half
 #: width matters only away from the monostatic direction (cameras) and is not calibrated.
 ROAD_SURFACE = {"sigma": 35.1, "opposition_amplitude": 1.0, "opposition_width": 5.0}
 _ROUGH = frozenset({"asphalt_new", "asphalt_old", "concrete"})
@@ -90,7 +90,7 @@ def _earthlib_materials() -> list[Material]:
             params |= ROAD_SURFACE
             notes += (
                 "; rough diffuse road surface (roughdiffuse: Oren-Nayar sigma, Hapke opposition "
-                "surge) calibrated in nidar_mi.lidar.calibration"
+                "surge) derived in nidar_mi.lidar.link_budget"
             )
         out.append(
             Material(

@@ -1,4 +1,4 @@
-"""Losses of NIDAR (paper Sec. III-D) and of the STN; pure functions plus thin modules.
+"""Losses of NIDAR (paper Sec. III-D) and of the STN; pure functions.
 
 All images are ``(B, C, H, W)`` tensors; masks are ``(B, 1, H, W)`` bool or {0, 1} float.
 "Mean" means the mean over every element unless stated otherwise.
@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
-from torch import nn
 
 __all__ = [
     "gain_offset_fit",
@@ -41,8 +40,6 @@ __all__ = [
     "intensity_loss",
     "linear_warmup",
     "irnet_objective",
-    "SSIMLoss",
-    "MaskedIntensityLoss",
 ]
 
 
@@ -399,30 +396,3 @@ def irnet_objective(
         terms["S_true"] = shading_supervision_loss(s, s_true, r_true, cfg.eps)
         total = total + cfg.lambda_s_true * terms["S_true"]
     return total, {k: float(v.detach()) for k, v in terms.items()}
-
-
-class SSIMLoss(nn.Module):
-    """``mean((1 - SSIM_map(x, y)) / 2)``; see :func:`ssim_map`."""
-
-    def __init__(
-        self, window_size: int = SSIM_WINDOW, sigma: float = SSIM_SIGMA, data_range: float = 1.0
-    ):
-        super().__init__()
-        self.window_size, self.sigma, self.data_range = window_size, sigma, data_range
-
-    def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-        smap = ssim_map(x, y, self.window_size, self.sigma, self.data_range)
-        return ((1 - smap) / 2).mean()
-
-
-class MaskedIntensityLoss(nn.Module):
-    """L_int as a module; see :func:`intensity_loss`."""
-
-    def __init__(self, w1=1.0, w2=0.5, w_ssim=0.2, scales=(1.0, 0.5, 0.25), eps=1e-6):
-        super().__init__()
-        self.w1, self.w2, self.w_ssim, self.scales, self.eps = w1, w2, w_ssim, scales, eps
-
-    def forward(self, pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor):
-        return intensity_loss(
-            pred, target, mask, self.w1, self.w2, self.w_ssim, self.scales, self.eps
-        )

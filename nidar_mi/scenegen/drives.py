@@ -23,7 +23,8 @@ import os
 
 import numpy as np
 
-from ..io.trajectory import write_kitti_poses, write_times, write_tum
+from ..io.kitti import write_kitti_poses, write_kitti_times
+from ..io.trajectory import write_tum
 from .city import StreetGrid
 from .trajectory import drive, revisits
 
@@ -65,7 +66,7 @@ def write_drive(
     comment = "t x y z qx qy qz qw  (T_rig, T_world_lidar = T_rig @ T_mount; s, m)"
     write_tum(os.path.join(out_dir, files["tum"]), traj.times, traj.poses, comment)
     write_kitti_poses(os.path.join(out_dir, files["kitti"]), traj.poses)
-    write_times(os.path.join(out_dir, files["times"]), traj.times)
+    write_kitti_times(os.path.join(out_dir, files["times"]), traj.times)
     return {
         "files": files,
         "frames": frames,

@@ -89,7 +89,7 @@ def _shape(s) -> str:
 
 def _threshold(preset: str) -> list[str]:
     """The detection threshold line: none where the preset has a calibrated default
-    (:mod:`nidar_mi.lidar.calibration`), else 5e-5."""
+    (:mod:`nidar_mi.lidar.link_budget`), else 5e-5."""
     from ..lidar.pattern import PRESETS
 
     if PRESETS[preset].detection_threshold > 0:

@@ -68,7 +68,7 @@ __all__ = [
 
 #: The road of the old model: Lambertian asphalt_old (its earthlib spectrum).
 LAMBERTIAN_ASPHALT = "lambertian:asphalt_old"
-#: The library's asphalt_old: roughdiffuse (nidar_mi.lidar.calibration).
+#: The library's asphalt_old: roughdiffuse (nidar_mi.lidar.link_budget).
 ROUGH_ASPHALT = "asphalt_old"
 #: A ring's ground ranges are compared where the real frames hold at least this many of its
 #: ground returns per frame (about 5 % of a 2000-column sweep).
@@ -379,7 +379,7 @@ def kitti_ground_rings(
         pose_over_plane,
         scan_rings,
     )
-    from ..io.points import read_kitti_bin
+    from ..io.kitti import read_kitti_bin
 
     paths = sorted(glob.glob(os.path.join(os.fspath(velodyne_dir), "*.bin")))
     if frames is not None:
@@ -586,19 +586,25 @@ def target_reach_scanned(
     without receiver noise (the step at the threshold; with noise this is where ``P_D = 0.5``).
 
     One horizontal beam meets a 40 m wide vertical panel; the LiDAR is moved back (an opaque
-    pose: one compiled kernel) and the reach bracketed by bisection to ``tol_m``.
+    pose: one compiled kernel) and the step from seen (+1) to not seen (-1) is found by
+    :func:`scipy.optimize.brentq` to ``tol_m``. Returns 0 when the target is not seen at
+    ``lo_m``, ``hi_m`` when it still is there.
     """
+    from functools import cache
+
+    from scipy.optimize import brentq
+
     from ..lidar.scan import scan
 
     loaded = _target_scene(reflectivity, threshold, 0.0, 1, hi_m)
 
-    def seen(d: float) -> bool:
-        return bool(scan(loaded.scene, loaded.lidars[0], to_world=_at_distance(d)).valid[0, 0])
+    @cache  # brentq evaluates the ends again
+    def seen(d: float) -> float:
+        hit = scan(loaded.scene, loaded.lidars[0], to_world=_at_distance(d)).valid[0, 0]
+        return 1.0 if hit else -1.0
 
-    if not seen(lo_m):
+    if seen(lo_m) < 0:
         return 0.0
-    lo, hi = lo_m, hi_m
-    while hi - lo > tol_m:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if seen(mid) else (lo, mid)
-    return lo
+    if seen(hi_m) > 0:
+        return hi_m
+    return brentq(seen, lo_m, hi_m, xtol=tol_m)

@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import brentq
 
 from ..errors import NidarError
 from .panels import REFERENCE_DISTANCE_M, scan_panels
@@ -132,8 +133,8 @@ def detection_range(
 
     The left side is the return model's ``raw`` intensity
     (:func:`nidar_mi.lidar.return_model.expected_intensity`, no glass); it falls strictly with
-    ``d``, so the root is unique; it is found by bisection on ``log`` of both sides. With
-    ``α = 0`` it is ``sqrt(g·ρ·cosθ / threshold)``.
+    ``d``, so the root is unique; it is found by :func:`scipy.optimize.brentq` on ``log`` of
+    both sides. With ``α = 0`` it is ``sqrt(g·ρ·cosθ / threshold)``.
 
     Args:
         rho: monostatic reflectance ρ (π × BSDF) at the laser wavelength, > 0.
@@ -158,14 +159,10 @@ def detection_range(
 
     if excess(d_max_m) >= 0.0:
         return float(d_max_m)
-    lo, hi = 1.0e-9, float(d_max_m)
-    while hi - lo > rtol * hi:
-        mid = 0.5 * (lo + hi)
-        if excess(mid) >= 0.0:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+    d_min = 1.0e-9
+    if excess(d_min) < 0.0:
+        return d_min
+    return brentq(excess, d_min, float(d_max_m), xtol=1e-300, rtol=max(rtol, 1e-15))
 
 
 def max_detection_range(

@@ -129,7 +129,7 @@ def assign_inputs(tmp_path) -> list[str]:
 @pytest.fixture(scope="session")
 def synthetic_data(tmp_path_factory):
     """A small synthetic training dataset (meta.json and frames, no renders)."""
-    from nidar_mi.nidar.synthetic import write_synthetic_dataset
+    from tests.helpers.synthetic_frames import write_synthetic_dataset
 
     return write_synthetic_dataset(tmp_path_factory.mktemp("synthetic"), height=48, width=64)
 

@@ -325,8 +325,9 @@ def _assign_inputs(draw):
 def test_assign_inputs(inputs, fmt, call):
     from PIL import Image
 
+    from nidar_mi.io.kitti import write_kitti_bin
     from nidar_mi.io.las import write_las
-    from nidar_mi.io.points import write_kitti_bin, write_npz, write_ply
+    from nidar_mi.io.points import write_npz, write_ply
 
     xyz, calib, (shape, depth) = inputs
     with tempfile.TemporaryDirectory() as tmp:

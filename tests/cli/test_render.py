@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from nidar_mi.io.images import read_exr, read_png
-from nidar_mi.io.points import read_kitti_bin, read_npz
+from nidar_mi.io.kitti import read_kitti_bin
+from nidar_mi.io.points import read_npz
 from nidar_mi.io.range_preview import preview_columns
 
 SKY = "360:0.5, 1700:1.5"  # linear in λ: the band average at λ is its value at λ

@@ -9,17 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nidar_mi.datasets.kitti import (
-    KITTI_IMAGE_SIZE,
-    KittiFrame,
-    frame_ids,
-    load_frame,
-    load_kitti_calib,
-)
+from nidar_mi.datasets.kitti import KittiFrame, frame_ids, load_frame
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry import in_image, project
 from nidar_mi.io.images import write_png
-from nidar_mi.io.points import write_kitti_bin
+from nidar_mi.io.kitti import KITTI_IMAGE_SIZE, load_kitti_calib, write_kitti_bin
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -194,7 +188,7 @@ def test_frame_ids_lists_complete_frames_sorted(kitti_dir, tmp_path):
 
 
 def test_load_frame(kitti_dir):
-    from nidar_mi.io.points import read_kitti_bin
+    from nidar_mi.io.kitti import read_kitti_bin
 
     frame = load_frame(kitti_dir, "000004")
     assert isinstance(frame, KittiFrame) and frame.frame_id == "000004"

@@ -21,7 +21,7 @@ from nidar_mi.datasets.kitti_frames import (
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry import project
 from nidar_mi.io.images import write_png
-from nidar_mi.io.points import write_kitti_bin
+from nidar_mi.io.kitti import write_kitti_bin
 from tests.helpers.synthetic_kitti import CALIB as _SYNTHETIC_KITTI
 from tests.helpers.synthetic_kitti import kitti_order_scan
 

@@ -1,14 +1,12 @@
 """Rings from KITTI's storage order (checked by elevation, with the elevation fallback), truncated
-scans and files, and the road plane, on synthetic sweeps built like KITTI's and the real scans."""
+scans, and the road plane, on synthetic sweeps built like KITTI's and the real scans."""
 
 import os
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from nidar_mi.datasets.kitti import read_scan
 from nidar_mi.datasets.kitti_rings import (
     checked_rings,
     elevation_rings,
@@ -16,6 +14,7 @@ from nidar_mi.datasets.kitti_rings import (
     grow_ground,
     scan_rings,
 )
+from nidar_mi.io.kitti import read_kitti_bin
 from nidar_mi.lidar.pattern import elevation_table
 from tests.helpers.synthetic_kitti import kitti_order_scan
 
@@ -102,18 +101,6 @@ def test_an_unordered_cloud_is_refused_and_elevation_is_the_fallback():
     np.testing.assert_array_equal(est[far], ring[perm][far])
 
 
-def test_read_scan_drops_a_trailing_partial_point(tmp_path):
-    rows = np.arange(32, dtype="<f4").reshape(8, 4)
-    path = tmp_path / "cut.bin"
-    path.write_bytes(rows.tobytes() + b"\x00" * 7)
-    with warnings.catch_warnings(record=True) as w:
-        warnings.simplefilter("always")
-        xyz, inten = read_scan(path)
-    assert any("truncated scan" in str(x.message) for x in w)
-    np.testing.assert_array_equal(xyz, rows[:, :3])
-    np.testing.assert_array_equal(inten, rows[:, 3])
-
-
 def _shared(name: str) -> Path:
     root = Path(os.environ.get("NIDAR_MI_DATA", REPO.parent / "shared" / "data"))
     path = root / name
@@ -126,7 +113,7 @@ def test_real_scans_have_64_rings_except_the_truncated_one():
     counts = {}
     for name in ("kitti", "kitti_raw_0926"):
         for p in sorted((_shared(name) / "velodyne").glob("*.bin")):
-            rings = checked_rings(read_scan(p)[0])
+            rings = checked_rings(read_kitti_bin(p)[0])
             assert rings is not None, p
             counts[f"{name}/{p.stem}"] = int(rings.max()) + 1
     short = {k: v for k, v in counts.items() if v != 64}

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.eval.ablation import AblationSettings, ablation_config, map_scores, run_ablation
-from nidar_mi.nidar.synthetic import write_synthetic_dataset
+from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
 def test_config_carries_the_settings():

@@ -31,7 +31,7 @@ from nidar_mi.geometry import CameraModel, bilinear_sample, project
 from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
-from nidar_mi.nidar.synthetic import write_synthetic_dataset
+from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")

@@ -48,7 +48,7 @@ def test_a_layout_agrees_with_its_own_scan(variant, write_scene, tmp_path):
     counter-clockwise): the storage order gives back the rings and every return lies on its own
     laser's beam (offsets included)."""
     from nidar_mi.eval.layout_agreement import elevation_agreement, storage_rings
-    from nidar_mi.io.points import write_kitti_bin
+    from nidar_mi.io.kitti import write_kitti_bin
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from nidar_mi.io.images import write_png
-from nidar_mi.io.points import write_kitti_bin
+from nidar_mi.io.kitti import write_kitti_bin
 from nidar_mi.lidar.pattern import elevation_table
 
 #: A KITTI calibration file (P2 looks ahead along the Velodyne's x axis; 1242 x 375 images).

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
+from nidar_mi.io.kitti import write_kitti_bin
 from nidar_mi.io.las import write_las
 from nidar_mi.io.point_cloud import read_point_cloud
-from nidar_mi.io.points import write_kitti_bin, write_npz, write_ply
+from nidar_mi.io.points import write_npz, write_ply
 
 
 @pytest.mark.parametrize("suffix", [".npz", ".ply", ".las", ".bin", ".PLY"])

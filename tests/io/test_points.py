@@ -1,4 +1,4 @@
-"""Tests of nidar_mi.io.points: points-dict validation, npz, PLY, KITTI .bin, dispatch."""
+"""Tests of nidar_mi.io.points: points-dict validation, npz, PLY, dispatch."""
 
 import os
 
@@ -7,14 +7,7 @@ import plyfile
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.io.points import (
-    read_kitti_bin,
-    read_npz,
-    read_ply,
-    write_kitti_bin,
-    write_npz,
-    write_ply,
-)
+from nidar_mi.io.points import read_npz, read_ply, write_npz, write_ply
 
 # --- npz -----------------------------------------------------------------------------------
 
@@ -145,31 +138,6 @@ def test_ply_malformed(tmp_path):
     )
     with pytest.raises(NidarError, match="no x, y, z"):
         read_ply(tmp_path / "noxyz.ply")
-
-
-# --- KITTI .bin ----------------------------------------------------------------------------
-
-
-def test_kitti_bin_layout_and_round_trip(tmp_path):
-    rng = np.random.default_rng(1)
-    xyz = rng.normal(size=(100, 3)).astype(np.float32)
-    intensity = rng.uniform(size=100).astype(np.float32)
-    write_kitti_bin(tmp_path / "000000.bin", xyz, intensity)
-    raw = np.fromfile(tmp_path / "000000.bin", dtype=np.float32).reshape(-1, 4)
-    np.testing.assert_array_equal(raw, np.column_stack([xyz, intensity]))
-    assert (tmp_path / "000000.bin").stat().st_size == 100 * 16
-    got_xyz, got_i = read_kitti_bin(tmp_path / "000000.bin")
-    np.testing.assert_array_equal(got_xyz, xyz)
-    np.testing.assert_array_equal(got_i, intensity)
-    assert got_xyz.shape == (100, 3) and got_i.shape == (100,) and got_i.dtype == np.float32
-
-
-def test_kitti_bin_errors(tmp_path):
-    with pytest.raises(NidarError, match="xyz"):
-        write_kitti_bin(tmp_path / "a.bin", np.zeros((3, 3)), np.zeros(2))
-    (tmp_path / "b.bin").write_bytes(b"\0" * 20)
-    with pytest.raises(NidarError, match=r"b\.bin: size 20 B"):
-        read_kitti_bin(tmp_path / "b.bin")
 
 
 # --- the documented schema -------------------------------------------------------------------

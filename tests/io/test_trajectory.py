@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.io.trajectory import read_trajectory, write_kitti_poses, write_times
+from nidar_mi.io.kitti import write_kitti_poses
+from nidar_mi.io.trajectory import read_trajectory
 
 
 def _poses():
@@ -43,11 +44,6 @@ def test_three_formats_same_poses(tmp_path):
         np.testing.assert_allclose(tr.times, t)
         np.testing.assert_allclose(tr.poses, P, atol=1e-9)
     np.testing.assert_allclose(kitti.poses, P, atol=1e-8)
-
-
-def test_write_times(tmp_path):
-    write_times(tmp_path / "times.txt", [0.0, 0.1, 0.25])
-    np.testing.assert_allclose(np.loadtxt(tmp_path / "times.txt"), [0.0, 0.1, 0.25])
 
 
 @pytest.mark.parametrize(

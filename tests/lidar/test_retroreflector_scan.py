@@ -5,9 +5,8 @@ import pytest
 
 
 def test_retroreflector_outshines_white_panel(variant, write_scene):
-    from nidar_mi.plugins.vmf import monostatic_gain
-
     from nidar_mi.lidar.scan import scan
+    from nidar_mi.materials.vmf import monostatic_gain
     from nidar_mi.scene import load_scene
 
     body = """

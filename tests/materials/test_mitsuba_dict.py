@@ -51,7 +51,7 @@ def test_diffuse_monostatic_reflectance_equals_the_library(mi, name):
 @pytest.mark.parametrize("theta", [20.0, 85.0])
 def test_road_surfaces_are_rough_diffuse(mi, name, theta):
     """rho_eff = rho (A + B sin²θ / cos θ)(1 + B0) (Oren–Nayar facets with the opposition surge)."""
-    from nidar_mi.plugins.oren_nayar import coefficients
+    from nidar_mi.materials.oren_nayar import coefficients
 
     m = get_material(name)
     assert m.kind == "rough_diffuse" and bsdf_dict(name)["type"] == "roughdiffuse"

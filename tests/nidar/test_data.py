@@ -11,7 +11,7 @@ from nidar_mi.dataset import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame,
 from nidar_mi.errors import NidarError
 from nidar_mi.nidar.data import IRNetDataset, STNDataset
 from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
-from nidar_mi.nidar.synthetic import write_synthetic_dataset
+from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")

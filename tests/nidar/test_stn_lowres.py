@@ -114,7 +114,7 @@ def test_cli_trains_on_photo_pairs_and_learns_their_colour_map(tmp_path):
     from nidar_mi.eval.photos import image_scores
     from nidar_mi.io.images import REC709_LUMA, linear_to_srgb, srgb_to_linear, write_png
     from nidar_mi.nidar.model_io import load_stn
-    from nidar_mi.nidar.synthetic import write_synthetic_dataset
+    from tests.helpers.synthetic_frames import write_synthetic_dataset
 
     w_true = np.array([0.6, -0.2, 0.5, 0.1])
     rng = np.random.default_rng(1)

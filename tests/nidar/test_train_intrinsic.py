@@ -15,8 +15,8 @@ from nidar_mi.cli.train import main
 from nidar_mi.dataset import list_frames
 from nidar_mi.errors import NidarError
 from nidar_mi.nidar.config import LossConfig, TrainConfig
-from nidar_mi.nidar.synthetic import write_synthetic_dataset
 from nidar_mi.nidar.train import train_irnet
+from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,8 @@ import math
 
 import numpy as np
 import pytest
-from nidar_mi.plugins.vmf import lobe_concentration, monostatic_gain
+
+from nidar_mi.materials.vmf import lobe_concentration, monostatic_gain
 
 RHO = 0.8
 

@@ -5,7 +5,8 @@ import math
 
 import numpy as np
 import pytest
-from nidar_mi.plugins.oren_nayar import brdf, coefficients, monostatic_reflectance
+
+from nidar_mi.materials.oren_nayar import brdf, coefficients, monostatic_reflectance
 
 RHO = 0.3
 

@@ -52,10 +52,6 @@ class Frame:
     extra: dict | None = None
 
 
-def _sha(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True).encode()).hexdigest()[:16]
-
-
 def _frame_path(folder: str, k: int, stem: str = "") -> str:
     return os.path.join(folder, f"{stem}{k:06d}.npz")
 
@@ -257,14 +253,11 @@ def read_sequence(folder: str, lidar: str | None = None):
     Raises:
         NidarError: a missing or malformed file, or frame folders that do not match the poses.
     """
-    from ...io.kitti_odometry import read_poses
+    from ...io.kitti import read_kitti_poses, read_kitti_times
     from ...io.points import read_npz
 
-    poses = read_poses(os.path.join(folder, "poses.txt"))
-    try:
-        times = np.loadtxt(os.path.join(folder, "times.txt"), ndmin=1)
-    except (OSError, ValueError) as e:
-        raise NidarError(f"{folder}/times.txt: not a times file ({e})") from None
+    poses = read_kitti_poses(os.path.join(folder, "poses.txt"))
+    times = read_kitti_times(os.path.join(folder, "times.txt"))
     frames_dir = os.path.join(folder, "frames")
     names = sorted(os.listdir(frames_dir)) if os.path.isdir(frames_dir) else []
     if len(times) != len(poses) or len(names) != len(poses):

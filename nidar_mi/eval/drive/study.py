@@ -27,7 +27,6 @@ columns and the steps after them.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
@@ -252,7 +251,7 @@ def _kiss_on_kitti_layout(cfg: StudyConfig, phys: str, gt: np.ndarray, progress:
     estimate and the loader's ground truth."""
     from kiss_icp.datasets.kitti import KITTIOdometryDataset
 
-    from ...io.kitti_odometry import write_sequence
+    from ...io.kitti import write_sequence
     from .frames import load_frame
     from .kiss import run_odometry
 
@@ -491,9 +490,3 @@ def run_study(
         world_poses=poses,
     )
     return results
-
-
-def load_results(out: str) -> dict:
-    """The ``results.json`` of an earlier run."""
-    with open(os.path.join(out, "results.json"), encoding="utf-8") as f:
-        return json.load(f)

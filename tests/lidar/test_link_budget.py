@@ -1,5 +1,5 @@
-"""The detection calibration: closed forms, the catalog's road roughness, the receiver-noise
-detection model, and scans against them."""
+"""The link budget of the presets' detection numbers: closed forms, the catalog's road
+roughness, the receiver-noise detection model, and scans against them."""
 
 import math
 
@@ -7,11 +7,10 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from nidar_mi.lidar.calibration import (
+from nidar_mi.lidar.link_budget import (
     FALSE_ALARM_PROBABILITY,
     HDL64E_DATASHEET,
     KITTI_SENSOR_HEIGHT_M,
-    detection_probability,
     ground_detection_probability,
     ground_reach,
     ground_return,
@@ -22,7 +21,7 @@ from nidar_mi.lidar.calibration import (
     threshold_to_noise,
 )
 from nidar_mi.lidar.pattern import PRESETS
-from nidar_mi.lidar.return_model import detection_probability as detection_probability_array
+from nidar_mi.lidar.return_model import detection_probability
 
 T64 = PRESETS["hdl64e"].detection_threshold
 NOISE64 = PRESETS["hdl64e"].receiver_noise_std
@@ -71,14 +70,12 @@ def test_datasheet_targets_are_detected_with_probability_at_least_one_half():
     # where the 10 % target fades: P_D = 0.9 at 50 / sqrt(1 + 1.2816 / k) m, 0.1 beyond 50 m
     d90 = 50.0 / math.sqrt(1.0 + norm.ppf(0.9) / k)
     assert detection_probability(0.10 / d90**2, T64, NOISE64) == pytest.approx(0.9, abs=1e-9)
-    # the array form agrees, and sigma_n = 0 is the old step
+    # arrays: Φ((E - T) / σ_n) element by element, and sigma_n = 0 is the old step
     e = np.array([0.5, 1.0, 1.5]) * T64
     np.testing.assert_allclose(
-        detection_probability_array(e, T64, NOISE64),
-        [detection_probability(x, T64, NOISE64) for x in e],
-        rtol=1e-12,
+        detection_probability(e, T64, NOISE64), norm.cdf((e - T64) / NOISE64), rtol=1e-12
     )
-    np.testing.assert_array_equal(detection_probability_array(e, T64, 0.0), [0.0, 1.0, 1.0])
+    np.testing.assert_array_equal(detection_probability(e, T64, 0.0), [0.0, 1.0, 1.0])
 
 
 def test_lambertian_ground_falls_as_h_over_d_cubed():

@@ -1,4 +1,4 @@
-"""Small synthetic frames in the NIDAR training-data format (for tests and demos).
+"""Small synthetic frames in the NIDAR training-data format, for tests.
 
 A frame is a mosaic of rectangular "materials", each with a linear RGB albedo and an NIR
 reflectance ``rho``, lit by a smooth shading field. The RGB image is ``albedo * shading``
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.images import linear_to_srgb
+from nidar_mi.io.images import linear_to_srgb
 
 __all__ = ["synthetic_frame", "write_synthetic_dataset"]
 
@@ -126,7 +126,7 @@ def write_synthetic_dataset(
         "wavelength_nm": 905,
         "splits": splits,
         "source": "render",
-        "generator": "nidar_mi.nidar.synthetic",
+        "generator": "tests.helpers.synthetic_frames",
     }
     (root / "meta.json").write_text(json.dumps(meta, indent=2))
     return root

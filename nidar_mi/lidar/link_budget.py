@@ -1,4 +1,4 @@
-"""Where the presets' detection numbers come from, as closed forms that reproduce them.
+"""The link budget of the presets' detection numbers: closed forms that reproduce them.
 
 The return model (:mod:`.return_model`, ``raw`` mode, gain 1) reports a beam when the
 receiver's output ``E + σ_n·n`` reaches the threshold ``T``, ``E = ρ_eff · cos θ / d²`` and ``n``
@@ -32,8 +32,12 @@ detection:
   2013) returns ``E = T`` at 50 m (``P_D = 0.5``): 35.1°, the catalog's value for road asphalt
   and concrete. :func:`ground_detection_probability` is then ``P_D`` of the road at any range.
 
-Nothing here is fitted to KITTI data: the real frames only check the result
-(:mod:`nidar_mi.studies.ground_coverage`, ``docs/SENSORS.md``).
+Every return and probability is the return model's own (:mod:`.return_model`:
+:func:`~.return_model.expected_intensity`, :func:`~.return_model.detection_probability`) and the
+road's reflectance the ``roughdiffuse`` closed form's (:mod:`nidar_mi.materials.oren_nayar`);
+this module only inverts them for the datasheet's figures (the root finding by
+:func:`scipy.optimize.brentq`). Nothing here is fitted to KITTI data: the real frames only check
+the result (:mod:`nidar_mi.studies.ground_coverage`, ``docs/SENSORS.md``).
 """
 
 from __future__ import annotations
@@ -41,7 +45,10 @@ from __future__ import annotations
 import math
 from statistics import NormalDist
 
-from ..plugins.oren_nayar import coefficients
+from scipy.optimize import brentq
+
+from ..materials.oren_nayar import monostatic_reflectance
+from .return_model import detection_probability, expected_intensity
 
 __all__ = [
     "HDL64E_DATASHEET",
@@ -49,7 +56,6 @@ __all__ = [
     "FALSE_ALARM_PROBABILITY",
     "threshold_to_noise",
     "noise_for",
-    "detection_probability",
     "ground_detection_probability",
     "ground_return",
     "ground_reach",
@@ -65,6 +71,8 @@ KITTI_SENSOR_HEIGHT_M = 1.73
 #: Probability of a false alarm per ranging event: the false positive rate at which Ouster's OS1
 #: datasheet specifies its range (1/10,000); Velodyne's datasheets give none.
 FALSE_ALARM_PROBABILITY = 1e-4
+#: Largest range (m) searched for the end of the road.
+_FAR_M = 1e4
 
 
 def threshold_to_noise(false_alarm: float = FALSE_ALARM_PROBABILITY) -> float:
@@ -80,34 +88,27 @@ def noise_for(threshold: float, false_alarm: float = FALSE_ALARM_PROBABILITY) ->
     return threshold / threshold_to_noise(false_alarm)
 
 
-def detection_probability(expected: float, threshold: float, noise: float) -> float:
-    """``P_D = Φ((E - T) / σ_n)`` (a step where ``σ_n = 0``); see
-    :func:`nidar_mi.lidar.return_model.detection_probability` for arrays."""
-    if noise <= 0.0:
-        return float(expected >= threshold)
-    return NormalDist().cdf((expected - threshold) / noise)
-
-
 def threshold_for(reflectivity: float, range_m: float, gain: float = 1.0) -> float:
     """The ``raw``-mode threshold at which a Lambertian target of ``reflectivity`` at normal
-    incidence is detected exactly to ``range_m``: ``g ρ / d²`` (1/m²)."""
-    return gain * reflectivity / range_m**2
+    incidence is detected exactly to ``range_m``: its return ``g ρ / d²`` (1/m²)."""
+    return expected_intensity(gain, reflectivity, range_m, 1.0, 0.0, "raw")
 
 
 def target_reach(reflectivity: float, threshold: float, gain: float = 1.0) -> float:
     """How far (m) a Lambertian target at normal incidence is detected: ``sqrt(g ρ / T)``, where
-    ``E = T`` and ``P_D = 0.5`` whatever the receiver noise."""
+    its return ``g ρ / d²`` equals ``T`` and ``P_D = 0.5`` whatever the receiver noise."""
     return math.sqrt(gain * reflectivity / threshold)
 
 
 def ground_return(
     rho: float, sigma_deg: float, amplitude: float, height_m: float, range_m: float
 ) -> float:
-    """``ρ_eff cos θ / d²`` of flat ``roughdiffuse`` ground seen at range ``d`` from ``h``:
-    ``ρ (A c + B (1 - c²))(1 + B0) / d²`` with ``c = cos θ = h / d`` (1/m², gain 1)."""
-    a, b = coefficients(sigma_deg)
+    """The return ``ρ_eff cos θ / d²`` of flat ``roughdiffuse`` ground seen at range ``d`` from
+    ``h`` (1/m², gain 1): ``ρ_eff`` the monostatic reflectance ``ρ (A + B sin²θ / cos θ)(1 + B0)``
+    at ``cos θ = h / d``. ``range_m`` may be an array (the result has its shape)."""
     c = height_m / range_m
-    return rho * (a * c + b * (1.0 - c * c)) * (1.0 + amplitude) / range_m**2
+    rho_eff = monostatic_reflectance(rho, c, sigma_deg, amplitude)
+    return expected_intensity(1.0, rho_eff, range_m, c, 0.0, "raw")
 
 
 def ground_detection_probability(
@@ -120,27 +121,27 @@ def ground_detection_probability(
     noise: float,
 ) -> float:
     """``P_D`` of flat ``roughdiffuse`` ground at range ``d`` seen from ``h``
-    (:func:`ground_return` through :func:`detection_probability`)."""
+    (:func:`ground_return` through :func:`nidar_mi.lidar.return_model.detection_probability`)."""
     e = ground_return(rho, sigma_deg, amplitude, height_m, range_m)
-    return detection_probability(e, threshold, noise)
+    return float(detection_probability(e, threshold, noise))
 
 
 def ground_reach(
     rho: float, sigma_deg: float, amplitude: float, height_m: float, threshold: float
 ) -> float:
-    """The range (m) beyond which flat ground no longer reaches ``threshold`` (bisection; the
-    return falls monotonically with range): where ``P_D`` falls to 0.5 (with receiver noise),
-    or the end of the road (without)."""
-    lo, hi = height_m, 1e4
-    if ground_return(rho, sigma_deg, amplitude, height_m, lo * (1 + 1e-9)) < threshold:
+    """The range (m) beyond which flat ground no longer reaches ``threshold`` (the return falls
+    monotonically with range): where ``P_D`` falls to 0.5 (with receiver noise), or the end of
+    the road (without); ``h`` when even the ground below is too dark, 1e4 m at most."""
+
+    def excess(d: float) -> float:
+        return ground_return(rho, sigma_deg, amplitude, height_m, d) - threshold
+
+    near = height_m * (1 + 1e-9)
+    if excess(near) < 0:
         return height_m
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if ground_return(rho, sigma_deg, amplitude, height_m, mid) >= threshold:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    if excess(_FAR_M) >= 0:
+        return _FAR_M
+    return brentq(excess, near, _FAR_M, xtol=1e-9, rtol=1e-12)
 
 
 def sigma_for_reach(
@@ -158,14 +159,9 @@ def sigma_for_reach(
     lo, hi = 0.0, 89.0
     if excess(hi) < 0:
         raise ValueError(
-            f"no roughness reaches {reach_m:g} m (at most {ground_reach(rho, hi, amplitude, height_m, threshold):.1f} m)"
+            f"no roughness reaches {reach_m:g} m "
+            f"(at most {ground_reach(rho, hi, amplitude, height_m, threshold):.1f} m)"
         )
     if excess(lo) >= 0:
         return 0.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if excess(mid) >= 0:
-            hi = mid
-        else:
-            lo = mid
-    return hi
+    return brentq(excess, lo, hi, xtol=1e-12, rtol=1e-12)
