@@ -293,8 +293,8 @@ def render_scene(
         weights: NIDAR weights folder (None: the shipped model); ``nidar`` only.
         nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only (without a
             profile).
-        profile: a :class:`~nidar_mi.nidar.profile.SensorProfile` for NIDAR's intensity
-            (:func:`nidar_mi.nidar.profiles.resolve_profile` turns a name or file into one);
+        profile: a :class:`~nidar_mi.profiles.SensorProfile` for NIDAR's intensity
+            (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile` turns a name or file into one);
             None: the weights' own ``sim-905`` (``profiles/sim-905.json``, else
             ``calibration.json``); ``nidar`` only.
         overwrite: replace a non-empty ``out_dir``.

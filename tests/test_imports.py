@@ -151,6 +151,7 @@ LAYERS = {
             "dataset",
             "datasets",
             "nidar",
+            "profiles",
             "scenegen",
         ),
         1,

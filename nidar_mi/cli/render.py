@@ -226,8 +226,8 @@ def main(argv=None) -> int:
         if args.profile is not None:
             if args.intensity != "nidar":
                 raise NidarError("--profile applies to --intensity nidar")
+            from ..datasets.sensor_profiles import resolve_profile
             from ..nidar.pipeline import NidarModel
-            from ..nidar.profiles import resolve_profile
 
             profile = resolve_profile(args.profile, NidarModel.load(args.weights))
         manifest = render_scene(
