@@ -148,9 +148,14 @@ def fit_values_profile(
     } | dict(provenance or {})
     mapping = fit(form, **data, input=input, **options)
     return SensorProfile(
-        name=name, sensor=sensor, form=form, input=input, mapping=mapping, model=model,
+        name=name,
+        sensor=sensor,
+        form=form,
+        input=input,
+        mapping=mapping,
+        model=model,
         provenance=info,
-    )  # fmt: skip
+    )
 
 
 def fit_scan_profile(
