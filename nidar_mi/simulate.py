@@ -294,7 +294,7 @@ def render_scene(
         nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only (without a
             profile).
         profile: a :class:`~nidar_mi.profiles.SensorProfile` for NIDAR's intensity
-            (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile` turns a name or file into one);
+            (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile` makes one of a name or file);
             None: the weights' own ``sim-905`` (``profiles/sim-905.json``, else
             ``calibration.json``); ``nidar`` only.
         overwrite: replace a non-empty ``out_dir``.

@@ -11,8 +11,8 @@
 ``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
 ``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
 its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
-(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default form) also
-reads each return's ``|cos θ|``, from normals estimated on the scan's own points
+(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default
+form) also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
 (:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
 ``kitti-hdl64e``. ``assign`` and ``render`` then estimate it the same way on the clouds they are
 given. With ``--no-geometry`` the profile reads the value and the

@@ -4,8 +4,8 @@ Both gather the returns (the model value, range, ring, elevation, incidence and 
 intensity) and hand them to :func:`nidar_mi.profiles.fit`, the one fitting entry point:
 
 * :func:`fit_values_profile` / :func:`fit_scan_profile`: per-return values (a NIDAR map, or any
-  method's) against the intensities of a sensor's scans (:class:`~nidar_mi.datasets.scans.ScanFrame`);
-  ``python -m nidar_mi.calibrate``, the ``kitti-hdl64e`` profile and the leave-one-frame-out
+  method's) against the intensities of a sensor's scans
+  (:class:`~nidar_mi.datasets.scans.ScanFrame`); ``python -m nidar_mi.calibrate``, the ``kitti-hdl64e`` profile and the leave-one-frame-out
   evaluation use it.
 * :func:`fit_split_calibration`: the paper's distance encoding and quantile map of a NIDAR map
   on the pixels of a training split that carry a LiDAR return (``python -m nidar_mi.train``

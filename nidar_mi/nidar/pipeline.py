@@ -117,7 +117,9 @@ class NidarModel:
                 mapping=self._calibration_map,
                 model=self.identity(),
                 provenance={
-                    "data": "the rendered training split of these weights (see their MODEL_CARD.md)",
+                    "data": (
+                        "the rendered training split of these weights (see their MODEL_CARD.md)"
+                    ),
                     "file": str(Path(self.weights_dir) / "calibration.json"),
                 },
             )

@@ -19,7 +19,8 @@ and kept out of the model. Three forms, one interface (:mod:`~nidar_mi.profiles.
 
 Every map and every :class:`SensorProfile` is called the same way,
 ``profile(values, range_m, *, ring=None, elevation_deg=None, cos_incidence=None)``, and every
-form is fitted by :func:`fit`. The profile file format is :mod:`~nidar_mi.profiles.sensor_profile`'s.
+form is fitted by :func:`fit`. The profile file format is
+:mod:`~nidar_mi.profiles.sensor_profile`'s.
 Which data a profile is fitted on, and the named profiles (``sim-905``, ``kitti-hdl64e``), are
 the datasets' side (:mod:`nidar_mi.datasets.sensor_profiles`). Pure NumPy and LightGBM: the
 package imports neither the networks nor any data.

@@ -1,8 +1,9 @@
 """The ``distance_quantile`` profile form: the paper's distance encoding and quantile remapping.
 
-This is §III.E of the NIDAR paper (the source-domain distribution calibration). A per-point branch value ``i`` (the reflectance-like ``R``
-branch sampled at the point; see :mod:`nidar_mi.geometry.fusion`) is turned into an
-intensity in two steps, both fitted offline on the training split and then held fixed:
+This is §III.E of the NIDAR paper (the source-domain distribution calibration). A per-point
+branch value ``i`` (the reflectance-like ``R`` branch sampled at the point; see
+:mod:`nidar_mi.geometry.fusion`) is turned into an intensity in two steps, both fitted offline
+on the training split and then held fixed:
 
 1. **Distance encoding** (paper Eq. dist_encode), a first-order range attenuation::
 
@@ -191,7 +192,8 @@ class DistanceQuantileMap:
         return self.quantile_map(self.encode(v, d))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe representation: a profile's ``mapping`` (``calibration.json`` less its schema)."""
+        """JSON-safe representation: a profile's ``mapping`` (``calibration.json`` less its
+        schema)."""
         return {
             "branch": self.branch,
             "distance_encoding": {
@@ -230,7 +232,7 @@ class DistanceQuantileMap:
 
     @classmethod
     def load_json(cls, path: str | os.PathLike[str]) -> DistanceQuantileMap:
-        """Read a ``calibration.json`` (:meth:`save_json`); raises :class:`NidarError` if invalid."""
+        """Read a ``calibration.json`` (:meth:`save_json`); :class:`NidarError` if invalid."""
         try:
             with open(path, encoding="utf-8") as fh:
                 data = json.load(fh)

@@ -319,7 +319,8 @@ class RangeRingMap:
         y = np.asarray(intensity, dtype=np.float64).reshape(-1)
         if not v.size or v.shape != d.shape or v.shape != y.shape:
             raise NidarError(
-                f"fit range_ring: need as many values, ranges and references (got {v.size}, {d.size}, {y.size})"
+                "fit range_ring: need as many values, ranges and intensities "
+                f"(got {v.size}, {d.size}, {y.size})"
             )
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d)) and np.all(np.isfinite(y))):
             raise NidarError("fit range_ring: values, ranges and references must be finite")
