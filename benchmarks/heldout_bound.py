@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from nidar_mi.dataset import SPLITS, list_frames, load_meta
     from nidar_mi.errors import NidarError
-    from nidar_mi.nidar.gbm_profile import fit_gbm
+    from nidar_mi.profiles import fit
 
     try:
         train = [returns(f) for f in list_frames(args.train_data, "train")]
@@ -85,12 +85,17 @@ def main(argv: list[str] | None = None) -> int:
     cat = {k: np.concatenate([t[k] for t in train]) for k in train[0]}
     scale = float(load_meta(args.train_data).get("intensity_scale", 1.0))
     reference = np.clip(cat["intensity"] / scale, 0, 1)  # the metric scale of the evaluation
-    gbm = fit_gbm(cat["r_true"], cat["range"], reference, cat["elevation"])
-    gbm_inc = fit_gbm(
-        cat["r_true"], cat["range"], reference, cat["elevation"], cos_incidence=cat["cos"]
+    gbm = fit("gbm", cat["r_true"], cat["range"], reference, elevation_deg=cat["elevation"])
+    gbm_inc = fit(
+        "gbm",
+        cat["r_true"],
+        cat["range"],
+        reference,
+        elevation_deg=cat["elevation"],
+        cos_incidence=cat["cos"],
     )
-    gbm_vc = fit_gbm(
-        cat["r_true"], cat["range"], reference, None, cos_incidence=cat["cos"], use_geometry=False
+    gbm_vc = fit(
+        "gbm", cat["r_true"], cat["range"], reference, cos_incidence=cat["cos"], use_geometry=False
     )
 
     def values(t):

@@ -59,8 +59,8 @@ class RenderOptions:
         weights: NIDAR weights folder (None: the shipped model); ``nidar`` only.
         nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only (without a
             profile).
-        profile: a :class:`~nidar_mi.nidar.profile.SensorProfile` for NIDAR's intensity
-            (:func:`nidar_mi.nidar.profiles.resolve_profile` turns a name or file into one);
+        profile: a :class:`~nidar_mi.profiles.SensorProfile` for NIDAR's intensity
+            (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile` turns a name or file into one);
             None: the weights' own ``sim-905`` (``profiles/sim-905.json``, else
             ``calibration.json``); ``nidar`` only.
         bin_intensity: ``unit`` (KITTI's [0, 1]) or ``raw``: see

@@ -45,8 +45,8 @@ def tiny_run(tmp_path_factory, variant):
     from pathlib import Path
 
     from nidar_mi.dataset import build_dataset
+    from nidar_mi.datasets.profile_fitting import fit_split_calibration
     from nidar_mi.nidar.config import TrainConfig
-    from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
     from nidar_mi.nidar.pipeline import NidarModel
     from nidar_mi.nidar.train import train
 
@@ -70,7 +70,7 @@ def tiny_run(tmp_path_factory, variant):
     cfg = dataclasses.replace(red, device="cpu", stn_optim=one, irnet_optim=one)
     train(cfg, root / "data", root / "run", progress=False)
     model = NidarModel.load(root / "run", device="cpu")
-    fit_dataset_calibration(model, root / "data").save_json(root / "run" / "calibration.json")
+    fit_split_calibration(model, root / "data").mapping.save_json(root / "run" / "calibration.json")
     return root
 
 

@@ -152,6 +152,7 @@ LAYERS = {
             "dataset",
             "datasets",
             "nidar",
+            "profiles",
             "scenegen",
         ),
         1,

@@ -16,9 +16,9 @@ Points with a non-finite value (NaN or infinity, e.g. the no-return points of an
 cloud) are dropped before any work, with a warning that counts them.
 
 ``--profile NAME|FILE`` chooses the sensor profile that turns NIDAR's map into the sensor's
-intensity (:mod:`nidar_mi.nidar.profiles`): ``kitti-hdl64e`` by default with ``--kitti`` (fitted
-on the real KITTI frames at first use and cached), ``sim-905`` (the simulator's) by default
-otherwise, or a file from ``python -m nidar_mi.calibrate``. A cloud's ``ring`` column gives the
+intensity (:mod:`nidar_mi.datasets.sensor_profiles`): ``kitti-hdl64e`` by default with
+``--kitti`` (fitted on the real KITTI frames at first use and cached), ``sim-905`` (the
+simulator's) by default otherwise, or a file from ``python -m nidar_mi.calibrate``. A cloud's ``ring`` column gives the
 profile its rings; with ``--kitti`` they are recovered from the storage order
 (:func:`nidar_mi.datasets.kitti_rings.checked_rings`) and written as ``ring``. ``--branch I_hat``
 without ``--profile`` assigns the dense head raw.
@@ -55,8 +55,8 @@ def assign_intensity(
     the profile's branch (``R`` without a profile); a branch the profile was not fitted on is an
     error.
     """
+    from ..datasets.sensor_profiles import resolve_profile
     from ..nidar.pipeline import NidarModel
-    from ..nidar.profiles import resolve_profile
 
     model = NidarModel.load(weights)
     prof = resolve_profile(profile, model) if profile is not None else None

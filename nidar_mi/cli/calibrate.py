@@ -11,15 +11,15 @@
 ``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
 ``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
 its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
-(:func:`nidar_mi.nidar.profiles.fit_scan_profile`). A ``gbm`` profile (the default form) also
-reads each return's ``|cos θ|``, from normals estimated on the scan's own points
+(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default
+form) also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
 (:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
 ``kitti-hdl64e``. ``assign`` and ``render`` then estimate it the same way on the clouds they are
 given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
 The profile file
-(:mod:`nidar_mi.nidar.profile`) then goes to ``assign --profile FILE`` or
+(:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
 An existing ``-o`` file is replaced only when it is a profile (an earlier output) or with
@@ -32,8 +32,8 @@ import json
 import os
 import sys
 
+from ..datasets.sensor_profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
 from ..errors import NidarError
-from ..nidar.profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
 from ._common import parser, run
 
 __all__ = ["build_parser", "main"]
@@ -121,9 +121,9 @@ def main(argv=None) -> int:
 
 
 def _calibrate(args, argv) -> None:
+    from ..datasets.profile_fitting import fit_scan_profile
     from ..datasets.scans import load_scans
     from ..nidar.pipeline import NidarModel
-    from ..nidar.profiles import fit_scan_profile
 
     if args.incidence and args.form != "gbm":
         raise NidarError(f"--incidence needs --form gbm (got --form {args.form})")

@@ -229,7 +229,7 @@ def _render_options(args):
         if args.intensity != "nidar":
             raise NidarError("--profile applies to --intensity nidar")
         from ..nidar.pipeline import NidarModel
-        from ..nidar.profiles import resolve_profile
+        from ..datasets.sensor_profiles import resolve_profile
 
         profile = resolve_profile(args.profile, NidarModel.load(args.weights))
     return RenderOptions(

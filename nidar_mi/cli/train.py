@@ -11,7 +11,7 @@
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
 ``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
 trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted on the training
-split (:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`; ``--no-calibration`` skips it). Options given on
+split (:func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). ``--all-frames`` (with ``--stage irnet``) trains
 IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.train`.
@@ -220,11 +220,13 @@ def _train(args: argparse.Namespace, cfg) -> None:
             photos=args.photos,
         )
     if args.stage != "stn" and not args.no_calibration:
-        from ..nidar.dataset_calibration import fit_dataset_calibration
+        from ..datasets.profile_fitting import fit_split_calibration
         from ..nidar.pipeline import NidarModel
 
         model = NidarModel.load(args.out, device=cfg.device)
-        fit_dataset_calibration(model, args.data, "train").save_json(args.out / "calibration.json")
+        fit_split_calibration(model, args.data, "train").mapping.save_json(
+            args.out / "calibration.json"
+        )
 
 
 def _render_frames(data: Path) -> list[Path]:

@@ -9,6 +9,10 @@
   held-out frame list).
 * :mod:`~nidar_mi.datasets.rgbnir`: pixel-aligned RGB/NIR photo pairs and their held-out split.
 * :mod:`~nidar_mi.datasets.paths`: where the data and the derived caches live.
+* :mod:`~nidar_mi.datasets.profile_fitting`: the returns a sensor profile is fitted on (a
+  sensor's scans, a training split's frames).
+* :mod:`~nidar_mi.datasets.sensor_profiles`: the named profiles (``sim-905``, and
+  ``kitti-hdl64e`` fitted on the KITTI frames at first use and cached).
 
 The data is read from ``../shared/data`` (or ``$NIDAR_MI_DATA``, or a path given by the user)
 and nothing derived from it is kept inside the project.

@@ -8,7 +8,7 @@
 * **Pseudo-NIR vs RGB diagnostic**: the paper's model (``unet+deeplabv3``) trained on
   pseudo-NIR and on RGB input; for each, the final validation loss and MAE/RMSE/SSIM of Î raw,
   R raw and R remapped (R through the distance encoding + quantile map fitted on the training
-  split, :func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`).
+  split, :func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`).
 
 The networks are trained by :func:`nidar_mi.nidar.train.train_irnet` into
 ``OUT/<input>__<variant>/``; a finished run (its ``irnet.safetensors`` exists) is reused, so an
@@ -141,13 +141,13 @@ def evaluate_run(
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
     from ..dataset import list_frames, load_meta
-    from ..nidar.dataset_calibration import fit_dataset_calibration
+    from ..datasets.profile_fitting import fit_split_calibration
     from ..nidar.pipeline import NidarModel
 
     run_dir = Path(run_dir)
     scale = float(load_meta(data_dir).get("intensity_scale", 1.0))
     model = NidarModel.load(run_dir, device="cpu")
-    calib = fit_dataset_calibration(model, data_dir, "train") if remap else None
+    calib = fit_split_calibration(model, data_dir, "train") if remap else None
     frames = list_frames(data_dir, split)
     if not frames:
         raise NidarError(f"{data_dir}: no '{split}' frames")
@@ -163,7 +163,7 @@ def evaluate_run(
         if remap:
             acc["R"].append(map_scores(maps["R"], gt, mask))
             remapped = np.zeros(mask.shape)
-            remapped[mask] = calib.apply(maps["R"][mask], rng[mask])[0]
+            remapped[mask] = calib(maps["R"][mask], rng[mask])
             acc["R_remap"].append(map_scores(remapped, gt, mask))
     log_path = run_dir / "train_log.json"
     epochs = json.loads(log_path.read_text()).get("irnet", {}).get("epochs", [])

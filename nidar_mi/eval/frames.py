@@ -259,9 +259,7 @@ def predict_frame(
         maps = maps if maps is not None else model.predict_image(frame.rgb)
         if pseudo_calibration is not None and "pseudo_nir" in maps:
             pn = bilinear_sample(maps["pseudo_nir"], frame.uv)
-            out["nidar_no_irnet"] = pseudo_calibration.apply(pn, frame.range_m)[0].astype(
-                np.float64
-            )
+            out["nidar_no_irnet"] = pseudo_calibration(pn, frame.range_m).astype(np.float64)
         out["nidar_ihat"] = np.clip(bilinear_sample(maps["I_hat"], frame.uv), 0.0, 1.0)
         res = model.point_intensity(
             frame.xyz,

@@ -11,7 +11,7 @@ fitted on.
 returns an intensity per return of ``scan``: anything fitted on the training frames plugs in
 (a network trained per fold, a sensor profile, a regression). :func:`standard_methods` builds
 this package's baselines and NIDAR rows; every sensor profile in them is fitted by
-:func:`nidar_mi.nidar.profiles.fit_values_profile`, the code path of ``python -m
+:func:`nidar_mi.datasets.profile_fitting.fit_values_profile`, the code path of ``python -m
 nidar_mi.calibrate`` and of the ``kitti-hdl64e`` profile.
 
 Per-return values that take time (the networks' maps) are computed once per frame and reused
@@ -133,7 +133,7 @@ def profile_method(
 
     Returns without a value at test time get the profile's output for the median training value.
     """
-    from ..nidar.profiles import fit_values_profile
+    from ..datasets.profile_fitting import fit_values_profile
 
     def fit(train):
         profile = fit_values_profile(
@@ -150,7 +150,13 @@ def profile_method(
         def predict(scan):
             v = _fill(values(scan), median)
             cos = scan.cos_incidence if profile.uses_incidence else None
-            return profile.apply(v, scan.range_m, scan.ring, scan.elevation_deg, cos)
+            return profile(
+                v,
+                scan.range_m,
+                ring=scan.ring,
+                elevation_deg=scan.elevation_deg,
+                cos_incidence=cos,
+            )
 
         return predict
 
@@ -304,7 +310,7 @@ def _luminance_map(rgb: np.ndarray) -> np.ndarray:
 
 
 def _nidar_branches(model, scan) -> dict[str, np.ndarray]:
-    from ..nidar.profiles import scan_branches
+    from ..datasets.profile_fitting import scan_branches
 
     return scan_branches(model, scan, ("pseudo_nir", "R", "I_hat"))
 
@@ -320,12 +326,12 @@ def _zero_shot_method(model, profile, sources) -> LooMethod:
     vals = next(v for k, _, v, _ in sources if k == f"nidar_{profile.branch}")
 
     def fit(train):
-        return lambda scan: profile.apply(
+        return lambda scan: profile(
             _fill(vals(scan), 0.0),
             scan.range_m,
-            scan.ring,
-            scan.elevation_deg,
-            scan.cos_incidence if profile.uses_incidence else None,
+            ring=scan.ring,
+            elevation_deg=scan.elevation_deg,
+            cos_incidence=scan.cos_incidence if profile.uses_incidence else None,
         )
 
     return LooMethod(

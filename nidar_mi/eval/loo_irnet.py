@@ -85,7 +85,7 @@ class FoldModels:
             model = self.model(train)
 
             def branches(scan, model=model):
-                from ..nidar.profiles import scan_branches
+                from ..datasets.profile_fitting import scan_branches
 
                 return scan_branches(model, scan, ("R", "I_hat"))
 
@@ -187,15 +187,13 @@ def irnet_methods(
 
     Args:
         models: the per-fold networks.
-        forms: profile forms (:data:`nidar_mi.nidar.profile.PROFILE_FORMS`).
+        forms: profile forms (:data:`nidar_mi.profiles.FORMS`).
     """
-    from ..nidar.profile import PROFILE_FORMS
+    from ..profiles import FORMS
 
-    unknown = [f for f in forms if f not in PROFILE_FORMS]
+    unknown = [f for f in forms if f not in FORMS]
     if unknown:
-        raise NidarError(
-            f"unknown profile form(s) {', '.join(unknown)}; known: {', '.join(PROFILE_FORMS)}"
-        )
+        raise NidarError(f"unknown profile form(s) {', '.join(unknown)}; known: {', '.join(FORMS)}")
     net = f"IRNet {models.cfg.irnet.variant} w{models.cfg.irnet.width} x{models.cfg.scale:g}"
 
     def profiled(branch: str, form: str, label: str, **options) -> LooMethod:

@@ -62,7 +62,7 @@ def evaluate_kitti_loo(
 
     from ..datasets.kitti_frames import kitti_training_data
     from ..datasets.scans import frames_from_data
-    from ..nidar.profiles import resolve_profile
+    from ..datasets.sensor_profiles import resolve_profile
     from .loo import leave_one_out, standard_methods
 
     data = kitti_training_data(kitti_dirs, progress=progress)

@@ -200,7 +200,7 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
     """The groups on rendered scenes: held-out generated, hand-made, held-out materials,
     ablations."""
     from ..dataset import frame_has, list_frames
-    from ..nidar.dataset_calibration import fit_dataset_calibration
+    from ..datasets.profile_fitting import fit_split_calibration
     from .heldout import evaluate_renders, fit_class_constant, render_scenes
 
     scale = float(meta.get("intensity_scale", 1.0))
@@ -210,7 +210,7 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
     payload["ground_truth"] = "clip(range-compensated intensity / intensity_scale, 0, 1)"
     log.info("fitting baselines (c) and (e) on the training split")
     class_const = fit_class_constant([os.path.join(renders, n) for n in splits["train"]], scale)
-    pseudo_cal = fit_dataset_calibration(model, args.data, "train", branch="pseudo_nir")
+    pseudo_cal = fit_split_calibration(model, args.data, "train", branch="pseudo_nir")
     common = dict(
         class_const=class_const,
         pseudo_calibration=pseudo_cal,

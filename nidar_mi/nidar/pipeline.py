@@ -2,18 +2,16 @@
 
 RGB -> STN pseudo-NIR -> IRNet (R, S, Î) -> the R branch sampled at each point by calibrated
 projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on) -> the sensor's
-response: a sensor profile (:mod:`nidar_mi.nidar.profile`; by default the weights'
-``profiles/sim-905.json``, which also reads the incidence estimated from the points), or the
-paper's distance encoding and quantile remapping
-(:class:`nidar_mi.nidar.calibration.Calibration`). Points no camera sees get 0 and
-``observed = False``.
+response, a sensor profile (:mod:`nidar_mi.profiles`): by default the weights' own
+(:meth:`NidarModel.default_profile`). Points no camera sees get 0 and ``observed = False``.
 
 A weights folder holds ``stn.safetensors``, ``irnet.safetensors``, ``config.json`` (written by
-``python -m nidar_mi.train``) and ``calibration.json`` (written by
-:func:`nidar_mi.nidar.dataset_calibration.fit_dataset_calibration`), and optionally
-``profiles/sim-905.json``: the simulator's sensor profile (:mod:`nidar_mi.nidar.profiles`),
-which then replaces ``calibration.json`` as the default mapping of the R branch. The package
-ships one in ``nidar_mi/nidar/weights``.
+``python -m nidar_mi.train``) and ``calibration.json`` (the paper's distance encoding and
+quantile map fitted on the training split,
+:func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`; read as a ``distance_quantile``
+profile named :data:`SIM_PROFILE`), and optionally ``profiles/sim-905.json``: the simulator's
+sensor profile, which then replaces ``calibration.json`` as the default mapping of the R branch.
+The package ships one in ``nidar_mi/nidar/weights``.
 """
 
 from __future__ import annotations
@@ -22,27 +20,31 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import NidarError
 from ..geometry import CameraModel, incidence_cosine, sample_cameras
-from .calibration import Calibration
-
-if TYPE_CHECKING:
-    from .profile import SensorProfile
+from ..profiles import DistanceQuantileMap, SensorProfile, load_profile
 
 __all__ = [
     "NidarModel",
     "shipped_weights_dir",
     "PointIntensity",
     "BRANCHES",
+    "SIM_PROFILE",
+    "SIM_SENSOR",
 ]
 
 #: Branches :meth:`NidarModel.point_intensity` can assign: the paper's calibrated reflectance, or
 #: the dense intensity head.
 BRANCHES = ("R", "I_hat")
+#: Name of the weights' own profile: the simulator's 905 nm LiDAR in compensated mode, fitted on
+#: the rendered training scenes of the weights (``profiles/sim-905.json``, else
+#: ``calibration.json``).
+SIM_PROFILE = "sim-905"
+#: The sensor that profile describes.
+SIM_SENSOR = "simulated 905 nm LiDAR, range-compensated intensity g·ρ·cosθ·exp(-2αd)"
 
 
 def shipped_weights_dir() -> Path:
@@ -90,14 +92,38 @@ class PointIntensity:
 
 
 class NidarModel:
-    """Trained NIDAR networks plus their source-domain calibration."""
+    """Trained NIDAR networks plus their source-domain calibration (``calibration.json``)."""
 
-    def __init__(self, stn, irnet, config, calibration: Calibration | None, weights_dir: Path):
+    def __init__(
+        self, stn, irnet, config, calibration: DistanceQuantileMap | None, weights_dir: Path
+    ):
         self.stn, self.irnet, self.config = stn, irnet, config
-        self.calibration = calibration
+        self._calibration_map = calibration
+        self._calibration: SensorProfile | None = None
         self.weights_dir = weights_dir
         self.scale = 1.0
         self._default_profile: SensorProfile | None | bool = False  # False: not read yet
+
+    @property
+    def calibration(self) -> SensorProfile | None:
+        """``calibration.json`` as the ``distance_quantile`` profile :data:`SIM_PROFILE` of its
+        branch (built once), None when the weights folder has none."""
+        if self._calibration is None and self._calibration_map is not None:
+            self._calibration = SensorProfile(
+                name=SIM_PROFILE,
+                sensor=SIM_SENSOR,
+                form="distance_quantile",
+                input=f"nidar:{self._calibration_map.branch}",
+                mapping=self._calibration_map,
+                model=self.identity(),
+                provenance={
+                    "data": (
+                        "the rendered training split of these weights (see their MODEL_CARD.md)"
+                    ),
+                    "file": str(Path(self.weights_dir) / "calibration.json"),
+                },
+            )
+        return self._calibration
 
     def identity(self) -> dict[str, str]:
         """SHA-256 of the weight files (``irnet_sha256``, ``stn_sha256`` when it has one): what
@@ -118,16 +144,14 @@ class NidarModel:
         return dict(self._identity)
 
     def default_profile(self) -> SensorProfile | None:
-        """The weights folder's ``profiles/sim-905.json`` (read once), None when it has none or
-        when it was fitted for other networks (retrained weights: a warning, and
-        ``calibration.json`` maps R): the mapping of the R branch when :meth:`point_intensity`
-        is given no profile."""
+        """The mapping of the R branch when :meth:`point_intensity` is given no profile: the
+        weights folder's ``profiles/sim-905.json`` (read once), else :attr:`calibration`; also
+        :attr:`calibration` when that file was fitted for other networks (retrained weights: a
+        warning). None when the folder has neither."""
         if self._default_profile is False:
             import warnings
 
-            from .profile import load_profile
-
-            path = Path(self.weights_dir) / "profiles" / "sim-905.json"
+            path = Path(self.weights_dir) / "profiles" / f"{SIM_PROFILE}.json"
             profile = load_profile(path) if path.is_file() else None
             if profile is not None and profile.model not in (None, self.identity()):
                 warnings.warn(
@@ -137,7 +161,7 @@ class NidarModel:
                 )
                 profile = None
             self._default_profile = profile
-        return self._default_profile
+        return self._default_profile or self.calibration
 
     @classmethod
     def load(
@@ -174,7 +198,7 @@ class NidarModel:
         if optimize:
             stn, irnet = _optimized(stn, irnet)
         calib_path = wdir / "calibration.json"
-        calib = Calibration.load_json(calib_path) if calib_path.is_file() else None
+        calib = DistanceQuantileMap.load_json(calib_path) if calib_path.is_file() else None
         model = cls(stn, irnet, cfg, calib, wdir)
         model.scale = float(scale)
         return model
@@ -213,8 +237,9 @@ class NidarModel:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
 
         ``branch="R"`` (default, the paper's NIDAR-Full): the reflectance branch through the
-        weights' ``profiles/sim-905.json`` when the folder has one (:meth:`default_profile`),
-        else through ``calibration.json``'s distance encoding and quantile map. ``branch="I_hat"``: IRNet's dense intensity head
+        weights' own profile (:meth:`default_profile`: ``profiles/sim-905.json`` when the
+        folder has one, else ``calibration.json``'s distance encoding and quantile map).
+        ``branch="I_hat"``: IRNet's dense intensity head
         sampled at the points and clipped to [0, 1], no calibration (it is trained on the
         range-compensated intensity directly); on the held-out scenes of docs/RESULTS.md it
         ranks points far better than R (method (f)).
@@ -228,7 +253,7 @@ class NidarModel:
             occlusion: reject points hidden from the camera.
             maps: precomputed :meth:`predict_image` outputs (skips the networks).
             branch: ``"R"`` or ``"I_hat"`` (ignored with a ``profile``).
-            profile: a sensor profile (:mod:`nidar_mi.nidar.profiles`): its NIDAR map at the
+            profile: a sensor profile (:mod:`nidar_mi.profiles`): its NIDAR map at the
                 points through its mapping (range, ring, elevation) instead of ``branch``.
             ring: optional (N,) ring of each point (-1 unknown), for a ``range_ring`` profile.
             cos_incidence: optional (N,) ``|cos θ|`` of the rays on the surfaces, for a profile
@@ -238,6 +263,8 @@ class NidarModel:
         """
         if profile is None and branch == "R":
             profile = self.default_profile()
+            if profile is None:
+                raise NidarError(f"{self.weights_dir}: no calibration.json beside the weights")
         if profile is not None:
             branch = profile.branch
             if branch is None:
@@ -253,35 +280,41 @@ class NidarModel:
         values, observed, cam_idx = sample_cameras(
             xyz, cameras, [m[branch] for m in maps], depth_images=depth_images, occlusion=occlusion
         )
-        if profile is not None:
-            observed = observed & np.isfinite(values)
-            out = np.zeros(len(xyz), dtype=np.float32)
-            if observed.any():
-                p = xyz[observed]
-                r = None if ring is None else np.asarray(ring).reshape(-1)[observed]
-                el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
-                cos = None
-                if profile.uses_incidence:
-                    if cos_incidence is None:
-                        cos = incidence_cosine(p)
-                    else:
-                        cos = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)
-                        if cos.shape != (len(xyz),):
-                            raise NidarError(f"{cos.size} incidence cosines for {len(xyz)} points")
-                        cos = cos[observed]
-                out[observed] = profile.apply(
-                    values[observed], np.linalg.norm(p, axis=1), r, el, cos
-                )
-            raw = np.where(observed, values, 0.0).astype(np.float32)
-            return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
-        if branch == "I_hat":
-            observed = observed & np.isfinite(values)
+        observed = observed & np.isfinite(values)
+        if profile is None:  # the dense head, raw
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)
-            raw = np.where(observed, values, 0.0).astype(np.float32)
-            return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
-        if self.calibration is None:
-            raise NidarError(f"{self.weights_dir}: no calibration.json beside the weights")
-        dist = np.linalg.norm(xyz, axis=1)
-        intensity, observed = self.calibration.apply(values, dist, observed)
+        else:
+            out = _profile_intensity(profile, xyz, values, observed, ring, cos_incidence)
         raw = np.where(observed, values, 0.0).astype(np.float32)
-        return PointIntensity(intensity.astype(np.float32), observed, raw, cam_idx)
+        return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
+
+
+def _profile_intensity(
+    profile: SensorProfile,
+    xyz: np.ndarray,
+    values: np.ndarray,
+    observed: np.ndarray,
+    ring: np.ndarray | None,
+    cos_incidence: np.ndarray | None,
+) -> np.ndarray:
+    """(N,) float32 intensity of the observed points through ``profile``, 0 elsewhere: their
+    range, elevation, ring and incidence (given, or estimated from the observed points)."""
+    out = np.zeros(len(xyz), dtype=np.float32)
+    if not observed.any():
+        return out
+    p = xyz[observed]
+    r = None if ring is None else np.asarray(ring).reshape(-1)[observed]
+    el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
+    cos = None
+    if profile.uses_incidence:
+        if cos_incidence is None:
+            cos = incidence_cosine(p)
+        else:
+            cos = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)
+            if cos.shape != (len(xyz),):
+                raise NidarError(f"{cos.size} incidence cosines for {len(xyz)} points")
+            cos = cos[observed]
+    out[observed] = profile(
+        values[observed], np.linalg.norm(p, axis=1), ring=r, elevation_deg=el, cos_incidence=cos
+    )
+    return out

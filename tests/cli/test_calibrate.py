@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from nidar_mi.cli.calibrate import main
-from nidar_mi.nidar.profile import load_profile
+from nidar_mi.profiles import load_profile
 from tests.helpers.synthetic_kitti import make_kitti
 
 
@@ -26,11 +26,11 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
     assert not p.uses_incidence
     # the profile maps into [0, 1] and is monotone in the value at a fixed range and elevation
     v = np.linspace(0, 1, 50)
-    y = p.apply(v, np.full(50, 12.0), None, np.full(50, -8.0))
+    y = p(v, np.full(50, 12.0), elevation_deg=np.full(50, -8.0))
     assert np.all(np.diff(y) >= 0) and 0 <= y.min() and y.max() <= 1
     assert main([str(kitti), "-o", str(out), "--form", "range_ring", "-q"]) == 0
     p = load_profile(out)
-    y = p.apply(v, np.full(50, 12.0), np.full(50, 30))
+    y = p(v, np.full(50, 12.0), ring=np.full(50, 30))
     assert p.form == "range_ring" and np.all(np.diff(y) >= 0)
     # an earlier profile is replaced; another file is not, unless --overwrite
     assert main([str(kitti), "-o", str(out), "--form", "distance_quantile", "-q"]) == 0
@@ -54,7 +54,7 @@ def test_incidence_aware_profile(tmp_path, capsys):
     p = load_profile(out)
     assert p.uses_incidence and p.mapping.features[-1] == "cos_incidence"
     c = np.linspace(0, 1, 50)
-    y = p.apply(np.full(50, 0.5), np.full(50, 12.0), None, np.full(50, -8.0), c)
+    y = p(np.full(50, 0.5), np.full(50, 12.0), elevation_deg=np.full(50, -8.0), cos_incidence=c)
     assert np.all(np.diff(y) >= 0)
     assert main([str(kitti), "-o", str(out), "--incidence", "--form", "range_ring", "-q"]) == 2
     assert "--incidence needs --form gbm" in capsys.readouterr().err
@@ -66,8 +66,8 @@ def test_incidence_aware_profile(tmp_path, capsys):
     assert p.mapping.features == ("v", "cos_incidence") and not p.mapping.uses_geometry
     v = np.linspace(0.1, 0.9, 9)
     np.testing.assert_array_equal(
-        p.apply(v, np.full(9, 5.0), None, None, np.full(9, 0.7)),
-        p.apply(v, np.full(9, 50.0), None, np.full(9, -20.0), np.full(9, 0.7)),
+        p(v, np.full(9, 5.0), cos_incidence=np.full(9, 0.7)),
+        p(v, np.full(9, 50.0), elevation_deg=np.full(9, -20.0), cos_incidence=np.full(9, 0.7)),
     )
     for bad in (["--no-incidence"], ["--form", "range_ring"]):
         assert main([str(kitti), "-o", str(out), "--no-geometry", "-q", *bad]) == 2
@@ -89,7 +89,7 @@ def test_generic_folder_with_rings_and_0_255_intensity(tmp_path, capsys):
     p = load_profile(out)
     assert p.provenance["rings"] == "given" and len(p.mapping.gains) == 32
     # the sensor's response falls with range: the profile learnt it from the scans
-    near, far = p.apply([0.5, 0.5], [4.0, 24.0], [20, 20])
+    near, far = p([0.5, 0.5], [4.0, 24.0], ring=[20, 20])
     assert near > far
 
 
@@ -149,7 +149,7 @@ def test_non_finite_intensities_are_left_out_with_a_count(tmp_path, capsys):
     n = len(np.load(root / "points" / "0000.npz")["xyz"])
     assert f"{len(range(0, n, 10))} of {n} points with a NaN" in err
     p = load_profile(out)
-    assert np.isfinite(p.apply([0.2, 0.8], [5.0, 5.0])).all()
+    assert np.isfinite(p([0.2, 0.8], [5.0, 5.0])).all()
 
 
 def test_negative_intensities_are_a_user_error(tmp_path, capsys):

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
+from nidar_mi.datasets.profile_fitting import fit_split_calibration
 from nidar_mi.errors import NidarError
 from nidar_mi.eval.baselines import ClassConstant
 from nidar_mi.eval.frames import (
@@ -30,7 +31,6 @@ from nidar_mi.eval.report import goal_check, markdown_table, write_csv, write_js
 from nidar_mi.geometry import CameraModel, bilinear_sample, project
 from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
-from nidar_mi.nidar.dataset_calibration import fit_dataset_calibration
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
@@ -47,7 +47,7 @@ def model(data_dir, tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
     train(dataclasses.replace(TrainConfig.reduced(), device="cpu"), data_dir, out, progress=False)
     m = NidarModel.load(out, device="cpu")
-    fit_dataset_calibration(m, data_dir, "train").save_json(out / "calibration.json")
+    fit_split_calibration(m, data_dir, "train").mapping.save_json(out / "calibration.json")
     return NidarModel.load(out, device="cpu")
 
 
@@ -88,7 +88,7 @@ def _frame(seed: int = 0, n: int = 40) -> FrameData:
 def evaluated(model, data_dir):
     frame = _frame()
     cc = ClassConstant.fit(np.array(["a", "a", "b", "c"]), np.array([0.2, 0.4, 0.9, 0.1]))
-    pcal = fit_dataset_calibration(model, str(data_dir), branch="pseudo_nir")
+    pcal = fit_split_calibration(model, str(data_dir), branch="pseudo_nir")
     twin = np.linspace(0.0, 1.0, frame.gt.size)
     pred = predict_frame(frame, model, class_const=cc, pseudo_calibration=pcal, twin_pred=twin)
     return frame, pred, evaluate_frame(frame, pred), pcal
@@ -116,20 +116,20 @@ def test_nidar_rows_are_the_model_outputs(evaluated, model):
     frame, pred, _, pcal = evaluated
     maps = model.predict_image(frame.rgb)
     R = bilinear_sample(maps["R"], frame.uv)
-    expect, _ = model.calibration.apply(R, frame.range_m)
+    expect = model.calibration(R, frame.range_m)
     np.testing.assert_allclose(pred["nidar_full"], expect, rtol=1e-6)
     np.testing.assert_allclose(
         pred["nidar_ihat"], np.clip(bilinear_sample(maps["I_hat"], frame.uv), 0, 1), rtol=1e-6
     )
     pn = bilinear_sample(maps["pseudo_nir"], frame.uv)
-    np.testing.assert_allclose(pred["nidar_no_irnet"], pcal.apply(pn, frame.range_m)[0], rtol=1e-6)
+    np.testing.assert_allclose(pred["nidar_no_irnet"], pcal(pn, frame.range_m), rtol=1e-6)
     assert pcal.branch == "pseudo_nir"
 
 
 @pytest.mark.parametrize("branch", ["R", "pseudo_nir"])
 def test_dataset_calibration_pools_the_named_map_at_masked_pixels(model, data_dir, branch):
     from nidar_mi.dataset import list_frames, load_meta
-    from nidar_mi.nidar.calibration import fit_calibration
+    from nidar_mi.profiles import fit
 
     scale = load_meta(data_dir)["intensity_scale"]
     preds, dists, refs = [], [], []
@@ -139,16 +139,15 @@ def test_dataset_calibration_pools_the_named_map_at_masked_pixels(model, data_di
             preds.append(model.predict_image(z["rgb"])[branch][m])
             dists.append(z["range"][m])
             refs.append(np.clip(z["intensity"][m].astype(np.float64) / scale, 0.0, 1.0))
-    expect = fit_calibration(
-        np.concatenate(preds), np.concatenate(dists), np.concatenate(refs), branch=branch
-    )
-    got = fit_dataset_calibration(model, data_dir, branch=branch)
-    assert got.to_dict() == expect.to_dict()
+    v, d, y = np.concatenate(preds), np.concatenate(dists), np.concatenate(refs)
+    expect = fit("distance_quantile", v, d, y, input=branch)
+    got = fit_split_calibration(model, data_dir, branch=branch)
+    assert got.mapping.to_dict() == expect.to_dict() and got.branch == branch
 
 
 def test_dataset_calibration_rejects_an_unknown_branch(model, data_dir):
     with pytest.raises(NidarError, match="calibration branch"):
-        fit_dataset_calibration(model, data_dir, branch="S")
+        fit_split_calibration(model, data_dir, branch="S")
 
 
 def test_carla_row_recomputed_by_hand(evaluated):

@@ -47,5 +47,5 @@ def test_deterministic_and_matches_reference():
     for k, stats in ref["maps"].items():
         assert float(a[k].mean()) == pytest.approx(stats["mean"], rel=1e-3, abs=1e-5), k
         assert float(a[k].std()) == pytest.approx(stats["std"], rel=1e-3, abs=1e-5), k
-    q = model.calibration.quantile_map
+    q = model.calibration.mapping.quantile_map
     assert np.all(np.diff(q.q_source) > 0) and np.all(np.diff(q.q_reference) >= 0)

@@ -181,13 +181,13 @@ def test_cli_config_file_errors_name_the_file_and_the_key(tmp_path, capsys):
 def test_cli_fits_calibration_and_pipeline_runs(trained, data_dir, tmp_path):
     """The CLI writes calibration.json; the whole pipeline then maps points to [0, 1]."""
     from nidar_mi.geometry import CameraModel
-    from nidar_mi.nidar.calibration import Calibration
     from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.profiles import DistanceQuantileMap
 
     _, out, _ = trained
     argv = [str(data_dir), str(tmp_path), "--reduced", "--device", "cpu", "--no-progress", "-q"]
     assert main(argv + ["--stn-weights", str(out / "stn.safetensors")]) == 0
-    calib = Calibration.load_json(tmp_path / "calibration.json")
+    calib = DistanceQuantileMap.load_json(tmp_path / "calibration.json")
     knots = calib.quantile_map.q_source
     assert np.all(np.diff(knots) > 0)  # strictly increasing knots
     model = NidarModel.load(tmp_path, device="cpu")

@@ -1,20 +1,7 @@
-"""Sensor profiles: how one sensor turns a surface's model value into its intensity.
+"""A sensor profile: a fitted form's map with its name, sensor, input and provenance; its file.
 
-NIDAR's networks rank surfaces (a reflectance-like value per pixel); how bright a return of a
-given surface comes out depends on the sensor: its range response (some sensors report
-range-compensated intensity, some do not), per-laser gains, its intensity scale. A sensor
-profile holds that part, fitted on the sensor's own scans
-(``python -m nidar_mi.calibrate``) and kept out of the model. Three forms:
-
-* ``distance_quantile``: the paper's (§III.E) distance encoding and quantile map
-  (:class:`nidar_mi.nidar.calibration.Calibration`);
-* ``range_ring``: a monotone map of the model value per range bin and a gain per ring
-  (:class:`nidar_mi.nidar.range_ring.RangeRingMap`);
-* ``gbm``: a gradient-boosted regression of the intensity on the value, the range and the
-  elevation, monotone in the value, or on the range and elevation alone; optionally also on
-  the incidence ``|cos θ|`` of the ray on the surface, estimated from the scan's own points;
-  or on the value and the incidence alone, without range and elevation
-  (:class:`nidar_mi.nidar.gbm_profile.GbmMap`; LightGBM's text model in the file).
+A profile's ``mapping`` is one of the forms of :data:`nidar_mi.profiles.forms.FORMS`; calling
+the profile calls it, after checking the inputs, and gives float32.
 
 **File format** (JSON, UTF-8)::
 
@@ -46,21 +33,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import NidarError
-from .calibration import Calibration, fit_calibration
-from .gbm_profile import GbmMap, fit_gbm
-from .range_ring import RangeRingMap, fit_range_ring
+from .forms import FORMS, ProfileMap, form_class
 
-__all__ = [
-    "PROFILE_FORMS",
-    "PROFILE_SCHEMA",
-    "SensorProfile",
-    "fit_profile",
-    "load_profile",
-]
+__all__ = ["PROFILE_SCHEMA", "SensorProfile", "load_profile"]
 
 PROFILE_SCHEMA = "nidar_mi.sensor_profile/1"
-#: The forms a profile can take and their mapping classes.
-PROFILE_FORMS = {"distance_quantile": Calibration, "range_ring": RangeRingMap, "gbm": GbmMap}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
@@ -72,7 +49,7 @@ class SensorProfile:
     sensor: str
     form: str
     input: str
-    mapping: Calibration | RangeRingMap | GbmMap
+    mapping: ProfileMap
     model: dict[str, str] | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
 
@@ -81,14 +58,9 @@ class SensorProfile:
             raise NidarError(
                 f"profile name must be letters, digits, '-', '_', '.' (got {self.name!r})"
             )
-        if self.form not in PROFILE_FORMS:
-            raise NidarError(
-                f"profile form must be one of {', '.join(PROFILE_FORMS)} (got {self.form!r})"
-            )
-        if not isinstance(self.mapping, PROFILE_FORMS[self.form]):
-            raise NidarError(
-                f"profile {self.name}: a {self.form} profile needs a {PROFILE_FORMS[self.form].__name__}"
-            )
+        cls = form_class(self.form)
+        if not isinstance(self.mapping, cls):
+            raise NidarError(f"profile {self.name}: a {self.form} profile needs a {cls.__name__}")
         if not isinstance(self.input, str) or not self.input:
             raise NidarError(f"profile {self.name}: 'input' must be a non-empty string")
         if self.model is not None and not (
@@ -98,19 +70,20 @@ class SensorProfile:
 
     @property
     def uses_incidence(self) -> bool:
-        """Whether :meth:`apply` needs the returns' incidence cosines (an incidence-aware
-        ``gbm`` profile)."""
-        return isinstance(self.mapping, GbmMap) and self.mapping.uses_incidence
+        """Whether calling the profile needs the returns' incidence cosines (an
+        incidence-aware ``gbm`` profile)."""
+        return self.mapping.uses_incidence
 
     @property
     def branch(self) -> str | None:
         """The NIDAR map the profile reads (``"R"``, ``"I_hat"``, ...), None for other inputs."""
         return self.input.split(":", 1)[1] if self.input.startswith("nidar:") else None
 
-    def apply(
+    def __call__(
         self,
         values: Any,
         range_m: Any,
+        *,
         ring: Any = None,
         elevation_deg: Any = None,
         cos_incidence: Any = None,
@@ -141,18 +114,13 @@ class SensorProfile:
             raise NidarError(f"profile {self.name}: {v.size} values but {d.size} ranges")
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d))):
             raise NidarError(f"profile {self.name}: values and ranges must be finite")
-        if self.form == "distance_quantile":
-            out = self.mapping.quantile_map(self.mapping.encode(v, d))
-        elif self.form == "gbm":
-            out = self.mapping(v, d, ring, elevation_deg, cos_incidence)
-        else:
-            out = self.mapping(v, d, ring, elevation_deg)
+        out = self.mapping(
+            v, d, ring=ring, elevation_deg=elevation_deg, cos_incidence=cos_incidence
+        )
         return out.astype(np.float32)
 
     def to_dict(self) -> dict[str, Any]:
         """The profile as JSON data (module docstring)."""
-        mapping = self.mapping.to_dict()
-        mapping.pop("schema", None)
         return {
             "schema": PROFILE_SCHEMA,
             "name": self.name,
@@ -160,7 +128,7 @@ class SensorProfile:
             "form": self.form,
             "input": self.input,
             "model": dict(self.model) if self.model is not None else None,
-            "mapping": mapping,
+            "mapping": self.mapping.to_dict(),
             "provenance": self.provenance,
         }
 
@@ -183,20 +151,10 @@ class SensorProfile:
         if unknown:
             raise NidarError(f"{where}: unknown field(s) {', '.join(unknown)}")
         form = data["form"]
-        if form not in PROFILE_FORMS:
-            raise NidarError(
-                f"{where}: 'form' must be one of {', '.join(PROFILE_FORMS)} (got {form!r})"
-            )
-        mapping = data["mapping"]
+        if form not in FORMS:
+            raise NidarError(f"{where}: 'form' must be one of {', '.join(FORMS)} (got {form!r})")
         try:
-            if form == "distance_quantile":
-                if not isinstance(mapping, Mapping):
-                    raise NidarError("expected an object")
-                mapping = Calibration.from_dict({"schema": "nidar_mi.calibration/1", **mapping})
-            elif form == "gbm":
-                mapping = GbmMap.from_dict(mapping)
-            else:
-                mapping = RangeRingMap.from_dict(mapping)
+            mapping = FORMS[form].from_dict(data["mapping"])
         except NidarError as e:
             raise NidarError(f"{where}: 'mapping': {e}") from None
         provenance = data.get("provenance") or {}
@@ -243,62 +201,3 @@ def load_profile(path: str | os.PathLike) -> SensorProfile:
     except json.JSONDecodeError as e:
         raise NidarError(f"{p}: not valid JSON ({e})") from None
     return SensorProfile.from_dict(data, str(p))
-
-
-def fit_profile(
-    values: Any,
-    range_m: Any,
-    reference: Any,
-    *,
-    form: str,
-    name: str,
-    sensor: str,
-    input: str,
-    ring: Any = None,
-    elevation_deg: Any = None,
-    cos_incidence: Any = None,
-    model: dict[str, str] | None = None,
-    provenance: dict[str, Any] | None = None,
-    **options: Any,
-) -> SensorProfile:
-    """Fit a profile of the given form on training returns.
-
-    Args:
-        values: (N,) model values at the returns (the profile's ``input``).
-        range_m: (N,) their ranges, m.
-        reference: (N,) the sensor's intensities on the [0, 1] scale.
-        form: one of :data:`PROFILE_FORMS`.
-        name, sensor, input, model, provenance: the profile's fields.
-        ring: optional (N,) rings (``range_ring``).
-        elevation_deg: optional (N,) elevations, degrees (``range_ring``; required by ``gbm``).
-        cos_incidence: optional (N,) incidence cosines: given, a ``gbm`` profile reads them
-            (the other forms do not: an error).
-        **options: passed to :func:`~nidar_mi.nidar.calibration.fit_calibration`,
-            :func:`~nidar_mi.nidar.range_ring.fit_range_ring` or
-            :func:`~nidar_mi.nidar.gbm_profile.fit_gbm` (``use_value=False``: geometry only;
-            ``use_geometry=False``: the value and the incidence only).
-
-    Raises:
-        NidarError: an unknown form or unusable data.
-    """
-    if cos_incidence is not None and form != "gbm":
-        raise NidarError(f"only a gbm profile reads the incidence (form {form!r} does not)")
-    if form == "distance_quantile":
-        mapping = fit_calibration(values, range_m, reference, branch=input, **options)
-    elif form == "range_ring":
-        mapping = fit_range_ring(values, range_m, reference, ring, elevation_deg, **options)
-    elif form == "gbm":
-        mapping = fit_gbm(
-            values, range_m, reference, elevation_deg, cos_incidence=cos_incidence, **options
-        )
-    else:
-        raise NidarError(f"profile form must be one of {', '.join(PROFILE_FORMS)} (got {form!r})")
-    return SensorProfile(
-        name=name,
-        sensor=sensor,
-        form=form,
-        input=input,
-        mapping=mapping,
-        model=model,
-        provenance=dict(provenance or {}),
-    )

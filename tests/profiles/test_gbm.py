@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.nidar.gbm_profile import GbmMap, fit_gbm
-from nidar_mi.nidar.profile import fit_profile, load_profile
+from nidar_mi.profiles import GbmMap, fit, load_profile
+from tests.helpers.profiles import fitted_profile
 
 
 def _truth(v, d, e):
@@ -41,9 +41,9 @@ def test_recovers_a_known_response():
     """Fitted on 100 000 noisy returns (noise σ 0.05) the map is within 0.01 of the response on
     average and within 0.04 everywhere on a grid inside the training domain."""
     v, d, e, y = _sample()
-    m = fit_gbm(v, d, y, e)
+    m = fit("gbm", v, d, y, elevation_deg=e)
     gv, gd, ge, truth = _grid(_truth)
-    err = np.abs(m(gv, gd, None, ge) - truth)
+    err = np.abs(m(gv, gd, elevation_deg=ge) - truth)
     assert err.mean() < 0.01 and err.max() < 0.04, (err.mean(), err.max())
     assert m.n_trees == 200 and m.uses_value and m.monotone
 
@@ -53,11 +53,11 @@ def test_geometry_only_ignores_the_value():
         return 0.6 * np.exp(-d / 30.0) + 0.005 * (e + 24)
 
     v, d, e, y = _sample(f=f)
-    m = fit_gbm(v, d, y, e, use_value=False)
+    m = fit("gbm", v, d, y, elevation_deg=e, use_value=False)
     assert m.features == ("range_m", "elevation_deg") and not m.uses_value
     gv, gd, ge, truth = _grid(f)
-    out = m(gv, gd, None, ge)
-    np.testing.assert_array_equal(out, m(np.zeros_like(gv), gd, None, ge))
+    out = m(gv, gd, elevation_deg=ge)
+    np.testing.assert_array_equal(out, m(np.zeros_like(gv), gd, elevation_deg=ge))
     assert np.abs(out - truth).mean() < 0.01
 
 
@@ -71,29 +71,29 @@ def test_monotone_in_the_value_when_constrained():
     vs = np.linspace(0, 1, 101)
     gd, ge = np.meshgrid(np.linspace(3, 58, 8), np.linspace(-23, 1, 8))
     rows = [(np.full(101, a), np.full(101, b)) for a, b in zip(gd.ravel(), ge.ravel())]
-    constrained = fit_gbm(v, d, y, e, trees=60)
-    free = fit_gbm(v, d, y, e, trees=60, monotone=False)
+    constrained = fit("gbm", v, d, y, elevation_deg=e, trees=60)
+    free = fit("gbm", v, d, y, elevation_deg=e, trees=60, monotone=False)
     for dd, ee in rows:
-        assert np.all(np.diff(constrained(vs, dd, None, ee)) >= 0)
+        assert np.all(np.diff(constrained(vs, dd, elevation_deg=ee)) >= 0)
     # without the constraint the same data give a map that falls (by ~0.06 from v = 0.6 to
     # 0.8): the check above can fail
     for dd, ee in rows:
-        y_free = free(vs, dd, None, ee)
+        y_free = free(vs, dd, elevation_deg=ee)
         assert y_free[80] < y_free[60] - 0.03
 
 
 def test_output_is_clipped_to_the_sensor_range():
     v, d, e, _ = _sample(20_000)
     y = 1.6 * v - 0.3  # a response that runs past [0, 1] at both ends
-    m = fit_gbm(v, d, y, e, trees=50)
-    out = m(np.linspace(0, 1, 500), np.full(500, 20.0), None, np.full(500, -5.0))
+    m = fit("gbm", v, d, y, elevation_deg=e, trees=50)
+    out = m(np.linspace(0, 1, 500), np.full(500, 20.0), elevation_deg=np.full(500, -5.0))
     assert out.min() == 0 and out.max() == 1 and np.all((out >= 0) & (out <= 1))
     assert np.sum(out == 0) > 50 and np.sum(out == 1) > 50
 
 
 def _profile(**options):
     v, d, e, y = _sample(30_000)
-    return fit_profile(
+    return fitted_profile(
         v,
         d,
         y,
@@ -112,9 +112,9 @@ def test_json_round_trip_gives_identical_predictions(tmp_path):
     q = load_profile(tmp_path / "p.json")
     assert q.form == "gbm" and q.mapping.model == p.mapping.model
     v, d, e, _ = _sample(5000, seed=1)
-    out = p.apply(v, d, None, e)
+    out = p(v, d, elevation_deg=e)
     assert out.dtype == np.float32
-    np.testing.assert_array_equal(q.apply(v, d, None, e), out)
+    np.testing.assert_array_equal(q(v, d, elevation_deg=e), out)
     size = (tmp_path / "p.json").stat().st_size
     assert size < 1_000_000
     # the shipped size bound: 200 trees of 31 leaves stay under 1 MB
@@ -123,18 +123,18 @@ def test_json_round_trip_gives_identical_predictions(tmp_path):
 
 def test_same_seed_same_model_text():
     v, d, e, y = _sample(20_000)
-    a = fit_gbm(v, d, y, e, trees=30, max_samples=10_000, seed=3)
-    b = fit_gbm(v, d, y, e, trees=30, max_samples=10_000, seed=3)
-    c = fit_gbm(v, d, y, e, trees=30, max_samples=10_000, seed=4)
+    a = fit("gbm", v, d, y, elevation_deg=e, trees=30, max_samples=10_000, seed=3)
+    b = fit("gbm", v, d, y, elevation_deg=e, trees=30, max_samples=10_000, seed=3)
+    c = fit("gbm", v, d, y, elevation_deg=e, trees=30, max_samples=10_000, seed=4)
     assert a.model == b.model and a.model != c.model
 
 
 def test_needs_elevations_and_finite_inputs():
     p = _profile()
     with pytest.raises(NidarError, match="elevations are needed"):
-        p.apply([0.5], [10.0])
+        p([0.5], [10.0])
     with pytest.raises(NidarError, match="finite"):
-        p.apply([0.5], [10.0], None, [np.nan])
+        p([0.5], [10.0], elevation_deg=[np.nan])
 
 
 def _corruptions(text: str, n: int, seed: int = 0):
@@ -183,7 +183,7 @@ def test_corrupt_files_are_one_line_errors(tmp_path, edit, message):
 def test_random_corruptions_never_crash_the_parser():
     """LightGBM's own parser aborts the process on some malformed texts; every corrupted text
     is either refused in one line or still a valid model."""
-    m = fit_gbm(*_sample(5000)[:2], _sample(5000)[3], _sample(5000)[2], trees=10)
+    m = fit("gbm", *_sample(5000)[:2], _sample(5000)[3], elevation_deg=_sample(5000)[2], trees=10)
     data = m.to_dict()
     refused = 0
     for bad in _corruptions(data["model"], 300):
@@ -199,7 +199,7 @@ def test_a_corrupt_profile_file_is_a_one_line_cli_error(tmp_path, capsys):
     """What ``assign --profile FILE`` and ``render --profile FILE`` do with the file, through the
     commands' runner: one ``error:`` line naming the file, exit status 2, no traceback."""
     from nidar_mi.cli._common import run
-    from nidar_mi.nidar.profiles import resolve_profile
+    from nidar_mi.datasets.sensor_profiles import resolve_profile
 
     data = _profile().to_dict()
     data["mapping"]["model"] = data["mapping"]["model"].replace("Tree=1", "Tree=2", 1)
@@ -229,24 +229,26 @@ def test_incidence_aware_map_recovers_lamberts_law():
     it the same returns leave the cos θ spread unexplained (mean error ≈ 0.8·v·E|c − ½| ≥ 0.08
     in the mean over the grid), and the map is non-decreasing in cos θ (constrained)."""
     v, d, e, c, y = _incidence_sample()
-    m = fit_gbm(v, d, y, e, cos_incidence=c, trees=100)
+    m = fit("gbm", v, d, y, elevation_deg=e, cos_incidence=c, trees=100)
     assert m.features == ("v", "range_m", "elevation_deg", "cos_incidence") and m.uses_incidence
-    flat = fit_gbm(v, d, y, e, trees=100)
+    flat = fit("gbm", v, d, y, elevation_deg=e, trees=100)
     g = np.random.default_rng(5)
     gv, gc = g.uniform(0.05, 0.95, 5000), g.uniform(0.05, 0.95, 5000)
     gd, ge = _geometry(5000, g)
     truth = _lambert(gv, gd, ge, gc)
-    assert np.abs(m(gv, gd, None, ge, gc) - truth).mean() < 0.02
-    assert np.abs(flat(gv, gd, None, ge) - truth).mean() > 0.08
+    assert np.abs(m(gv, gd, elevation_deg=ge, cos_incidence=gc) - truth).mean() < 0.02
+    assert np.abs(flat(gv, gd, elevation_deg=ge) - truth).mean() > 0.08
     cs = np.linspace(0, 1, 101)
     for vv in (0.1, 0.5, 0.9):
-        out = m(np.full(101, vv), np.full(101, 20.0), None, np.full(101, -5.0), cs)
+        out = m(
+            np.full(101, vv), np.full(101, 20.0), elevation_deg=np.full(101, -5.0), cos_incidence=cs
+        )
         assert np.all(np.diff(out) >= 0)
 
 
 def test_incidence_profile_round_trip_and_checks(tmp_path):
     v, d, e, c, y = _incidence_sample(20_000)
-    p = fit_profile(
+    p = fitted_profile(
         v, d, y, form="gbm", name="inc", sensor="x", input="nidar:R",
         elevation_deg=e, cos_incidence=c, trees=30,
     )  # fmt: skip
@@ -254,21 +256,21 @@ def test_incidence_profile_round_trip_and_checks(tmp_path):
     p.save(tmp_path / "p.json")
     q = load_profile(tmp_path / "p.json")
     assert q.uses_incidence
-    np.testing.assert_array_equal(q.apply(v[:500], d[:500], None, e[:500], c[:500]),
-                                  p.apply(v[:500], d[:500], None, e[:500], c[:500]))  # fmt: skip
+    np.testing.assert_array_equal(q(v[:500], d[:500], elevation_deg=e[:500], cos_incidence=c[:500]),
+                                  p(v[:500], d[:500], elevation_deg=e[:500], cos_incidence=c[:500]))  # fmt: skip
     with pytest.raises(NidarError, match="reads the returns' incidence"):
-        p.apply(v[:5], d[:5], None, e[:5])
+        p(v[:5], d[:5], elevation_deg=e[:5])
     with pytest.raises(NidarError, match=r"in \[0, 1\]"):
-        p.apply(v[:2], d[:2], None, e[:2], [0.5, 1.5])
+        p(v[:2], d[:2], elevation_deg=e[:2], cos_incidence=[0.5, 1.5])
     with pytest.raises(NidarError, match="differ in length"):
-        p.apply(v[:2], d[:2], None, e[:2], [0.5])
+        p(v[:2], d[:2], elevation_deg=e[:2], cos_incidence=[0.5])
     with pytest.raises(NidarError, match="only a gbm profile reads the incidence"):
-        fit_profile(v, d, y, form="range_ring", name="r", sensor="x", input="nidar:R",
+        fitted_profile(v, d, y, form="range_ring", name="r", sensor="x", input="nidar:R",
                     elevation_deg=e, cos_incidence=c)  # fmt: skip
     # a map without the incidence ignores one given
     np.testing.assert_array_equal(
-        _profile().apply(v[:50], d[:50], None, e[:50], c[:50]),
-        _profile().apply(v[:50], d[:50], None, e[:50]),
+        _profile()(v[:50], d[:50], elevation_deg=e[:50], cos_incidence=c[:50]),
+        _profile()(v[:50], d[:50], elevation_deg=e[:50]),
     )
 
 
@@ -278,46 +280,46 @@ def test_value_and_incidence_map_recovers_lamberts_law_without_the_geometry(tmp_
     all), it round-trips through a profile file, and it cannot be asked without the value or
     the incidence."""
     v, d, e, c, y = _incidence_sample()
-    m = fit_gbm(v, d, y, e, cos_incidence=c, use_geometry=False, trees=100)
+    m = fit("gbm", v, d, y, elevation_deg=e, cos_incidence=c, use_geometry=False, trees=100)
     assert m.features == ("v", "cos_incidence") and not m.uses_geometry and m.uses_incidence
     g = np.random.default_rng(6)
     gv, gc = g.uniform(0.05, 0.95, 5000), g.uniform(0.05, 0.95, 5000)
     gd, ge = _geometry(5000, g)
-    out = m(gv, gd, None, None, gc)
+    out = m(gv, gd, cos_incidence=gc)
     assert np.abs(out - _lambert(gv, gd, ge, gc)).mean() < 0.02
-    np.testing.assert_array_equal(out, m(gv, gd[::-1], None, ge, gc))
-    p = fit_profile(
+    np.testing.assert_array_equal(out, m(gv, gd[::-1], elevation_deg=ge, cos_incidence=gc))
+    p = fitted_profile(
         v, d, y, form="gbm", name="vc", sensor="x", input="nidar:R",
         elevation_deg=None, cos_incidence=c, trees=30, use_geometry=False,
     )  # fmt: skip
     p.save(tmp_path / "vc.json")
     q = load_profile(tmp_path / "vc.json")
-    np.testing.assert_array_equal(q.apply(gv, gd, None, None, gc), p.apply(gv, gd, None, None, gc))
+    np.testing.assert_array_equal(q(gv, gd, cos_incidence=gc), p(gv, gd, cos_incidence=gc))
     with pytest.raises(NidarError, match="reads the value and the incidence"):
-        fit_gbm(v, d, y, e, use_geometry=False)
+        fit("gbm", v, d, y, elevation_deg=e, use_geometry=False)
     with pytest.raises(NidarError, match="reads the value and the incidence"):
-        fit_gbm(v, d, y, e, cos_incidence=c, use_value=False, use_geometry=False)
+        fit("gbm", v, d, y, elevation_deg=e, cos_incidence=c, use_value=False, use_geometry=False)
     with pytest.raises(NidarError, match="differ in length"):
-        m(gv[:3], gd[:3], None, None, gc[:2])
+        m(gv[:3], gd[:3], cos_incidence=gc[:2])
 
 
 def test_prediction_does_not_depend_on_the_threads(monkeypatch):
-    from nidar_mi.nidar import gbm_profile
+    from nidar_mi.profiles import gbm
 
     p = _profile()
     v, d, e, _ = _sample(20_000, seed=2)
-    monkeypatch.setattr(gbm_profile, "_predict_threads", lambda: 1)
-    one = p.apply(v, d, None, e)
-    monkeypatch.setattr(gbm_profile, "_predict_threads", lambda: 4)
-    np.testing.assert_array_equal(p.apply(v, d, None, e), one)
+    monkeypatch.setattr(gbm, "_predict_threads", lambda: 1)
+    one = p(v, d, elevation_deg=e)
+    monkeypatch.setattr(gbm, "_predict_threads", lambda: 4)
+    np.testing.assert_array_equal(p(v, d, elevation_deg=e), one)
 
 
 def test_too_few_returns_and_bad_constraint_headers_are_errors():
     v, d, e, y = _sample(150)
     with pytest.raises(NidarError, match="150 returns are too few"):
-        fit_gbm(v, d, y, e)  # leaves of >= 100 returns: a constant at best
+        fit("gbm", v, d, y, elevation_deg=e)  # leaves of >= 100 returns: a constant at best
     v, d, e, y = _sample(3000)
-    m = fit_gbm(v, d, y, e, trees=5)
+    m = fit("gbm", v, d, y, elevation_deg=e, trees=5)
     assert m.params["trees"] == 5
     bad = m.model.replace("monotone_constraints=1 0 0", "monotone_constraints=1 0 0 1 1")
     assert bad != m.model

@@ -1,6 +1,6 @@
-"""A sensor's range and per-ring response: monotone maps per range bin, and ring gains.
+"""The ``range_ring`` profile form: monotone maps per range bin, and ring gains.
 
-The richer sensor-profile form (:mod:`nidar_mi.nidar.profile`, form ``"range_ring"``). A model
+A sensor-profile form (:mod:`nidar_mi.profiles`). A model
 value ``v`` (reflectance-like, the same for a surface whatever sees it) at a return of range
 ``d`` from ring ``r`` becomes the sensor's intensity
 
@@ -8,7 +8,7 @@ value ``v`` (reflectance-like, the same for a surface whatever sees it) at a ret
 
 * ``Q(·; d)``: within each range bin a monotone (quantile) map from the model values to the
   ring-normalised intensities of the training returns in that bin
-  (:class:`~nidar_mi.nidar.calibration.QuantileMap`); between the median ranges of neighbouring
+  (:class:`~nidar_mi.profiles.quantile_map.QuantileMap`); between the median ranges of neighbouring
   bins the two maps are blended linearly, beyond the first and last the nearest is used. Bins
   start :data:`DEFAULT_BIN_M` wide and grow until they hold :data:`DEFAULT_MIN_POINTS` returns.
   Within a bin ``Q`` keeps the order of the model values: the ranking of surfaces stays the
@@ -28,18 +28,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..errors import NidarError
-from .calibration import DEFAULT_K, QuantileMap
+from .quantile_map import DEFAULT_K, QuantileMap
 
 __all__ = [
     "DEFAULT_BIN_M",
     "DEFAULT_MIN_POINTS",
     "RangeRingMap",
-    "fit_range_ring",
     "range_bins",
     "ring_gains",
 ]
@@ -145,6 +144,11 @@ class RangeRingMap:
             where unknown); used for returns without a ring.
     """
 
+    #: The form's name in a profile file.
+    form: ClassVar[str] = "range_ring"
+    #: Whether the form can read the returns' incidence cosines.
+    reads_incidence: ClassVar[bool] = False
+
     edges_m: np.ndarray
     centres_m: np.ndarray
     maps: tuple[QuantileMap, ...]
@@ -176,6 +180,11 @@ class RangeRingMap:
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "maps", tuple(self.maps))
 
+    @property
+    def uses_incidence(self) -> bool:
+        """False: the map reads the value, range, ring and elevation only."""
+        return False
+
     def _bin_values(self, v: np.ndarray, d: np.ndarray) -> np.ndarray:
         out = np.empty_like(v)
         c = self.centres_m
@@ -206,8 +215,10 @@ class RangeRingMap:
         self,
         values: Any,
         range_m: Any,
+        *,
         ring: Any = None,
         elevation_deg: Any = None,
+        cos_incidence: Any = None,
     ) -> np.ndarray:
         """Intensities of returns (module docstring).
 
@@ -216,6 +227,7 @@ class RangeRingMap:
             range_m: (N,) ranges, m.
             ring: optional (N,) rings (-1 unknown).
             elevation_deg: optional (N,) elevations, degrees (for returns without a ring).
+            cos_incidence: ignored (the form does not read the incidence).
 
         Returns:
             (N,) float64 in [0, 1].
@@ -265,76 +277,89 @@ class RangeRingMap:
             ring_elevation_deg=np.array(elev),
         )
 
+    @classmethod
+    def fit(
+        cls,
+        values: Any,
+        range_m: Any,
+        intensity: Any,
+        *,
+        ring: Any = None,
+        elevation_deg: Any = None,
+        cos_incidence: Any = None,
+        input: str = "R",
+        n_rings: int | None = None,
+        ring_gains_on: bool = True,
+        width: float = DEFAULT_BIN_M,
+        min_points: int = DEFAULT_MIN_POINTS,
+        min_ring_points: int = DEFAULT_MIN_RING_POINTS,
+        K: int = DEFAULT_K,
+    ) -> RangeRingMap:
+        """Fit the map on training returns (:func:`nidar_mi.profiles.fit` is the entry point).
 
-def fit_range_ring(
-    values: Any,
-    range_m: Any,
-    reference: Any,
-    ring: Any = None,
-    elevation_deg: Any = None,
-    *,
-    n_rings: int | None = None,
-    ring_gains_on: bool = True,
-    width: float = DEFAULT_BIN_M,
-    min_points: int = DEFAULT_MIN_POINTS,
-    min_ring_points: int = DEFAULT_MIN_RING_POINTS,
-    K: int = DEFAULT_K,
-) -> RangeRingMap:
-    """Fit a :class:`RangeRingMap` on training returns.
+        Args:
+            values: (N,) model values at the returns.
+            range_m: (N,) their ranges, m.
+            intensity: (N,) the sensor's intensities there, in [0, 1].
+            ring: optional (N,) rings (-1 unknown).
+            elevation_deg: optional (N,) elevations, degrees (for the rings' median elevations).
+            cos_incidence, input: not read by this form.
+            n_rings: number of rings (default: the largest ring + 1).
+            ring_gains_on: fit ring gains (else all 1).
+            width: initial range-bin width, m.
+            min_points: fewest returns per range bin.
+            min_ring_points: fewest returns for a ring's own gain.
+            K: quantile levels per map.
 
-    Args:
-        values: (N,) model values at the returns.
-        range_m: (N,) their ranges, m.
-        reference: (N,) the sensor's intensities there, in [0, 1].
-        ring: optional (N,) rings (-1 unknown).
-        elevation_deg: optional (N,) elevations, degrees (for the rings' median elevations).
-        n_rings: number of rings (default: the largest ring + 1).
-        ring_gains_on: fit ring gains (else all 1).
-        width: initial range-bin width, m.
-        min_points: fewest returns per range bin.
-        min_ring_points: fewest returns for a ring's own gain.
-        K: quantile levels per map.
-
-    Raises:
-        NidarError: mismatched, empty or non-finite inputs.
-    """
-    v = np.asarray(values, dtype=np.float64).reshape(-1)
-    d = np.asarray(range_m, dtype=np.float64).reshape(-1)
-    y = np.asarray(reference, dtype=np.float64).reshape(-1)
-    if not v.size or v.shape != d.shape or v.shape != y.shape:
-        raise NidarError(
-            f"fit_range_ring: need as many values, ranges and references (got {v.size}, {d.size}, {y.size})"
+        Raises:
+            NidarError: mismatched, empty or non-finite inputs.
+        """
+        v = np.asarray(values, dtype=np.float64).reshape(-1)
+        d = np.asarray(range_m, dtype=np.float64).reshape(-1)
+        y = np.asarray(intensity, dtype=np.float64).reshape(-1)
+        if not v.size or v.shape != d.shape or v.shape != y.shape:
+            raise NidarError(
+                "fit range_ring: need as many values, ranges and intensities "
+                f"(got {v.size}, {d.size}, {y.size})"
+            )
+        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d)) and np.all(np.isfinite(y))):
+            raise NidarError("fit range_ring: values, ranges and references must be finite")
+        r = (
+            np.full(v.size, -1, np.int64)
+            if ring is None
+            else np.asarray(ring, np.int64).reshape(-1)
         )
-    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d)) and np.all(np.isfinite(y))):
-        raise NidarError("fit_range_ring: values, ranges and references must be finite")
-    r = np.full(v.size, -1, np.int64) if ring is None else np.asarray(ring, np.int64).reshape(-1)
-    if r.shape != v.shape:
-        raise NidarError("fit_range_ring: one ring per value expected")
-    n_r = int(n_rings) if n_rings is not None else max(int(r.max()) + 1, 0)
-    r = np.where(r < n_r, r, -1)
-    edges = range_bins(d, width, min_points)
-    b = np.clip(np.searchsorted(edges, d, side="right") - 1, 0, edges.size - 2)
-    n_b = edges.size - 1
-    if ring_gains_on and n_r > 0:
-        g = ring_gains(y, b, r, n_b, n_r, min_ring_points)
-    else:
-        g = np.ones(n_r)
-    y_norm = y / np.maximum(_gain(g, r), 1e-12)
-    maps, centres = [], []
-    for k in range(n_b):
-        s = b == k
-        if np.ptp(v[s]) == 0:  # one value in the bin (a range-only profile): its median
-            maps.append(QuantileMap([0.5], [v[s][0]], [float(np.median(y_norm[s]))]))
+        if r.shape != v.shape:
+            raise NidarError("fit range_ring: one ring per value expected")
+        n_r = int(n_rings) if n_rings is not None else max(int(r.max()) + 1, 0)
+        r = np.where(r < n_r, r, -1)
+        edges = range_bins(d, width, min_points)
+        b = np.clip(np.searchsorted(edges, d, side="right") - 1, 0, edges.size - 2)
+        n_b = edges.size - 1
+        if ring_gains_on and n_r > 0:
+            g = ring_gains(y, b, r, n_b, n_r, min_ring_points)
         else:
-            maps.append(QuantileMap.fit(v[s], y_norm[s], K=K))
-        centres.append(float(np.median(d[s])))
-    el = np.full(n_r, np.nan)
-    if elevation_deg is not None and n_r:
-        e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
-        for k in range(n_r):
-            s = r == k
-            if s.any():
-                el[k] = float(np.median(e[s]))
-    return RangeRingMap(
-        edges_m=edges, centres_m=np.array(centres), maps=tuple(maps), gains=g, ring_elevation_deg=el
-    )
+            g = np.ones(n_r)
+        y_norm = y / np.maximum(_gain(g, r), 1e-12)
+        maps, centres = [], []
+        for k in range(n_b):
+            s = b == k
+            if np.ptp(v[s]) == 0:  # one value in the bin (a range-only profile): its median
+                maps.append(QuantileMap([0.5], [v[s][0]], [float(np.median(y_norm[s]))]))
+            else:
+                maps.append(QuantileMap.fit(v[s], y_norm[s], K=K))
+            centres.append(float(np.median(d[s])))
+        el = np.full(n_r, np.nan)
+        if elevation_deg is not None and n_r:
+            e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
+            for k in range(n_r):
+                s = r == k
+                if s.any():
+                    el[k] = float(np.median(e[s]))
+        return cls(
+            edges_m=edges,
+            centres_m=np.array(centres),
+            maps=tuple(maps),
+            gains=g,
+            ring_elevation_deg=el,
+        )

@@ -1,6 +1,6 @@
-"""A sensor's response as a gradient-boosted regression on the value and the return's geometry.
+"""The ``gbm`` profile form: a gradient-boosted regression on the value and the return's geometry.
 
-The sensor-profile form ``"gbm"`` (:mod:`nidar_mi.nidar.profile`). A model value ``v``
+A sensor-profile form (:mod:`nidar_mi.profiles`). A model value ``v``
 (reflectance-like) at a return of range ``d`` (m) and elevation ``e`` (degrees above the
 sensor's xy plane, from the return's xyz in the sensor frame, so any sensor has it, with or
 without rings) becomes the sensor's intensity
@@ -9,7 +9,7 @@ without rings) becomes the sensor's intensity
 
 where ``F`` is a LightGBM regression (least squares: the conditional mean of the training
 intensities given the features) of a bounded size (:data:`DEFAULT_TREES` trees of at most
-:data:`DEFAULT_LEAVES` leaves). Where :class:`~nidar_mi.nidar.range_ring.RangeRingMap` maps
+:data:`DEFAULT_LEAVES` leaves). Where :class:`~nidar_mi.profiles.range_ring.RangeRingMap` maps
 quantiles per range bin and a gain per ring, ``F`` learns the range response, the per-laser
 (per-elevation) response and their interaction with the value jointly; being a conditional mean
 rather than a quantile map it also shrinks towards the mean where the value says little, which
@@ -44,7 +44,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -58,7 +58,6 @@ __all__ = [
     "INCIDENCE_FEATURE",
     "VALUE_INCIDENCE_FEATURES",
     "GbmMap",
-    "fit_gbm",
 ]
 
 #: Features of a map with the value, in column order: value, range (m), elevation (degrees).
@@ -145,6 +144,11 @@ class GbmMap:
         params: the fitting parameters (for the record).
     """
 
+    #: The form's name in a profile file.
+    form: ClassVar[str] = "gbm"
+    #: Whether the form can read the returns' incidence cosines.
+    reads_incidence: ClassVar[bool] = True
+
     features: tuple[str, ...]
     monotone: bool
     model: str
@@ -189,6 +193,7 @@ class GbmMap:
         self,
         values: Any,
         range_m: Any,
+        *,
         ring: Any = None,
         elevation_deg: Any = None,
         cos_incidence: Any = None,
@@ -256,6 +261,110 @@ class GbmMap:
             monotone=data["monotone"],
             model=data["model"],
             params=data.get("params") or {},
+        )
+
+    @classmethod
+    def fit(
+        cls,
+        values: Any,
+        range_m: Any,
+        intensity: Any,
+        *,
+        ring: Any = None,
+        elevation_deg: Any = None,
+        cos_incidence: Any = None,
+        input: str = "R",
+        use_value: bool = True,
+        use_geometry: bool = True,
+        monotone: bool = True,
+        trees: int = DEFAULT_TREES,
+        leaves: int = DEFAULT_LEAVES,
+        learning_rate: float = DEFAULT_LEARNING_RATE,
+        min_leaf: int = DEFAULT_MIN_LEAF,
+        max_samples: int = DEFAULT_MAX_SAMPLES,
+        seed: int = 0,
+    ) -> GbmMap:
+        """Fit the map on training returns (least squares, deterministic;
+        :func:`nidar_mi.profiles.fit` is the entry point).
+
+        Args:
+            values: (N,) model values at the returns (ignored with ``use_value=False``).
+            range_m: (N,) their ranges, m.
+            intensity: (N,) the sensor's intensities there, in [0, 1].
+            ring, input: not read by this form (the elevation stands for the laser).
+            elevation_deg: (N,) their elevations above the sensor's xy plane, degrees (unused
+                with ``use_geometry=False``).
+            cos_incidence: (N,) ``|cos θ|`` of the returns in [0, 1]: given, the map is
+                incidence-aware (module docstring); None: it is not.
+            use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
+            use_geometry: False: a value-and-incidence map of ``(v, cos_incidence)`` (needs
+                ``cos_incidence`` and the value; the ranges only set the number of returns).
+            monotone: constrain the map non-decreasing in the value.
+            trees: boosting rounds, 1 to :data:`MAX_TREES`.
+            leaves: most leaves per tree, 2 to :data:`MAX_LEAVES`.
+            learning_rate: shrinkage per round, in (0, 1].
+            min_leaf: fewest training returns per leaf.
+            max_samples: returns beyond this are subsampled (seeded) before fitting.
+            seed: the seed of the subsample and of LightGBM.
+
+        Raises:
+            NidarError: mismatched, empty or non-finite inputs, or parameters out of range.
+        """
+        if not use_geometry and (cos_incidence is None or not use_value):
+            raise NidarError(
+                "fit gbm: a map without range and elevation reads the value and the incidence"
+            )
+        if elevation_deg is None and use_geometry:
+            raise NidarError("fit gbm: the returns' elevations are needed")
+        if not 1 <= int(trees) <= MAX_TREES or not 2 <= int(leaves) <= MAX_LEAVES:
+            raise NidarError(f"fit gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
+        if not 0 < learning_rate <= 1 or min_leaf < 1 or max_samples < 1:
+            raise NidarError("fit gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
+        x = _design(
+            values,
+            range_m,
+            elevation_deg,
+            use_value,
+            "fit gbm",
+            cos_incidence,
+            use_geometry=use_geometry,
+        )
+        y = np.asarray(intensity, dtype=np.float64).reshape(-1)
+        if y.shape != (x.shape[0],) or not y.size:
+            raise NidarError(f"fit gbm: {x.shape[0]} returns but {y.size} intensities")
+        if not np.all(np.isfinite(y)):
+            raise NidarError("fit gbm: intensities must be finite")
+        if y.size < 2 * min_leaf:
+            raise NidarError(
+                f"fit gbm: {y.size} returns are too few for leaves of at least {min_leaf} returns "
+                f"(need {2 * min_leaf}; fewer returns fit a constant)"
+            )
+        if y.size > max_samples:
+            keep = np.sort(np.random.default_rng(seed).choice(y.size, max_samples, replace=False))
+            x, y = x[keep], y[keep]
+        feats = FEATURES if use_value else GEOMETRY_FEATURES
+        if cos_incidence is not None:
+            feats = (*feats, INCIDENCE_FEATURE) if use_geometry else VALUE_INCIDENCE_FEATURES
+        params = _params(
+            feats,
+            monotone,
+            leaves=leaves,
+            learning_rate=learning_rate,
+            min_leaf=min_leaf,
+            seed=seed,
+        )
+        lgb = _lgb()
+        data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
+        booster = lgb.train(params, data, num_boost_round=int(trees))
+        record = {
+            k: params[k]
+            for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
+        } | {"trees": int(booster.num_trees()), "samples": int(y.size)}
+        return cls(
+            features=feats,
+            monotone=bool(monotone and use_value),
+            model=booster.model_to_string(),
+            params=record,
         )
 
 
@@ -463,101 +572,3 @@ def _load_booster(text: Any, features: tuple[str, ...]):
     if booster.num_feature() != len(features) or booster.num_trees() < 1:
         raise NidarError(f"gbm: the model reads {booster.num_feature()} features")
     return booster
-
-
-def fit_gbm(
-    values: Any,
-    range_m: Any,
-    reference: Any,
-    elevation_deg: Any,
-    *,
-    cos_incidence: Any = None,
-    use_value: bool = True,
-    use_geometry: bool = True,
-    monotone: bool = True,
-    trees: int = DEFAULT_TREES,
-    leaves: int = DEFAULT_LEAVES,
-    learning_rate: float = DEFAULT_LEARNING_RATE,
-    min_leaf: int = DEFAULT_MIN_LEAF,
-    max_samples: int = DEFAULT_MAX_SAMPLES,
-    seed: int = 0,
-) -> GbmMap:
-    """Fit a :class:`GbmMap` on training returns (least squares, deterministic).
-
-    Args:
-        values: (N,) model values at the returns (ignored with ``use_value=False``).
-        range_m: (N,) their ranges, m.
-        reference: (N,) the sensor's intensities there, in [0, 1].
-        elevation_deg: (N,) their elevations above the sensor's xy plane, degrees (unused
-            with ``use_geometry=False``).
-        cos_incidence: (N,) ``|cos θ|`` of the returns in [0, 1]: given, the map is
-            incidence-aware (module docstring); None: it is not.
-        use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
-        use_geometry: False: a value-and-incidence map of ``(v, cos_incidence)`` (needs
-            ``cos_incidence`` and the value; the ranges only set the number of returns).
-        monotone: constrain the map non-decreasing in the value.
-        trees: boosting rounds, 1 to :data:`MAX_TREES`.
-        leaves: most leaves per tree, 2 to :data:`MAX_LEAVES`.
-        learning_rate: shrinkage per round, in (0, 1].
-        min_leaf: fewest training returns per leaf.
-        max_samples: returns beyond this are subsampled (seeded) before fitting.
-        seed: the seed of the subsample and of LightGBM.
-
-    Raises:
-        NidarError: mismatched, empty or non-finite inputs, or parameters out of range.
-    """
-    if not use_geometry and (cos_incidence is None or not use_value):
-        raise NidarError(
-            "fit_gbm: a map without range and elevation reads the value and the incidence"
-        )
-    if elevation_deg is None and use_geometry:
-        raise NidarError("fit_gbm: the returns' elevations are needed")
-    if not 1 <= int(trees) <= MAX_TREES or not 2 <= int(leaves) <= MAX_LEAVES:
-        raise NidarError(f"fit_gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
-    if not 0 < learning_rate <= 1 or min_leaf < 1 or max_samples < 1:
-        raise NidarError("fit_gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
-    x = _design(
-        values,
-        range_m,
-        elevation_deg,
-        use_value,
-        "fit_gbm",
-        cos_incidence,
-        use_geometry=use_geometry,
-    )
-    y = np.asarray(reference, dtype=np.float64).reshape(-1)
-    if y.shape != (x.shape[0],) or not y.size:
-        raise NidarError(f"fit_gbm: {x.shape[0]} returns but {y.size} references")
-    if not np.all(np.isfinite(y)):
-        raise NidarError("fit_gbm: references must be finite")
-    if y.size < 2 * min_leaf:
-        raise NidarError(
-            f"fit_gbm: {y.size} returns are too few for leaves of at least {min_leaf} returns "
-            f"(need {2 * min_leaf}; fewer returns fit a constant)"
-        )
-    if y.size > max_samples:
-        keep = np.sort(np.random.default_rng(seed).choice(y.size, max_samples, replace=False))
-        x, y = x[keep], y[keep]
-    feats = FEATURES if use_value else GEOMETRY_FEATURES
-    if cos_incidence is not None:
-        feats = (*feats, INCIDENCE_FEATURE) if use_geometry else VALUE_INCIDENCE_FEATURES
-    params = _params(
-        feats,
-        monotone,
-        leaves=leaves,
-        learning_rate=learning_rate,
-        min_leaf=min_leaf,
-        seed=seed,
-    )
-    lgb = _lgb()
-    data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
-    booster = lgb.train(params, data, num_boost_round=int(trees))
-    record = {
-        k: params[k] for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
-    } | {"trees": int(booster.num_trees()), "samples": int(y.size)}
-    return GbmMap(
-        features=feats,
-        monotone=bool(monotone and use_value),
-        model=booster.model_to_string(),
-        params=record,
-    )

@@ -1,0 +1,147 @@
+"""NidarModel.point_intensity through a sensor profile: the weights' own by default (sim-905, else
+calibration.json), or one given, with the points' range, ring, elevation and incidence."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from nidar_mi.datasets.sensor_profiles import resolve_profile
+from nidar_mi.errors import NidarError
+from nidar_mi.nidar.pipeline import NidarModel
+from nidar_mi.profiles import DistanceQuantileMap
+from tests.helpers.profiles import fitted_profile
+
+
+def _data(n=20_000, seed=0):
+    rng = np.random.default_rng(seed)
+    v = rng.uniform(0, 1, n)
+    d = rng.uniform(2, 60, n)
+    ring = rng.integers(0, 8, n)
+    el = -2.0 * ring
+    ref = np.clip(v * np.exp(-d / 30) * (0.8 + 0.05 * ring), 0, 1)
+    return v, d, ring, el, ref
+
+
+def _wall_scene():
+    """A camera looking along the LiDAR's +x at a wall tilted 50° about z, 10 m ahead, sampled
+    on a 0.05 m grid, with a constant R map."""
+    from nidar_mi.geometry import CameraModel
+
+    cam = CameraModel(
+        K=np.array([[50.0, 0, 31.5], [0, 50, 23.5], [0, 0, 1]]),
+        width=64,
+        height=48,
+        T_cam_lidar=np.array([[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1.0]]),
+    )
+    n = np.array([np.cos(np.radians(50)), np.sin(np.radians(50)), 0.0])
+    t = np.array([-n[1], n[0], 0.0])
+    s, h = np.meshgrid(np.arange(-3, 3, 0.05), np.arange(-1.5, 1.5, 0.05))
+    xyz = 10.0 * np.array([1.0, 0, 0]) + s.reshape(-1, 1) * t + h.reshape(-1, 1) * [0, 0, 1.0]
+    maps = {"R": np.full((48, 64), 0.4, np.float32), "I_hat": np.zeros((48, 64), np.float32)}
+    return cam, xyz, n, maps
+
+
+def test_default_point_intensity_uses_the_incidence_of_the_cloud():
+    """With no profile given, R goes through the shipped sim-905 profile, and the incidence it
+    reads is estimated from the cloud itself: on a flat wall the output equals the profile at
+    the analytic |cos θ| = |n · x| / |x|, and the wall seen more obliquely comes out no brighter."""
+    model = NidarModel.load(device="cpu")
+    cam, xyz, n, maps = _wall_scene()
+    res = model.point_intensity(xyz, [cam], [None], maps=[maps], occlusion=False)
+    assert res.observed.sum() > 100
+    cos = np.abs(xyz @ n) / np.linalg.norm(xyz, axis=1)
+    given = model.point_intensity(
+        xyz, [cam], [None], maps=[maps], occlusion=False, cos_incidence=cos
+    )
+    np.testing.assert_allclose(res.intensity, given.intensity, atol=1e-6)
+    o = res.observed
+    p = model.default_profile()
+    el = np.degrees(np.arctan2(xyz[o, 2], np.hypot(xyz[o, 0], xyz[o, 1])))
+    rng = np.linalg.norm(xyz[o], axis=1)
+    np.testing.assert_allclose(
+        res.intensity[o],
+        p(np.full(o.sum(), 0.4), rng, elevation_deg=el, cos_incidence=cos[o]),
+        atol=1e-6,
+    )
+    explicit = model.point_intensity(
+        xyz, [cam], [None], maps=[maps], occlusion=False, profile=resolve_profile("sim-905", model)
+    )
+    np.testing.assert_array_equal(explicit.intensity, res.intensity)
+    with pytest.raises(NidarError, match="incidence cosines for"):
+        model.point_intensity(xyz, [cam], [None], maps=[maps], cos_incidence=cos[:3])
+    with pytest.raises(NidarError, match="rings for"):
+        model.point_intensity(xyz, [cam], [None], maps=[maps], ring=np.zeros(3, int))
+
+
+def test_one_or_two_observed_points_are_assigned_head_on():
+    """Too few observed points for a normal: the incidence is taken as head-on (a warning), and
+    the output is the profile's at |cos θ| = 1."""
+    model = NidarModel.load(device="cpu")
+    cam, xyz, _, maps = _wall_scene()
+    pts = np.array([[10.0, 0.2, 0.1], [12.0, -0.3, 0.0], [-5.0, 0, 0]])  # the last is behind
+    with pytest.warns(UserWarning, match="too few for a surface normal"):
+        res = model.point_intensity(pts, [cam], [None], maps=[maps], occlusion=False)
+    assert res.observed.tolist() == [True, True, False]
+    el = np.degrees(np.arctan2(pts[:2, 2], np.hypot(pts[:2, 0], pts[:2, 1])))
+    expect = model.default_profile()(
+        [0.4, 0.4], np.linalg.norm(pts[:2], axis=1), elevation_deg=el, cos_incidence=[1.0, 1.0]
+    )
+    np.testing.assert_allclose(res.intensity[:2], expect, atol=1e-6)
+
+
+def test_a_default_profile_of_other_networks_is_ignored(tmp_path):
+    """A weights folder whose profiles/sim-905.json was fitted for other networks (retrained
+    into the same folder) warns and maps R through its calibration.json."""
+    import shutil
+
+    w = tmp_path / "w"
+    shutil.copytree(NidarModel.load(device="cpu").weights_dir, w)
+    path = w / "profiles" / "sim-905.json"
+    data = json.loads(path.read_text())
+    data["model"]["irnet_sha256"] = "0" * 64
+    path.write_text(json.dumps(data))
+    model = NidarModel.load(w, device="cpu")
+    with pytest.warns(UserWarning, match="fitted for other networks"):
+        assert model.default_profile() is model.calibration
+    assert model.calibration.form == "distance_quantile"
+    cam, xyz, _, maps = _wall_scene()
+    res = model.point_intensity(xyz, [cam], [None], maps=[maps], occlusion=False)
+    o = res.observed
+    calibration = DistanceQuantileMap.load_json(w / "calibration.json")
+    expect = calibration(np.full(o.sum(), 0.4), np.linalg.norm(xyz[o], axis=1))
+    np.testing.assert_allclose(res.intensity[o], expect, atol=1e-6)
+
+
+def test_profile_in_point_intensity_uses_range_and_ring():
+    model = NidarModel.load(device="cpu")
+    v, d, ring, el, ref = _data()
+    p = fitted_profile(
+        v,
+        d,
+        ref,
+        form="range_ring",
+        name="p",
+        sensor="",
+        input="nidar:R",
+        ring=ring,
+        elevation_deg=el,
+    )
+    from nidar_mi.geometry import CameraModel
+
+    cam = CameraModel(
+        K=np.array([[50.0, 0, 31.5], [0, 50, 23.5], [0, 0, 1]]),
+        width=64,
+        height=48,
+        T_cam_lidar=np.array([[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1.0]]),
+    )
+    xyz = np.array([[5.0, 0.0, 0.0], [20.0, 1.0, -1.0], [-5.0, 0, 0]])
+    maps = {"R": np.full((48, 64), 0.6, np.float32), "I_hat": np.zeros((48, 64), np.float32)}
+    res = model.point_intensity(
+        xyz, [cam], [None], maps=[maps], profile=p, ring=np.array([1, 6, 0])
+    )
+    assert res.observed.tolist() == [True, True, False] and res.intensity[2] == 0
+    expect = p([0.6, 0.6], np.linalg.norm(xyz[:2], axis=1), ring=[1, 6])
+    np.testing.assert_allclose(res.intensity[:2], expect, rtol=1e-6)
