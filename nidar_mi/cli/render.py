@@ -228,8 +228,8 @@ def _render_options(args):
     if args.profile is not None:
         if args.intensity != "nidar":
             raise NidarError("--profile applies to --intensity nidar")
-        from ..nidar.pipeline import NidarModel
         from ..datasets.sensor_profiles import resolve_profile
+        from ..nidar.pipeline import NidarModel
 
         profile = resolve_profile(args.profile, NidarModel.load(args.weights))
     return RenderOptions(
