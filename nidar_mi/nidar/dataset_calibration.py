@@ -51,7 +51,7 @@ def fit_dataset_calibration(
     Raises:
         NidarError: unknown branch, a model without that map, or no frames in the split.
     """
-    from ..dataset import list_frames, load_frame, load_meta
+    from ..frames import list_frames, load_frame, load_meta
 
     if branch not in CALIBRATION_BRANCHES:
         raise NidarError(
