@@ -14,12 +14,12 @@ machine load (the machine is shared: read ratios within a run, not absolute seco
    bytes of the render folder and of the frame (also written with ``np.savez_compressed``).
 2. **kernel cache**: the first scene rendered in a fresh process, with Dr.Jit's kernel cache
    (``~/.drjit``) empty (a temporary ``HOME``) and warm.
-3. **modes**: the dataset command's work (:func:`nidar_mi.dataset.build_dataset`) from scratch
+3. **modes**: the dataset command's work (:func:`nidar_mi.render_dataset.build_dataset`) from scratch
    in a fresh process, serially, with ``workers=1`` and ``workers=2``; ``repeats`` rounds, the
    order rotated every round. Wall time of the whole process (start-up, Ray included), the time
    the first scene finished, and the steady rate after the first wave (each worker's first
    scene pays its process start-up); speed-ups against serial in the same round.
-4. **Ray**: ``import ray`` in a fresh interpreter against ``import nidar_mi.dataset``; starting
+4. **Ray**: ``import ray`` in a fresh interpreter against ``import nidar_mi.render_dataset``; starting
    and stopping the local runtime; per-task overhead (no-op tasks through
    :func:`nidar_mi.tasks.run_tasks`, Ray against serial); a worker's first set-up
    (``prepare_worker``: imports, variant, plugins) and later ones; the installed size of Ray.
@@ -75,8 +75,8 @@ def _stages(scene_files: list[str], work: str, args) -> dict:
     import numpy as np
 
     from nidar_mi.backend import prepare_worker
-    from nidar_mi.dataset import frames_of_render
     from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.render_dataset import frames_of_render
     from nidar_mi.render_folder import read_render
     from nidar_mi.render_session import RenderOptions
     from nidar_mi.simulate import render_scene
@@ -217,7 +217,7 @@ _DATASET_JOB = """
 import json, sys, time
 t0 = time.perf_counter()
 import nidar_mi.tasks as tasks
-from nidar_mi.dataset import build_dataset
+from nidar_mi.render_dataset import build_dataset
 done = []
 original = tasks._Progress.done
 def stamp(self, failure):
@@ -340,7 +340,7 @@ def _ray(args) -> dict:
     size = sum(f.locate().stat().st_size for f in files if f.locate().is_file())
     return {
         "import_ray_s": _import_time("ray", args.repeats),
-        "import_nidar_mi_dataset_s": _import_time("nidar_mi.dataset", args.repeats),
+        "import_nidar_mi_render_dataset_s": _import_time("nidar_mi.render_dataset", args.repeats),
         "ray_version": ray.__version__,
         "ray_installed_bytes": size,
         "init_s": init_s,
@@ -444,8 +444,8 @@ def _report(r: dict) -> str:
         )
     ray = r["ray"]
     lines += [
-        f"ray {ray['ray_version']}: import {ray['import_ray_s']:.2f} s (nidar_mi.dataset "
-        f"{ray['import_nidar_mi_dataset_s']:.2f} s), {ray['ray_installed_bytes'] / 1e6:.0f} MB "
+        f"ray {ray['ray_version']}: import {ray['import_ray_s']:.2f} s (nidar_mi.render_dataset "
+        f"{ray['import_nidar_mi_render_dataset_s']:.2f} s), {ray['ray_installed_bytes'] / 1e6:.0f} MB "
         f"installed, init {ray['init_s']:.1f} s, shutdown {ray['shutdown_s']:.1f} s, "
         f"{ray['overhead_per_task_ms']:.2f} ms per task, worker set-up first "
         f"{ray['worker_first_setup_s']:.2f} s / again {ray['worker_setup_again_s'] * 1e3:.1f} ms",

@@ -43,11 +43,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
 
-    from nidar_mi.dataset import list_frames, load_meta
     from nidar_mi.datasets.scans import frames_from_data
     from nidar_mi.eval.loo import leave_one_out, standard_methods
     from nidar_mi.eval.loo_irnet import FoldModels, irnet_methods
     from nidar_mi.eval.report import loo_markdown
+    from nidar_mi.frames import list_frames, load_meta
     from nidar_mi.nidar.config import TrainConfig
 
     cfg = TrainConfig.from_dict(json.loads(args.config.read_text()))

@@ -6,8 +6,8 @@ import shutil
 import numpy as np
 import pytest
 
-from nidar_mi.dataset import build_dataset, split_scenes
 from nidar_mi.errors import NidarError
+from nidar_mi.render_dataset import build_dataset, split_scenes
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

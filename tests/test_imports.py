@@ -1,12 +1,17 @@
-"""The import graph of the package: no module imports itself back through others, and every
-import points down the layers of docs/ARCHITECTURE.md.
+"""The import graph of the package: no module imports itself back through others, no package
+imports itself back through others, and every import points down the layers of
+docs/ARCHITECTURE.md.
 
-Every ``import`` statement counts, at module level or inside a function (a deferred import is
-still a dependency), except those under ``if TYPE_CHECKING:`` and a module's
-``if __name__ == "__main__":`` command hook. ``plugins/`` is installed as
-``nidar_mi.plugins`` and is part of the graph. Importing a submodule runs its package's
-``__init__`` first; that implicit edge is not counted, or every package re-exporting its
-submodules would be a cycle.
+Every ``import`` statement counts, at module level, inside a function (a deferred import is
+still a dependency) or in a module's ``if __name__ == "__main__":`` command hook, except those
+under ``if TYPE_CHECKING:``. ``plugins/`` is installed as ``nidar_mi.plugins`` and is part of
+the graph. Importing a submodule runs its package's ``__init__`` first; that implicit edge is
+not counted, or every package re-exporting its submodules would be a cycle.
+
+The package graph has one node per subpackage of ``nidar_mi`` (all its modules, nested
+packages included), one per module directly in ``nidar_mi/`` (``errors``, ``simulate``, the
+``python -m`` shims, ...) and one per ``__main__`` module (a command entry point that runs
+only as ``python -m`` and that nothing imports).
 """
 
 from __future__ import annotations
@@ -32,11 +37,8 @@ def _modules() -> dict[str, tuple[Path, bool]]:
 
 
 def _import_nodes(node: ast.AST):
-    """Every import statement under ``node``, skipping ``if TYPE_CHECKING:`` bodies and a
-    module's ``if __name__ == "__main__":`` command hook (it runs only as ``python -m``)."""
+    """Every import statement under ``node``, skipping ``if TYPE_CHECKING:`` bodies."""
     for child in ast.iter_child_nodes(node):
-        if isinstance(child, ast.If) and ast.unparse(child.test) == "__name__ == '__main__'":
-            continue
         if isinstance(child, ast.If) and ast.unparse(child.test) in (
             "TYPE_CHECKING",
             "typing.TYPE_CHECKING",
@@ -118,11 +120,40 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+def package_of(module: str) -> str:
+    """The package-graph node of a module (module docstring)."""
+    parts = module.split(".")
+    if len(parts) <= 2 or parts[-1] == "__main__":
+        return module
+    return ".".join(parts[:2])
+
+
+def package_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The module graph contracted to packages (edges inside one node dropped)."""
+    out: dict[str, set[str]] = {}
+    for module, deps in graph.items():
+        node = package_of(module)
+        out.setdefault(node, set()).update(package_of(d) for d in deps)
+    return {node: deps - {node} for node, deps in out.items()}
+
+
 def test_the_graph_sees_deferred_and_relative_imports():
     graph = import_graph()
     assert "nidar_mi.io.points" in graph["nidar_mi.io.las"]  # module level, relative
     assert "nidar_mi.plugins" in graph["nidar_mi.backend"]  # inside a function
     assert "nidar_mi.lidar.config" in graph["nidar_mi.plugins.lidar"]  # absolute
+    assert "nidar_mi.cli.render" in graph["nidar_mi.render"]  # a `__main__` command hook
+
+
+def test_package_nodes():
+    assert package_of("nidar_mi.eval.drive.study") == "nidar_mi.eval"
+    assert package_of("nidar_mi.plugins.lidar") == "nidar_mi.plugins"
+    assert package_of("nidar_mi.simulate") == "nidar_mi.simulate"
+    assert package_of("nidar_mi.materials") == "nidar_mi.materials"
+    assert package_of("nidar_mi.materials.__main__") == "nidar_mi.materials.__main__"
+    assert package_of("nidar_mi") == "nidar_mi"
+    graph = {"nidar_mi.a.x": {"nidar_mi.a.y", "nidar_mi.b"}, "nidar_mi.a.y": set()}
+    assert package_graph(graph) == {"nidar_mi.a": {"nidar_mi.b"}}
 
 
 def test_cycle_finder_finds_a_cycle():
@@ -134,13 +165,32 @@ def test_no_import_cycles_in_the_package():
     assert cycles(import_graph()) == []
 
 
+def _edges_within(graph: dict[str, set[str]], component: list[str]) -> list[str]:
+    """Every module import that joins two nodes of a package cycle, ``a -> b``."""
+    inside = set(component)
+    return sorted(
+        f"{module} -> {dep}"
+        for module, deps in graph.items()
+        for dep in deps
+        if package_of(module) in inside
+        and package_of(dep) in inside
+        and package_of(dep) != package_of(module)
+    )
+
+
+def test_no_import_cycles_between_packages():
+    graph = import_graph()
+    found = cycles(package_graph(graph))
+    assert [(c, _edges_within(graph, c)) for c in found] == []
+
+
 #: First component below ``nidar_mi`` -> layer (0 low, 1 middle, 2 top); docs/ARCHITECTURE.md.
 LAYERS = {
     **dict.fromkeys(
         ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
         0,
     ),
-    **dict.fromkeys(("plugins", "tasks"), 0),
+    **dict.fromkeys(("plugins", "tasks", "frames"), 0),
     **dict.fromkeys(
         (
             "scene",
@@ -149,7 +199,7 @@ LAYERS = {
             "render_session",
             "simulate",
             "sequence",
-            "dataset",
+            "render_dataset",
             "datasets",
             "nidar",
             "profiles",
@@ -161,7 +211,7 @@ LAYERS = {
     **dict.fromkeys(("eval", "cli"), 2),
 }
 #: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
-SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate", "drive"}
+SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate", "drive", "dataset"}
 
 
 def _component(module: str) -> str:

@@ -143,7 +143,7 @@ def test_serial_mode_never_imports_ray(tmp_path):
         f"""
         import sys
         sys.path.insert(0, {os.path.dirname(__file__)!r})
-        import nidar_mi.cli.dataset, nidar_mi.cli.evaluate, nidar_mi.dataset
+        import nidar_mi.cli.dataset, nidar_mi.cli.evaluate, nidar_mi.render_dataset
         from nidar_mi.tasks import Task, run_tasks
         report = run_tasks([Task("a", divmod, (7, 2))], progress=False)
         assert report.results == [(3, 1)], report

@@ -3,7 +3,7 @@
     python -m nidar_mi.dataset --scenes DIR -o DATA [...]        rendered scenes
     python -m nidar_mi.dataset --kitti DIR [--kitti DIR ...] -o DATA   real KITTI frames
 
-The frame format is :mod:`nidar_mi.dataset`; KITTI frames are
+The frame format is :mod:`nidar_mi.frames`; KITTI frames are
 :mod:`nidar_mi.datasets.kitti_frames` (held-out frame list, rings, short scans). KITTI data is
 non-commercial: keep ``DATA`` out of any repository.
 """
@@ -76,7 +76,8 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
 
     def work():
-        from ..dataset import SPLITS, build_dataset
+        from ..frames import SPLITS
+        from ..render_dataset import build_dataset
 
         if args.kitti:
             from ..datasets.kitti_frames import build_kitti_frames

@@ -6,7 +6,7 @@ the ablations.
                                 [--heldout-materials DIR] [--kitti DIR ...] [--photos DIR]
                                 [--ablation] [--cache DIR] [--overwrite] -o OUT
 
-* ``DATA`` is a dataset from :mod:`nidar_mi.dataset`: its ``test`` scenes (rendered under
+* ``DATA`` is a dataset from :mod:`nidar_mi.render_dataset`: its ``test`` scenes (rendered under
   ``DATA/renders``) are the held-out generated scenes, its ``train`` scenes fit baselines (c)
   and (e), ``meta.json`` gives ``intensity_scale``.
 * ``--scenes`` renders the hand-made scene files (cached in ``CACHE/renders``) with the

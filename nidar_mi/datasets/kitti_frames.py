@@ -1,12 +1,12 @@
 """KITTI frames as NIDAR training frames: real sparse intensity, visible returns, rings.
 
 Each KITTI frame (:func:`nidar_mi.datasets.kitti.load_frame`) becomes one training frame in the
-format of :mod:`nidar_mi.dataset` (source ``"kitti"``, keys
-:data:`nidar_mi.dataset.FRAME_SOURCES` ``["kitti"]``):
+format of :mod:`nidar_mi.frames` (source ``"kitti"``, keys
+:data:`nidar_mi.frames.FRAME_SOURCES` ``["kitti"]``):
 
 * the returns camera 2 sees: in front of it, inside the image and not hidden in the cloud's own
-  z-buffer (:func:`nidar_mi.geometry.visible_mask`, the package defaults; KITTI has no rendered
-  depth): ``points_xyz``, ``points_intensity`` (the stored reflectance in [0, 1]) and
+  z-buffer (:func:`nidar_mi.geometry.camera_returns`, the package defaults; KITTI has no
+  rendered depth): ``points_xyz``, ``points_intensity`` (the stored reflectance in [0, 1]) and
   ``points_ring`` (:func:`~nidar_mi.datasets.kitti_rings.checked_rings`; the nominal HDL-64E elevation
   table when the scan order is lost);
 * those returns splatted to camera resolution (nearest return wins a pixel): the sparse
@@ -81,7 +81,7 @@ def kitti_training_frame(frame: KittiFrame) -> tuple[dict[str, np.ndarray], dict
         ``(frame dict, info)``; ``info`` has ``points``, ``visible``, ``rings`` (count) and
         ``ring_method`` (``"scan order"`` or ``"elevation"``).
     """
-    from ..geometry import project, splat_points, visible_mask
+    from ..geometry import camera_returns
     from ..lidar.pattern import elevation_table
 
     xyz = frame.xyz.astype(np.float64)
@@ -92,14 +92,13 @@ def kitti_training_frame(frame: KittiFrame) -> tuple[dict[str, np.ndarray], dict
         method = "elevation"
     cam = frame.camera
     dist = np.linalg.norm(xyz, axis=1)
-    uv, z, front = project(xyz, cam)
-    seen = np.flatnonzero(front & visible_mask(uv, z, cam))
-    maps, mask = splat_points(xyz, {"intensity": frame.intensity, "range": dist}, cam)
+    visible = camera_returns(xyz, cam, {"intensity": frame.intensity, "range": dist})
+    maps, seen = visible.maps, visible.index
     out = {
         "rgb": np.ascontiguousarray(frame.rgb),
         "intensity": maps["intensity"],
         "range": maps["range"],
-        "mask": mask,
+        "mask": visible.mask,
         "K": cam.K.astype(np.float64),
         "T_cam_lidar": cam.T_cam_lidar.astype(np.float64),
         "points_xyz": frame.xyz[seen].astype(np.float32),
@@ -147,7 +146,7 @@ def build_kitti_frames(
     """
     from tqdm.auto import tqdm
 
-    from ..dataset import SPLITS, list_frames, write_frame
+    from ..frames import SPLITS, list_frames, write_frame
     from ..io.atomic import atomic_write_json
 
     dirs = [Path(d) for d in kitti_dirs]
@@ -168,7 +167,7 @@ def build_kitti_frames(
     meta_path = out / "meta.json"
     old_version, old_info = None, {}
     if meta_path.is_file():
-        from ..dataset import load_meta
+        from ..frames import load_meta
 
         old = load_meta(out)
         old_version, old_info = old.get("version"), old.get("frame_info", {})

@@ -227,7 +227,7 @@ def fit_split_calibration(
     Raises:
         NidarError: unknown branch, a model without that map, or no frames in the split.
     """
-    from ..dataset import list_frames, load_frame, load_meta
+    from ..frames import list_frames, load_frame, load_meta
 
     if branch not in CALIBRATION_BRANCHES:
         raise NidarError(

@@ -140,7 +140,7 @@ def evaluate_run(
         ``{"val_loss": last epoch's validation loss, "I_hat": scores, ["R": scores,
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
-    from ..dataset import list_frames, load_meta
+    from ..frames import list_frames, load_meta
     from ..datasets.profile_fitting import fit_split_calibration
     from ..nidar.pipeline import NidarModel
 

@@ -1,10 +1,9 @@
 """Held-out evaluation: every method's intensity on the same camera-visible LiDAR returns.
 
 One *frame* is a (scene, camera) pair of a rendered scene (``DATA/renders/<scene>/``, written by
-:func:`nidar_mi.render.render_scene`). Its evaluation points are the LiDAR returns the camera
+:func:`nidar_mi.simulate.render_scene`). Its evaluation points are the LiDAR returns the camera
 sees: in front of it, inside the image and not hidden behind the rendered depth
-(:func:`nidar_mi.geometry.visibility.visible_mask`), exactly the returns that
-:func:`nidar_mi.geometry.visibility.splat_points` writes into the training frames.
+(:func:`nidar_mi.geometry.camera_returns`), exactly the returns of the training frames.
 
 **Ground truth** is the range-compensated physical intensity ``g·ρ·cosθ·exp(-2αd)``
 (:func:`nidar_mi.lidar.return_model.compensate`) on the metric scale
@@ -165,7 +164,7 @@ def load_render_frames(
     Returns:
         One :class:`FrameData` per camera, sorted by camera id.
     """
-    from ..geometry import project, visible_mask
+    from ..geometry import camera_returns
     from ..render_folder import read_render
 
     r = read_render(render_dir, lidar_id)
@@ -180,9 +179,8 @@ def load_render_frames(
     physics = _noise_free(pts, lparams, intensity_scale)
     frames = []
     for cam in r.cameras:
-        uv, z, in_front = project(xyz, cam.model)
-        seen = in_front & visible_mask(uv, z, cam.model, depth_image=cam.depth)
-        idx = np.flatnonzero(seen)
+        visible = camera_returns(xyz, cam.model, depth_image=cam.depth)
+        idx = visible.index
         frames.append(
             FrameData(
                 scene=scene,
@@ -193,7 +191,7 @@ def load_render_frames(
                 ring=np.asarray(pts["ring"], dtype=np.int64)[idx],
                 column=np.asarray(pts["column"], dtype=np.int64)[idx],
                 material=mat_name[idx],
-                uv=uv[idx],
+                uv=visible.uv,
                 rgb=cam.rgb8(),
                 depth=cam.depth,
                 camera_model=cam.model,

@@ -114,7 +114,7 @@ def render_scenes(
     from functools import partial
 
     from ..backend import prepare_worker
-    from ..dataset import scene_params
+    from ..render_dataset import scene_params
     from ..render_folder import is_current
     from ..render_session import RenderOptions
     from ..simulate import ensure_rendered

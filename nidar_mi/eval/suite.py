@@ -117,7 +117,7 @@ def run(args, argv_text: str) -> dict:
 
 def _check_inputs(args) -> dict | None:
     """The dataset's meta (None without ``--data``), after checking every input exists."""
-    from ..dataset import load_meta
+    from ..frames import load_meta
 
     if not (args.data or args.kitti or args.photos):
         raise NidarError("nothing to evaluate: give --data, --kitti and/or --photos")
@@ -199,7 +199,7 @@ def _evaluate(args, argv_text: str, meta: dict | None, model, fig_dir: str) -> d
 def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
     """The groups on rendered scenes: held-out generated, hand-made, held-out materials,
     ablations."""
-    from ..dataset import frame_has, list_frames
+    from ..frames import frame_has, list_frames
     from ..datasets.profile_fitting import fit_split_calibration
     from .heldout import evaluate_renders, fit_class_constant, render_scenes
 
@@ -232,7 +232,7 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
         params=meta.get("params"), seed=int(meta.get("seed", 0)), spp=int(meta.get("spp", 16))
     )
     if args.scenes:
-        from ..dataset import find_scenes
+        from ..render_dataset import find_scenes
 
         files = find_scenes(args.scenes)
         log.info("rendering and evaluating %d hand-made scenes", len(files))
@@ -253,7 +253,7 @@ def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
         payload["groups"]["handmade"] = _group(res, "handmade", names, note)
         payload["figures"] += _figures(res, "handmade", fig_dir, args.figures)
     if args.heldout_materials:
-        from ..dataset import find_scenes
+        from ..render_dataset import find_scenes
         from .heldout import heldout_material_scores
 
         files = find_scenes(args.heldout_materials)

@@ -5,8 +5,10 @@
 * :mod:`~nidar_mi.geometry.projection`: :func:`project`, :func:`unproject`,
   :func:`in_image`, :func:`bilinear_sample`.
 * :mod:`~nidar_mi.geometry.visibility`: :func:`visible_mask` (occlusion against a rendered
-  depth image or the cloud's own z-buffer) and :func:`splat_points` (points to a sparse
-  pixel map, nearest point wins).
+  depth image or the cloud's own z-buffer).
+* :mod:`~nidar_mi.geometry.camera_returns`: :func:`camera_returns` (the LiDAR returns a
+  camera sees: project, :func:`visible_mask`, splat to a sparse pixel map, nearest return
+  wins) and :func:`splat_points` (its maps alone).
 * :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
   cameras, fused by a rule).
 * :mod:`~nidar_mi.geometry.normals`: :func:`estimate_normals` (plane fits to each point's
@@ -18,16 +20,11 @@ Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are 
 """
 
 from .camera_model import CONVENTIONS, R_OPENCV_FROM_WAYMO, CameraModel
+from .camera_returns import CameraReturns, camera_returns, splat_points
 from .fusion import FUSION_RULES, sample_cameras
 from .normals import estimate_normals, incidence_cosine
 from .projection import bilinear_sample, in_image, project, unproject
-from .visibility import (
-    DEFAULT_ABS_TOL,
-    DEFAULT_REL_TOL,
-    DEFAULT_ZBUFFER_CELL,
-    splat_points,
-    visible_mask,
-)
+from .visibility import DEFAULT_ABS_TOL, DEFAULT_REL_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
 
 __all__ = [
     "CONVENTIONS",
@@ -37,7 +34,9 @@ __all__ = [
     "FUSION_RULES",
     "R_OPENCV_FROM_WAYMO",
     "CameraModel",
+    "CameraReturns",
     "bilinear_sample",
+    "camera_returns",
     "estimate_normals",
     "in_image",
     "incidence_cosine",

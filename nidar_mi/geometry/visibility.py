@@ -1,4 +1,4 @@
-"""Which projected LiDAR points a camera sees, and splatting them onto its pixel grid.
+"""Which projected LiDAR points a camera sees (splatting them: :mod:`.camera_returns`).
 
 Pixel coordinates ``(u, v)`` are ``(column, row)`` in pixels with pixel centres at integer
 coordinates (see :mod:`nidar_mi.geometry.camera_model`); depths and tolerances are in metres,
@@ -28,9 +28,6 @@ What the test changes (measured with this module's defaults, 4 px cells, ``rel_t
   the NIDAR paper (which has no occlusion test) loses little, and a cloud z-buffer removes
   mostly visible points at silhouettes; the test matters for cameras far from the LiDAR,
   and a rendered depth image is the reliable way to do it.
-
-**Splatting.** :func:`splat_points` writes each visible point's values to its nearest pixel;
-when several land on one pixel the one nearest to the camera wins (a z-buffer).
 """
 
 from __future__ import annotations
@@ -43,13 +40,12 @@ import numpy as np
 from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
-from .projection import _uv, in_image, project
+from .projection import _uv, in_image
 
 __all__ = [
     "DEFAULT_ABS_TOL",
     "DEFAULT_REL_TOL",
     "DEFAULT_ZBUFFER_CELL",
-    "splat_points",
     "visible_mask",
 ]
 
@@ -154,50 +150,3 @@ def visible_mask(
     np.minimum.at(zmin, key, zc)
     visible[idx] = zc <= zmin[key] * (1.0 + rel_tol) + abs_tol
     return visible
-
-
-def splat_points(
-    xyz_lidar: np.ndarray,
-    values: dict[str, np.ndarray],
-    cam: CameraModel,
-    *,
-    depth_image: np.ndarray | None = None,
-) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Project LiDAR points into a camera and splat per-point values to pixels.
-
-    A point is kept when it is in front of the camera and :func:`visible_mask` (default
-    tolerances) passes it; it lands on the pixel ``(rint(v), rint(u))`` (clipped to the
-    image). Where several points land on one pixel the one with the smallest camera depth
-    wins (the first in input order on equal depths).
-
-    Args:
-        xyz_lidar: (N, 3) points in the LiDAR frame, metres.
-        values: name -> (N,) per-point values to splat.
-        cam: the camera (pixel centres at integer coordinates).
-        depth_image: optional (H, W) rendered camera-forward depth in metres (0 = no surface)
-            for the occlusion test; without it the projected cloud's own z-buffer is used.
-
-    Returns:
-        ``(maps, mask)``: name -> (H, W) float32 map, 0 where no point landed; (H, W) bool
-        mask of the pixels a point landed on.
-    """
-    H, W = cam.height, cam.width
-    uv, depth, in_front = project(xyz_lidar, cam)
-    seen = in_front & visible_mask(uv, depth, cam, depth_image=depth_image)
-    idx = np.nonzero(seen)[0]
-    u = np.clip(np.rint(uv[idx, 0]).astype(np.int64), 0, W - 1)
-    v = np.clip(np.rint(uv[idx, 1]).astype(np.int64), 0, H - 1)
-    # nearest first; np.unique keeps the first occurrence of every pixel
-    order = np.argsort(depth[idx], kind="stable")
-    pix = (v * W + u)[order]
-    _, first = np.unique(pix, return_index=True)
-    keep = idx[order][first]
-    flat = pix[first]
-    mask = np.zeros(H * W, dtype=bool)
-    mask[flat] = True
-    maps = {}
-    for name, vals in values.items():
-        m = np.zeros(H * W, dtype=np.float32)
-        m[flat] = np.asarray(vals, dtype=np.float32)[keep]
-        maps[name] = m.reshape(H, W)
-    return maps, mask.reshape(H, W)

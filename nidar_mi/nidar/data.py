@@ -1,6 +1,6 @@
 """Torch datasets over the training frames: crops, flips and tensors for the networks.
 
-The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.dataset`; these classes only
+The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.frames`; these classes only
 read it. Intensity is divided by ``intensity_scale`` and clipped to [0, 1].
 Crops and flips are drawn from a generator seeded by ``(seed, epoch, index)``, so a sample
 does not depend on worker processes or on where a run was resumed.
@@ -14,8 +14,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from ..dataset import load_frame
 from ..errors import NidarError
+from ..frames import load_frame
 from .preprocess import prepare_nir, prepare_rgb
 
 __all__ = [
@@ -223,7 +223,7 @@ class IRNetDataset(FrameDataset):
             keys = (*keys, "range")
         zero_targets = False
         if self.intrinsic_targets:
-            from ..dataset import frame_has
+            from ..frames import frame_has
 
             zero_targets = self.missing_targets_zero and not frame_has(path, ("R_true",))
             if not zero_targets:

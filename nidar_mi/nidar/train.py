@@ -33,8 +33,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..dataset import list_frames, load_frame, load_meta
 from ..errors import NidarError
+from ..frames import list_frames, load_frame, load_meta
 from .checkpoint import atomic_write
 from .config import TrainConfig
 from .data import IRNetDataset, MixedDataset, STNDataset
@@ -485,7 +485,7 @@ def _stored_config(path: Path, kind: str, config_cls):
 
 def _check_intrinsic_frames(frames: list[Path]) -> None:
     """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not)."""
-    from ..dataset import frame_has
+    from ..frames import frame_has
 
     for path in frames:
         if not frame_has(path, ("R_true", "S_true")):

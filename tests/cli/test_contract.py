@@ -170,7 +170,7 @@ def test_stopped_dataset_publishes_nothing_and_keeps_complete_renders(
 ):
     exc, status_want, word = stop
     data = tmp_path / "data"
-    monkeypatch.setattr("nidar_mi.dataset.frames_of_render", _raise(exc))
+    monkeypatch.setattr("nidar_mi.render_dataset.frames_of_render", _raise(exc))
     status, _, err = call("dataset", ["--scenes", os.path.dirname(tiny_scene), "-o", data, "-q"])
     assert status == status_want and "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith(f"{word}; no dataset published")
@@ -185,7 +185,7 @@ def test_stopped_rebuild_withdraws_the_old_dataset(tmp_path, call, tiny_scene, m
     scenes = os.path.dirname(tiny_scene)
     assert call("dataset", ["--scenes", scenes, "-o", data, "-q", "--spp", "1"])[0] == 0
     assert (data / "meta.json").is_file() and (data / "train").is_dir()
-    monkeypatch.setattr("nidar_mi.dataset.frames_of_render", _raise(KeyboardInterrupt))
+    monkeypatch.setattr("nidar_mi.render_dataset.frames_of_render", _raise(KeyboardInterrupt))
     argv = ["--scenes", scenes, "-o", data, "-q", "--spp", "1", "-D", "width=20"]
     assert call("dataset", argv)[0] == EXIT_INTERRUPTED
     assert sorted(p.name for p in data.iterdir()) == ["renders"]

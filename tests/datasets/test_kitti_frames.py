@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nidar_mi.dataset import FRAME_SOURCES, list_frames, load_frame
 from nidar_mi.datasets.kitti import load_frame as load_kitti
 from nidar_mi.datasets.kitti_frames import (
     DEFAULT_HELD_OUT,
@@ -19,6 +18,7 @@ from nidar_mi.datasets.kitti_frames import (
     kitti_training_frame,
 )
 from nidar_mi.errors import NidarError
+from nidar_mi.frames import FRAME_SOURCES, list_frames, load_frame
 from nidar_mi.geometry import project
 from nidar_mi.io.images import write_png
 from nidar_mi.io.kitti import write_kitti_bin

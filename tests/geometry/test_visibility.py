@@ -1,4 +1,4 @@
-"""Tests for nidar_mi.geometry.visibility (occlusion test, splatting points to pixels)."""
+"""Tests for nidar_mi.geometry.visibility (the occlusion test)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.geometry import CameraModel, project, splat_points, unproject, visible_mask
+from nidar_mi.geometry import CameraModel, project, visible_mask
 
 K = np.array([[500.0, 0.0, 319.5], [0.0, 480.0, 239.5], [0.0, 0.0, 1.0]])
 W, H = 640, 480
@@ -63,33 +63,3 @@ def test_visible_mask_rejects_bad_arguments():
         visible_mask(uv, depth, cam, depth_image=np.ones((H, W)), depth_kind="disparity")
     with pytest.raises(NidarError, match="zbuffer_cell"):
         visible_mask(uv, depth, cam, zbuffer_cell=0)
-
-
-# --- splatting --------------------------------------------------------------------------
-
-
-def test_splat_points_nearest_point_wins_each_pixel():
-    cam = _identity_cam(width=8, height=6, k=[[4.0, 0, 3.5], [0, 4.0, 2.5], [0, 0, 1]])
-    centres = np.array([[1, 1], [1, 1], [6, 4], [6, 4]], dtype=float)  # (column, row)
-    pts = unproject(centres, np.array([5.2, 5.0, 5.0, 5.0]), cam)
-    pts = np.concatenate([pts, [[0.0, 0.0, -5.0], [50.0, 0.0, 5.0]]])  # behind, outside
-    values = {"a": np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]), "b": np.arange(6)}
-    maps, mask = splat_points(pts, values, cam)
-    assert mask.shape == (6, 8) and mask.dtype == bool
-    assert np.flatnonzero(mask).tolist() == [1 * 8 + 1, 4 * 8 + 6]
-    assert maps["a"].dtype == np.float32 and maps["a"].shape == (6, 8)
-    # pixel (1, 1): the nearer second point; pixel (4, 6): equal depths, the first in order
-    assert maps["a"][1, 1] == 2.0 and maps["a"][4, 6] == 3.0
-    assert maps["b"][1, 1] == 1.0 and maps["b"][4, 6] == 2.0
-    assert not maps["a"][~mask].any() and not maps["b"][~mask].any()
-
-
-def test_splat_points_honours_the_depth_image():
-    cam = _identity_cam()
-    point = np.array([[0.3, -0.2, 20.0]])
-    _, alone = splat_points(point, {}, cam)
-    assert alone.sum() == 1  # nothing in the cloud hides it
-    _, behind = splat_points(point, {}, cam, depth_image=np.full((H, W), 10.0))
-    assert not behind.any()  # the rendered surface at 10 m does
-    _, no_surface = splat_points(point, {}, cam, depth_image=np.zeros((H, W)))
-    np.testing.assert_array_equal(no_surface, alone)

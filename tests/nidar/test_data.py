@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from nidar_mi.dataset import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
 from nidar_mi.errors import NidarError
+from nidar_mi.frames import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
 from nidar_mi.nidar.data import IRNetDataset, STNDataset
 from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
 from tests.helpers.synthetic_frames import write_synthetic_dataset

@@ -11,8 +11,8 @@ import pytest
 import torch
 from safetensors.numpy import load_file
 
-from nidar_mi.dataset import list_frames, load_frame
 from nidar_mi.errors import NidarError
+from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.config import IRNetConfig, STNConfig, TrainConfig
 from nidar_mi.nidar.data import IRNetDataset, area_resize, reduce_sparse
 from nidar_mi.nidar.model_io import build_stn, save_stn

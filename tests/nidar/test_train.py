@@ -10,8 +10,8 @@ import pytest
 from safetensors.numpy import load_file
 
 from nidar_mi.cli.train import main
-from nidar_mi.dataset import list_frames, load_frame
 from nidar_mi.errors import NidarError
+from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.checkpoint import latest_checkpoint
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.infer import predict

@@ -1,0 +1,374 @@
+"""NIDAR training data built from rendered scenes: render each scene, a frame per camera.
+
+Layout::
+
+    DATA/meta.json                       splits, wavelength, intensity_scale, render parameters,
+                                         and the request (every input) the dataset was built from
+    DATA/renders/<scene>/                each scene's render folder (nidar_mi.render_folder): a
+                                         cache, reused while the scene's render request holds
+    DATA/{train,val,test}/<frame>.npz    one frame per (scene, camera), in the format of
+                                         :mod:`nidar_mi.frames` (source ``"render"``)
+
+The splits and ``meta.json`` are published together when the whole build succeeded; the renders
+are a cache that an interrupted build leaves for the next one (:func:`build_dataset`).
+
+A frame pairs one camera's images with the LiDAR returns it sees: each return is projected with
+the camera's calibration, kept when the rendered depth does not hide it, and written to its
+nearest pixel (the nearest return wins; :func:`nidar_mi.geometry.camera_returns`). Scenes are
+split into train/val/test **by scene** (a seeded permutation of the sorted names), so no layout
+is shared across splits.
+
+``python -m nidar_mi.dataset --scenes DIR -o DATA`` runs :func:`build_dataset`
+(:mod:`nidar_mi.cli.dataset`).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import NidarError, check_seed
+from .frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
+
+__all__ = [
+    "build_dataset",
+    "find_scenes",
+    "frames_of_render",
+    "scene_params",
+    "split_scenes",
+]
+
+# --------------------------------------------------------------------------- scenes and splits
+
+
+def find_scenes(scene_dir: str) -> list[str]:
+    """Scene XML files under ``scene_dir`` (one level of sub-folders), sorted."""
+    if not os.path.isdir(scene_dir):
+        raise NidarError(f"--scenes: no such directory {scene_dir}")
+    files = sorted(
+        set(
+            glob.glob(os.path.join(scene_dir, "*.xml"))
+            + glob.glob(os.path.join(scene_dir, "*", "*.xml"))
+        )
+    )
+    if not files:
+        raise NidarError(f"--scenes: no scene XML files in {scene_dir}")
+    return files
+
+
+def scene_params(scene_path: str, params: dict[str, str] | None) -> dict[str, str]:
+    """The entries of ``params`` the scene uses (``$name`` in its XML): per-scene defaults.
+
+    Raises:
+        NidarError: the file is not readable as UTF-8 text.
+    """
+    try:
+        with open(scene_path, encoding="utf-8") as f:
+            text = f.read()
+    except (OSError, UnicodeDecodeError) as e:
+        raise NidarError(f"{scene_path}: cannot read ({e})") from None
+    return {k: v for k, v in (params or {}).items() if f"${k}" in text}
+
+
+def split_scenes(
+    names: list[str], fractions=(0.8, 0.1, 0.1), seed: int = 0
+) -> dict[str, list[str]]:
+    """Assign whole scenes to splits: a seeded permutation cut by ``fractions``.
+
+    Every split with a positive fraction gets at least one scene when there are enough scenes.
+    """
+    names = sorted(names)
+    f = np.asarray(fractions, dtype=np.float64)
+    if f.shape != (3,) or not np.isfinite(f).all() or np.any(f < 0) or f.sum() <= 0:
+        raise NidarError(f"--split: three non-negative fractions expected (got {fractions})")
+    f = f / f.sum()
+    perm = np.random.default_rng(seed).permutation(len(names))
+    n = len(names)
+    counts = np.floor(f * n).astype(int)
+    for i in np.argsort(-(f * n - counts)):  # largest remainders
+        if counts.sum() >= n:
+            break
+        counts[i] += 1
+    for i in range(3):  # a positive fraction never yields an empty split if scenes allow
+        if f[i] > 0 and counts[i] == 0 and n >= np.count_nonzero(f):
+            j = int(np.argmax(counts))
+            counts[j] -= 1
+            counts[i] += 1
+    out, start = {}, 0
+    for name, c in zip(SPLITS, counts):
+        out[name] = sorted(names[k] for k in perm[start : start + c])
+        start += c
+    return out
+
+
+# --------------------------------------------------------------------------- building frames
+
+
+def frames_of_render(render_dir: str, lidar_id: str | None = None):
+    """Yield ``(camera id, frame dict, lidar parameters)`` for every camera of a render folder."""
+    from .geometry import camera_returns
+    from .render_folder import read_render
+
+    r = read_render(render_dir, lidar_id)
+    pts = r.points
+    values = {"intensity": r.compensated, "reflectance": pts["reflectance"], "range": pts["range"]}
+    for cam in r.cameras:
+        visible = camera_returns(pts["xyz"], cam.model, values, depth_image=cam.depth)
+        maps, idx = visible.maps, visible.index
+        wavelength = r.parameters["wavelength"]
+        nir = cam.nir(wavelength)
+        frame = {
+            "rgb": cam.rgb8(),
+            "nir": nir,
+            "intensity": maps["intensity"],
+            "reflectance": maps["reflectance"],
+            "range": maps["range"],
+            "mask": visible.mask,
+            "depth": cam.depth,
+            "K": cam.model.K.astype(np.float64),
+            "T_cam_lidar": cam.model.T_cam_lidar.astype(np.float64),
+            "points_xyz": pts["xyz"][idx].astype(np.float32),
+            "points_intensity": r.compensated[idx].astype(np.float32),
+            "points_ring": pts["ring"][idx].astype(np.int16),
+        }
+        if float(cam.calib.get("nir_wavelength_nm", wavelength)) == float(wavelength):
+            # reflectance.exr is at the wavelength of nir.exr (the render's first LiDAR)
+            r_true = cam.reflectance()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s_true = np.where(r_true >= R_TRUE_MIN, np.pi * nir / r_true, 0.0)
+            frame["R_true"], frame["S_true"] = r_true, s_true.astype(np.float32)
+        yield cam.name, frame, r.parameters
+
+
+def _render_request(path: str, params: dict[str, str], seed: int, spp: int):
+    """The render of one scene a dataset asks for (the cache key of ``DATA/renders/<scene>``)."""
+    from .render_folder import RenderRequest
+
+    return RenderRequest.of(path, params=params, seed=seed, spp=spp, formats=("npz",))
+
+
+def _read_meta(out_dir: str) -> dict | None:
+    """``DATA/meta.json`` when it is readable, else None."""
+    try:
+        return load_meta(out_dir)
+    except NidarError:
+        return None
+
+
+def _published(out_dir: str, meta: dict | None, request: dict, renders: dict) -> bool:
+    """Whether ``out_dir`` already holds the dataset of ``request``: same request, every render
+    current, every frame file present."""
+    from .render_folder import is_current
+
+    if meta is None or meta.get("request") != request:
+        return False
+    if not all(is_current(os.path.join(out_dir, "renders", n), r) for n, r in renders.items()):
+        return False
+    return all(
+        os.path.isfile(os.path.join(out_dir, split, f"{fid}.npz"))
+        for split, fids in meta.get("frames", {}).items()
+        for fid in fids
+    )
+
+
+def _withdraw(out_dir: str) -> None:
+    """Remove a published dataset (``meta.json`` first, then the splits); the renders stay."""
+    import shutil
+
+    meta = Path(out_dir) / "meta.json"
+    if meta.is_file():
+        meta.unlink()
+    for split in SPLITS:
+        shutil.rmtree(Path(out_dir) / split, ignore_errors=True)
+
+
+def _scene_frames(
+    scene_path: str, name: str, render_dir: str, frame_dir: str, lidar_id, options: dict
+) -> None:
+    """One scene's task: render it unless ``render_dir`` holds its render already, then write a
+    frame per camera into ``frame_dir`` (the staged split folder)."""
+    from .render_session import RenderOptions
+    from .simulate import ensure_rendered
+
+    ensure_rendered(RenderOptions(scene_path, **options), render_dir)
+    for cam_id, frame, _ in frames_of_render(render_dir, lidar_id):
+        write_frame(os.path.join(frame_dir, f"{name}__{cam_id}.npz"), frame)
+
+
+def _scene_entry(render_dir: str, lidar_id: str | None) -> tuple[list[str], float]:
+    """The camera ids of a render folder and the supervising LiDAR's wavelength, nm."""
+    from .render_folder import read_manifest
+
+    manifest = read_manifest(render_dir)
+    lidars = manifest.get("lidars") or {}
+    lid = lidar_id or (min(lidars) if lidars else None)
+    if lid not in lidars:
+        raise NidarError(f"{render_dir}: no lidar '{lid}' (has {', '.join(sorted(lidars))})")
+    return sorted(manifest.get("cameras", {})), lidars[lid]["parameters"]["wavelength"]
+
+
+def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, parallel):
+    """Run every scene's task (:func:`_scene_frames`) on :mod:`nidar_mi.tasks` (``parallel``:
+    its ``workers``, ``address``, ``progress``); the frame ids per split and the wavelength."""
+    from .backend import prepare_worker
+    from .io.atomic import leftovers
+    from .tasks import Task, run_tasks
+
+    tasks = []
+    for path, name in zip(files, names):
+        rdir = os.path.join(out_dir, "renders", name)
+        fdir = os.path.join(stage, split_of[name])
+        options = dict(opts, params=used[path])
+        args = (path, name, rdir, fdir, lidar_id, options)
+        tasks.append(Task(name, _scene_frames, args, output=rdir))
+    report = run_tasks(
+        tasks,
+        workers=parallel["workers"],
+        address=parallel["address"],
+        setup=prepare_worker,
+        progress=parallel["progress"],
+        desc="dataset",
+        unit="scene",
+    )
+    report.raise_on_failure("scenes")
+    frames: dict[str, list[str]] = {s: [] for s in SPLITS}
+    wavelength = None
+    for name in names:
+        cameras, wavelength = _scene_entry(os.path.join(out_dir, "renders", name), lidar_id)
+        frames[split_of[name]] += [f"{name}__{c}" for c in cameras]
+    for split in SPLITS:  # what a worker killed while writing a frame left
+        for _, path in leftovers(os.path.join(stage, split)):
+            path.unlink(missing_ok=True)
+    return frames, wavelength
+
+
+def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
+    """Drop cached renders of scenes no longer in the dataset and, with ``foreign`` (an
+    ``--overwrite`` of a folder that was no dataset), every other entry."""
+    import shutil
+
+    renders = Path(out_dir) / "renders"
+    keep = set(names)
+    for d in renders.iterdir() if renders.is_dir() else ():
+        if d.is_dir() and not d.name.startswith(".") and d.name not in keep:
+            shutil.rmtree(d, ignore_errors=True)
+    if foreign:
+        for entry in Path(out_dir).iterdir():
+            if entry.name not in {"renders", "meta.json", *SPLITS}:
+                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+
+
+def build_dataset(
+    scene_dir: str,
+    out_dir: str,
+    *,
+    fractions=(0.8, 0.1, 0.1),
+    seed: int = 0,
+    spp: int = 16,
+    params: dict[str, str] | None = None,
+    lidar_id: str | None = None,
+    intensity_scale: float = 1.0,
+    progress: bool = True,
+    overwrite: bool = False,
+    workers: int | None = None,
+    ray_address: str | None = None,
+) -> dict:
+    """Render every scene (cached per request) and publish the frames and ``meta.json``.
+
+    ``DATA`` holds a render cache (``renders/``, one complete render folder per scene, reused
+    while its request is unchanged) and the published dataset (``meta.json`` and the split
+    folders). The dataset is built in a staging folder and published whole at the end
+    (``meta.json`` last); a build with other inputs first withdraws the published dataset, so
+    a failed or interrupted build never leaves frames that mix two builds, only the completed
+    renders for the next run to reuse. A build with the same inputs as the published dataset
+    (:data:`meta.json`'s ``request``) does nothing.
+
+    Args:
+        scene_dir: folder of scene XML files.
+        out_dir: the dataset folder; a non-empty folder that is no dataset is refused unless
+            ``overwrite`` (its other entries are then removed once the dataset is published).
+        fractions: train/val/test fractions of the scenes.
+        seed: split seed, scan seed and sampler seed, in [0, 2**32).
+        spp: camera samples per pixel (>= 1).
+        params: scene parameters (``-D``); each scene gets those it uses; a name no scene uses
+            is an error.
+        lidar_id: the LiDAR whose returns supervise (None: the first by id).
+        intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
+        progress: show a progress bar.
+        overwrite: accept a non-empty ``out_dir`` that is no dataset.
+        workers: scenes at once on a local Ray runtime (None: one after the other, in this
+            process); see :mod:`nidar_mi.tasks`.
+        ray_address: run the scenes on this Ray cluster instead.
+
+    Each scene is one task: render (unless cached), then write its frames into the staging
+    folder. A scene that fails is reported by name while the others complete; then
+    :class:`~nidar_mi.tasks.TasksFailed` is raised and nothing is published (the completed
+    renders stay for the next run).
+
+    Returns:
+        The meta dict (also written to ``DATA/meta.json``).
+    """
+    from .io.atomic import atomic_write_json, check_output_folder, staged_entries
+    from .render_folder import file_sha256
+    from .tasks import check_parallel
+
+    if not (isinstance(intensity_scale, (int, float)) and np.isfinite(intensity_scale)):
+        raise NidarError(f"--intensity-scale must be a positive number (got {intensity_scale})")
+    if not intensity_scale > 0:
+        raise NidarError(f"--intensity-scale must be > 0 (got {intensity_scale})")
+    check_seed(seed)
+    if spp < 1:
+        raise NidarError(f"--spp must be >= 1 (got {spp})")
+    check_parallel(workers, ray_address)
+    files = [os.path.abspath(f) for f in find_scenes(scene_dir)]  # workers may run elsewhere
+    names = [os.path.splitext(os.path.basename(f))[0] for f in files]
+    if len(set(names)) != len(names):
+        raise NidarError(f"{scene_dir}: scene file names must be unique")
+    used = {path: scene_params(path, params) for path in files}
+    unused = sorted(set(params or {}) - {k for u in used.values() for k in u})
+    if unused:
+        raise NidarError(f"-D {', '.join(unused)}: no scene in {scene_dir} has such a parameter")
+    splits = split_scenes(names, fractions, seed)
+    old = _read_meta(out_dir)
+    earlier = old is not None or os.path.isdir(os.path.join(out_dir, "renders"))
+    check_output_folder(out_dir, overwrite=overwrite or earlier)
+    request = {
+        "scenes": {n: file_sha256(f) for f, n in zip(files, names)},
+        "params": dict(sorted((params or {}).items())),
+        "seed": seed,
+        "spp": spp,
+        "lidar": lidar_id,
+        "split": [float(f) for f in fractions],
+        "intensity_scale": float(intensity_scale),
+    }
+    renders = {n: _render_request(f, used[f], seed, spp) for f, n in zip(files, names)}
+    if _published(out_dir, old, request, renders):
+        return old
+    if old is not None:
+        _withdraw(out_dir)
+    split_of = {n: s for s, ns in splits.items() for n in ns}
+    opts = dict(formats=("npz",), seed=seed, spp=spp, progress=False)
+    parallel = dict(workers=workers, address=ray_address, progress=progress)
+    out_dir = os.path.abspath(out_dir)
+    with staged_entries(out_dir, [*SPLITS, "meta.json"], last="meta.json") as stage:
+        frames, wavelength = _build_frames(
+            files, names, out_dir, str(stage), split_of, used, lidar_id, opts, parallel
+        )
+        meta = {
+            "source": "render",
+            "scenes": splits,
+            "frames": frames,
+            "wavelength_nm": wavelength,
+            "intensity": "range-compensated g·rho·cos(theta)·exp(-2 alpha d)",
+            "intensity_scale": float(intensity_scale),
+            "seed": seed,
+            "spp": spp,
+            "params": dict(params or {}),
+            "request": request,
+        }
+        atomic_write_json(os.path.join(stage, "meta.json"), meta)
+    _remove_leftovers(out_dir, names, foreign=overwrite and not earlier)
+    return meta
