@@ -140,8 +140,8 @@ def evaluate_run(
         ``{"val_loss": last epoch's validation loss, "I_hat": scores, ["R": scores,
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
-    from ..frames import list_frames, load_meta
     from ..datasets.profile_fitting import fit_split_calibration
+    from ..frames import list_frames, load_meta
     from ..nidar.pipeline import NidarModel
 
     run_dir = Path(run_dir)

@@ -199,8 +199,8 @@ def _evaluate(args, argv_text: str, meta: dict | None, model, fig_dir: str) -> d
 def _synthetic(args, meta: dict, model, fig_dir: str, payload: dict) -> None:
     """The groups on rendered scenes: held-out generated, hand-made, held-out materials,
     ablations."""
-    from ..frames import frame_has, list_frames
     from ..datasets.profile_fitting import fit_split_calibration
+    from ..frames import frame_has, list_frames
     from .heldout import evaluate_renders, fit_class_constant, render_scenes
 
     scale = float(meta.get("intensity_scale", 1.0))
