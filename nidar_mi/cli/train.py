@@ -187,13 +187,24 @@ def main(argv: list[str] | None = None) -> int:
     return run(work, on_interrupt=lambda: left["text"])
 
 
+def _photos(folder, progress: bool):
+    from ..datasets.rgbnir import stn_training_pairs
+
+    return stn_training_pairs(folder, progress=progress)
+
+
 def _train(args: argparse.Namespace, cfg) -> None:
     from ..nidar import train as training
 
     progress = not args.no_progress
     if args.stage == "stn" and args.photos is not None:
         training.train_stn_photos(
-            cfg, args.photos, args.data, args.out, resume=args.resume, progress=progress
+            cfg,
+            _photos(args.photos, progress),
+            args.data,
+            args.out,
+            resume=args.resume,
+            progress=progress,
         )
     elif args.stage == "stn":
         training.train_stn(cfg, args.data, args.out, resume=args.resume, progress=progress)
@@ -217,7 +228,13 @@ def _train(args: argparse.Namespace, cfg) -> None:
             stn_weights=args.stn_weights,
             resume=args.resume,
             progress=progress,
-            photos=args.photos,
+            photos=(
+                _photos(args.photos, progress)
+                if args.photos is not None
+                and args.stn_weights is None
+                and cfg.irnet.input == "pseudo_nir"
+                else None
+            ),
         )
     if args.stage != "stn" and not args.no_calibration:
         from ..datasets.profile_fitting import fit_split_calibration

@@ -137,3 +137,23 @@ def split_pairs(
         out["val"] += [f"{cat}/{i}" for i in sorted(rest[:nv])]
         out["train"] += [f"{cat}/{i}" for i in sorted(rest[nv:])]
     return {k: sorted(v) for k, v in out.items()}
+
+
+def stn_training_pairs(
+    root: str | os.PathLike | None = None, *, progress: bool = False
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
+    """The photo pairs the STN is trained on, loaded: ``(fit, val)``.
+
+    The pairs of ``root`` are split by image with :func:`split_pairs` (seed 0, every category in
+    every split): ``fit`` holds the ``train`` and ``val`` pairs, ``val`` the ``val`` pairs alone
+    (logged during training); the ``test`` pairs are never read (the photo evaluation scores
+    them, :mod:`nidar_mi.eval.photos`). Each pair is ``(rgb (H, W, 3) uint8, nir (H, W) uint8)``.
+    """
+    from tqdm.auto import tqdm
+
+    pairs = {p.name: p for p in list_pairs(root)}
+    split = split_pairs(list(pairs.values()))
+    names = split["train"] + split["val"]
+    fit = [load_pair(pairs[n]) for n in tqdm(names, desc="photos", disable=not progress)]
+    val = [load_pair(pairs[n]) for n in split["val"]]
+    return fit, val

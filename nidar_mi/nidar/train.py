@@ -47,6 +47,10 @@ from .stn import image_pyramid
 __all__ = ["train", "train_stn", "train_stn_photos", "train_irnet"]
 
 
+#: Real RGB/NIR photo pairs for the STN: ``(fit, val)``, lists of ``(rgb (H, W, 3) uint8,
+#: nir (H, W) uint8)``.
+PhotoPairs = tuple[list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]
+
 # --------------------------------------------------------------------------- public API
 
 
@@ -58,11 +62,12 @@ def train(
     stn_weights: str | Path | None = None,
     resume: bool = False,
     progress: bool = True,
-    photos: str | Path | None = None,
+    photos: PhotoPairs | None = None,
 ) -> dict[str, Path]:
     """Train both stages (the STN is skipped when ``stn_weights`` is given, and for RGB-input
-    IRNet without ``stn_weights``). With ``photos`` (a folder of RGB/NIR photo pairs) the STN
-    is trained on them (:func:`train_stn_photos`), else on the dataset's renders.
+    IRNet without ``stn_weights``). With ``photos`` (real RGB/NIR photo pairs, ``(fit, val)`` as
+    :func:`nidar_mi.datasets.rgbnir.stn_training_pairs` loads them) the STN is trained on them
+    (:func:`train_stn_photos`), else on the dataset's renders.
 
     Returns:
         ``{"stn": path, "irnet": path}`` (``"stn"`` absent when no STN was used).
@@ -120,7 +125,7 @@ def train_stn(
 
 def train_stn_photos(
     cfg: TrainConfig,
-    photos_dir: str | Path,
+    photos: PhotoPairs,
     data_dir: str | Path,
     out_dir: str | Path,
     *,
@@ -129,31 +134,23 @@ def train_stn_photos(
 ) -> Path:
     """Train the STN on real RGB/NIR photo pairs; returns ``OUT/stn.safetensors``.
 
-    The pairs of ``photos_dir`` (:mod:`nidar_mi.datasets.rgbnir`) are split by image with
-    :func:`~nidar_mi.datasets.rgbnir.split_pairs` (seed 0, every category in every split): the
-    network is fitted on the ``train`` and ``val`` pairs, ``val`` crops are logged, and the
-    ``test`` pairs are never read (the photo evaluation scores them,
-    :mod:`nidar_mi.eval.photos`). With ``cfg.photos.render_fraction > 0`` that share of the
+    ``photos`` is ``(fit, val)``: the network is fitted on the ``fit`` pairs and ``val`` crops are
+    logged; each pair is ``(rgb (H, W, 3) uint8, nir (H, W) uint8)``
+    (:func:`nidar_mi.datasets.rgbnir.stn_training_pairs` loads them, by image split so that the
+    photo evaluation's test pairs are never read). With ``cfg.photos.render_fraction > 0`` that share of the
     crops comes from the rendered RGB/NIR pairs of ``data_dir/train``. Loss:
     :func:`~nidar_mi.nidar.losses.photo_stn_loss`; crops: :mod:`nidar_mi.nidar.photo_data`.
     The network is ``cfg.stn`` (``kind`` ``"lowres"`` is the shipped one).
     """
-    from tqdm.auto import tqdm
-
-    from ..datasets.rgbnir import list_pairs, load_pair, split_pairs
     from .photo_data import PhotoCropDataset, render_pair
 
     data_dir, out_dir = Path(data_dir), Path(out_dir)
-    pairs = {p.name: p for p in list_pairs(photos_dir)}
-    split = split_pairs(list(pairs.values()))
+    fit, val = photos
     _begin(cfg, data_dir, out_dir, "stn", resume)
     torch.manual_seed(cfg.seed)
     model = build_stn(cfg.stn)
     _check_crop(cfg.crop_size, model.stride, "STN")
     pc = cfg.photos
-    names = split["train"] + split["val"]
-    fit = [load_pair(pairs[n]) for n in tqdm(names, desc="photos", disable=not progress)]
-    val = [load_pair(pairs[n]) for n in split["val"]]
     renders = []
     if pc.render_fraction > 0:
         renders = [render_pair(f) for f in _frames(data_dir, "train")]
