@@ -151,6 +151,7 @@ LAYERS = {
             "dataset",
             "datasets",
             "nidar",
+            "cloud_intensity",
             "scenegen",
         ),
         1,
