@@ -142,4 +142,4 @@ def main(argv: list[str] | None = None) -> int:
         payload = evaluate(opts)
         log.info("wrote %s in %.0f s", os.path.join(opts.out, "results.md"), payload["seconds"])
 
-    return run(work)
+    return run(work, flags={"scene_dir": "--scenes"})
