@@ -143,7 +143,7 @@ def set_variant(variant: str | None = None) -> str:
         raise NidarError(f"Dr.Jit cannot load libLLVM for variant '{variant}': {_FIX}")
     if variant.startswith("cuda") and not _cuda_available():
         raise NidarError(
-            f"variant '{variant}' needs a working CUDA device; use --variant llvm_ad_spectral"
+            f"variant '{variant}' needs a working CUDA device; use `variant` llvm_ad_spectral"
         )
     if mi.variant() != variant:
         mi.set_variant(variant)

@@ -253,7 +253,7 @@ def check_render_memory(camera, spp: int, limit: int | None = None) -> None:
         raise NidarError(
             f"camera '{camera.id()}': the render needs about {format_size(need)} ({W} x {H} "
             f"pixels, {spp} spp), more than the limit of {format_size(limit)}; lower the "
-            "resolution or raise the limit with --max-memory (or NIDAR_MAX_MEMORY)"
+            "resolution or raise the limit with `max_memory` (or NIDAR_MAX_MEMORY)"
         )
 
 

@@ -47,7 +47,7 @@ __all__ = [
 def find_scenes(scene_dir: str) -> list[str]:
     """Scene XML files under ``scene_dir`` (one level of sub-folders), sorted."""
     if not os.path.isdir(scene_dir):
-        raise NidarError(f"--scenes: no such directory {scene_dir}")
+        raise NidarError(f"`scene_dir`: no such directory {scene_dir}")
     files = sorted(
         set(
             glob.glob(os.path.join(scene_dir, "*.xml"))
@@ -55,7 +55,7 @@ def find_scenes(scene_dir: str) -> list[str]:
         )
     )
     if not files:
-        raise NidarError(f"--scenes: no scene XML files in {scene_dir}")
+        raise NidarError(f"`scene_dir`: no scene XML files in {scene_dir}")
     return files
 
 
@@ -83,7 +83,7 @@ def split_scenes(
     names = sorted(names)
     f = np.asarray(fractions, dtype=np.float64)
     if f.shape != (3,) or not np.isfinite(f).all() or np.any(f < 0) or f.sum() <= 0:
-        raise NidarError(f"--split: three non-negative fractions expected (got {fractions})")
+        raise NidarError(f"`fractions`: three non-negative fractions expected (got {fractions})")
     f = f / f.sum()
     perm = np.random.default_rng(seed).permutation(len(names))
     n = len(names)
@@ -316,12 +316,12 @@ def build_dataset(
     from .tasks import check_parallel
 
     if not (isinstance(intensity_scale, (int, float)) and np.isfinite(intensity_scale)):
-        raise NidarError(f"--intensity-scale must be a positive number (got {intensity_scale})")
+        raise NidarError(f"`intensity_scale` must be a positive number (got {intensity_scale})")
     if not intensity_scale > 0:
-        raise NidarError(f"--intensity-scale must be > 0 (got {intensity_scale})")
+        raise NidarError(f"`intensity_scale` must be > 0 (got {intensity_scale})")
     check_seed(seed)
     if spp < 1:
-        raise NidarError(f"--spp must be >= 1 (got {spp})")
+        raise NidarError(f"`spp` must be >= 1 (got {spp})")
     check_parallel(workers, ray_address)
     files = [os.path.abspath(f) for f in find_scenes(scene_dir)]  # workers may run elsewhere
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]

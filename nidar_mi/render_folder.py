@@ -226,7 +226,7 @@ def write_lidar(
     from .lidar.return_model import full_scale_intensity
 
     if bin_intensity not in BIN_INTENSITY:
-        raise NidarError(f"--bin-intensity must be one of {', '.join(BIN_INTENSITY)}")
+        raise NidarError(f"`bin_intensity` must be one of {', '.join(BIN_INTENSITY)}")
     cfg = result.config
     d = os.path.join(folder, cfg.name)
     os.makedirs(d, exist_ok=True)

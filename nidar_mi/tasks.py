@@ -65,7 +65,7 @@ __all__ = [
 ]
 
 #: The one line a user sees when workers are asked for and Ray is not installed.
-RAY_MISSING = "--workers and --ray-address need Ray: pip install 'nidar_mi[ray]'"
+RAY_MISSING = "`workers` and `ray_address` need Ray: pip install 'nidar_mi[ray]'"
 #: Object store of a local runtime: tasks pass paths and small results only.
 _OBJECT_STORE_BYTES = 128 * 1024**2
 #: How often the driver wakes up while waiting (Ctrl-C and SIGTERM are handled in between).
@@ -299,7 +299,7 @@ def _check_address(address: str) -> None:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=_CONNECT_TIMEOUT_S):
             pass
     except (OSError, ValueError) as e:
-        raise NidarError(f"--ray-address {address}: no Ray cluster answers there ({e})") from None
+        raise NidarError(f"`ray_address` {address}: no Ray cluster answers there ({e})") from None
 
 
 def _connect(ray, workers: int | None, address: str | None, after_init: Callable[[], None]) -> bool:
@@ -355,7 +355,7 @@ def _init(ray, workers: int | None, address: str | None) -> None:
                 ray.init(address=address, **quiet)
         except (ConnectionError, RuntimeError, ValueError) as e:
             hint = "" if os.environ.get("RAY_AUTH_MODE") else _AUTH_HINT
-            raise NidarError(f"--ray-address {address}: {_one_line(e)}{hint}") from None
+            raise NidarError(f"`ray_address` {address}: {_one_line(e)}{hint}") from None
         return
     ray.init(
         num_cpus=workers,
@@ -496,9 +496,9 @@ def check_parallel(workers: int | None, address: str | None) -> None:
             nothing listening at ``address``.
     """
     if workers is not None and (isinstance(workers, bool) or workers < 1):
-        raise NidarError(f"--workers must be >= 1 (got {workers})")
+        raise NidarError(f"`workers` must be >= 1 (got {workers})")
     if address is not None and not str(address).strip():
-        raise NidarError("--ray-address must not be empty")
+        raise NidarError("`ray_address` must not be empty")
     if workers is not None or address is not None:
         _import_ray()
     if address is not None:

@@ -147,7 +147,7 @@ def test_bad_input(tmp_path, args, needle):
 
 
 def test_unknown_profile_is_a_user_error():
-    from nidar_mi.cli.assign import assign_intensity
+    from nidar_mi.cloud_intensity import assign_intensity
     from nidar_mi.errors import NidarError
 
     with pytest.raises(NidarError, match="unknown profile 'nope'.*sim-905, kitti-hdl64e"):

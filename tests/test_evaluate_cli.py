@@ -237,3 +237,26 @@ def test_real_data_tables(tmp_path):
         and "## Pseudo-NIR against real NIR photos" in md
     )
     assert not (out / "figures").exists()  # no figure of real data
+
+
+def test_the_command_line_becomes_evaluate_options():
+    from nidar_mi.cli.evaluate import _parser, options
+
+    argv = ["--data", "d", "--kitti", "k1", "--kitti", "k2", "--no-twin", "-q", "-o", "o"]
+    opts = options(_parser().parse_args(argv), "python -m nidar_mi.evaluate ...")
+    assert (opts.data, opts.kitti, opts.out) == ("d", ("k1", "k2"), "o")
+    assert not opts.twin and not opts.progress and not opts.scans_scenes
+    assert opts.command == "python -m nidar_mi.evaluate ..."
+    opts = options(_parser().parse_args(["--data", "d", "-o", "o"]), "")
+    assert opts.twin and opts.progress and opts.scans_scenes and opts.figures == 3
+
+
+def test_the_library_names_parameters_and_the_command_flags(tmp_path, capsys):
+    from nidar_mi.errors import NidarError
+    from nidar_mi.eval.suite import EvaluateOptions, run
+
+    with pytest.raises(NidarError, match="`heldout_materials` needs `data`"):
+        run(EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path)))
+    argv = ["--photos", "p", "--heldout-materials", str(tmp_path), "-o", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert "error: --heldout-materials needs --data" in capsys.readouterr().err

@@ -203,6 +203,7 @@ LAYERS = {
             "datasets",
             "nidar",
             "profiles",
+            "cloud_intensity",
             "scenegen",
         ),
         1,

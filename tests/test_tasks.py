@@ -129,7 +129,7 @@ def test_leftovers_of_the_job_outputs_are_removed_and_no_others(tmp_path):
 
 
 def test_bad_options_and_missing_ray_are_one_line_errors(tmp_path, monkeypatch):
-    with pytest.raises(NidarError, match=r"--workers must be >= 1 \(got 0\)"):
+    with pytest.raises(NidarError, match=r"`workers` must be >= 1 \(got 0\)"):
         run_tasks(_noise_tasks(tmp_path), workers=0)
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` fails as if not installed
     with pytest.raises(NidarError) as e:
@@ -154,7 +154,7 @@ def test_serial_mode_never_imports_ray(tmp_path):
 
 
 def test_no_cluster_at_the_address_fails_fast():
-    with pytest.raises(NidarError, match=r"--ray-address 127\.0\.0\.1:1: no Ray cluster answers"):
+    with pytest.raises(NidarError, match=r"`ray_address` 127\.0\.0\.1:1: no Ray cluster answers"):
         run_tasks([Task("a", divmod, (7, 2))], address="127.0.0.1:1", progress=False)
 
 

@@ -12,6 +12,9 @@ status  meaning
 143     terminated (SIGTERM)
 ======  ====================================================================================
 
+Library messages name a parameter in backticks (`` `spp` ``); :func:`run` shows each as the
+command's flag (``--spp``; :func:`flag_message`).
+
 Outputs are written through staging folders (:func:`nidar_mi.io.atomic.staged_directory`), so an
 interrupted or failed command leaves nothing behind. Warnings are printed as one
 ``warning: ...`` line each.
@@ -20,10 +23,11 @@ interrupted or failed command leaves nothing behind. Warnings are printed as one
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from ..errors import MAX_SEED, NidarError, check_seed
 
@@ -33,6 +37,7 @@ __all__ = [
     "EXIT_INTERRUPTED",
     "EXIT_TERMINATED",
     "Terminated",
+    "flag_message",
     "parser",
     "parse_defines",
     "run",
@@ -102,6 +107,27 @@ def parse_defines(items: list[str]) -> dict[str, str]:
     return out
 
 
+#: A parameter named in a library message: a Python identifier in backticks.
+_PARAM = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")
+
+
+def flag_message(message: str, flags: Mapping[str, str] | None = None) -> str:
+    """``message`` with every parameter it names in backticks shown as a flag.
+
+    Args:
+        message: a library message (:class:`~nidar_mi.errors.NidarError`).
+        flags: parameter name -> its flag where the two differ (e.g. ``{"images": "--image"}``);
+            any other name ``a_b`` is shown as ``--a-b``.
+    """
+    flags = flags or {}
+
+    def flag(m: re.Match) -> str:
+        name = m.group(1)
+        return flags.get(name, "--" + name.replace("_", "-"))
+
+    return _PARAM.sub(flag, message)
+
+
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -115,7 +141,10 @@ def _left(on_interrupt: str | Callable[[], str]) -> str:
 
 
 def run(
-    work: Callable[[], int | None], *, on_interrupt: str | Callable[[], str] = "nothing written"
+    work: Callable[[], int | None],
+    *,
+    on_interrupt: str | Callable[[], str] = "nothing written",
+    flags: Mapping[str, str] | None = None,
 ) -> int:
     """Run a command's work and map every expected failure to one line and an exit status.
 
@@ -123,6 +152,8 @@ def run(
         work: the command body; returns an exit status or None (success).
         on_interrupt: what the user is told is left after Ctrl-C or SIGTERM (or a function
             that says it, called after the work was stopped).
+        flags: the command's flags of the parameters library messages name, where a flag is
+            not ``--`` and the name with hyphens (:func:`flag_message`).
 
     Returns:
         The exit status (see the module docstring).
@@ -139,7 +170,7 @@ def run(
             status = work()
         return EXIT_OK if status is None else int(status)
     except NidarError as e:
-        print(f"error: {_one_line(e)}", file=sys.stderr)
+        print(f"error: {_one_line(flag_message(str(e), flags))}", file=sys.stderr)
         return EXIT_USER_ERROR
     except Terminated:
         print(f"terminated; {_left(on_interrupt)}", file=sys.stderr)

@@ -115,4 +115,5 @@ def main(argv=None) -> int:
         work,
         on_interrupt="no dataset published; the completed renders are kept in "
         f"{args.out}/renders for the next run",
+        flags={"scene_dir": "--scenes", "fractions": "--split"},
     )

@@ -94,6 +94,32 @@ def _parser():
     return p
 
 
+def options(args, argv_text: str):
+    """The :class:`~nidar_mi.eval.suite.EvaluateOptions` of the parsed command line."""
+    from ..eval.suite import EvaluateOptions
+
+    return EvaluateOptions(
+        out=args.out,
+        data=args.data,
+        weights=args.weights,
+        scenes=args.scenes,
+        heldout_materials=args.heldout_materials,
+        kitti=tuple(args.kitti or ()),
+        photos=args.photos,
+        ablation=args.ablation,
+        split=args.split,
+        twin=not args.no_twin,
+        lpips=args.lpips,
+        figures=args.figures,
+        cache=args.cache,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+        workers=args.workers,
+        ray_address=args.ray_address,
+        command=argv_text,
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 on a user error)."""
     args = _parser().parse_args(argv)
@@ -108,7 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     def work():
         from ..eval.suite import run as evaluate
 
-        payload = evaluate(args, argv_text)
-        log.info("wrote %s in %.0f s", os.path.join(args.out, "results.md"), payload["seconds"])
+        opts = options(args, argv_text)
+        if opts.scans_scenes:
+            from ..backend import set_variant
 
-    return run(work)
+            set_variant("llvm_ad_spectral")
+        payload = evaluate(opts)
+        log.info("wrote %s in %.0f s", os.path.join(opts.out, "results.md"), payload["seconds"])
+
+    return run(work, flags={"scene_dir": "--scenes"})

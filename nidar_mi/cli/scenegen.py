@@ -96,4 +96,4 @@ def main(argv=None) -> int:
                 f"{len(index['scenes'])} in {args.out}/index.json"
             )
 
-    return run(work, on_interrupt="the scenes written so far are complete")
+    return run(work, on_interrupt="the scenes written so far are complete", flags={"out_dir": "-o"})

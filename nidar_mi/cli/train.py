@@ -184,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
             raise
         logging.getLogger(__name__).info("weights written to %s", out)
 
-    return run(work, on_interrupt=lambda: left["text"])
+    return run(work, on_interrupt=lambda: left["text"], flags={"render_frames": "--renders"})
 
 
 def _photos(folder, progress: bool):

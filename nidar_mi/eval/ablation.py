@@ -202,7 +202,7 @@ def run_ablation(
     settings = settings or AblationSettings()
     variants = tuple(variants or IRNET_VARIANTS)
     if not Path(stn_weights).is_file():
-        raise NidarError(f"--ablation: STN weights {stn_weights} not found")
+        raise NidarError(f"ablation: STN weights {stn_weights} not found")
     out_dir = Path(out_dir)
     structural, inputs = [], []
     paper = "unet+deeplabv3"

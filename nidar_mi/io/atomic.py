@@ -190,7 +190,7 @@ def check_output_folder(
         raise NidarError(f"cannot write {target}: it exists and is not a folder")
     if target.is_dir() and not (overwrite or (marker and (target / marker).is_file())):
         if any(target.iterdir()):
-            raise NidarError(f"{target} is not empty: choose another folder or pass --overwrite")
+            raise NidarError(f"{target} is not empty: choose another folder or pass `overwrite`")
     parent = target.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent

@@ -148,7 +148,7 @@ def render_camera(
         if len(ids) != 1:
             listed = ", ".join(ids) if ids else "none"
             raise NidarError(
-                f"{path}: T_cam_lidar has {len(ids)} LiDARs ({listed}); choose one with --lidar (lidar= in Python)"
+                f"{path}: T_cam_lidar has {len(ids)} LiDARs ({listed}); choose one with `lidar`"
             )
         lidar = ids[0]
     elif lidar not in poses:
@@ -192,7 +192,7 @@ def load_calib(path: str | os.PathLike[str], *, lidar: str | None = None) -> lis
     if _is_render_calib(data):
         return [render_camera(data, path.parent.name, lidar, str(path))]
     if lidar is not None:
-        raise NidarError(f"{path}: --lidar (lidar=) applies to a renderer calib.json only")
+        raise NidarError(f"{path}: `lidar` applies to a renderer calib.json only")
     if isinstance(data, Mapping):
         data = data.get("cameras")
     if not isinstance(data, list) or not data:

@@ -97,7 +97,7 @@ def check_scan_memory(cfg: LidarConfig, limit: int | None = None) -> None:
             f"({cfg.rings} rings x {cfg.horizontal_resolution} columns x {cfg.subrays} rays per "
             "beam), more than "
             f"the limit of {format_size(limit)}; lower horizontal_resolution or raise the limit "
-            "with --max-memory (or NIDAR_MAX_MEMORY)"
+            "with `max_memory` (or NIDAR_MAX_MEMORY)"
         )
 
 

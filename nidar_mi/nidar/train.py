@@ -489,7 +489,7 @@ def _check_intrinsic_frames(frames: list[Path]) -> None:
             raise NidarError(
                 f"loss.lambda_r_true / lambda_s_true need rendered frames with R_true and "
                 f"S_true; {path} has none (real frames carry no true reflectance: mix rendered "
-                f"frames in with render_frames, train --renders)"
+                f"frames in with `render_frames`)"
             )
 
 

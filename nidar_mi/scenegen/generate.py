@@ -195,12 +195,12 @@ def generate(
     from ..io.atomic import atomic_write_json, atomic_write_text, check_output_folder
 
     if count < 1:
-        raise NidarError(f"--count must be >= 1 (got {count})")
+        raise NidarError(f"`count` must be >= 1 (got {count})")
     check_seed(seed)
     if kind is not None and kind not in KINDS:
-        raise NidarError(f"--kind must be one of {', '.join(KINDS)} (got '{kind}')")
+        raise NidarError(f"`kind` must be one of {', '.join(KINDS)} (got '{kind}')")
     if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise NidarError(f"-o: {out_dir} exists and is not a directory")
+        raise NidarError(f"`out_dir`: {out_dir} exists and is not a directory")
     check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
     index_path = os.path.join(out_dir, INDEX_NAME)
     old_entries = {e["id"]: e for e in _read_index(index_path)}
@@ -233,7 +233,7 @@ def generate(
                 raise NidarError(
                     f"{path} holds scene {k} of another run (kind {old.get('kind')}, materials "
                     f"{old.get('material_set', 'all')}): choose "
-                    "another folder or pass --overwrite"
+                    "another folder or pass `overwrite`"
                 )
             action = "keep"  # edited by hand (or of unknown origin): kept, marked edited
             entry = (old or entry) | {"sha256": on_disk, "edited": True}

@@ -162,7 +162,7 @@ def test_negative_intensities_are_a_user_error(tmp_path, capsys):
 
 
 def test_a_branch_the_profile_was_not_fitted_on_is_refused(tmp_path):
-    from nidar_mi.cli.assign import assign_intensity
+    from nidar_mi.cloud_intensity import assign_intensity
     from nidar_mi.errors import NidarError
 
     root = _generic_folder(

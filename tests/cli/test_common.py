@@ -18,6 +18,7 @@ from nidar_mi.cli._common import (
     EXIT_INTERRUPTED,
     EXIT_TERMINATED,
     EXIT_USER_ERROR,
+    flag_message,
     parse_defines,
     run,
 )
@@ -57,6 +58,19 @@ def test_warnings_are_one_line(capsys):
 
     assert run(warn) == 0
     assert capsys.readouterr().err == "warning: first part second part\n"
+
+
+def test_library_parameters_are_shown_as_flags(capsys):
+    msg = "`ray_address` a:1: `scene_dir` and `spp` in scenes/spp `x-y` `a b`"
+    assert flag_message(msg, {"scene_dir": "--scenes"}) == (
+        "--ray-address a:1: --scenes and --spp in scenes/spp `x-y` `a b`"
+    )
+
+    def fail():
+        raise NidarError("`scene_dir`: no such directory /x/scene_dir")
+
+    assert run(fail, flags={"scene_dir": "--scenes"}) == EXIT_USER_ERROR
+    assert capsys.readouterr().err == "error: --scenes: no such directory /x/scene_dir\n"
 
 
 def test_parse_defines():

@@ -224,7 +224,7 @@ def test_failed_train_leaves_no_config(tmp_path, call, one_error_line, synthetic
 
 def test_stopped_assign_writes_nothing(stop, tmp_path, call, assign_inputs, monkeypatch):
     exc, status_want, word = stop
-    monkeypatch.setattr("nidar_mi.cli.assign.assign_intensity", _raise(exc))
+    monkeypatch.setattr("nidar_mi.cloud_intensity.assign_intensity", _raise(exc))
     status, _, err = call("assign", [*assign_inputs, "-o", tmp_path / "out"])
     assert status == status_want and err.strip() == f"{word}; nothing written"
     assert not (tmp_path / "out").exists()

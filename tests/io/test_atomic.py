@@ -116,7 +116,7 @@ def test_staged_directory_never_mixes_runs(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "mine.txt").write_text("user data")
-    with pytest.raises(NidarError, match="not empty.*--overwrite"):
+    with pytest.raises(NidarError, match="not empty.*`overwrite`"):
         with staged_directory(out) as stage:
             raise AssertionError("not reached")
     assert (out / "mine.txt").read_text() == "user data"

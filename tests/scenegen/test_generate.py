@@ -73,9 +73,9 @@ def test_run_resumes_and_keeps_existing_files(tmp_path):
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        ({"count": 0, "seed": 0}, "--count"),
-        ({"count": 1, "seed": -1}, "--seed"),
-        ({"count": 1, "seed": 0, "kind": "moon"}, "--kind"),
+        ({"count": 0, "seed": 0}, "`count`"),
+        ({"count": 1, "seed": -1}, "`seed`"),
+        ({"count": 1, "seed": 0, "kind": "moon"}, "`kind`"),
     ],
 )
 def test_bad_arguments(tmp_path, kwargs, message):

@@ -116,12 +116,12 @@ class StudyConfig:
         bad = [s for s in self.sources if s not in SOURCES]
         if bad or not self.sources:
             raise NidarError(
-                f"--sources: unknown '{','.join(bad)}' (choose from {', '.join(SOURCES)})"
+                f"`sources`: unknown '{','.join(bad)}' (choose from {', '.join(SOURCES)})"
             )
         if self.frames < 10:
-            raise NidarError(f"--frames must be >= 10 (got {self.frames})")
+            raise NidarError(f"`frames` must be >= 10 (got {self.frames})")
         if self.cols < 16 or self.width < 16 or self.height < 16 or self.spp < 1:
-            raise NidarError("--cols, --width and --height must be >= 16 and --spp >= 1")
+            raise NidarError("`cols`, `width` and `height` must be >= 16 and `spp` >= 1")
 
 
 def source_values(source: str, xyz, intensity, rng_m, nidar=None) -> np.ndarray:
