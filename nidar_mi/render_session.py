@@ -125,9 +125,9 @@ def check_options(options: RenderOptions) -> rf.RenderRequest:
         NidarError: one line naming the offending option.
     """
     if options.intensity != "nidar" and options.weights is not None:
-        raise NidarError("--weights is used only with --intensity nidar")
+        raise NidarError("`weights` is used only with `intensity` nidar")
     if options.intensity != "nidar" and options.nidar_branch is not None:
-        raise NidarError("--nidar-branch is used only with --intensity nidar")
+        raise NidarError("`nidar_branch` is used only with `intensity` nidar")
     req = options.key()
     _check_request(req)
     return req
@@ -135,26 +135,26 @@ def check_options(options: RenderOptions) -> rf.RenderRequest:
 
 def _check_request(req: rf.RenderRequest) -> None:
     if req.spp < 1:
-        raise NidarError(f"--spp must be >= 1 (got {req.spp})")
+        raise NidarError(f"`spp` must be >= 1 (got {req.spp})")
     if req.intensity not in INTENSITY_SOURCES:
         raise NidarError(
-            f"--intensity must be one of {', '.join(INTENSITY_SOURCES)} (got '{req.intensity}')"
+            f"`intensity` must be one of {', '.join(INTENSITY_SOURCES)} (got '{req.intensity}')"
         )
     if req.intensity == "nidar" and not req.cameras:
-        raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
+        raise NidarError("`intensity` nidar needs the camera renders (`cameras` is off)")
     if req.intensity == "nidar" and req.nidar_branch not in NIDAR_BRANCHES:
-        raise NidarError(f"--nidar-branch must be one of {', '.join(NIDAR_BRANCHES)}")
+        raise NidarError(f"`nidar_branch` must be one of {', '.join(NIDAR_BRANCHES)}")
     if req.seed is not None:
         check_seed(req.seed)
     if req.bin_intensity not in rf.BIN_INTENSITY:
         raise NidarError(
-            f"--bin-intensity must be one of {', '.join(rf.BIN_INTENSITY)} "
+            f"`bin_intensity` must be one of {', '.join(rf.BIN_INTENSITY)} "
             f"(got '{req.bin_intensity}')"
         )
     bad = [f for f in req.formats if f not in rf.FORMATS]
     if bad or not req.formats:
         raise NidarError(
-            f"--formats: unknown '{','.join(bad)}' (choose from {', '.join(rf.FORMATS)})"
+            f"`formats`: unknown '{','.join(bad)}' (choose from {', '.join(rf.FORMATS)})"
         )
 
 

@@ -182,7 +182,7 @@ def _frame_times(traj, rate: float, frames: int | None, sweep_s: float) -> np.nd
         frames = fit
     elif frames > fit:
         raise NidarError(
-            f"--frames {frames}: the trajectory ({t1 - t0:.3g} s) holds {fit} frames at "
+            f"`frames` {frames}: the trajectory ({t1 - t0:.3g} s) holds {fit} frames at "
             f"{rate:g} Hz (each needs its whole sweep of {sweep_s:.3g} s inside it)"
         )
     return t0 + np.arange(frames) / rate
@@ -240,13 +240,13 @@ def check_sequence(options: SequenceOptions):
     """
     rate, frames = options.rate, options.frames
     if rate is not None and not (rate > 0 and np.isfinite(rate)):
-        raise NidarError(f"--rate must be > 0 Hz (got {rate})")
+        raise NidarError(f"`rate` must be > 0 Hz (got {rate})")
     if frames is not None and frames < 1:
-        raise NidarError(f"--frames must be >= 1 (got {frames})")
+        raise NidarError(f"`frames` must be >= 1 (got {frames})")
     bad = [f for f in options.sequence_formats if f not in SEQUENCE_FORMATS]
     if bad:
         raise NidarError(
-            f"--sequence-formats: unknown '{','.join(bad)}' "
+            f"`sequence_formats`: unknown '{','.join(bad)}' "
             f"(choose from {', '.join(SEQUENCE_FORMATS)})"
         )
     request = check_options(options.frame_options())

@@ -187,7 +187,7 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
 def _nidar_step(run: _Run, options: RenderOptions) -> dict[str, dict]:
     """``--intensity nidar``: load the NIDAR model, then :func:`nidar_columns`."""
     if not run.renders:
-        raise NidarError("--intensity nidar needs at least one perspective camera in the scene")
+        raise NidarError("`intensity` nidar needs at least one perspective camera in the scene")
     from .nidar.pipeline import NidarModel
 
     model = NidarModel.load(options.weights)

@@ -10,7 +10,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 
 #: Modules whose messages still name flags (their parameters move to request objects).
-_NOT_YET = {"simulate.py", "sequence.py"}
+_NOT_YET: set[str] = set()
 #: Messages that name another command to run, with its flags.
 _COMMAND_HINTS = ("--profile FILE", "calibrate --branch")
 

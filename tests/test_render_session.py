@@ -32,12 +32,12 @@ def test_key_is_the_render_request():
 @pytest.mark.parametrize(
     "options, message",
     [
-        (dict(weights="w"), "--weights is used only with --intensity nidar"),
-        (dict(nidar_branch="R"), "--nidar-branch is used only with --intensity nidar"),
-        (dict(spp=0), "--spp must be >= 1"),
+        (dict(weights="w"), "`weights` is used only with `intensity` nidar"),
+        (dict(nidar_branch="R"), "`nidar_branch` is used only with `intensity` nidar"),
+        (dict(spp=0), "`spp` must be >= 1"),
         (dict(intensity="nidar", cameras=False), "needs the camera renders"),
-        (dict(formats=("npz", "xyz")), "--formats: unknown 'xyz'"),
-        (dict(bin_intensity="half"), "--bin-intensity must be one of"),
+        (dict(formats=("npz", "xyz")), "`formats`: unknown 'xyz'"),
+        (dict(bin_intensity="half"), "`bin_intensity` must be one of"),
     ],
 )
 def test_bad_options_are_refused_before_loading(options, message):
@@ -93,10 +93,10 @@ def test_another_variant_than_the_active_one_is_refused(variant):
 @pytest.mark.parametrize(
     "options, message",
     [
-        (dict(rate=0.0), "--rate must be > 0 Hz"),
-        (dict(frames=0), "--frames must be >= 1"),
-        (dict(sequence_formats=("mcap",)), "--sequence-formats: unknown 'mcap'"),
-        (dict(spp=0), "--spp must be >= 1"),
+        (dict(rate=0.0), "`rate` must be > 0 Hz"),
+        (dict(frames=0), "`frames` must be >= 1"),
+        (dict(sequence_formats=("mcap",)), "`sequence_formats`: unknown 'mcap'"),
+        (dict(spp=0), "`spp` must be >= 1"),
         (dict(trajectory="nope.txt"), "nope.txt: no such trajectory file"),
     ],
 )

@@ -224,6 +224,8 @@ def _render_options(args):
     from ..errors import NidarError
     from ..render_session import RenderOptions
 
+    if args.intensity == "nidar" and args.no_cameras:
+        raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
     profile = None
     if args.profile is not None:
         if args.intensity != "nidar":
