@@ -12,7 +12,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["Poses", "BlockRays", "jit_float", "static_pose", "column_poses", "block_rays"]
+__all__ = [
+    "Poses",
+    "BlockRays",
+    "jit_float",
+    "jit_scalars",
+    "gather_each",
+    "static_pose",
+    "column_poses",
+    "block_rays",
+]
 
 
 def jit_float(values: np.ndarray):
@@ -29,6 +38,37 @@ def jit_float(values: np.ndarray):
     out = buf[off : off + a.size]
     out[:] = a
     return mi.Float(out)
+
+
+_index_cache: dict[tuple[str, int], Any] = {}
+
+
+def jit_scalars(values) -> list:
+    """Width-1 ``mi.Float`` arrays holding ``values`` (float32), uploaded in one copy.
+
+    Each is gathered inside the kernels that use it, from an evaluated index (a literal index
+    would make Dr.Jit copy the element eagerly, one transfer each): data, not literals, so
+    other values launch the same kernels.
+    """
+    import mitsuba as mi
+
+    return gather_each(mi.Float, jit_float(values), len(values))
+
+
+def gather_each(dtype, buf, count: int) -> list:
+    """The first ``count`` entries of the Dr.Jit array ``buf`` as width-1 arrays of ``dtype``
+    (see :func:`jit_scalars`)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    out = []
+    for i in range(count):
+        key = (mi.variant(), i)
+        if key not in _index_cache:
+            _index_cache[key] = mi.UInt32(np.array([i], dtype=np.uint32))
+            dr.eval(_index_cache[key])
+        out.append(dr.gather(dtype, buf, _index_cache[key]))
+    return out
 
 
 class Poses(NamedTuple):
@@ -58,13 +98,11 @@ class BlockRays(NamedTuple):
 
 
 def static_pose(pose: np.ndarray) -> Poses:
-    """An opaque single pose from a (4, 4) float64 matrix."""
-    import drjit as dr
+    """A single pose from a (4, 4) float64 matrix, uploaded in one copy (:func:`jit_scalars`)."""
     import mitsuba as mi
 
-    T = mi.Transform4f(np.asarray(pose, dtype=np.float32))
-    dr.make_opaque(T)
-    return Poses(T, None)
+    m = jit_scalars(np.asarray(pose, dtype=np.float32).reshape(16))
+    return Poses(mi.Transform4f(mi.Matrix4f(*m)), None)
 
 
 def column_poses(poses: np.ndarray) -> Poses:
