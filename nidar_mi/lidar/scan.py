@@ -53,8 +53,6 @@ from .scene_tables import SceneTables, material_table, scene_tables, shape_table
 
 __all__ = ["ScanResult", "ReturnLayer", "scan", "material_table", "shape_table"]
 
-_VALID, _HIT = 1, 2  # bits of the ``flags`` column
-
 
 def scan(
     scene,
@@ -304,19 +302,20 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
             "cos": dr.select(hit, sh.cos_t, 0.0),
             "material": material,
             "shape": dr.select(hit, tables.shape_index(beams.si.shape), -1),
-            "flags": dr.select(valid, mi.UInt32(_VALID), 0) | dr.select(hit, mi.UInt32(_HIT), 0),
+            "valid": valid,
+            "hit": hit,
         }
         count = len(tables.material_names)
+        # the materials hit matter only to warn of RGB-only ones (a scatter of every beam)
         seen = (
-            _material_flags(material, hit, count),
+            _material_flags(material, hit, count) if tables.rgb_only else dr.zeros(mi.UInt32, 1),
             _material_flags(material, hit & ~dr.isfinite(sh.expected), count),
         )
         dr.eval(columns, seen)  # one kernel
     with _timed(ctx.timings, "readback"):
         cols = {key: value.numpy() for key, value in columns.items()}
-        flags = cols.pop("flags")
-        ctx.out.put(0, start, stop, valid=(flags & _VALID) != 0, **cols)
-        ctx.out.hit[start:stop] = (flags & _HIT) != 0
+        ctx.out.hit[start:stop] = cols.pop("hit")
+        ctx.out.put(0, start, stop, **cols)
         ctx.out.materials_hit.append(np.flatnonzero(seen[0].numpy()[1:]))
         ctx.out.nonfinite.append(np.flatnonzero(seen[1].numpy()) - 1)
 
