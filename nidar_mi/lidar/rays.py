@@ -46,9 +46,9 @@ _index_cache: dict[tuple[str, int], Any] = {}
 def jit_scalars(values) -> list:
     """Width-1 ``mi.Float`` arrays holding ``values`` (float32), uploaded in one copy.
 
-    Each is gathered inside the kernels that use it, from an evaluated index (a literal index
-    would make Dr.Jit copy the element eagerly, one transfer each): data, not literals, so
-    other values launch the same kernels.
+    They are gathered by one width-1 kernel from evaluated indices (a literal index would make
+    Dr.Jit copy each element eagerly, one transfer each), so the kernels that use them read
+    evaluated scalars: data, not literals, and other values launch the same kernels.
     """
     import mitsuba as mi
 
@@ -68,6 +68,7 @@ def gather_each(dtype, buf, count: int) -> list:
             _index_cache[key] = mi.UInt32(np.array([i], dtype=np.uint32))
             dr.eval(_index_cache[key])
         out.append(dr.gather(dtype, buf, _index_cache[key]))
+    dr.eval(out)  # one width-1 kernel: the scan's kernels then read scalars
     return out
 
 

@@ -672,6 +672,8 @@ def _drop_materials(layer: ReturnLayer, bad: np.ndarray) -> None:
     data at the laser wavelength gives no trustworthy return anywhere, even where its
     evaluation happens to be finite (Mitsuba's conductor presets read η = k = 0 past their
     table, a perfect mirror at exactly normal incidence and NaN elsewhere)."""
+    if not len(bad):
+        return
     drop = np.isin(layer.material, bad) & layer.valid
     if drop.any():
         layer.valid = layer.valid & ~drop
