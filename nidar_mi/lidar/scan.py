@@ -273,7 +273,6 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
     """One ray per beam: detection, noise, the material and shape indices and the per-beam
     columns in one kernel, then one synchronisation and the columns' read-back."""
     import drjit as dr
-    import mitsuba as mi
 
     inputs, tables = ctx.inputs, ctx.tables
     with _timed(ctx.timings, "detect"):
@@ -305,30 +304,23 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
             "valid": valid,
             "hit": hit,
         }
-        count = len(tables.material_names)
-        # the materials hit matter only to warn of RGB-only ones (a scatter of every beam)
-        seen = (
-            _material_flags(material, hit, count) if tables.rgb_only else dr.zeros(mi.UInt32, 1),
-            _material_flags(material, hit & ~dr.isfinite(sh.expected), count),
-        )
-        dr.eval(columns, seen)  # one kernel
+        columns["nonfinite"] = hit & ~dr.isfinite(sh.expected)  # its material is dropped
+        dr.eval(columns)  # one kernel
     with _timed(ctx.timings, "readback"):
         cols = {key: value.numpy() for key, value in columns.items()}
         ctx.out.hit[start:stop] = cols.pop("hit")
+        nonfinite = cols.pop("nonfinite")
+        if nonfinite.any():
+            ctx.out.nonfinite.append(cols["material"][nonfinite])
+        if tables.rgb_only:  # the materials hit matter only to warn of RGB-only ones
+            ctx.out.materials_hit.append(_materials_hit(cols["material"]))
         ctx.out.put(0, start, stop, **cols)
-        ctx.out.materials_hit.append(np.flatnonzero(seen[0].numpy()[1:]))
-        ctx.out.nonfinite.append(np.flatnonzero(seen[1].numpy()) - 1)
 
 
-def _material_flags(material, active, count: int):
-    """``mi.UInt32`` (M+1,) flags: entry ``1 + m`` is set when an ``active`` beam has material
-    ``m`` (entry 0: an unknown material, ``m`` = -1)."""
-    import drjit as dr
-    import mitsuba as mi
-
-    flags = dr.zeros(mi.UInt32, count + 1)
-    dr.scatter(flags, mi.UInt32(1), mi.UInt32(material + 1), active)
-    return flags
+def _materials_hit(material: np.ndarray) -> np.ndarray:
+    """The distinct material indices >= 0 among ``material`` (int32)."""
+    # np.bincount: several times faster than np.unique on a scan's worth of indices
+    return np.flatnonzero(np.bincount(material[material >= 0], minlength=1))
 
 
 def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, stop: int) -> None:
@@ -388,8 +380,8 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
                 material=material,
                 shape=np.where(has, attrs["shape"][rows, src], -1),
             )
-            if m == 0:
-                ctx.out.materials_hit.append(np.unique(material[material >= 0]))
+            if m == 0 and ctx.tables.rgb_only:
+                ctx.out.materials_hit.append(_materials_hit(material))
 
 
 def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
