@@ -17,7 +17,6 @@ __all__ = [
     "BlockRays",
     "jit_float",
     "jit_scalars",
-    "gather_each",
     "static_pose",
     "column_poses",
     "block_rays",
@@ -32,7 +31,7 @@ def jit_float(values: np.ndarray):
     """
     import mitsuba as mi
 
-    a = np.asarray(values, dtype=np.float32).ravel()
+    a = np.asarray(values, dtype=np.float32).ravel()  # float32 input: bits copied as they are
     buf = np.empty(a.size + 16, dtype=np.float32)
     off = (-buf.ctypes.data % 64) // 4
     out = buf[off : off + a.size]
@@ -43,32 +42,26 @@ def jit_float(values: np.ndarray):
 _index_cache: dict[tuple[str, int], Any] = {}
 
 
-def jit_scalars(values) -> list:
-    """Width-1 ``mi.Float`` arrays holding ``values`` (float32), uploaded in one copy.
+def jit_scalars(values: np.ndarray) -> list:
+    """Width-1 ``mi.Float`` values of a (k,) float32 array, uploaded in one copy.
 
-    They are gathered by one width-1 kernel from evaluated indices (a literal index would make
-    Dr.Jit copy each element eagerly, one transfer each), so the kernels that use them read
-    evaluated scalars: data, not literals, and other values launch the same kernels.
+    Each is a gather from that buffer at an evaluated index (a literal index would make Dr.Jit
+    copy each element eagerly, one transfer each); the caller evaluates them together (one
+    width-1 kernel), so that the kernels using them read evaluated scalars: data, not literals,
+    and other values launch the same kernels. The bits are kept (a float32 view of integers
+    reads back unchanged through ``dr.reinterpret_array``).
     """
-    import mitsuba as mi
-
-    return gather_each(mi.Float, jit_float(values), len(values))
-
-
-def gather_each(dtype, buf, count: int) -> list:
-    """The first ``count`` entries of the Dr.Jit array ``buf`` as width-1 arrays of ``dtype``
-    (see :func:`jit_scalars`)."""
     import drjit as dr
     import mitsuba as mi
 
+    buf = jit_float(values)
     out = []
-    for i in range(count):
+    for i in range(len(values)):
         key = (mi.variant(), i)
         if key not in _index_cache:
             _index_cache[key] = mi.UInt32(np.array([i], dtype=np.uint32))
             dr.eval(_index_cache[key])
-        out.append(dr.gather(dtype, buf, _index_cache[key]))
-    dr.eval(out)  # one width-1 kernel: the scan's kernels then read scalars
+        out.append(dr.gather(mi.Float, buf, _index_cache[key]))
     return out
 
 
@@ -98,12 +91,12 @@ class BlockRays(NamedTuple):
     weight: Any
 
 
-def static_pose(pose: np.ndarray) -> Poses:
-    """A single pose from a (4, 4) float64 matrix, uploaded in one copy (:func:`jit_scalars`)."""
+def static_pose(entries) -> Poses:
+    """A single pose from its 16 row-major matrix entries (width-1 ``mi.Float``, e.g. of
+    :func:`jit_scalars`)."""
     import mitsuba as mi
 
-    m = jit_scalars(np.asarray(pose, dtype=np.float32).reshape(16))
-    return Poses(mi.Transform4f(mi.Matrix4f(*m)), None)
+    return Poses(mi.Transform4f(mi.Matrix4f(*entries)), None)
 
 
 def column_poses(poses: np.ndarray) -> Poses:

@@ -39,7 +39,7 @@ from .echoes import group_echoes, select_returns
 from .footprint import subray_offsets
 from .memory import check_scan_memory, chunk_beams
 from .raycast import cast, monostatic_reflectance
-from .rays import block_rays, column_poses, gather_each, jit_float, jit_scalars, static_pose
+from .rays import block_rays, column_poses, jit_float, jit_scalars, static_pose
 from .result import ReturnLayer, ScanResult
 from .return_model import (
     add_noise,
@@ -91,11 +91,14 @@ def scan(
     pose = _pose(sensor, to_world)
     poses_per_column = _check_column_poses(cfg, poses_per_column)
     with _timed(timings, "pattern"):
+        inputs, poses = _kernel_inputs(
+            cfg, cfg.seed if seed is None else int(seed), pose if poses_per_column is None else None
+        )
         ctx = _Context(
             scene,
             cfg,
-            _kernel_inputs(cfg, cfg.seed if seed is None else int(seed)),
-            static_pose(pose) if poses_per_column is None else column_poses(poses_per_column),
+            inputs,
+            poses if poses_per_column is None else column_poses(poses_per_column),
             scene_tables(scene),
             _Outputs(cfg.pattern.size, cfg.max_returns),
             timings,
@@ -250,7 +253,7 @@ def _scan_block(ctx: _Context, start: int, stop: int) -> None:
             cfg.intensity_mode,
             beams.two_way_transmittance,
         )
-    draws = _draws(cfg, stop - start, inputs.seed_state, first)
+    draws = _draws(cfg, stop - start, inputs, first)
     shading = _Shading(rho, cos_t, bsdf, d, expected)
     if subrays is None:
         _ideal_block(ctx, beams, shading, draws, start, stop)
@@ -557,13 +560,21 @@ class _KernelInputs(NamedTuple):
     receiver_noise: Any
     half_angle: Any
     seed_state: Any
+    stream: Any
     seed: int
 
 
-def _kernel_inputs(cfg: LidarConfig, seed: int) -> _KernelInputs:
+def _kernel_inputs(cfg: LidarConfig, seed: int, pose: np.ndarray | None):
+    """The kernels' scalars and the single pose (when given, (4, 4)), in one upload and one
+    width-1 kernel (:func:`.rays.jit_scalars`).
+
+    Returns:
+        ``(_KernelInputs, Poses or None)``.
+    """
+    import drjit as dr
     import mitsuba as mi
 
-    values = [
+    params = [
         cfg.wavelength,
         cfg.gain,
         cfg.atmospheric_extinction,
@@ -576,13 +587,24 @@ def _kernel_inputs(cfg: LidarConfig, seed: int) -> _KernelInputs:
         cfg.receiver_noise_std,
         cfg.beam_divergence * 5e-4,  # mrad full angle -> rad half angle
     ]
-    jit = jit_scalars(np.asarray(values, dtype=np.float64))
+    words = np.array(  # the 64-bit PCG32 seed state and stream, as float32 bit patterns
+        [(seed * 0x9E3779B97F4A7C15) % 2**64, _PCG32_DEFAULT_STREAM], dtype="<u8"
+    ).view("<u4")
+    matrix = np.zeros(0) if pose is None else np.asarray(pose, dtype=np.float64).reshape(16)
+    values = np.concatenate(
+        [np.asarray(params, dtype=np.float32), matrix.astype(np.float32), words.view(np.float32)]
+    )
+    jit = jit_scalars(values)
+    bits = [mi.UInt64(dr.reinterpret_array(mi.UInt32, x)) for x in jit[-4:]]
+    seed_state, stream = bits[0] | (bits[1] << 32), bits[2] | (bits[3] << 32)
+    scalars = jit[: len(params)]
+    entries = jit[len(params) : len(params) + matrix.size]
+    dr.eval(scalars, entries, seed_state, stream)
     for i in range(6, 10):  # dropout and noise σ: a literal 0 where the sensor has none
-        if values[i] == 0:
-            jit[i] = 0.0
-    state = np.array([(seed * 0x9E3779B97F4A7C15) % 2**64], dtype=np.uint64)
-    (seed_state,) = gather_each(mi.UInt64, mi.UInt64(state), 1)
-    return _KernelInputs(*jit, seed_state, seed)
+        if params[i] == 0:
+            scalars[i] = 0.0
+    inputs = _KernelInputs(*scalars, seed_state, stream, seed)
+    return inputs, (static_pose(entries) if pose is not None else None)
 
 
 _PCG32_DEFAULT_STREAM = 0xDA3E39CB94B95BDB
@@ -597,19 +619,18 @@ class _Draws(NamedTuple):
     receiver: Any
 
 
-def _draws(cfg: LidarConfig, n: int, seed_state, first_beam) -> _Draws:
+def _draws(cfg: LidarConfig, n: int, inputs, first_beam) -> _Draws:
     """Per beam and return: a uniform dropout draw and standard normals for intensity and range
     noise; then, per beam, a standard normal of the receiver noise (drawn after the others so
     that they keep their values). Beam ``b`` draws from its own stream whatever block it is
     cast in; a draw whose σ (or probability) is 0 still advances the stream."""
-    import drjit as dr
     import mitsuba as mi
 
     offset = mi.UInt64(first_beam)
     rng = mi.PCG32(
         size=n,
-        initstate=seed_state + offset,
-        initseq=dr.opaque(mi.UInt64, _PCG32_DEFAULT_STREAM) + offset,
+        initstate=inputs.seed_state + offset,
+        initseq=inputs.stream + offset,
     )
 
     def uniform(used: bool):
