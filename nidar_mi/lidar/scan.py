@@ -3,9 +3,22 @@ detection and noise → read back.
 
 :func:`scan` casts every beam at once in Dr.Jit (in blocks of bounded memory for very large
 scans, :mod:`.memory`); the physics is :mod:`.return_model`'s, the ray casting :mod:`.raycast`'s,
-the rays (pose per column, beam origins, sub-rays) :mod:`.rays`'s. The pose and every scalar
-parameter enter the kernels as opaque values, so scanning again with another pose, other
-per-column poses or another seed reuses the compiled kernels.
+the rays (pose per column, beam origins, sub-rays) :mod:`.rays`'s. What stays on the device:
+
+* the beam pattern, uploaded once per pattern and block (cached);
+* every scalar parameter, the single pose and the PCG32 seed state: one upload and one width-1
+  kernel per scan, read by the scan's kernels as data (never literals), so scanning again with
+  another pose, other per-column poses or another seed reuses the compiled kernels; a dropout
+  probability or noise σ of 0 leaves its draw's transform out of that sensor's kernels (the
+  random stream advances as before, so every other draw keeps its value);
+* the material and shape indices, looked up from the hit's BSDF and shape pointers in the scene's
+  tables (:mod:`.scene_tables`, cached per scene).
+
+An ideal-beam block is **one kernel** (rays, cast, BSDF, return model, draws, detection, look-ups)
+followed by one synchronisation and the read-back of its per-beam columns (zero-copy views on
+the CPU). On the host remain the checks of the materials found non-finite or RGB-only (rare
+paths), building :class:`ScanResult`, and, for diverging beams, the grouping of the sub-rays'
+contributions into echoes and the choice of returns (:mod:`.echoes`, NumPy over the block).
 
 Two paths, one per beam model:
 
@@ -19,7 +32,7 @@ Two paths, one per beam model:
   selected per ``return_mode`` (:mod:`.echoes`) by the receiver's output (each echo with its
   own receiver noise); further noise per return.
 
-Reading back names the materials (:func:`material_table`) and the shapes (``scene.shapes()``
+A scan names the materials (:func:`material_table`) and the shapes (``scene.shapes()``
 order), and warns once per material whose reflectance is not finite (Mitsuba's conductor presets
 past ~886 nm: its returns are dropped) or comes from RGB upsampling (not physical past 830 nm).
 """
@@ -100,7 +113,7 @@ def scan(
             inputs,
             poses if poses_per_column is None else column_poses(poses_per_column),
             scene_tables(scene),
-            _Outputs(cfg.pattern.size, cfg.max_returns),
+            _Outputs(cfg.rings * cfg.horizontal_resolution, cfg.max_returns),
             timings,
         )
     for start, stop in chunk_beams(cfg):
@@ -146,7 +159,7 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
         _drop_materials(layer, bad)
     _warn_rgb_materials(tables, cfg, np.unique(np.concatenate(out.materials_hit)))
     first = layers[0]
-    directions, origins = _pattern_arrays(cfg, 0, cfg.pattern.size)
+    directions, origins = _pattern_arrays(cfg, 0, cfg.rings * cfg.horizontal_resolution)
     return ScanResult(
         config=cfg,
         valid=first.valid,
@@ -163,7 +176,7 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
         shape_index=first.shape_index,
         shape_labels=shape_labels(ctx.scene, labels),
         shape_names=list(tables.shape_names),
-        time=_firing_times(cfg.pattern).reshape(shape),
+        time=_firing_times(cfg).reshape(shape),
         origins=None if origins is None else origins.reshape(*shape, 3),
         column_poses=poses_per_column,
         further=layers[1:],
@@ -484,6 +497,7 @@ def _timed(timings: dict[str, float], stage: str):
 _beam_cache: dict[tuple, tuple[np.ndarray, np.ndarray | None]] = {}
 _jit_cache: dict[tuple, tuple[Any, Any]] = {}
 _time_cache: dict[Any, np.ndarray] = {}
+_pattern_cache: dict[LidarConfig, Any] = {}
 _CACHE_SIZE = 16
 
 
@@ -497,22 +511,23 @@ def _cached(cache: dict, key, make):
 
 def _pattern_arrays(cfg: LidarConfig, start: int, stop: int):
     """(n, 3) float32 directions and origins (or None) of beams ``start..stop``, read-only and
-    cached per pattern and block."""
+    cached per sensor configuration and block."""
 
     def make():
-        d, o = cfg.pattern.beams(start, stop)
+        d, o = _pattern(cfg).beams(start, stop)
         out = tuple(None if a is None else a.astype(np.float32) for a in (d, o))
         for a in out:
             if a is not None:
                 a.setflags(write=False)
         return out
 
-    return _cached(_beam_cache, (cfg.pattern, start, stop), make)
+    return _cached(_beam_cache, (cfg, start, stop), make)
 
 
 def _pattern_jit(cfg: LidarConfig, start: int, stop: int):
     """Beams ``start..stop`` as ``mi.Vector3f`` directions and ``mi.Point3f`` origins (or None),
-    uploaded once per pattern, block and variant: the pattern stays on the device."""
+    uploaded once per sensor configuration, block and variant: the pattern stays on the
+    device."""
     import mitsuba as mi
 
     def make():
@@ -521,18 +536,23 @@ def _pattern_jit(cfg: LidarConfig, start: int, stop: int):
         origins = None if o is None else mi.Point3f(*(jit_float(o[:, i]) for i in range(3)))
         return directions, origins
 
-    return _cached(_jit_cache, (cfg.pattern, start, stop, mi.variant()), make)
+    return _cached(_jit_cache, (cfg, start, stop, mi.variant()), make)
 
 
-def _firing_times(pattern) -> np.ndarray:
-    """(R·C,) float32 firing time of every beam, s; read-only, cached per pattern."""
+def _firing_times(cfg: LidarConfig) -> np.ndarray:
+    """(R·C,) float32 firing time of every beam, s; read-only, cached per configuration."""
 
     def make():
-        t = pattern.time_s().astype(np.float32)
+        t = _pattern(cfg).time_s().astype(np.float32)
         t.setflags(write=False)
         return t
 
-    return _cached(_time_cache, pattern, make)
+    return _cached(_time_cache, cfg, make)
+
+
+def _pattern(cfg: LidarConfig):
+    """``cfg.pattern``, cached (building it, and hashing it, costs ~1 ms each time)."""
+    return _cached(_pattern_cache, cfg, lambda: cfg.pattern)
 
 
 def _pose(sensor, to_world) -> np.ndarray:
