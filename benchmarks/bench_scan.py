@@ -146,10 +146,6 @@ def run_benchmark(
     if run_o3d is not None:
         methods["open3d"] = run_o3d
     first, secs, stages = _time_interleaved(methods, repeats)
-    res, t_bare = run_scan(), run_bare()
-    med = {k: _median(v) for k, v in secs.items()}
-    both = res.valid.reshape(-1) & np.isfinite(t_bare)
-    diff = np.abs(res.range.reshape(-1)[both] - t_bare[both])
     out = {
         "rays": n,
         "rings": rings,
@@ -157,35 +153,51 @@ def run_benchmark(
         "triangles": int(sum(len(f) for _, f in meshes.values())),
         "repeats": repeats,
         "variant": variant,
-        "median_s": med,
-        "min_s": {k: min(v) for k, v in secs.items()},
-        "rays_per_s": {k: n / v for k, v in med.items()},
-        "ratio_scan_over_bare": med["bare"] / med["scan"],
+        **_summary(secs, n),
         "scan_stage_median_s": {k: _median(v) for k, v in stages.items()},
         "scan_kernel_s": _kernel_ms(run_scan) / 1e3,
         "first_call_s": first,
         "all_s": secs,
-        "hit_fraction": {
-            "scan_hit": float(res.hit.mean()),
-            "scan_valid": float(res.valid.mean()),
-            "bare": float(np.isfinite(t_bare).mean()),
-        },
-        "agreement_m": {
-            "compared": int(both.sum()),
-            "scan_vs_bare_median": float(np.median(diff)) if diff.size else None,
-            "scan_vs_bare_max": float(diff.max()) if diff.size else None,
-            "hit_mismatch": int((res.hit.reshape(-1) != np.isfinite(t_bare)).sum()),
-        },
+    }
+    out.update(_agreement(run_scan(), run_bare(), run_o3d))
+    return out
+
+
+def _summary(secs: dict[str, list[float]], n: int) -> dict:
+    """Medians, minima, rays/s and the ratios of the methods' timings."""
+    med = {k: _median(v) for k, v in secs.items()}
+    out = {
+        "median_s": med,
+        "min_s": {k: min(v) for k, v in secs.items()},
+        "rays_per_s": {k: n / v for k, v in med.items()},
+        "ratio_scan_over_bare": med["bare"] / med["scan"],
+    }
+    if "open3d" in med:
+        out["ratio_scan_over_open3d"] = med["open3d"] / med["scan"]
+    return out
+
+
+def _agreement(res, t_bare: np.ndarray, run_o3d) -> dict:
+    """Hit fractions and the scan's ranges against the bare cast's distances (and Open3D's)."""
+    both = res.valid.reshape(-1) & np.isfinite(t_bare)
+    diff = np.abs(res.range.reshape(-1)[both] - t_bare[both])
+    agree = {
+        "compared": int(both.sum()),
+        "scan_vs_bare_median": float(np.median(diff)) if diff.size else None,
+        "scan_vs_bare_max": float(diff.max()) if diff.size else None,
+        "hit_mismatch": int((res.hit.reshape(-1) != np.isfinite(t_bare)).sum()),
     }
     if run_o3d is not None:
-        out["ratio_scan_over_open3d"] = med["open3d"] / med["scan"]
         t_o3d = run_o3d()
         o3d_both = np.isfinite(t_bare) & np.isfinite(t_o3d)
         o3d_diff = np.abs(t_bare[o3d_both] - t_o3d[o3d_both])
-        out["agreement_m"]["bare_vs_open3d_median"] = (
-            float(np.median(o3d_diff)) if o3d_diff.size else None
-        )
-    return out
+        agree["bare_vs_open3d_median"] = float(np.median(o3d_diff)) if o3d_diff.size else None
+    hits = {
+        "scan_hit": float(res.hit.mean()),
+        "scan_valid": float(res.valid.mean()),
+        "bare": float(np.isfinite(t_bare).mean()),
+    }
+    return {"hit_fraction": hits, "agreement_m": agree}
 
 
 def run_all(*, variants: list[str], cols: list[int], **kwargs) -> dict:
