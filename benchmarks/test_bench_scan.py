@@ -17,35 +17,47 @@ if _HERE not in sys.path:
 
 import bench_scan as bench  # noqa: E402
 
-
-def test_main_writes_json_and_both_casters_agree(tmp_path, capsys):
-    pytest.importorskip("open3d")
-    out = tmp_path / "r.json"
-    args = ["--repeats", "1", "--rings", "8", "--cols", "64", "--grid", "41", "--json", str(out)]
-    assert bench.main(args) == 0
-    r = json.loads(out.read_text())
-    assert r["rays"] == 8 * 64 and r["triangles"] == 2 * 40 * 40 + 1000
-    assert set(r["rays_per_s"]) == {"scan", "bare", "open3d"}
-    assert r["ratio_scan_over_open3d"] == pytest.approx(
-        r["median_s"]["open3d"] / r["median_s"]["scan"]
-    )
-    agree = r["agreement_m"]
-    assert agree["compared"] > 0.9 * r["rays"]
-    assert agree["scan_vs_open3d_median"] < 1e-5 and agree["scan_vs_open3d_max"] < 1e-3
-    assert agree["hit_mismatch"] == 0
-    assert "Open3D cast_rays" in capsys.readouterr().out
+_SMALL = ["--repeats", "1", "--rings", "8", "--grid", "41"]
 
 
-def test_main_without_open3d(tmp_path, capsys, monkeypatch):
+def test_main_writes_json_and_scan_agrees_with_the_bare_cast(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "open3d", None)  # import open3d raises ImportError
     out = tmp_path / "r.json"
-    assert bench.main(["--json", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("error: Open3D is not importable") and err.count("\n") == 1
-    assert "[bench]" in err and not out.exists()
+    assert bench.main([*_SMALL, "--cols", "64", "32", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert [r["cols"] for r in result["runs"]] == [64, 32]
+    assert result["machine"]["open3d"] is None
+    r = result["runs"][0]
+    assert r["rays"] == 8 * 64 and r["triangles"] == 2 * 40 * 40 + 1000
+    assert set(r["rays_per_s"]) == {"scan", "bare"} and "ratio_scan_over_open3d" not in r
+    assert r["ratio_scan_over_bare"] == pytest.approx(r["median_s"]["bare"] / r["median_s"]["scan"])
+    agree = r["agreement_m"]
+    assert agree["compared"] > 0.9 * r["rays"]
+    assert agree["scan_vs_bare_median"] < 1e-5 and agree["scan_vs_bare_max"] < 1e-3
+    assert agree["hit_mismatch"] == 0
+    text = capsys.readouterr().out
+    assert "full / bare" in text and "Open3D" not in text
+
+
+def test_main_with_open3d_compares_it_too(tmp_path, capsys):
+    pytest.importorskip("open3d")
+    out = tmp_path / "r.json"
+    assert bench.main([*_SMALL, "--cols", "64", "--json", str(out)]) == 0
+    r = json.loads(out.read_text())["runs"][0]
+    assert set(r["rays_per_s"]) == {"scan", "bare", "open3d"}
+    assert r["agreement_m"]["bare_vs_open3d_median"] < 1e-5
+    assert "Open3D cast_rays" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("arg", ["--repeats", "--rings", "--cols", "--grid"])
 def test_main_rejects_non_positive_counts(arg, capsys):
     assert bench.main([arg, "0"]) == 2
     assert capsys.readouterr().err.startswith(f"error: {arg} must be >= ")
+
+
+def test_main_rejects_unknown_variant(capsys):
+    assert bench.main(["--variants", "no_such_variant"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("error: variant 'no_such_variant' is not available") and err.count("\n") == 1
+    )

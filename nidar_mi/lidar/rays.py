@@ -12,7 +12,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["Poses", "BlockRays", "jit_float", "static_pose", "column_poses", "block_rays"]
+__all__ = [
+    "Poses",
+    "BlockRays",
+    "jit_float",
+    "jit_scalars",
+    "static_pose",
+    "column_poses",
+    "block_rays",
+]
 
 
 def jit_float(values: np.ndarray):
@@ -23,12 +31,38 @@ def jit_float(values: np.ndarray):
     """
     import mitsuba as mi
 
-    a = np.asarray(values, dtype=np.float32).ravel()
+    a = np.asarray(values, dtype=np.float32).ravel()  # float32 input: bits copied as they are
     buf = np.empty(a.size + 16, dtype=np.float32)
     off = (-buf.ctypes.data % 64) // 4
     out = buf[off : off + a.size]
     out[:] = a
     return mi.Float(out)
+
+
+_index_cache: dict[tuple[str, int], Any] = {}
+
+
+def jit_scalars(values: np.ndarray) -> list:
+    """Width-1 ``mi.Float`` values of a (k,) float32 array, uploaded in one copy.
+
+    Each is a gather from that buffer at an evaluated index (a literal index would make Dr.Jit
+    copy each element eagerly, one transfer each); the caller evaluates them together (one
+    width-1 kernel), so that the kernels using them read evaluated scalars: data, not literals,
+    and other values launch the same kernels. The bits are kept (a float32 view of integers
+    reads back unchanged through ``dr.reinterpret_array``).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    buf = jit_float(values)
+    out = []
+    for i in range(len(values)):
+        key = (mi.variant(), i)
+        if key not in _index_cache:
+            _index_cache[key] = mi.UInt32(np.array([i], dtype=np.uint32))
+            dr.eval(_index_cache[key])
+        out.append(dr.gather(mi.Float, buf, _index_cache[key]))
+    return out
 
 
 class Poses(NamedTuple):
@@ -57,14 +91,12 @@ class BlockRays(NamedTuple):
     weight: Any
 
 
-def static_pose(pose: np.ndarray) -> Poses:
-    """An opaque single pose from a (4, 4) float64 matrix."""
-    import drjit as dr
+def static_pose(entries) -> Poses:
+    """A single pose from its 16 row-major matrix entries (width-1 ``mi.Float``, e.g. of
+    :func:`jit_scalars`)."""
     import mitsuba as mi
 
-    T = mi.Transform4f(np.asarray(pose, dtype=np.float32))
-    dr.make_opaque(T)
-    return Poses(T, None)
+    return Poses(mi.Transform4f(mi.Matrix4f(*entries)), None)
 
 
 def column_poses(poses: np.ndarray) -> Poses:

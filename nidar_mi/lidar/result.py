@@ -56,7 +56,8 @@ class ScanResult:
         config: the sensor's resolved parameters.
         valid, range, intensity, reflectance, cos_incidence, material: the first (or only)
             return of each beam, as in :class:`ReturnLayer` (the strongest in ``dual`` mode).
-        directions: (R, C, 3) float32 unit beam directions in the LiDAR frame.
+        directions: (R, C, 3) float32 unit beam directions in the LiDAR frame (read-only:
+            shared by every scan of the same beam pattern).
         to_world: (4, 4) float64 LiDAR pose at the sweep's start.
         material_names: list of material (BSDF) ids.
         hit: bool, the beam (or one of its sub-rays) hit a surface (before range, threshold and
@@ -67,9 +68,10 @@ class ScanResult:
         shape_labels: per-shape class and instance tables (:class:`nidar_mi.labels.ShapeLabels`)
             that :meth:`points` turns into ``label`` and ``instance``.
         shape_names: ids of ``scene.shapes()`` in that order (anonymous shapes: ``""``).
-        time: float32 s, firing time of each beam since the sweep's start.
-        origins: (R, C, 3) float32 beam origins in the LiDAR frame, m; None when every beam
-            starts at the origin.
+        time: float32 s, firing time of each beam since the sweep's start (read-only, shared
+            like ``directions``).
+        origins: (R, C, 3) float32 beam origins in the LiDAR frame, m (read-only, shared like
+            ``directions``); None when every beam starts at the origin.
         column_poses: (C, 4, 4) float64 LiDAR world pose at each column's firing time; None
             when the pose is ``to_world`` throughout.
         further: the other returns (``dual``: one layer), empty for single-return scans.

@@ -3,9 +3,22 @@ detection and noise → read back.
 
 :func:`scan` casts every beam at once in Dr.Jit (in blocks of bounded memory for very large
 scans, :mod:`.memory`); the physics is :mod:`.return_model`'s, the ray casting :mod:`.raycast`'s,
-the rays (pose per column, beam origins, sub-rays) :mod:`.rays`'s. The pose and every scalar
-parameter enter the kernels as opaque values, so scanning again with another pose, other
-per-column poses or another seed reuses the compiled kernels.
+the rays (pose per column, beam origins, sub-rays) :mod:`.rays`'s. What stays on the device:
+
+* the beam pattern, uploaded once per pattern and block (cached);
+* every scalar parameter, the single pose and the PCG32 seed state: one upload and one width-1
+  kernel per scan, read by the scan's kernels as data (never literals), so scanning again with
+  another pose, other per-column poses or another seed reuses the compiled kernels; a dropout
+  probability or noise σ of 0 leaves its draw's transform out of that sensor's kernels (the
+  random stream advances as before, so every other draw keeps its value);
+* the material and shape indices, looked up from the hit's BSDF and shape pointers in the scene's
+  tables (:mod:`.scene_tables`, cached per scene).
+
+An ideal-beam block is **one kernel** (rays, cast, BSDF, return model, draws, detection, look-ups)
+followed by one synchronisation and the read-back of its per-beam columns (zero-copy views on
+the CPU). On the host remain the checks of the materials found non-finite or RGB-only (rare
+paths), building :class:`ScanResult`, and, for diverging beams, the grouping of the sub-rays'
+contributions into echoes and the choice of returns (:mod:`.echoes`, NumPy over the block).
 
 Two paths, one per beam model:
 
@@ -19,7 +32,7 @@ Two paths, one per beam model:
   selected per ``return_mode`` (:mod:`.echoes`) by the receiver's output (each echo with its
   own receiver noise); further noise per return.
 
-Reading back names the materials (:func:`material_table`) and the shapes (``scene.shapes()``
+A scan names the materials (:func:`material_table`) and the shapes (``scene.shapes()``
 order), and warns once per material whose reflectance is not finite (Mitsuba's conductor presets
 past ~886 nm: its returns are dropped) or comes from RGB upsampling (not physical past 830 nm).
 """
@@ -39,7 +52,7 @@ from .echoes import group_echoes, select_returns
 from .footprint import subray_offsets
 from .memory import check_scan_memory, chunk_beams
 from .raycast import cast, monostatic_reflectance
-from .rays import block_rays, column_poses, jit_float, static_pose
+from .rays import block_rays, column_poses, jit_float, jit_scalars, static_pose
 from .result import ReturnLayer, ScanResult
 from .return_model import (
     add_noise,
@@ -49,6 +62,7 @@ from .return_model import (
     expected_intensity,
     received,
 )
+from .scene_tables import SceneTables, material_table, scene_tables, shape_table
 
 __all__ = ["ScanResult", "ReturnLayer", "scan", "material_table", "shape_table"]
 
@@ -84,128 +98,163 @@ def scan(
         NidarError: the scan would need more memory than ``max_memory``, or the per-column
             poses do not match the columns.
     """
-    from ..errors import NidarError
-
     cfg: LidarConfig = sensor.config
     check_scan_memory(cfg, max_memory)
     timings: dict[str, float] = {}
-    pattern = cfg.pattern
     pose = _pose(sensor, to_world)
-    if poses_per_column is not None:
-        poses_per_column = np.asarray(poses_per_column, dtype=np.float64)
-        if poses_per_column.shape != (cfg.horizontal_resolution, 4, 4) or not np.all(
-            np.isfinite(poses_per_column)
-        ):
-            raise NidarError(
-                f"lidar '{cfg.name}': poses per column must be a finite "
-                f"({cfg.horizontal_resolution}, 4, 4) array (got {poses_per_column.shape})"
-            )
+    poses_per_column = _check_column_poses(cfg, poses_per_column)
     with _timed(timings, "pattern"):
-        inputs = _kernel_inputs(cfg, cfg.seed if seed is None else int(seed))
-        poses = static_pose(pose) if poses_per_column is None else column_poses(poses_per_column)
-        directions = np.empty((pattern.size, 3), dtype=np.float32)
-        origins = (
-            np.zeros((pattern.size, 3), dtype=np.float32) if cfg.laser_table.has_origins else None
+        inputs, poses = _kernel_inputs(
+            cfg, cfg.seed if seed is None else int(seed), pose if poses_per_column is None else None
         )
-    out = _Outputs(pattern.size, cfg.max_returns)
+        ctx = _Context(
+            scene,
+            cfg,
+            inputs,
+            poses if poses_per_column is None else column_poses(poses_per_column),
+            scene_tables(scene),
+            _Outputs(cfg.rings * cfg.horizontal_resolution, cfg.max_returns),
+            timings,
+        )
     for start, stop in chunk_beams(cfg):
-        _scan_block(scene, cfg, inputs, poses, start, stop, directions, origins, out, timings)
-
+        _scan_block(ctx, start, stop)
     with _timed(timings, "readback"):
-        shape = (cfg.rings, cfg.horizontal_resolution)
-        names, lut = material_table(scene)
-        bad = _warn_nonfinite(cfg, names, _lookup(lut, np.concatenate(out.nonfinite_ids)))
-        shape_names, shape_lut = shape_table(scene)
-        layers = []
-        for m in range(cfg.max_returns):
-            material = np.where(out.has_attr[m], _lookup(lut, out.bsdf_id[m]), -1)
-            layers.append(
-                ReturnLayer(
-                    valid=out.valid[m].reshape(shape),
-                    range=out.range[m].reshape(shape),
-                    intensity=out.intensity[m].reshape(shape),
-                    reflectance=out.reflectance[m].reshape(shape),
-                    cos_incidence=out.cos[m].reshape(shape),
-                    material=material.astype(np.int32).reshape(shape),
-                    shape_index=np.where(out.has_attr[m], _lookup(shape_lut, out.shape_id[m]), -1)
-                    .astype(np.int32)
-                    .reshape(shape),
-                )
-            )
-        for layer in layers:
-            _drop_materials(layer, bad)
-        first = layers[0]
-        _warn_rgb_materials(scene, cfg, names, first.material[first.material >= 0])
-        result = ScanResult(
-            config=cfg,
-            valid=first.valid,
-            range=first.range,
-            intensity=first.intensity,
-            reflectance=first.reflectance,
-            cos_incidence=first.cos_incidence,
-            material=first.material,
-            directions=directions.reshape(*shape, 3),
-            to_world=pose,
-            material_names=names,
-            hit=out.hit.reshape(shape),
-            timings=timings,
-            shape_index=first.shape_index,
-            shape_labels=shape_labels(scene, labels),
-            shape_names=shape_names,
-            time=pattern.time_s().astype(np.float32).reshape(shape),
-            origins=None if origins is None else origins.reshape(*shape, 3),
-            column_poses=poses_per_column,
-            further=layers[1:],
+        return _result(ctx, pose, poses_per_column, labels)
+
+
+def _check_column_poses(cfg: LidarConfig, poses):
+    """(C, 4, 4) float64 per-column poses, or None; NidarError when they do not fit."""
+    from ..errors import NidarError
+
+    if poses is None:
+        return None
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.shape != (cfg.horizontal_resolution, 4, 4) or not np.all(np.isfinite(poses)):
+        raise NidarError(
+            f"lidar '{cfg.name}': poses per column must be a finite "
+            f"({cfg.horizontal_resolution}, 4, 4) array (got {poses.shape})"
         )
-    return result
+    return poses
+
+
+def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
+    """The scan's :class:`ScanResult` from the read-back outputs (warnings, dropped materials)."""
+    cfg, out, tables = ctx.cfg, ctx.out, ctx.tables
+    shape = (cfg.rings, cfg.horizontal_resolution)
+    names = tables.material_names
+    bad = _warn_nonfinite(cfg, names, np.concatenate(out.nonfinite))
+    layers = [
+        ReturnLayer(
+            valid=layer["valid"].reshape(shape),
+            range=layer["range"].reshape(shape),
+            intensity=layer["intensity"].reshape(shape),
+            reflectance=layer["reflectance"].reshape(shape),
+            cos_incidence=layer["cos"].reshape(shape),
+            material=layer["material"].reshape(shape),
+            shape_index=layer["shape"].reshape(shape),
+        )
+        for layer in out.layers
+    ]
+    for layer in layers:
+        _drop_materials(layer, bad)
+    _warn_rgb_materials(tables, cfg, np.unique(np.concatenate(out.materials_hit)))
+    first = layers[0]
+    directions, origins = _pattern_arrays(cfg, 0, cfg.rings * cfg.horizontal_resolution)
+    return ScanResult(
+        config=cfg,
+        valid=first.valid,
+        range=first.range,
+        intensity=first.intensity,
+        reflectance=first.reflectance,
+        cos_incidence=first.cos_incidence,
+        material=first.material,
+        directions=directions.reshape(*shape, 3),
+        to_world=pose,
+        material_names=list(names),
+        hit=out.hit.reshape(shape),
+        timings=ctx.timings,
+        shape_index=first.shape_index,
+        shape_labels=shape_labels(ctx.scene, labels),
+        shape_names=list(tables.shape_names),
+        time=_firing_times(cfg).reshape(shape),
+        origins=None if origins is None else origins.reshape(*shape, 3),
+        column_poses=poses_per_column,
+        further=layers[1:],
+    )
 
 
 # ---------------------------------------------------------------- one block of beams
 
 
+class _Context(NamedTuple):
+    """What every block of a scan needs."""
+
+    scene: Any
+    cfg: LidarConfig
+    inputs: Any
+    poses: Any
+    tables: SceneTables
+    out: Any
+    timings: dict
+
+
 class _Outputs:
-    """Flat (R·C,) per-beam outputs, one list entry per return, filled block by block."""
+    """Flat (R·C,) per-beam outputs, one dict per return (keys: ``valid``, ``range``,
+    ``intensity``, ``reflectance``, ``cos``, ``material``, ``shape``), filled block by block;
+    a block covering the whole scan hands its arrays over without a copy."""
+
+    _DTYPES = {
+        "valid": bool,
+        "range": np.float32,
+        "intensity": np.float32,
+        "reflectance": np.float32,
+        "cos": np.float32,
+        "material": np.int32,
+        "shape": np.int32,
+    }
 
     def __init__(self, beams: int, returns: int) -> None:
-        def arr(dtype):
-            return [np.zeros(beams, dtype=dtype) for _ in range(returns)]
-
-        self.valid = arr(bool)
-        self.range = arr(np.float32)
-        self.intensity = arr(np.float32)
-        self.reflectance = arr(np.float32)
-        self.cos = arr(np.float32)
-        self.bsdf_id = arr(np.uint32)
-        self.shape_id = arr(np.uint32)
-        self.has_attr = arr(bool)
+        self.beams = beams
+        self.layers: list[dict[str, np.ndarray]] = [{} for _ in range(returns)]
         self.hit = np.zeros(beams, dtype=bool)
-        self.nonfinite_ids: list[np.ndarray] = [np.zeros(0, dtype=np.uint32)]
+        self.nonfinite: list[np.ndarray] = [np.zeros(0, dtype=np.int64)]  # material indices
+        self.materials_hit: list[np.ndarray] = [np.zeros(0, dtype=np.int64)]
+
+    def put(self, m: int, start: int, stop: int, **values: np.ndarray) -> None:
+        """Store return ``m``'s columns of beams ``start..stop``."""
+        layer = self.layers[m]
+        for key, v in values.items():
+            v = np.asarray(v).astype(self._DTYPES[key], copy=False)
+            if start == 0 and stop == self.beams:
+                layer[key] = v
+                continue
+            if key not in layer:
+                layer[key] = np.zeros(self.beams, dtype=self._DTYPES[key])
+            layer[key][start:stop] = v
 
 
-def _scan_block(scene, cfg, inputs, poses, start, stop, directions, origins, out, timings):
-    """Scan beams ``start..stop`` and write their outputs into ``out``."""
+def _scan_block(ctx: _Context, start: int, stop: int) -> None:
+    """Scan beams ``start..stop`` and write their outputs into ``ctx.out``."""
     import drjit as dr
     import mitsuba as mi
 
-    with _timed(timings, "pattern"):
-        d_np, o_np = _beams(cfg, start, stop)
-        directions[start:stop] = d_np
-        if origins is not None:
-            origins[start:stop] = o_np
+    cfg, inputs = ctx.cfg, ctx.inputs
+    with _timed(ctx.timings, "pattern"):
+        directions, origins = _pattern_jit(cfg, start, stop)
         first = dr.opaque(mi.UInt32, start)
         subrays = subray_offsets(cfg.beam_sample_quality) if cfg.beam_divergence > 0 else None
         rays = block_rays(
-            poses,
-            mi.Vector3f(*(jit_float(d_np[:, i]) for i in range(3))),
-            None if o_np is None else mi.Point3f(*(jit_float(o_np[:, i]) for i in range(3))),
+            ctx.poses,
+            directions,
+            origins,
             first_beam=first,
             cols=cfg.horizontal_resolution,
             subrays=subrays,
             half_angle=inputs.half_angle,
         )
-    with _timed(timings, "raycast"):
-        beams = cast(scene, rays.ray, inputs.wavelength, glass_front=subrays is not None)
-    with _timed(timings, "bsdf"):
+    with _timed(ctx.timings, "raycast"):
+        beams = cast(ctx.scene, rays.ray, inputs.wavelength, glass_front=subrays is not None)
+    with _timed(ctx.timings, "bsdf"):
         rho, cos_t, bsdf = monostatic_reflectance(beams, inputs.wavelength)
         d = dr.select(beams.hit, beams.path_m, 1.0)
         expected = expected_intensity(
@@ -217,32 +266,36 @@ def _scan_block(scene, cfg, inputs, poses, start, stop, directions, origins, out
             cfg.intensity_mode,
             beams.two_way_transmittance,
         )
-    n = stop - start
-    draws = _draws(n, cfg.max_returns, inputs.seed_state, first)
+    draws = _draws(cfg, stop - start, inputs, first)
+    shading = _Shading(rho, cos_t, bsdf, d, expected)
     if subrays is None:
-        _ideal_block(
-            cfg, inputs, beams, rho, cos_t, bsdf, d, expected, draws, start, stop, out, timings
-        )
+        _ideal_block(ctx, beams, shading, draws, start, stop)
     else:
-        _echo_block(
-            cfg, inputs, rays, beams, rho, cos_t, bsdf, expected, draws, start, stop, out, timings
-        )
+        _echo_block(ctx, rays, beams, shading, draws, start, stop)
 
 
-def _ideal_block(
-    cfg, inputs, beams, rho, cos_t, bsdf, d, expected, draws, start, stop, out, timings
-):
-    """One ray per beam: detection and noise in Dr.Jit."""
+class _Shading(NamedTuple):
+    """Per-ray Dr.Jit values of a block: ρ, cos θ, the BSDF, the range (1 where no hit) and
+    the expected intensity."""
+
+    rho: Any
+    cos_t: Any
+    bsdf: Any
+    d: Any
+    expected: Any
+
+
+def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: int) -> None:
+    """One ray per beam: detection, noise, the material and shape indices and the per-beam
+    columns in one kernel, then one synchronisation and the columns' read-back."""
     import drjit as dr
-    import mitsuba as mi
 
-    s = slice(start, stop)
-    with _timed(timings, "detect"):
-        u_dropout, normal_intensity, normal_range = draws[0]
-        normal_receiver = draws[-1][0]
+    inputs, tables = ctx.inputs, ctx.tables
+    with _timed(ctx.timings, "detect"):
+        u_dropout, normal_intensity, normal_range = draws.returns[0]
         valid = detect(
-            expected,
-            d,
+            sh.expected,
+            sh.d,
             hit=beams.hit,
             threshold=inputs.threshold,
             range_min=inputs.range_min,
@@ -250,111 +303,56 @@ def _ideal_block(
             dropout=inputs.dropout,
             u=u_dropout,
             noise=inputs.receiver_noise,
-            normal=normal_receiver,
+            normal=draws.receiver,
         )
-        output = received(expected, inputs.receiver_noise, normal_receiver)
-        intensity = dr.select(
-            valid, add_noise(output, inputs.noise_intensity, normal_intensity), 0.0
-        )
-        range_m = dr.select(valid, add_noise(d, inputs.noise_range, normal_range), 0.0)
-        finite = dr.isfinite(expected)
-        bsdf_id = dr.reinterpret_array(mi.UInt32, bsdf)
-        shape_id = dr.reinterpret_array(mi.UInt32, beams.si.shape)
-        dr.eval(intensity, range_m, rho, cos_t, bsdf_id, shape_id, valid, beams.hit, finite)
-    with _timed(timings, "readback"):
-        hit = beams.hit.numpy().astype(bool)
-        ids = bsdf_id.numpy()
-        rho_np = rho.numpy()
-        out.valid[0][s] = valid.numpy().astype(bool)
-        out.range[0][s] = range_m.numpy()
-        out.intensity[0][s] = intensity.numpy()
-        out.reflectance[0][s] = np.where(np.isfinite(rho_np), rho_np, 0.0)
-        out.cos[0][s] = np.where(hit, cos_t.numpy(), 0.0)
-        out.bsdf_id[0][s] = ids
-        out.shape_id[0][s] = shape_id.numpy()
-        out.has_attr[0][s] = hit
-        out.hit[s] = hit
-        out.nonfinite_ids.append(ids[hit & ~finite.numpy().astype(bool)])
-
-
-def _echo_block(
-    cfg, inputs, rays, beams, rho, cos_t, bsdf, expected, draws, start, stop, out, timings
-):
-    """Sub-rays of diverging beams: echoes, return selection, detection and noise."""
-    import drjit as dr
-    import mitsuba as mi
-
-    n, count = stop - start, cfg.subrays
-    with _timed(timings, "detect"):
-        glass = beams.glass
-        cos_a = dr.minimum(dr.abs(dr.dot(glass.normal, rays.axis)), 1.0)
-        alpha2 = dr.square(dr.acos(cos_a))
-        theta2 = dr.square(inputs.half_angle)
-        d_glass = dr.select(glass.hit, glass.path_m, 1.0)
-        glass_energy = (
-            rays.weight
-            * inputs.gain
-            * glass.reflectance
-            * dr.exp(-8.0 * alpha2 / theta2)
-            / (2.0 * theta2)
-            * attenuation(d_glass, 1.0, inputs.alpha, cfg.intensity_mode)
-        )
-        energy = rays.weight * expected
-        ids = dr.reinterpret_array(mi.UInt32, bsdf)
-        shape_ids = dr.reinterpret_array(mi.UInt32, beams.si.shape)
-        glass_ids = dr.reinterpret_array(mi.UInt32, glass.bsdf)
-        glass_shape_ids = dr.reinterpret_array(mi.UInt32, glass.shape)
-        dr.eval(
-            beams.hit,
-            beams.path_m,
-            energy,
-            rho,
-            cos_t,
-            ids,
-            shape_ids,
-            glass.hit,
-            glass.path_m,
-            glass.reflectance,
-            glass_energy,
-            cos_a,
-            glass_ids,
-            glass_shape_ids,
-        )
-    with _timed(timings, "readback"):
-
-        def grid(x, dtype=None):
-            a = x.numpy()
-            return (a if dtype is None else a.astype(dtype)).reshape(n, count)
-
-        hit = grid(beams.hit, bool)
-        e_surf = grid(energy)
-        finite = np.isfinite(e_surf)
-        surf_ids = grid(ids)
-        out.nonfinite_ids.append(surf_ids[hit & ~finite])
-        rho_np = grid(rho)
-        contrib_range = [np.where(hit, grid(beams.path_m), np.inf)]
-        contrib_energy = [np.where(hit & finite, e_surf, 0.0)]
-        attrs = {
-            "reflectance": [np.where(np.isfinite(rho_np), rho_np, 0.0)],
-            "cos": [grid(cos_t)],
-            "bsdf_id": [surf_ids],
-            "shape_id": [grid(shape_ids)],
+        output = received(sh.expected, inputs.receiver_noise, draws.receiver)
+        intensity = add_noise(output, inputs.noise_intensity, normal_intensity)
+        range_m = add_noise(sh.d, inputs.noise_range, normal_range)
+        hit = beams.hit
+        material = dr.select(hit, tables.material_index(sh.bsdf), -1)
+        columns = {
+            "range": dr.select(valid, range_m, 0.0),
+            "intensity": dr.select(valid, intensity, 0.0),
+            "reflectance": dr.select(dr.isfinite(sh.rho), sh.rho, 0.0),
+            "cos": dr.select(hit, sh.cos_t, 0.0),
+            "material": material,
+            "shape": dr.select(hit, tables.shape_index(beams.si.shape), -1),
+            "valid": valid,
+            "hit": hit,
         }
-        g_hit = grid(glass.hit, bool)
-        if g_hit.any():  # the specular echoes of glass panes
-            contrib_range.append(np.where(g_hit, grid(glass.path_m), np.inf))
-            contrib_energy.append(np.where(g_hit, grid(glass_energy), 0.0))
-            attrs["reflectance"].append(grid(glass.reflectance))
-            attrs["cos"].append(grid(cos_a))
-            attrs["bsdf_id"].append(grid(glass_ids))
-            attrs["shape_id"].append(grid(glass_shape_ids))
-        contrib_range = np.concatenate(contrib_range, axis=1)
-        contrib_energy = np.concatenate(contrib_energy, axis=1)
-        attrs = {key: np.concatenate(v, axis=1) for key, v in attrs.items()}
-    with _timed(timings, "detect"):
+        columns["nonfinite"] = hit & ~dr.isfinite(sh.expected)  # its material is dropped
+        dr.eval(columns)  # one kernel
+    with _timed(ctx.timings, "readback"):
+        cols = {key: value.numpy() for key, value in columns.items()}
+        ctx.out.hit[start:stop] = cols.pop("hit")
+        nonfinite = cols.pop("nonfinite")
+        if nonfinite.any():
+            ctx.out.nonfinite.append(cols["material"][nonfinite])
+        if tables.rgb_only:  # the materials hit matter only to warn of RGB-only ones
+            ctx.out.materials_hit.append(_materials_hit(cols["material"]))
+        ctx.out.put(0, start, stop, **cols)
+
+
+def _materials_hit(material: np.ndarray) -> np.ndarray:
+    """The distinct material indices >= 0 among ``material`` (int32)."""
+    # np.bincount: several times faster than np.unique on a scan's worth of indices
+    return np.flatnonzero(np.bincount(material[material >= 0], minlength=1))
+
+
+def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, stop: int) -> None:
+    """Sub-rays of diverging beams: echoes, return selection, detection and noise (the
+    grouping of contributions into echoes runs on the host, :mod:`.echoes`)."""
+    cfg = ctx.cfg
+    with _timed(ctx.timings, "readback"):
+        contrib_range, contrib_energy, attrs, hit = _echo_contributions(ctx, rays, beams, sh)
+        n = stop - start
+        nonfinite = hit & ~np.isfinite(attrs["energy"][:, : cfg.subrays])
+        ctx.out.nonfinite.append(attrs["material"][:, : cfg.subrays][nonfinite])
+        draws = [tuple(_host(x) for x in d) for d in draws.returns]
+    with _timed(ctx.timings, "detect"):
         echoes = group_echoes(contrib_range, contrib_energy, cfg.return_separation)
         normal = (
-            _echo_normals(inputs.seed, start, echoes.energy.shape)
+            _echo_normals(ctx.inputs.seed, start, echoes.energy.shape)
             if cfg.receiver_noise_std > 0
             else 0.0
         )
@@ -374,11 +372,10 @@ def _echo_block(
         # attributes of beams without a return: their strongest echo, if any
         fallback = np.argmax(np.where(np.isfinite(echoes.range_m), echoes.energy, -1.0), axis=1)
         rows = np.arange(n)
-        s = slice(start, stop)
-        out.hit[s] = hit.any(axis=1)
+        ctx.out.hit[start:stop] = hit.any(axis=1)
         for m in range(cfg.max_returns):
             slot = slots[:, m]
-            u, normal_i, normal_r = (x.numpy() for x in draws[m])
+            u, normal_i, normal_r = draws[m]
             valid = (slot >= 0) & (u >= cfg.dropout)
             pick = np.where(slot >= 0, slot, fallback if m == 0 else 0)
             src = echoes.source[rows, pick]
@@ -386,16 +383,105 @@ def _echo_block(
             src = np.maximum(src, 0)
             e = echoes.energy[rows, pick]
             r = echoes.range_m[rows, pick]
-            out.valid[m][s] = valid
-            out.intensity[m][s] = np.where(
-                valid, add_noise(e, cfg.noise_intensity_std, normal_i), 0.0
+            material = np.where(has, attrs["material"][rows, src], -1)
+            ctx.out.put(
+                m,
+                start,
+                stop,
+                valid=valid,
+                intensity=np.where(valid, add_noise(e, cfg.noise_intensity_std, normal_i), 0.0),
+                range=np.where(valid, add_noise(r, cfg.noise_range_std, normal_r), 0.0),
+                reflectance=np.where(has, attrs["reflectance"][rows, src], 0.0),
+                cos=np.where(has, attrs["cos"][rows, src], 0.0),
+                material=material,
+                shape=np.where(has, attrs["shape"][rows, src], -1),
             )
-            out.range[m][s] = np.where(valid, add_noise(r, cfg.noise_range_std, normal_r), 0.0)
-            for key, target in (("reflectance", out.reflectance), ("cos", out.cos)):
-                target[m][s] = np.where(has, attrs[key][rows, src], 0.0)
-            out.bsdf_id[m][s] = attrs["bsdf_id"][rows, src]
-            out.shape_id[m][s] = attrs["shape_id"][rows, src]
-            out.has_attr[m][s] = has
+            if m == 0 and ctx.tables.rgb_only:
+                ctx.out.materials_hit.append(_materials_hit(material))
+
+
+def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
+    """The (n, K) contributions of each beam's sub-rays (surface hits, then the specular echoes
+    of glass when any beam met glass), read back.
+
+    Returns:
+        ``(range_m, energy, attrs, hit)``: (n, K) float ranges (inf: none) and energies (0:
+        none); attrs (n, K) ``reflectance``, ``cos``, ``material``, ``shape`` of every
+        contribution and ``energy`` of the surface hits before the finiteness test; (n, N)
+        bool surface hits.
+    """
+    import drjit as dr
+
+    inputs, tables, cfg = ctx.inputs, ctx.tables, ctx.cfg
+    glass = beams.glass
+    cos_a = dr.minimum(dr.abs(dr.dot(glass.normal, rays.axis)), 1.0)
+    theta2 = dr.square(inputs.half_angle)
+    glass_energy = (
+        rays.weight
+        * inputs.gain
+        * glass.reflectance
+        * dr.exp(-8.0 * dr.square(dr.acos(cos_a)) / theta2)
+        / (2.0 * theta2)
+        * attenuation(
+            dr.select(glass.hit, glass.path_m, 1.0), 1.0, inputs.alpha, cfg.intensity_mode
+        )
+    )
+    surface = {
+        "hit": beams.hit,
+        "path": beams.path_m,
+        "energy": rays.weight * sh.expected,
+        "reflectance": sh.rho,
+        "cos": sh.cos_t,
+        "material": tables.material_index(sh.bsdf),
+        "shape": tables.shape_index(beams.si.shape),
+    }
+    front = {
+        "hit": glass.hit,
+        "path": glass.path_m,
+        "energy": glass_energy,
+        "reflectance": glass.reflectance,
+        "cos": cos_a,
+        "material": tables.material_index(glass.bsdf),
+        "shape": tables.shape_index(glass.shape),
+    }
+    dr.eval(surface, front)
+    count = cfg.subrays
+
+    def grid(x):
+        return x.numpy().reshape(-1, count)
+
+    s = {k: grid(v) for k, v in surface.items()}
+    hit = s["hit"].astype(bool)
+    finite = np.isfinite(s["energy"])
+    contrib_range = [np.where(hit, s["path"], np.inf)]
+    contrib_energy = [np.where(hit & finite, s["energy"], 0.0)]
+    rho = s["reflectance"]
+    attrs = {
+        "reflectance": [np.where(np.isfinite(rho), rho, 0.0)],
+        "cos": [s["cos"]],
+        "material": [s["material"]],
+        "shape": [s["shape"]],
+        "energy": [s["energy"]],
+    }
+    g_hit = grid(glass.hit).astype(bool)
+    if g_hit.any():  # the specular echoes of glass panes
+        g = {k: grid(v) for k, v in front.items()}
+        contrib_range.append(np.where(g_hit, g["path"], np.inf))
+        contrib_energy.append(np.where(g_hit, g["energy"], 0.0))
+        for key in ("reflectance", "cos", "material", "shape", "energy"):
+            attrs[key].append(g[key])
+    attrs = {key: np.concatenate(v, axis=1) for key, v in attrs.items()}
+    return (
+        np.concatenate(contrib_range, axis=1),
+        np.concatenate(contrib_energy, axis=1),
+        attrs,
+        hit,
+    )
+
+
+def _host(x):
+    """A draw as NumPy (a Python float stands for a draw left out: its σ is 0)."""
+    return x if isinstance(x, float) else x.numpy()
 
 
 # ---------------------------------------------------------------- kernel inputs
@@ -409,26 +495,64 @@ def _timed(timings: dict[str, float], stage: str):
 
 
 _beam_cache: dict[tuple, tuple[np.ndarray, np.ndarray | None]] = {}
+_jit_cache: dict[tuple, tuple[Any, Any]] = {}
+_time_cache: dict[Any, np.ndarray] = {}
+_pattern_cache: dict[LidarConfig, Any] = {}
+_CACHE_SIZE = 16
 
 
-def _beams(cfg: LidarConfig, start: int, stop: int):
-    """(n, 3) float32 directions and origins (or None) of beams ``start..stop``; whole sweeps
-    are cached per pattern."""
-    pattern = cfg.pattern
-    key = (pattern, start, stop)
-    if key in _beam_cache:
-        return _beam_cache[key]
-    d, o = pattern.beams(start, stop)
-    d = d.astype(np.float32)
-    o = None if o is None else o.astype(np.float32)
-    if stop - start == pattern.size:
-        if len(_beam_cache) > 16:
-            _beam_cache.clear()
-        for a in (d, o):
+def _cached(cache: dict, key, make):
+    if key not in cache:
+        if len(cache) > _CACHE_SIZE:
+            cache.clear()
+        cache[key] = make()
+    return cache[key]
+
+
+def _pattern_arrays(cfg: LidarConfig, start: int, stop: int):
+    """(n, 3) float32 directions and origins (or None) of beams ``start..stop``, read-only and
+    cached per sensor configuration and block."""
+
+    def make():
+        d, o = _pattern(cfg).beams(start, stop)
+        out = tuple(None if a is None else a.astype(np.float32) for a in (d, o))
+        for a in out:
             if a is not None:
                 a.setflags(write=False)
-        _beam_cache[key] = (d, o)
-    return d, o
+        return out
+
+    return _cached(_beam_cache, (cfg, start, stop), make)
+
+
+def _pattern_jit(cfg: LidarConfig, start: int, stop: int):
+    """Beams ``start..stop`` as ``mi.Vector3f`` directions and ``mi.Point3f`` origins (or None),
+    uploaded once per sensor configuration, block and variant: the pattern stays on the
+    device."""
+    import mitsuba as mi
+
+    def make():
+        d, o = _pattern_arrays(cfg, start, stop)
+        directions = mi.Vector3f(*(jit_float(d[:, i]) for i in range(3)))
+        origins = None if o is None else mi.Point3f(*(jit_float(o[:, i]) for i in range(3)))
+        return directions, origins
+
+    return _cached(_jit_cache, (cfg, start, stop, mi.variant()), make)
+
+
+def _firing_times(cfg: LidarConfig) -> np.ndarray:
+    """(R·C,) float32 firing time of every beam, s; read-only, cached per configuration."""
+
+    def make():
+        t = _pattern(cfg).time_s().astype(np.float32)
+        t.setflags(write=False)
+        return t
+
+    return _cached(_time_cache, cfg, make)
+
+
+def _pattern(cfg: LidarConfig):
+    """``cfg.pattern``, cached (building it, and hashing it, costs ~1 ms each time)."""
+    return _cached(_pattern_cache, cfg, lambda: cfg.pattern)
 
 
 def _pose(sensor, to_world) -> np.ndarray:
@@ -439,7 +563,10 @@ def _pose(sensor, to_world) -> np.ndarray:
 
 
 class _KernelInputs(NamedTuple):
-    """The scalar parameters as opaque Dr.Jit values (one compiled kernel for all)."""
+    """The scalar parameters as Dr.Jit values gathered from one uploaded buffer (data, not
+    literals: one compiled kernel for every value). The dropout probability and the noise σ
+    are the Python float 0.0 where the sensor's value is 0: that sensor's kernels leave out
+    the draws' transforms (the random stream, and every draw that is used, stay the same)."""
 
     wavelength: Any
     gain: Any
@@ -453,58 +580,97 @@ class _KernelInputs(NamedTuple):
     receiver_noise: Any
     half_angle: Any
     seed_state: Any
+    stream: Any
     seed: int
 
 
-def _kernel_inputs(cfg: LidarConfig, seed: int) -> _KernelInputs:
+def _kernel_inputs(cfg: LidarConfig, seed: int, pose: np.ndarray | None):
+    """The kernels' scalars and the single pose (when given, (4, 4)), in one upload and one
+    width-1 kernel (:func:`.rays.jit_scalars`).
+
+    Returns:
+        ``(_KernelInputs, Poses or None)``.
+    """
     import drjit as dr
     import mitsuba as mi
 
-    def opaque(value: float):
-        return dr.opaque(mi.Float, value)
-
-    return _KernelInputs(
-        wavelength=opaque(cfg.wavelength),
-        gain=opaque(cfg.gain),
-        alpha=opaque(cfg.atmospheric_extinction),
-        range_min=opaque(cfg.range_min),
-        range_max=opaque(cfg.range_max),
-        threshold=opaque(cfg.detection_threshold),
-        dropout=opaque(cfg.dropout),
-        noise_intensity=opaque(cfg.noise_intensity_std),
-        noise_range=opaque(cfg.noise_range_std),
-        receiver_noise=opaque(cfg.receiver_noise_std),
-        half_angle=opaque(cfg.beam_divergence * 5e-4),  # mrad full angle -> rad half angle
-        seed_state=dr.opaque(mi.UInt64, (seed * 0x9E3779B97F4A7C15) % 2**64),
-        seed=seed,
+    params = [
+        cfg.wavelength,
+        cfg.gain,
+        cfg.atmospheric_extinction,
+        cfg.range_min,
+        cfg.range_max,
+        cfg.detection_threshold,
+        cfg.dropout,
+        cfg.noise_intensity_std,
+        cfg.noise_range_std,
+        cfg.receiver_noise_std,
+        cfg.beam_divergence * 5e-4,  # mrad full angle -> rad half angle
+    ]
+    words = np.array(  # the 64-bit PCG32 seed state and stream, as float32 bit patterns
+        [(seed * 0x9E3779B97F4A7C15) % 2**64, _PCG32_DEFAULT_STREAM], dtype="<u8"
+    ).view("<u4")
+    matrix = np.zeros(0) if pose is None else np.asarray(pose, dtype=np.float64).reshape(16)
+    values = np.concatenate(
+        [np.asarray(params, dtype=np.float32), matrix.astype(np.float32), words.view(np.float32)]
     )
+    jit = jit_scalars(values)
+    bits = [mi.UInt64(dr.reinterpret_array(mi.UInt32, x)) for x in jit[-4:]]
+    seed_state, stream = bits[0] | (bits[1] << 32), bits[2] | (bits[3] << 32)
+    scalars = jit[: len(params)]
+    entries = jit[len(params) : len(params) + matrix.size]
+    dr.eval(scalars, entries, seed_state, stream)
+    for i in range(6, 10):  # dropout and noise σ: a literal 0 where the sensor has none
+        if params[i] == 0:
+            scalars[i] = 0.0
+    inputs = _KernelInputs(*scalars, seed_state, stream, seed)
+    return inputs, (static_pose(entries) if pose is not None else None)
 
 
 _PCG32_DEFAULT_STREAM = 0xDA3E39CB94B95BDB
 
 
-def _draws(n: int, returns: int, seed_state, first_beam):
+class _Draws(NamedTuple):
+    """Per return ``(u_dropout, normal_intensity, normal_range)``, and the receiver noise's
+    standard normal; each a Dr.Jit array of one entry per beam, or the Python float (1.0 for
+    the uniform, 0.0 for a normal) where the sensor's probability or σ is 0."""
+
+    returns: list
+    receiver: Any
+
+
+def _draws(cfg: LidarConfig, n: int, inputs, first_beam) -> _Draws:
     """Per beam and return: a uniform dropout draw and standard normals for intensity and range
-    noise; then, per beam, a standard normal of the receiver noise (the last entry, a 1-tuple;
-    drawn after the others so that they keep their values). Beam ``b`` draws from its own
-    stream whatever block it is cast in."""
-    import drjit as dr
+    noise; then, per beam, a standard normal of the receiver noise (drawn after the others so
+    that they keep their values). Beam ``b`` draws from its own stream whatever block it is
+    cast in; a draw whose σ (or probability) is 0 still advances the stream."""
     import mitsuba as mi
 
     offset = mi.UInt64(first_beam)
     rng = mi.PCG32(
         size=n,
-        initstate=seed_state + offset,
-        initseq=dr.opaque(mi.UInt64, _PCG32_DEFAULT_STREAM) + offset,
+        initstate=inputs.seed_state + offset,
+        initseq=inputs.stream + offset,
     )
+
+    def uniform(used: bool):
+        u = rng.next_float32()
+        return u if used else 1.0
+
+    def normal(used: bool):
+        u1, u2 = rng.next_float32(), rng.next_float32()
+        return box_muller(u1, u2) if used else 0.0
+
     out = []
-    for _ in range(returns):
-        u_dropout = rng.next_float32()
-        normal_intensity = box_muller(rng.next_float32(), rng.next_float32())
-        normal_range = box_muller(rng.next_float32(), rng.next_float32())
-        out.append((u_dropout, normal_intensity, normal_range))
-    out.append((box_muller(rng.next_float32(), rng.next_float32()),))
-    return out
+    for _ in range(cfg.max_returns):
+        out.append(
+            (
+                uniform(cfg.dropout > 0),
+                normal(cfg.noise_intensity_std > 0),
+                normal(cfg.noise_range_std > 0),
+            )
+        )
+    return _Draws(out, normal(cfg.receiver_noise_std > 0))
 
 
 def _mix64(x: np.ndarray) -> np.ndarray:
@@ -534,66 +700,13 @@ def _echo_normals(seed: int, first_beam: int, shape: tuple[int, int]) -> np.ndar
 # ---------------------------------------------------------------- read back
 
 
-def _lookup(lut: dict[int, int], ids: np.ndarray) -> np.ndarray:
-    """int32 index per registry id (-1 for ids not in ``lut``)."""
-    table = np.full(max(lut, default=0) + 2, -1, dtype=np.int32)
-    for reg, idx in lut.items():
-        table[reg] = idx
-    return table[np.minimum(np.asarray(ids, dtype=np.int64), table.size - 1)]
-
-
-def shape_table(scene) -> tuple[list[str], dict[int, int]]:
-    """Shapes of a scene in ``scene.shapes()`` order.
-
-    Returns:
-        (their ids, map from the shape's Dr.Jit registry id to its index).
-    """
-    import drjit as dr
-    import mitsuba as mi
-
-    shapes = list(scene.shapes())
-    regs = {
-        int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]): i for i, s in enumerate(shapes)
-    }
-    return [s.id() for s in shapes], regs
-
-
-def material_table(scene) -> tuple[list[str], dict[int, int]]:
-    """Materials (BSDFs) of a scene in a stable order.
-
-    Returns:
-        (names sorted alphabetically, map from the BSDF's Dr.Jit registry id to index in names).
-    """
-    import drjit as dr
-    import mitsuba as mi
-
-    by_name: dict[str, int] = {}
-    for shape in scene.shapes():
-        bsdf = shape.bsdf()
-        if bsdf is None:
-            continue
-        reg = int(dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(bsdf))[0])
-        by_name.setdefault(_bsdf_name(shape), reg)
-    names = sorted(by_name)
-    regs = {}
-    for shape in scene.shapes():
-        bsdf = shape.bsdf()
-        if bsdf is not None:
-            reg = int(dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(bsdf))[0])
-            regs[reg] = names.index(_bsdf_name(shape))
-    return names, regs
-
-
-def _bsdf_name(shape) -> str:
-    """The BSDF's id, or ``<shape id>.bsdf`` for an anonymous BSDF."""
-    return shape.bsdf().id() or f"{shape.id()}.bsdf"
-
-
 def _drop_materials(layer: ReturnLayer, bad: np.ndarray) -> None:
     """Remove from ``layer`` every return of the materials ``bad`` (indices): a material with no
     data at the laser wavelength gives no trustworthy return anywhere, even where its
     evaluation happens to be finite (Mitsuba's conductor presets read η = k = 0 past their
     table, a perfect mirror at exactly normal incidence and NaN elsewhere)."""
+    if not len(bad):
+        return
     drop = np.isin(layer.material, bad) & layer.valid
     if drop.any():
         layer.valid = layer.valid & ~drop
@@ -619,20 +732,16 @@ def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -
 _warned_rgb: set[tuple[str, str]] = set()
 
 
-def _warn_rgb_materials(scene, cfg: LidarConfig, names: list[str], materials: np.ndarray) -> None:
+def _warn_rgb_materials(tables: SceneTables, cfg: LidarConfig, materials: np.ndarray) -> None:
     """Warn, once per material and process, when a material hit has RGB-only reflectance.
 
-    ``materials``: indices (>= 0) into ``names`` of the materials hit, one per return.
+    ``materials``: indices (>= 0) into the scene's material names of the materials hit.
     """
-    by_name = {}
-    for shape in scene.shapes():
-        if shape.bsdf() is not None:
-            by_name[_bsdf_name(shape)] = shape.bsdf()
-    # np.bincount: several times faster than np.unique on a scan's worth of indices
-    for idx in np.flatnonzero(np.bincount(materials, minlength=len(names))):
-        name = names[idx]
-        key = (name, str(by_name.get(name)))
-        if key in _warned_rgb or "SRGBReflectanceSpectrum" not in key[1]:
+    for idx in materials:
+        name = tables.material_names[idx]
+        text = tables.rgb_only.get(name)
+        key = (name, text)
+        if text is None or key in _warned_rgb:
             continue
         _warned_rgb.add(key)
         warnings.warn(
