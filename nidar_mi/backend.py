@@ -90,7 +90,9 @@ def configure_llvm() -> str | None:
     return path
 
 
-def _cuda_available() -> bool:
+def cuda_available() -> bool:
+    """Whether Dr.Jit's CUDA back end works here (a CUDA device and its driver)."""
+    configure_llvm()
     import drjit as dr
 
     try:
@@ -112,7 +114,7 @@ def default_variant() -> str:
     """``cuda_ad_spectral`` when CUDA works, else ``llvm_ad_spectral``."""
     if os.environ.get("NIDAR_VARIANT"):
         return os.environ["NIDAR_VARIANT"]
-    return "cuda_ad_spectral" if _cuda_available() else "llvm_ad_spectral"
+    return "cuda_ad_spectral" if cuda_available() else "llvm_ad_spectral"
 
 
 def set_variant(variant: str | None = None) -> str:
@@ -141,7 +143,7 @@ def set_variant(variant: str | None = None) -> str:
         )
     if variant.startswith("llvm") and not _llvm_available():
         raise NidarError(f"Dr.Jit cannot load libLLVM for variant '{variant}': {_FIX}")
-    if variant.startswith("cuda") and not _cuda_available():
+    if variant.startswith("cuda") and not cuda_available():
         raise NidarError(
             f"variant '{variant}' needs a working CUDA device; use `variant` llvm_ad_spectral"
         )

@@ -10,6 +10,11 @@ when the output already holds this task's result). :func:`run_tasks` runs a list
 * ``address=ADDRESS``: on an existing Ray cluster (one CPU per task; ``workers`` then caps the
   tasks in flight).
 
+Where the Ray runtime has GPUs (a local machine whose CUDA variant works, or a cluster whose
+nodes report ``GPU`` resources), every task asks for one GPU (``num_gpus=1``: Ray gives it its
+own device through ``CUDA_VISIBLE_DEVICES``, and the worker's default variant is then the CUDA
+one) and no more tasks run at once than there are GPUs. Without GPUs nothing changes.
+
 Whatever the mode, the job behaves the same:
 
 * Tasks whose skip test is true are not run (a job resumes where a crashed or interrupted run
@@ -357,9 +362,11 @@ def _init(ray, workers: int | None, address: str | None) -> None:
             hint = "" if os.environ.get("RAY_AUTH_MODE") else _AUTH_HINT
             raise NidarError(f"`ray_address` {address}: {_one_line(e)}{hint}") from None
         return
+    from .backend import cuda_available
+
     ray.init(
         num_cpus=workers,
-        num_gpus=0,
+        num_gpus=None if cuda_available() else 0,  # None: Ray counts the devices
         include_dashboard=False,
         object_store_memory=_OBJECT_STORE_BYTES,
         **quiet,
@@ -448,12 +455,14 @@ def _run_on(ray, pending, setup, report, bar, workers, address, retries, after_i
     owned = _connect(ray, workers, address, after_init)
     inflight: dict = {}
     try:
-        if address is None:
-            concurrency, threads = workers, max(1, _cpus() // workers)
-        else:
-            cluster = int(ray.cluster_resources().get("CPU", 1))
-            concurrency, threads = min(workers or cluster, max(cluster, 1)), 1
-        remote = ray.remote(_execute).options(num_cpus=1, max_retries=retries)
+        resources = ray.cluster_resources()
+        concurrency, threads, gpus = placement(
+            workers,
+            local=address is None,
+            cpus=_cpus() if address is None else int(resources.get("CPU", 1)),
+            gpus=int(resources.get("GPU", 0)),
+        )
+        remote = ray.remote(_execute).options(num_cpus=1, num_gpus=gpus, max_retries=retries)
         bar.note("")
         queue = iter(pending)
         exhausted = False
@@ -484,6 +493,26 @@ def _run_on(ray, pending, setup, report, bar, workers, address, retries, after_i
                 pass
         if owned:
             ray.shutdown()
+
+
+def placement(workers: int | None, *, local: bool, cpus: int, gpus: int) -> tuple[int, int, int]:
+    """How a Ray job runs its tasks: ``(tasks at once, CPU threads per task, GPUs per task)``.
+
+    Args:
+        workers: the job's ``workers`` (>= 1; None only with a cluster: as many as it holds).
+        local: a runtime started for this job (``cpus`` are this machine's, shared out as
+            threads) rather than a cluster (one thread per task).
+        cpus: CPUs of the runtime (>= 1).
+        gpus: GPUs of the runtime (0: none).
+
+    Every task takes one GPU when there are any, so no more run at once than there are GPUs.
+    """
+    if gpus > 0:
+        concurrency = min(workers or gpus, gpus)
+        return concurrency, (max(1, cpus // concurrency) if local else 1), 1
+    if local:
+        return workers, max(1, cpus // workers), 0
+    return min(workers or cpus, max(cpus, 1)), 1, 0
 
 
 def check_parallel(workers: int | None, address: str | None) -> None:
