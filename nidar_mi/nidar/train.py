@@ -68,7 +68,7 @@ def train(
         ``{"stn": path, "irnet": path}`` (``"stn"`` absent when no STN was used).
     """
     out: dict[str, Path] = {}
-    if stn_weights is None and cfg.irnet.input == "pseudo_nir":
+    if stn_weights is None and cfg.irnet.input != "rgb":
         if photos is not None:
             stn_weights = out["stn"] = train_stn_photos(
                 cfg, photos, data_dir, out_dir, resume=resume, progress=progress
@@ -266,7 +266,7 @@ def train_irnet(
             load_stn(stn_weights, "cpu")  # a file that is no STN fails here, before the copy
             atomic_write(local, stn_weights.read_bytes())
     with _torch_threads(cfg.threads):
-        if cfg.irnet.input == "pseudo_nir":
+        if cfg.irnet.input != "rgb":
             if stn_weights is None:
                 raise NidarError(
                     "IRNet with pseudo-NIR input needs STN weights (train the STN first)"
@@ -297,6 +297,7 @@ def train_irnet(
             scale=cfg.scale,
             intrinsic_targets=cfg.intrinsic_supervision,
             missing_targets_zero=bool(renders),
+            with_rgb=cfg.irnet.input == "rgb+pseudo_nir",
         )
         train_set = IRNetDataset(
             split_frames["train"], scale, train=True, input_dir=input_dirs["train"], **common
@@ -306,7 +307,7 @@ def train_irnet(
                 renders,
                 1.0,
                 train=True,
-                input_dir=render_input if cfg.irnet.input == "pseudo_nir" else None,
+                input_dir=render_input if cfg.irnet.input != "rgb" else None,
                 **(common | {"scale": cfg.render_scale}),
                 supervise_intensity=False,
             )
