@@ -71,6 +71,11 @@ def frame_returns(frame: dict) -> dict[str, np.ndarray]:
     }
 
 
+def _nanmean(values: list[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
 def _spearman(a: np.ndarray, b: np.ndarray) -> float:
     if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
         return float("nan")
@@ -113,7 +118,7 @@ def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str
             pooled.setdefault(name, []).append(v[m].astype(np.float64))
     rho = np.concatenate(rho_all)
     return {
-        k: {"per_frame": float(np.nanmean(per[k])), "pooled": _spearman(np.concatenate(v), rho)}
+        k: {"per_frame": _nanmean(per[k]), "pooled": _spearman(np.concatenate(v), rho)}
         for k, v in pooled.items()
     }
 
@@ -140,7 +145,7 @@ def _profile_scores(profile, ret: dict[str, np.ndarray]) -> dict[str, float]:
     pred = profile(ret["R"], ret["range"], cos_incidence=ret["cos"])
     frames = np.unique(ret["frame"])
     per = [_spearman(pred[ret["frame"] == k], ret["intensity"][ret["frame"] == k]) for k in frames]
-    return {"per_frame": float(np.nanmean(per)), "pooled": _spearman(pred, ret["intensity"])}
+    return {"per_frame": _nanmean(per), "pooled": _spearman(pred, ret["intensity"])}
 
 
 def image_gain(train: list[Path], test: list[Path], stn, irnet) -> dict[str, dict[str, float]]:
