@@ -45,4 +45,5 @@ def test_scores_of_every_source(data):
         assert -1.0 <= v["pooled"] <= 1.0 and -1.0 <= v["per_frame"] <= 1.0
     gain = image_gain(list_frames(data, "train"), frames, stn, irnet)
     assert set(gain) == {"image", "grey", "gain"}
-    assert gain["gain"]["pooled"] == pytest.approx(gain["image"]["pooled"] - gain["grey"]["pooled"])
+    for key in ("per_frame", "pooled"):  # NaN where an untrained R gives a flat profile
+        np.testing.assert_equal(gain["gain"][key], gain["image"][key] - gain["grey"][key])
