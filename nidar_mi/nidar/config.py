@@ -57,10 +57,11 @@ IRNET_VARIANTS = (
 
 #: What IRNet receives: the STN's pseudo-NIR image, the RGB image itself (the paper's
 #: pseudo-NIR-vs-RGB diagnostic), or both stacked (``rgb+pseudo_nir``: 4 channels, the colour
-#: that carries the reflectance beside the pseudo-NIR that ``R · S`` explains).
-INPUT_MODES = ("pseudo_nir", "rgb", "rgb+pseudo_nir")
+#: that carries the reflectance beside the pseudo-NIR that ``R · S`` explains), or the RGB's
+#: chromaticity (shading-free by construction) and the pseudo-NIR (``chroma+pseudo_nir``).
+INPUT_MODES = ("pseudo_nir", "rgb", "rgb+pseudo_nir", "chroma+pseudo_nir")
 #: Channels of each input mode.
-INPUT_CHANNELS = {"pseudo_nir": 1, "rgb": 3, "rgb+pseudo_nir": 4}
+INPUT_CHANNELS = {"pseudo_nir": 1, "rgb": 3, "rgb+pseudo_nir": 4, "chroma+pseudo_nir": 4}
 
 
 #: pydantic configuration of every config dataclass: unknown keys are errors.

@@ -24,7 +24,7 @@ import torch.nn.functional as F
 
 from ..errors import NidarError
 from .irnet import IRNet
-from .preprocess import EXPOSURE_TARGET_MEAN, prepare_rgb
+from .preprocess import EXPOSURE_TARGET_MEAN, colour_input, prepare_rgb
 from .stn import STN
 from .stn_lowres import LowResSTN
 
@@ -206,5 +206,6 @@ def predict(
         if irnet.in_channels == 1:
             x = p
         elif irnet.in_channels == 4:
-            x = torch.cat((x_rgb.to(p.device), p), 1)
+            colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
+            x = torch.cat((colour.to(p.device), p), 1)
     return result | run_irnet(irnet, x, scale=scale)

@@ -57,6 +57,9 @@ class IRNet(nn.Module):
         unet_depth: down-sampling steps of UNet parts.
         output_stride: output stride of DeepLabV3 parts.
         aspp_rates: ASPP dilation rates of DeepLabV3 parts.
+        input_mode: what the channels hold (:data:`nidar_mi.nidar.config.INPUT_MODES`; None:
+            ``pseudo_nir``, ``rgb`` or ``rgb+pseudo_nir`` by ``in_channels``); kept as
+            :attr:`input_mode` for inference.
 
     ``forward`` maps ``(B, in_channels, H, W)`` (sides multiples of :attr:`stride`) to a dict
     of ``(B, 1, H, W)`` tensors ``R``, ``S``, ``I_hat``.
@@ -70,12 +73,15 @@ class IRNet(nn.Module):
         unet_depth: int = 4,
         output_stride: int = 8,
         aspp_rates=(6, 12, 18),
+        input_mode: str | None = None,
     ) -> None:
         super().__init__()
         if in_channels not in (1, 3, 4):
             raise ValueError(f"in_channels must be 1, 3 or 4, got {in_channels}")
         self.variant = variant
         self.in_channels = in_channels
+        default = {1: "pseudo_nir", 3: "rgb", 4: "rgb+pseudo_nir"}[in_channels]
+        self.input_mode = input_mode or default
         backbone, head = parse_variant(variant)
 
         def network(kind: str, cin: int, cout: int) -> nn.Module:

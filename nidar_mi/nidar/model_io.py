@@ -53,6 +53,7 @@ def build_irnet(cfg: IRNetConfig) -> IRNet:
     return IRNet(
         variant=cfg.variant,
         in_channels=INPUT_CHANNELS[cfg.input],
+        input_mode=cfg.input,
         width=cfg.width,
         unet_depth=cfg.unet_depth,
         output_stride=cfg.output_stride,

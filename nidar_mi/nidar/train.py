@@ -36,7 +36,7 @@ from torch import nn
 from ..dataset import list_frames, load_frame, load_meta
 from ..errors import NidarError
 from .checkpoint import atomic_write
-from .config import TrainConfig
+from .config import INPUT_CHANNELS, TrainConfig
 from .data import IRNetDataset, MixedDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
@@ -297,7 +297,7 @@ def train_irnet(
             scale=cfg.scale,
             intrinsic_targets=cfg.intrinsic_supervision,
             missing_targets_zero=bool(renders),
-            with_rgb=cfg.irnet.input == "rgb+pseudo_nir",
+            colour=cfg.irnet.input if INPUT_CHANNELS[cfg.irnet.input] == 4 else None,
         )
         train_set = IRNetDataset(
             split_frames["train"], scale, train=True, input_dir=input_dirs["train"], **common
