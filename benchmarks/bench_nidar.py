@@ -135,6 +135,7 @@ def run_benchmark(
     from nidar_mi.nidar.fold import prepare_for_inference
     from nidar_mi.nidar.infer import pseudo_nir, run_irnet
     from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.nidar.preprocess import colour_input
 
     torch.set_num_threads(int(threads))
     base = NidarModel.load(weights, device="cpu", optimize=False)
@@ -157,6 +158,9 @@ def run_benchmark(
                 wall, cpu, p = _time(lambda: pseudo_nir(stn, rgb, scale=scale))
                 out["pseudo_nir"] = (wall, cpu)
                 x = torch.from_numpy(p)[None, None]
+                if irnet.in_channels == 4:  # colour channels stacked before the pseudo-NIR
+                    colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
+                    x = torch.cat((colour, x), 1)
                 wall, cpu, maps = _time(lambda: run_irnet(irnet, x, scale=scale))
                 out["irnet"] = (wall, cpu)
                 maps = maps | {"pseudo_nir": p}

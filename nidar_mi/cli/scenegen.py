@@ -41,6 +41,13 @@ def build_parser():
         "materials wherever a part has one (a test of unseen spectra)",
     )
     p.add_argument(
+        "--lighting",
+        choices=("default", "varied"),
+        default="default",
+        help="default: each layout's own sun and sky; varied: sun and sky redrawn per scene "
+        "(overcast a quarter of the time, sun 6-80 deg; the shapes stay those of default)",
+    )
+    p.add_argument(
         "--overwrite",
         action="store_true",
         help="replace scene files of another run (another --kind or --materials) and files "
@@ -88,6 +95,7 @@ def main(argv=None) -> int:
             drive=drive,
             overwrite=args.overwrite,
             materials=args.materials,
+            lighting=args.lighting,
         )
         if not args.quiet:
             stats = index["run"]

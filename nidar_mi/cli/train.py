@@ -52,7 +52,11 @@ def _parser() -> argparse.ArgumentParser:
         help="train both networks (default), the STN only, or IRNet only",
     )
     p.add_argument("--variant", help="IRNet variant, e.g. unet+deeplabv3, deeplabv3+3conv")
-    p.add_argument("--input", choices=("pseudo_nir", "rgb"), help="IRNet input")
+    p.add_argument(
+        "--input",
+        choices=("pseudo_nir", "rgb", "rgb+pseudo_nir", "chroma+pseudo_nir"),
+        help="IRNet input",
+    )
     p.add_argument("--stn-weights", type=Path, help="use this trained STN (skips the STN stage)")
     p.add_argument(
         "--photos",

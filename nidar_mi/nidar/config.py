@@ -35,6 +35,7 @@ __all__ = [
     "STN_KINDS",
     "PhotoConfig",
     "INPUT_MODES",
+    "INPUT_CHANNELS",
     "dataclass_from_dict",
 ]
 
@@ -54,9 +55,13 @@ IRNET_VARIANTS = (
     "unet+deeplabv3",
 )
 
-#: What IRNet receives: the STN's pseudo-NIR image, or the RGB image itself (the paper's
-#: pseudo-NIR-vs-RGB diagnostic).
-INPUT_MODES = ("pseudo_nir", "rgb")
+#: What IRNet receives: the STN's pseudo-NIR image, the RGB image itself (the paper's
+#: pseudo-NIR-vs-RGB diagnostic), or both stacked (``rgb+pseudo_nir``: 4 channels, the colour
+#: that carries the reflectance beside the pseudo-NIR that ``R · S`` explains), or the RGB's
+#: chromaticity (shading-free by construction) and the pseudo-NIR (``chroma+pseudo_nir``).
+INPUT_MODES = ("pseudo_nir", "rgb", "rgb+pseudo_nir", "chroma+pseudo_nir")
+#: Channels of each input mode.
+INPUT_CHANNELS = {"pseudo_nir": 1, "rgb": 3, "rgb+pseudo_nir": 4, "chroma+pseudo_nir": 4}
 
 
 #: pydantic configuration of every config dataclass: unknown keys are errors.

@@ -16,7 +16,7 @@ from torch.utils.data import Dataset
 
 from ..errors import NidarError
 from ..frames import load_frame
-from .preprocess import prepare_nir, prepare_rgb
+from .preprocess import colour_input, prepare_nir, prepare_rgb
 
 __all__ = [
     "area_resize",
@@ -177,14 +177,17 @@ class IRNetDataset(FrameDataset):
             ``R_true >= 1e-3``).
         supervise_intensity: False gives an empty intensity mask (frames that only supervise
             the decomposition: renders of another sensor than the real frames').
+        colour: with ``input_dir``, an IRNet input mode whose colour channels are stacked
+            before the pseudo-NIR (``rgb+pseudo_nir``, ``chroma+pseudo_nir``:
+            :func:`~nidar_mi.nidar.preprocess.colour_input`); None: the pseudo-NIR alone.
         scale: network resolution relative to the frames, in (0, 1]: frames become
             ``round(scale · H) x round(scale · W)`` (:func:`nidar_mi.nidar.infer.reduced_size`):
             the input and the dense true maps by area averaging (:func:`area_resize`), the
             sparse intensity and mask by :func:`reduce_sparse`. Reduced frames are kept in
             memory (they are read once).
 
-    Items: ``{"x": (1 or 3, h, w), "intensity": (1, h, w), "mask": (1, h, w)}`` float32
-    (the mask as 0/1), plus ``"R_true"`` and ``"S_true"`` ``(1, h, w)`` float32 (the same crop
+    Items: ``{"x": (C, h, w), "intensity": (1, h, w), "mask": (1, h, w)}`` float32 (``C``: 1, 3
+    or 4; the mask as 0/1), plus ``"R_true"`` and ``"S_true"`` ``(1, h, w)`` float32 (the same crop
     and flip) with ``intrinsic_targets``; ``(h, w)`` is the crop shape.
     """
 
@@ -200,8 +203,10 @@ class IRNetDataset(FrameDataset):
         scale: float = 1.0,
         missing_targets_zero: bool = False,
         supervise_intensity: bool = True,
+        colour: str | None = None,
     ) -> None:
         super().__init__(frames, crop_size, seed, train)
+        self.colour = colour
         self.missing_targets_zero = bool(missing_targets_zero)
         self.supervise_intensity = bool(supervise_intensity)
         self.intensity_scale = float(intensity_scale)
@@ -218,7 +223,9 @@ class IRNetDataset(FrameDataset):
         if index in self._reduced:
             return self._reduced[index]
         path = self.frames[index]
-        keys = ("intensity", "mask") if self.input_dir is not None else ("rgb", "intensity", "mask")
+        keys = ("rgb", "intensity", "mask")
+        if self.input_dir is not None and self.colour is None:
+            keys = keys[1:]
         if self.scale < 1.0:
             keys = (*keys, "range")
         zero_targets = False
@@ -240,6 +247,8 @@ class IRNetDataset(FrameDataset):
             x = np.load(self.input_dir / f"{path.stem}.npy", allow_pickle=False)
             if x.shape != (1, *arrays["mask"].shape):
                 raise NidarError(f"pseudo-NIR cache of {path.name} has shape {x.shape}")
+            if self.colour is not None:
+                x = np.concatenate((colour_input(arrays["rgb"], self.colour), x), 0)
         mask = arrays["mask"]
         # LiDAR4D-style scaling: divide by the stated scale and clip to [0, 1] (retroreflectors
         # would otherwise dominate every squared loss)

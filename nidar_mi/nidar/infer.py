@@ -24,7 +24,7 @@ import torch.nn.functional as F
 
 from ..errors import NidarError
 from .irnet import IRNet
-from .preprocess import EXPOSURE_TARGET_MEAN, prepare_rgb
+from .preprocess import EXPOSURE_TARGET_MEAN, colour_input, prepare_rgb
 from .stn import STN
 from .stn_lowres import LowResSTN
 
@@ -158,8 +158,9 @@ def run_irnet(irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0) -> dict[str,
 
     Args:
         irnet: trained IRNet.
-        x: ``(1, C, H, W)`` float32 network input: pseudo-NIR (``C = 1``, the STN's domain) or
-            prepared RGB (``C = 3``, :func:`~nidar_mi.nidar.preprocess.prepare_rgb`).
+        x: ``(1, C, H, W)`` float32 network input: pseudo-NIR (``C = 1``, the STN's domain),
+            prepared RGB (``C = 3``, :func:`~nidar_mi.nidar.preprocess.prepare_rgb`) or both
+            (``C = 4``: RGB, then pseudo-NIR).
         scale: inference resolution relative to the input, in (0, 1].
 
     Returns:
@@ -194,7 +195,7 @@ def predict(
         (reflectance-related, in (0, 1)), ``S`` (shading) and ``I_hat`` (dense intensity in
         units of the training data's ``intensity_scale``).
     """
-    if irnet.in_channels == 1 and stn is None:
+    if irnet.in_channels in (1, 4) and stn is None:
         raise NidarError("this IRNet takes pseudo-NIR input: an STN is required")
     x_rgb = torch.from_numpy(prepare_rgb(rgb))[None]
     result: dict[str, np.ndarray] = {}
@@ -204,4 +205,7 @@ def predict(
         result["pseudo_nir"] = p[0, 0].float().cpu().numpy()
         if irnet.in_channels == 1:
             x = p
+        elif irnet.in_channels == 4:
+            colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
+            x = torch.cat((colour.to(p.device), p), 1)
     return result | run_irnet(irnet, x, scale=scale)

@@ -11,7 +11,9 @@ Output ranges: ``R = sigmoid(.)`` in ``(0, 1)``; ``S = softplus(.)`` and
 ``I_hat = softplus(.)`` non-negative. With ``in_channels = 3`` (the RGB-input diagnostic)
 the image the decomposition explains is the Rec. 709 luminance of the input
 (:data:`nidar_mi.io.images.REC709_LUMA`)
-(:meth:`IRNet.intrinsic_target`), so that ``R`` stays single-channel and comparable.
+(:meth:`IRNet.intrinsic_target`), so that ``R`` stays single-channel and comparable. With
+``in_channels = 4`` (linear RGB, then pseudo-NIR) it is the pseudo-NIR channel: the colour is
+context that tells the reflectance, the pseudo-NIR the image that ``R * S`` explains.
 """
 
 from __future__ import annotations
@@ -50,11 +52,14 @@ class IRNet(nn.Module):
 
     Args:
         variant: ablation variant, e.g. ``"unet+deeplabv3"``.
-        in_channels: 1 (pseudo-NIR) or 3 (linear RGB).
+        in_channels: 1 (pseudo-NIR), 3 (linear RGB) or 4 (linear RGB and pseudo-NIR).
         width: base width of every sub-network.
         unet_depth: down-sampling steps of UNet parts.
         output_stride: output stride of DeepLabV3 parts.
         aspp_rates: ASPP dilation rates of DeepLabV3 parts.
+        input_mode: what the channels hold (:data:`nidar_mi.nidar.config.INPUT_MODES`; None:
+            ``pseudo_nir``, ``rgb`` or ``rgb+pseudo_nir`` by ``in_channels``); kept as
+            :attr:`input_mode` for inference.
 
     ``forward`` maps ``(B, in_channels, H, W)`` (sides multiples of :attr:`stride`) to a dict
     of ``(B, 1, H, W)`` tensors ``R``, ``S``, ``I_hat``.
@@ -68,12 +73,15 @@ class IRNet(nn.Module):
         unet_depth: int = 4,
         output_stride: int = 8,
         aspp_rates=(6, 12, 18),
+        input_mode: str | None = None,
     ) -> None:
         super().__init__()
-        if in_channels not in (1, 3):
-            raise ValueError(f"in_channels must be 1 or 3, got {in_channels}")
+        if in_channels not in (1, 3, 4):
+            raise ValueError(f"in_channels must be 1, 3 or 4, got {in_channels}")
         self.variant = variant
         self.in_channels = in_channels
+        default = {1: "pseudo_nir", 3: "rgb", 4: "rgb+pseudo_nir"}[in_channels]
+        self.input_mode = input_mode or default
         backbone, head = parse_variant(variant)
 
         def network(kind: str, cin: int, cout: int) -> nn.Module:
@@ -98,7 +106,8 @@ class IRNet(nn.Module):
         return max(p.stride for p in parts)
 
     def intrinsic_target(self, x: torch.Tensor) -> torch.Tensor:
-        """The image ``I`` that ``R * S`` explains: ``x`` itself, or its luminance for RGB.
+        """The image ``I`` that ``R * S`` explains: ``x`` itself, its luminance for RGB, its
+        pseudo-NIR channel (the last) for RGB + pseudo-NIR.
 
         Args:
             x: ``(B, in_channels, H, W)`` network input.
@@ -108,6 +117,8 @@ class IRNet(nn.Module):
         """
         if x.shape[1] == 1:
             return x
+        if x.shape[1] == 4:
+            return x[:, 3:4]
         return (x * self.luma.to(x.dtype)).sum(1, keepdim=True)
 
     def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:

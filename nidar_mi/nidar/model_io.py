@@ -15,7 +15,7 @@ import torch
 
 from ..errors import NidarError
 from .checkpoint import load_weights, read_weights_metadata, save_weights
-from .config import IRNetConfig, STNConfig, TrainConfig, dataclass_from_dict
+from .config import INPUT_CHANNELS, IRNetConfig, STNConfig, TrainConfig, dataclass_from_dict
 from .irnet import IRNet
 from .stn import STN
 from .stn_lowres import LowResSTN
@@ -52,7 +52,8 @@ def build_irnet(cfg: IRNetConfig) -> IRNet:
     """Untrained IRNet of the given configuration."""
     return IRNet(
         variant=cfg.variant,
-        in_channels=1 if cfg.input == "pseudo_nir" else 3,
+        in_channels=INPUT_CHANNELS[cfg.input],
+        input_mode=cfg.input,
         width=cfg.width,
         unet_depth=cfg.unet_depth,
         output_stride=cfg.output_stride,
@@ -123,6 +124,6 @@ def load_pipeline(
     irnet = load_irnet(irnet_path, device)
     stn_path = weights_dir / "stn.safetensors"
     stn = load_stn(stn_path, device) if stn_path.is_file() else None
-    if stn is None and cfg.irnet.input == "pseudo_nir":
+    if stn is None and cfg.irnet.input != "rgb":
         raise NidarError(f"{stn_path} not found (IRNet takes pseudo-NIR input)")
     return stn, irnet, cfg

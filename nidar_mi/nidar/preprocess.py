@@ -27,6 +27,8 @@ __all__ = [
     "normalize_exposure",
     "prepare_rgb",
     "prepare_nir",
+    "chromaticity",
+    "colour_input",
 ]
 
 #: Mean value an image has after exposure normalisation.
@@ -86,6 +88,42 @@ def prepare_nir(nir: np.ndarray) -> np.ndarray:
     if nir.ndim != 2:
         raise NidarError(f"NIR image must be (H, W), got shape {nir.shape}")
     return normalize_exposure(nir)[None]
+
+
+#: Added to the channel sum of :func:`chromaticity` (prepared RGB has mean 0.5 per channel).
+CHROMA_EPS = 1e-2
+
+
+def chromaticity(x: np.ndarray) -> np.ndarray:
+    """Shading-free colour of prepared RGB: ``x / (sum of channels + CHROMA_EPS)``.
+
+    Args:
+        x: ``(3, H, W)`` prepared RGB (:func:`prepare_rgb`).
+
+    Returns:
+        ``(3, H, W)`` float32 in ``[0, 1]``: each pixel's share of red, green and blue, the
+        same under any brightness of its light (a black pixel gives 0).
+    """
+    return (x / (x.sum(0, keepdims=True) + np.float32(CHROMA_EPS))).astype(np.float32)
+
+
+def colour_input(rgb: np.ndarray, mode: str) -> np.ndarray:
+    """The colour channels IRNet receives before its pseudo-NIR channel.
+
+    Args:
+        rgb: ``(H, W, 3)`` uint8 sRGB.
+        mode: IRNet input mode: ``rgb+pseudo_nir`` (prepared RGB) or ``chroma+pseudo_nir``
+            (its :func:`chromaticity`).
+
+    Returns:
+        ``(3, H, W)`` float32.
+    """
+    x = prepare_rgb(rgb)
+    if mode == "chroma+pseudo_nir":
+        return chromaticity(x)
+    if mode == "rgb+pseudo_nir":
+        return x
+    raise NidarError(f"input mode {mode!r} has no colour channels before the pseudo-NIR")
 
 
 def _check_rgb(rgb: np.ndarray) -> None:

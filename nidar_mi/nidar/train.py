@@ -36,7 +36,7 @@ from torch import nn
 from ..errors import NidarError
 from ..frames import list_frames, load_frame, load_meta
 from .checkpoint import atomic_write
-from .config import TrainConfig
+from .config import INPUT_CHANNELS, TrainConfig
 from .data import IRNetDataset, MixedDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
@@ -73,7 +73,7 @@ def train(
         ``{"stn": path, "irnet": path}`` (``"stn"`` absent when no STN was used).
     """
     out: dict[str, Path] = {}
-    if stn_weights is None and cfg.irnet.input == "pseudo_nir":
+    if stn_weights is None and cfg.irnet.input != "rgb":
         if photos is not None:
             stn_weights = out["stn"] = train_stn_photos(
                 cfg, photos, data_dir, out_dir, resume=resume, progress=progress
@@ -263,7 +263,7 @@ def train_irnet(
             load_stn(stn_weights, "cpu")  # a file that is no STN fails here, before the copy
             atomic_write(local, stn_weights.read_bytes())
     with _torch_threads(cfg.threads):
-        if cfg.irnet.input == "pseudo_nir":
+        if cfg.irnet.input != "rgb":
             if stn_weights is None:
                 raise NidarError(
                     "IRNet with pseudo-NIR input needs STN weights (train the STN first)"
@@ -294,6 +294,7 @@ def train_irnet(
             scale=cfg.scale,
             intrinsic_targets=cfg.intrinsic_supervision,
             missing_targets_zero=bool(renders),
+            colour=cfg.irnet.input if INPUT_CHANNELS[cfg.irnet.input] == 4 else None,
         )
         train_set = IRNetDataset(
             split_frames["train"], scale, train=True, input_dir=input_dirs["train"], **common
@@ -303,7 +304,7 @@ def train_irnet(
                 renders,
                 1.0,
                 train=True,
-                input_dir=render_input if cfg.irnet.input == "pseudo_nir" else None,
+                input_dir=render_input if cfg.irnet.input != "rgb" else None,
                 **(common | {"scale": cfg.render_scale}),
                 supervise_intensity=False,
             )

@@ -26,6 +26,7 @@ from ..errors import NidarError
 from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
+from .lighting import relight
 from .objects import material_set
 from .primitives import Layout
 from .xml import scene_xml
@@ -62,6 +63,7 @@ def generate_scene(
     kind: str | None = None,
     blocks: tuple[int, int] | None = None,
     materials: str = "all",
+    lighting: str = "default",
 ) -> tuple[Layout, str]:
     """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
 
@@ -73,12 +75,15 @@ def generate_scene(
         materials: material set (:data:`nidar_mi.scenegen.objects.MATERIAL_SETS`): ``all``,
             ``train`` (no held-out material) or ``heldout`` (held-out materials wherever a part
             has one).
+        lighting: lighting regime (:data:`nidar_mi.scenegen.lighting.LIGHTING_REGIMES`):
+            ``default`` (the layout's sun and sky) or ``varied`` (redrawn, overcast included).
     """
     with material_set(materials):
         if kind in CITY_KINDS:
             layout = sample_city(scene_rng(seed, k), kind, blocks or DEFAULT_BLOCKS)[0]
         else:
             layout = sample_layout(scene_rng(seed, k), kind)
+    layout = relight(layout, seed, k, lighting)
     name = scene_id(seed, k)
     text = scene_xml(
         layout,
@@ -94,10 +99,13 @@ def layout_hash(layout: Layout) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def index_entry(seed: int, k: int, layout: Layout, text: str, materials: str = "all") -> dict:
+def index_entry(
+    seed: int, k: int, layout: Layout, text: str, materials: str = "all", lighting: str = "default"
+) -> dict:
     """The ``index.json`` record of one scene (rig matrices as nested lists)."""
     rig = layout.rig
-    return {
+    extra = {} if lighting == "default" else {"lighting": lighting}
+    return extra | {
         "material_set": materials,
         "id": scene_id(seed, k),
         "file": f"{scene_id(seed, k)}.xml",
@@ -159,6 +167,7 @@ def generate(
     blocks: tuple[int, int] | None = None,
     drive: dict | None = None,
     materials: str = "all",
+    lighting: str = "default",
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -180,6 +189,7 @@ def generate(
         drive: keyword arguments of :func:`.drives.write_drive` (``frames``, ``rate_hz``,
             ``speed``) for ``city`` and ``suburb`` scenes.
         materials: material set of every scene (:func:`generate_scene`).
+        lighting: lighting regime of every scene (:func:`generate_scene`).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -216,8 +226,8 @@ def generate(
     for k in tqdm(
         range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
     ):
-        layout, text = generate_scene(seed, k, kind, blocks, materials)
-        entry = index_entry(seed, k, layout, text, materials)
+        layout, text = generate_scene(seed, k, kind, blocks, materials, lighting)
+        entry = index_entry(seed, k, layout, text, materials, lighting)
         other = hashes.get(entry["layout_sha256"], entry["id"])
         if other != entry["id"]:
             raise NidarError(f"{entry['id']} repeats the layout of {other}")

@@ -1,0 +1,223 @@
+"""How well an image value ranks the true LiDAR-wavelength reflectance, and what the image adds.
+
+On rendered frames (:mod:`nidar_mi.dataset`, ``source`` ``render``) two numbers per value source:
+
+* **cue**: Spearman of the value at the LiDAR returns against the true reflectance ρ(λ) there
+  (the frame's sparse ``reflectance`` map, on its ``mask`` pixels): per frame (mean) and over
+  every return of every frame (pooled). Sources: the camera's luminance (Rec. 709 of the linear
+  RGB), the STN's pseudo-NIR, and the R map of each NIDAR weights folder, all at the frame's
+  own resolution (``scale`` 1).
+* **image gain** (NIDAR weights only): a ``gbm`` profile of R and the incidence ``|cos θ|``
+  (the form of ``sim-905``; the incidence estimated from each scan's points,
+  :func:`nidar_mi.geometry.incidence_cosine`) is fitted on the returns of the training frames;
+  on the test frames its intensity is scored (Spearman against the rendered intensity) once
+  with R of the real camera image and once with R of a uniform grey image of the same size
+  through the same profile. The gain is the difference: what the image contributes beyond the
+  geometry.
+
+``python -m nidar_mi.eval.reflectance_cue --test DATA_TEST --train DATA_TRAIN
+--weights NAME=DIR ... -o cue.json`` writes every number as JSON and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import spearmanr
+
+from ..errors import NidarError
+from ..frames import list_frames, load_frame
+from ..io.images import REC709_LUMA, srgb_to_linear
+
+__all__ = ["GREY_LEVEL", "frame_returns", "image_gain", "luminance", "main", "score_cues"]
+
+#: 8-bit sRGB level of the uniform grey image of the image-gain test.
+GREY_LEVEL = 128
+_FRAME_KEYS = ("rgb", "reflectance", "mask", "K", "T_cam_lidar", "points_xyz", "points_intensity")
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance ``(H, W)`` float32 of the linear RGB of 8-bit sRGB ``(H, W, 3)``."""
+    lin = srgb_to_linear(rgb.astype(np.float32) / np.float32(255.0))
+    return (lin @ np.asarray(REC709_LUMA, np.float32)).astype(np.float32)
+
+
+def frame_returns(frame: dict) -> dict[str, np.ndarray]:
+    """The frame's returns with their pixel, range, incidence and intensity.
+
+    Returns:
+        ``rows``, ``cols`` (N,) int nearest pixels (clipped to the image), ``range`` (N,) m,
+        ``cos`` (N,) estimated ``|cos θ|``, ``intensity`` (N,) the rendered intensity.
+    """
+    from ..geometry import incidence_cosine
+
+    xyz = frame["points_xyz"].astype(np.float64)
+    p = xyz @ frame["T_cam_lidar"][:3, :3].T + frame["T_cam_lidar"][:3, 3]
+    uvw = p @ frame["K"].T
+    z = np.maximum(uvw[:, 2], 1e-9)
+    h, w = frame["mask"].shape
+    cols = np.clip(np.rint(uvw[:, 0] / z), 0, w - 1).astype(np.int64)
+    rows = np.clip(np.rint(uvw[:, 1] / z), 0, h - 1).astype(np.int64)
+    return {
+        "rows": rows,
+        "cols": cols,
+        "range": np.linalg.norm(xyz, axis=1),
+        "cos": incidence_cosine(xyz),
+        "intensity": frame["points_intensity"].astype(np.float64),
+    }
+
+
+def _nanmean(values: list[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
+def _spearman(a: np.ndarray, b: np.ndarray) -> float:
+    if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
+        return float("nan")
+    return float(spearmanr(a, b)[0])
+
+
+def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
+    """Every value source's ``(H, W)`` map of one image."""
+    from ..nidar.infer import predict, pseudo_nir
+
+    maps = {"luminance": luminance(rgb)}
+    if stn is not None:
+        maps["pseudo_nir"] = pseudo_nir(stn, rgb)
+    for name, (m_stn, irnet) in models.items():
+        maps[f"R:{name}"] = predict(m_stn, irnet, rgb)["R"]
+    return maps
+
+
+def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str, float]]:
+    """Spearman of each source's value against ρ at the returns (module docstring).
+
+    Args:
+        frames: rendered frame files.
+        models: ``{name: (stn or None, irnet)}``.
+        stn: the STN whose pseudo-NIR is scored as a source (None: not scored).
+
+    Returns:
+        ``{source: {"per_frame": mean Spearman, "pooled": Spearman over all returns}}``.
+    """
+    per: dict[str, list[float]] = {}
+    pooled: dict[str, list[np.ndarray]] = {}
+    rho_all = []
+    for path in frames:
+        f = load_frame(path, ("rgb", "reflectance", "mask"))
+        m = f["mask"]
+        rho = f["reflectance"][m].astype(np.float64)
+        rho_all.append(rho)
+        for name, v in _maps(models, f["rgb"], stn).items():
+            per.setdefault(name, []).append(_spearman(v[m], rho))
+            pooled.setdefault(name, []).append(v[m].astype(np.float64))
+    rho = np.concatenate(rho_all)
+    return {
+        k: {"per_frame": _nanmean(per[k]), "pooled": _spearman(np.concatenate(v), rho)}
+        for k, v in pooled.items()
+    }
+
+
+def _returns_with_r(frames: list[Path], stn, irnet, grey: bool) -> dict[str, np.ndarray]:
+    """Returns of ``frames`` with R sampled at them (of the grey image when ``grey``), and the
+    frame index of each return."""
+    from ..nidar.infer import predict
+
+    parts: dict[str, list[np.ndarray]] = {}
+    for k, path in enumerate(frames):
+        f = load_frame(path, _FRAME_KEYS)
+        ret = frame_returns(f)
+        rgb = np.full_like(f["rgb"], GREY_LEVEL) if grey else f["rgb"]
+        r = predict(stn, irnet, rgb)["R"]
+        ret["R"] = r[ret["rows"], ret["cols"]].astype(np.float64)
+        ret["frame"] = np.full(len(ret["R"]), k)
+        for key, v in ret.items():
+            parts.setdefault(key, []).append(v)
+    return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def _profile_scores(profile, ret: dict[str, np.ndarray]) -> dict[str, float]:
+    pred = profile(ret["R"], ret["range"], cos_incidence=ret["cos"])
+    frames = np.unique(ret["frame"])
+    per = [_spearman(pred[ret["frame"] == k], ret["intensity"][ret["frame"] == k]) for k in frames]
+    return {"per_frame": _nanmean(per), "pooled": _spearman(pred, ret["intensity"])}
+
+
+def image_gain(train: list[Path], test: list[Path], stn, irnet) -> dict[str, dict[str, float]]:
+    """Spearman of the profile's intensity with the real and the grey image, and the gain.
+
+    The ``gbm`` profile of R and ``|cos θ|`` is fitted on the returns of ``train`` (real
+    images); the reference is the rendered intensity clipped to [0, 1].
+
+    Returns:
+        ``{"image": {...}, "grey": {...}, "gain": {...}}``, each ``{"per_frame", "pooled"}``.
+    """
+    from ..profiles import fit
+
+    fit_ = _returns_with_r(train, stn, irnet, grey=False)
+    ref = np.clip(fit_["intensity"], 0.0, 1.0)
+    profile = fit(
+        "gbm", fit_["R"], fit_["range"], ref, cos_incidence=fit_["cos"], use_geometry=False
+    )
+    image = _profile_scores(profile, _returns_with_r(test, stn, irnet, grey=False))
+    grey = _profile_scores(profile, _returns_with_r(test, stn, irnet, grey=True))
+    gain = {k: image[k] - grey[k] for k in image}
+    return {"image": image, "grey": grey, "gain": gain}
+
+
+def _parse(argv):
+    p = argparse.ArgumentParser(prog="python -m nidar_mi.eval.reflectance_cue", description=__doc__)
+    p.add_argument("--test", required=True, help="dataset of rendered test frames (every split)")
+    p.add_argument("--train", help="dataset whose train split fits the image-gain profile")
+    p.add_argument("--weights", action="append", default=[], metavar="NAME=DIR")
+    p.add_argument("--stn", help="STN weights whose pseudo-NIR is scored (a .safetensors file)")
+    p.add_argument("--no-gain", action="store_true", help="score the cues only")
+    p.add_argument("-o", "--out", help="JSON file of every number")
+    return p.parse_args(argv)
+
+
+def _frames_of(data: str, splits=("train", "val", "test")) -> list[Path]:
+    frames = [f for s in splits for f in list_frames(data, s)]
+    if not frames:
+        raise NidarError(f"no frames in {data}")
+    return frames
+
+
+def main(argv=None) -> int:
+    import torch
+
+    from ..nidar.model_io import load_pipeline, load_stn
+
+    args = _parse(argv)
+    torch.set_num_threads(1)
+    models = {}
+    for spec in args.weights:
+        name, _, folder = spec.partition("=")
+        stn, irnet, _cfg = load_pipeline(folder, "cpu")
+        models[name] = (stn, irnet)
+    test = _frames_of(args.test)
+    stn = load_stn(args.stn, "cpu") if args.stn else None
+    result: dict = {"test_frames": len(test), "cue": score_cues(test, models, stn)}
+    if args.train and not args.no_gain:
+        train = _frames_of(args.train, ("train",))
+        result["gain"] = {n: image_gain(train, test, *m) for n, m in models.items()}
+    for k, v in result["cue"].items():
+        print(f"cue  {k:32s} per-frame {v['per_frame']:+.3f}  pooled {v['pooled']:+.3f}")
+    for k, v in result.get("gain", {}).items():
+        g, i = v["gain"], v["image"]
+        print(
+            f"gain {k:32s} image {i['per_frame']:+.3f}/{i['pooled']:+.3f}  "
+            f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
+        )
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

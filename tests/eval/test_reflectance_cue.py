@@ -1,0 +1,49 @@
+"""The reflectance cue and the image gain on rendered-style frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from nidar_mi.nidar.synthetic import write_synthetic_dataset
+
+from nidar_mi.eval.reflectance_cue import frame_returns, image_gain, luminance, score_cues
+from nidar_mi.frames import list_frames, load_frame
+from nidar_mi.nidar.config import IRNetConfig, STNConfig
+from nidar_mi.nidar.model_io import build_irnet, build_stn
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return write_synthetic_dataset(
+        tmp_path_factory.mktemp("cue"), {"train": 3, "test": 2}, height=48, width=64
+    )
+
+
+def test_luminance_of_white_and_black():
+    rgb = np.zeros((1, 2, 3), np.uint8)
+    rgb[0, 1] = 255
+    np.testing.assert_allclose(luminance(rgb), [[0.0, 1.0]], atol=1e-6)
+
+
+def test_returns_fall_on_their_pixels(data):
+    f = load_frame(list_frames(data, "train")[0], None)
+    ret = frame_returns(f)
+    assert len(ret["rows"]) == len(f["points_xyz"])
+    assert f["mask"][ret["rows"], ret["cols"]].mean() > 0.9
+    assert np.all((ret["cos"] >= 0) & (ret["cos"] <= 1))
+
+
+def test_scores_of_every_source(data):
+    torch.manual_seed(0)
+    stn = build_stn(STNConfig(kind="lowres", width=4, depth=2, down=2)).eval()
+    irnet = build_irnet(IRNetConfig(variant="unet", width=4, unet_depth=2)).eval()
+    frames = list_frames(data, "test")
+    cue = score_cues(frames, {"m": (stn, irnet)}, stn)
+    assert set(cue) == {"luminance", "pseudo_nir", "R:m"}
+    for v in cue.values():
+        assert -1.0 <= v["pooled"] <= 1.0 and -1.0 <= v["per_frame"] <= 1.0
+    gain = image_gain(list_frames(data, "train"), frames, stn, irnet)
+    assert set(gain) == {"image", "grey", "gain"}
+    for key in ("per_frame", "pooled"):  # NaN where an untrained R gives a flat profile
+        np.testing.assert_equal(gain["gain"][key], gain["image"][key] - gain["grey"][key])
