@@ -8,7 +8,6 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from nidar_mi.nidar.synthetic import write_synthetic_dataset
 
 from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.config import INPUT_CHANNELS, INPUT_MODES, IRNetConfig, STNConfig, TrainConfig
@@ -18,6 +17,7 @@ from nidar_mi.nidar.irnet import IRNet
 from nidar_mi.nidar.model_io import build_irnet, build_stn, load_pipeline, save_stn
 from nidar_mi.nidar.preprocess import chromaticity, colour_input, prepare_rgb
 from nidar_mi.nidar.train import train_irnet
+from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
 def test_every_input_mode_has_its_channels():
