@@ -109,7 +109,7 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
 def assign_intensity(
     xyz, cameras, images, *, weights=None, occlusion=True, branch=None, profile=None, ring=None
 ) -> dict[str, np.ndarray]:
-    """Per-point NIDAR intensity: ``{"intensity_nidar", "nidar_observed"}``.
+    """Per-point NIDAR intensity: ``{"intensity_nidar", "reflectance_nidar", "nidar_observed"}``.
 
     Args:
         xyz: (N, 3) points in the LiDAR frame (m).
@@ -123,7 +123,9 @@ def assign_intensity(
         ring: (N,) the points' rings for the profile (-1 unknown), or None.
 
     Returns:
-        ``intensity_nidar`` (N,) float32 (0 where unobserved), ``nidar_observed`` (N,) bool.
+        ``intensity_nidar`` (N,) float32 (0 where unobserved), ``reflectance_nidar`` (N,) float32
+        (IRNet's reflectance R at the point, the per-surface cue, 0 where unobserved),
+        ``nidar_observed`` (N,) bool.
     """
     from .datasets.sensor_profiles import resolve_profile
     from .nidar.pipeline import NidarModel
@@ -151,7 +153,11 @@ def assign_intensity(
     res = model.point_intensity(
         xyz, cameras, images, occlusion=occlusion, branch=branch, profile=prof, ring=ring
     )
-    return {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
+    return {
+        "intensity_nidar": res.intensity,
+        "reflectance_nidar": res.reflectance,
+        "nidar_observed": res.observed,
+    }
 
 
 def finite_points(points: dict, where: str) -> dict:

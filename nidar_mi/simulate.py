@@ -156,7 +156,8 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
         profile: a sensor profile, or None for the weights' own.
 
     Returns:
-        LiDAR id -> ``{"intensity_nidar": (N,) float, "nidar_observed": (N,) bool}``, one value
+        LiDAR id -> ``{"intensity_nidar": (N,) float, "reflectance_nidar": (N,) float,
+        "nidar_observed": (N,) bool}``, one value
         per valid return.
     """
     from .io.calib import render_camera
@@ -180,7 +181,11 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
             profile=profile,
             ring=pts["ring"].astype(np.int64),
         )
-        out[lid] = {"intensity_nidar": res.intensity, "nidar_observed": res.observed}
+        out[lid] = {
+            "intensity_nidar": res.intensity,
+            "reflectance_nidar": res.reflectance,
+            "nidar_observed": res.observed,
+        }
     return out
 
 

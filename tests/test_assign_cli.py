@@ -89,6 +89,17 @@ def test_points_image_calib(tmp_path):
     assert not obs[-1] and p["intensity_nidar"][-1] == 0
     assert np.all((p["intensity_nidar"] >= 0) & (p["intensity_nidar"] <= 1))
     assert np.all(p["intensity_nidar"][~obs] == 0)
+    # reflectance_nidar: IRNet's R map sampled bilinearly at the observed points (scipy's
+    # interpolation as the reference), 0 elsewhere
+    from scipy.ndimage import map_coordinates
+
+    from nidar_mi.nidar.pipeline import NidarModel
+
+    R = NidarModel.load(device="cpu").predict_image(img)["R"].astype(np.float64)
+    expected = map_coordinates(R, [v[obs], u[obs]], order=1, mode="nearest")
+    refl = p["reflectance_nidar"]
+    assert refl.dtype == np.float32 and np.all(refl[~obs] == 0)
+    np.testing.assert_allclose(refl[obs], expected, atol=1e-5)
 
 
 @pytest.mark.skipif(
@@ -191,6 +202,9 @@ def test_render_with_nidar_intensity(tmp_path):
     assert 0 < obs.sum() < len(obs)  # the forward camera sees part of the 360 deg scan
     assert np.all(p["intensity_nidar"][~obs] == 0)
     assert np.all((p["intensity_nidar"] >= 0) & (p["intensity_nidar"] <= 1))
+    refl = p["reflectance_nidar"]
+    assert refl.dtype == np.float32 and np.all(refl[~obs] == 0) and np.all(np.isfinite(refl))
+    assert refl[obs].std() > 0  # a per-surface value, not a constant
     # the physical intensity is still there, unchanged in meaning
     assert np.all(p["intensity"] >= 0) and p["intensity"].max() > 0
     ply = read_ply(out / "lidar_top/points.ply")

@@ -39,6 +39,9 @@ name                 dtype      shape   unit  meaning
                                               the sweep's start (motion compensated)
 ``intensity_nidar``  float32    (N,)    --    with ``--intensity nidar``: NIDAR's calibrated
                                               intensity in [0, 1], 0 where no camera sees the point
+``reflectance_nidar`` float32   (N,)    --    with ``--intensity nidar``: IRNet's reflectance R
+                                              at the point (the camera's per-surface cue), 0
+                                              where no camera sees the point
 ``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
 ===================  =========  ======  ====  ==================================================
 

@@ -83,12 +83,16 @@ class PointIntensity:
         raw_R: (N,) float32 branch value sampled at the points (before calibration), 0 where
             unobserved.
         camera_index: (N,) int64 camera that gave the value, -1 where unobserved.
+        reflectance: (N,) float32 IRNet's reflectance R at the points (the per-surface cue,
+            about [0, 1]), from the same camera as the value, 0 where unobserved; equal to
+            ``raw_R`` when the branch is R.
     """
 
     intensity: np.ndarray
     observed: np.ndarray
     raw_R: np.ndarray
     camera_index: np.ndarray
+    reflectance: np.ndarray | None = None
 
 
 class NidarModel:
@@ -286,7 +290,13 @@ class NidarModel:
         else:
             out = _profile_intensity(profile, xyz, values, observed, ring, cos_incidence)
         raw = np.where(observed, values, 0.0).astype(np.float32)
-        return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1))
+        refl = raw
+        if branch != "R":
+            r_vals = sample_cameras(
+                xyz, cameras, [m["R"] for m in maps], depth_images=depth_images, occlusion=occlusion
+            )[0]
+            refl = np.where(observed & np.isfinite(r_vals), r_vals, 0.0).astype(np.float32)
+        return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1), refl)
 
 
 def _profile_intensity(
