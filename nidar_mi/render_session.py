@@ -111,11 +111,9 @@ def _profile_key(profile) -> str | None:
     """``<name>@<sha256 of its JSON, 16 digits>``: what a render's request records of a profile."""
     if profile is None:
         return None
-    import hashlib
-    import json
+    from .io.cache_key import cache_key
 
-    text = json.dumps(profile.to_dict(), sort_keys=True)
-    return f"{profile.name}@{hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]}"
+    return f"{profile.name}@{cache_key(profile.to_dict())}"
 
 
 def check_options(options: RenderOptions) -> rf.RenderRequest:

@@ -2,7 +2,7 @@
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
-                                 [--incidence [--no-geometry] | --no-incidence]
+                                 [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--overwrite] [-q]
 
@@ -14,7 +14,8 @@ its ``--branch`` map at the returns a camera sees is fitted to the sensor's inte
 (:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default
 form) also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
 (:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
-``kitti-hdl64e``. ``assign`` and ``render`` then estimate it the same way on the clouds they are
+``kitti-hdl64e``. ``--incidence`` asks for that default and changes nothing (kept for existing
+scripts). ``assign`` and ``render`` then estimate it the same way on the clouds they are
 given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
@@ -64,8 +65,8 @@ def build_parser():
         "--incidence",
         action="store_true",
         default=None,
-        help="gbm: also read the incidence |cos θ| of each return, from normals estimated on "
-        "the scan's own points (the default of the gbm form)",
+        help="gbm: read the incidence |cos θ| of each return (the default of the gbm form: "
+        "changes nothing, kept for existing scripts)",
     )
     inc.add_argument(
         "--no-incidence",

@@ -33,9 +33,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from ..io.cache_key import cache_key
 from .kitti import KittiFrame, frame_ids, load_frame
 from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
-from .paths import cache_dir, cache_key, data_root
+from .paths import cache_dir, data_root
 
 __all__ = [
     "DEFAULT_HELD_OUT",

@@ -14,9 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..io.cache_key import cache_key
-
-__all__ = ["cache_dir", "cache_key", "data_root"]
+__all__ = ["cache_dir", "data_root"]
 
 
 def data_root() -> Path:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -107,8 +108,6 @@ def fit_values_profile(
     sensor: str,
     input: str,
     form: str = "gbm",
-    model: dict[str, str] | None = None,
-    provenance: dict[str, Any] | None = None,
     progress: bool = False,
     incidence: bool = False,
     **options: Any,
@@ -116,14 +115,14 @@ def fit_values_profile(
     """Fit a profile mapping per-return values to the scans' intensities.
 
     Returns whose value is not finite (no camera gives one) are left out of the fit. Rings are
-    used when every return has one.
+    used when every return has one. The profile's ``model`` is None (any model) and its
+    provenance counts the frames, returns and rings (:func:`fit_scan_profile` adds the model).
 
     Args:
         scans: the sensor's scans (:func:`nidar_mi.datasets.scans.load_scans`).
         values: the model value at a scan's returns, ``(N,)`` per scan.
-        name, sensor, input, model: the profile's fields.
+        name, sensor, input: the profile's fields.
         form: a profile form (:data:`nidar_mi.profiles.FORMS`).
-        provenance: extra provenance entries (the data, the command).
         progress: show a progress bar.
         incidence: the profile also reads the returns' incidence cosines, estimated from each
             scan's points (``ScanFrame.cos_incidence``; ``gbm`` form only).
@@ -145,7 +144,7 @@ def fit_values_profile(
         "frames": len(scans),
         "returns": n,
         "rings": "given" if has_rings else "none (elevation only)",
-    } | dict(provenance or {})
+    }
     mapping = fit(form, **data, input=input, **options)
     return SensorProfile(
         name=name,
@@ -153,7 +152,6 @@ def fit_values_profile(
         form=form,
         input=input,
         mapping=mapping,
-        model=model,
         provenance=info,
     )
 
@@ -166,7 +164,6 @@ def fit_scan_profile(
     sensor: str,
     form: str = "gbm",
     branch: str = "R",
-    values: Callable[[ScanFrame], np.ndarray] | None = None,
     provenance: dict[str, Any] | None = None,
     progress: bool = True,
     **options: Any,
@@ -179,23 +176,22 @@ def fit_scan_profile(
         name, sensor: the profile's name and sensor description.
         form: a profile form (:data:`nidar_mi.profiles.FORMS`).
         branch: the NIDAR map (``"R"`` or ``"I_hat"``).
-        values: the branch at a scan's returns (default :func:`scan_values`; a cache of it).
         provenance: extra provenance entries (the data, the command).
         progress: show a progress bar.
         **options: passed to :func:`fit_values_profile` (``incidence``) and the form's fit.
     """
-    return fit_values_profile(
+    profile = fit_values_profile(
         scans,
-        values if values is not None else (lambda s: scan_values(model, s, branch)),
+        lambda s: scan_values(model, s, branch),
         name=name,
         sensor=sensor,
         input=f"nidar:{branch}",
         form=form,
-        model=model.identity(),
-        provenance={"branch": branch, "weights": str(model.weights_dir)} | dict(provenance or {}),
         progress=progress,
         **options,
     )
+    record = {"branch": branch, "weights": str(model.weights_dir)} | dict(provenance or {})
+    return replace(profile, model=model.identity(), provenance=profile.provenance | record)
 
 
 def fit_split_calibration(

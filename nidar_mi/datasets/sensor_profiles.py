@@ -71,8 +71,9 @@ def _sim_profile(model: NidarModel) -> SensorProfile:
 
 def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfile:
     from ..io.atomic import atomic_write_json
+    from ..io.cache_key import cache_key
     from .kitti_frames import default_kitti_dirs, kitti_training_data
-    from .paths import cache_dir, cache_key, data_root
+    from .paths import cache_dir, data_root
     from .profile_fitting import fit_scan_profile
     from .scans import frames_from_data
 

@@ -403,16 +403,13 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
 
 def _ablation_key(meta: dict, stn) -> str:
     """16 hex digits naming the ablation runs of one dataset, STN and settings."""
-    import hashlib
-    import json
-
+    from ..io.cache_key import cache_key
     from ..render_folder import file_sha256
     from .ablation import AblationSettings
 
     data = {k: meta.get(k) for k in ("request", "frames", "intensity_scale")}
     stn_hash = file_sha256(stn) if os.path.isfile(stn) else None
-    text = json.dumps([data, stn_hash, AblationSettings().to_dict()], sort_keys=True)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+    return cache_key([data, stn_hash, AblationSettings().to_dict()])
 
 
 def _write(stage: str, payload: dict, out: str) -> None:

@@ -116,11 +116,7 @@ def train_stn(
         return loss, {}
 
     stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
-    with _torch_threads(cfg.threads):
-        run_stage(stage, cfg, out_dir, resume, progress)
-    path = save_stn(out_dir / "stn.safetensors", model, cfg.stn)
-    _mark_done(out_dir, "stn")
-    return path
+    return _run_stn_stage(stage, cfg, out_dir, resume, progress)
 
 
 def train_stn_photos(
@@ -162,11 +158,7 @@ def train_stn_photos(
         return photo_stn_loss(net(batch["rgb"]), batch["nir"], pc.ssim_weight), {}
 
     stage = Stage("stn", model, cfg.stn_optim, train_set, val_set, loss_fn)
-    with _torch_threads(cfg.threads):
-        run_stage(stage, cfg, out_dir, resume, progress)
-    path = save_stn(out_dir / "stn.safetensors", model, cfg.stn)
-    _mark_done(out_dir, "stn")
-    return path
+    return _run_stn_stage(stage, cfg, out_dir, resume, progress)
 
 
 def train_irnet(
@@ -348,6 +340,17 @@ def _frames(data_dir: Path, split: str) -> list[Path]:
 def _check_crop(crop: int, stride: int, name: str) -> None:
     if crop % stride:
         raise NidarError(f"crop_size {crop} is not a multiple of the {name} stride {stride}")
+
+
+def _run_stn_stage(
+    stage: Stage, cfg: TrainConfig, out_dir: Path, resume: bool, progress: bool
+) -> Path:
+    """Train an STN stage, save its weights as ``out_dir/stn.safetensors`` and mark it done."""
+    with _torch_threads(cfg.threads):
+        run_stage(stage, cfg, out_dir, resume, progress)
+    path = save_stn(out_dir / "stn.safetensors", stage.model, cfg.stn)
+    _mark_done(out_dir, "stn")
+    return path
 
 
 def _mark_done(out_dir: Path, stage: str) -> None:

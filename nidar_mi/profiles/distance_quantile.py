@@ -55,6 +55,7 @@ __all__ = [
     "DEFAULT_RANGE_QUANTILES",
     "DEFAULT_R_RETRO",
     "DEFAULT_TAU",
+    "DistanceQuantileFitOptions",
     "DistanceQuantileMap",
     "distance_encode",
 ]
@@ -106,6 +107,27 @@ def distance_encode(
     return np.clip(i + (r_min - i) * t, 0.0, 1.0)
 
 
+@dataclass(frozen=True)
+class DistanceQuantileFitOptions:
+    """How a ``distance_quantile`` map is fitted (keyword options of
+    :func:`nidar_mi.profiles.fit`).
+
+    Attributes:
+        tau: diffuse / retro-reflective threshold.
+        r_retro: far-range floor of retro-reflective values.
+        range_quantiles: ``(lo, hi)`` quantile levels of ``range_m`` giving ``d_min, d_max``,
+            ``0 <= lo < hi <= 1``.
+        K: number of quantile levels when ``levels`` is None.
+        levels: optional explicit quantile levels.
+    """
+
+    tau: float = DEFAULT_TAU
+    r_retro: float = DEFAULT_R_RETRO
+    range_quantiles: tuple[float, float] = DEFAULT_RANGE_QUANTILES
+    K: int = DEFAULT_K
+    levels: Any = None
+
+
 @dataclass(frozen=True, eq=False)
 class DistanceQuantileMap:
     """Fitted distance encoding plus quantile map, applied to per-point branch values.
@@ -123,6 +145,8 @@ class DistanceQuantileMap:
     form: ClassVar[str] = "distance_quantile"
     #: Whether the form can read the returns' incidence cosines.
     reads_incidence: ClassVar[bool] = False
+    #: The keyword options of its :meth:`fit`.
+    fit_options: ClassVar[type] = DistanceQuantileFitOptions
 
     d_min: float
     d_max: float
@@ -260,11 +284,7 @@ class DistanceQuantileMap:
         elevation_deg: Any = None,
         cos_incidence: Any = None,
         input: str = "R",
-        tau: float = DEFAULT_TAU,
-        r_retro: float = DEFAULT_R_RETRO,
-        range_quantiles: tuple[float, float] = DEFAULT_RANGE_QUANTILES,
-        K: int = DEFAULT_K,
-        levels: Any = None,
+        options: DistanceQuantileFitOptions | None = None,
     ) -> DistanceQuantileMap:
         """Fit the map on training points (:func:`nidar_mi.profiles.fit` is the entry point).
 
@@ -279,15 +299,14 @@ class DistanceQuantileMap:
                 same N points, but the pairing is not used: only the distribution matters).
             ring, elevation_deg, cos_incidence: not read by this form.
             input: the value the map is fitted on, stored as its ``branch``.
-            tau: diffuse / retro-reflective threshold.
-            r_retro: far-range floor of retro-reflective values.
-            range_quantiles: ``(lo, hi)`` quantile levels of ``range_m``, ``0 <= lo < hi <= 1``.
-            K: number of quantile levels when ``levels`` is None.
-            levels: optional explicit quantile levels.
+            options: the fitting options (:class:`DistanceQuantileFitOptions`; default its
+                defaults).
 
         Raises:
             NidarError: on mismatched, empty or non-finite inputs, or a degenerate range.
         """
+        o = options or DistanceQuantileFitOptions()
+        tau, r_retro, range_quantiles = o.tau, o.r_retro, o.range_quantiles
         pred = as_float_array(values, "values").reshape(-1)
         dist = as_float_array(range_m, "range_m").reshape(-1)
         ref = as_float_array(intensity, "intensity").reshape(-1)
@@ -312,7 +331,7 @@ class DistanceQuantileMap:
                 f"fit distance_quantile: training distances span no range ({d_min} m to {d_max} m)"
             )
         encoded = distance_encode(pred, dist, d_min=d_min, d_max=d_max, tau=tau, r_retro=r_retro)
-        qmap = QuantileMap.fit(encoded, ref, K=K, levels=levels)
+        qmap = QuantileMap.fit(encoded, ref, K=o.K, levels=o.levels)
         return cls(
             d_min=d_min, d_max=d_max, tau=tau, r_retro=r_retro, quantile_map=qmap, branch=input
         )

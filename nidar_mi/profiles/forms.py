@@ -3,7 +3,8 @@
 Every form is a class with the same interface (:class:`ProfileMap`): its ``form`` name, whether
 it ``reads_incidence`` at all, ``__call__(values, range_m, *, ring=None, elevation_deg=None,
 cos_incidence=None)`` giving (N,) float64 intensities in [0, 1], ``to_dict`` / ``from_dict``
-(a profile file's ``mapping``) and a classmethod ``fit`` of the same data.
+(a profile file's ``mapping``), a classmethod ``fit`` of the same data and ``fit_options``, the
+dataclass of its fitting options.
 :data:`FORMS` is the only place that lists them.
 """
 
@@ -26,6 +27,7 @@ class ProfileMap(Protocol):
 
     form: ClassVar[str]
     reads_incidence: ClassVar[bool]
+    fit_options: ClassVar[type]
 
     @property
     def uses_incidence(self) -> bool: ...
@@ -80,7 +82,7 @@ def fit(
             ``gbm`` can; another form is an error).
         input: the value the map is fitted on (a profile's ``input``, e.g. ``"nidar:R"``), kept
             by forms that record it (``distance_quantile``'s ``branch``).
-        **form_options: the form's own fitting options (its class's ``fit``), e.g. ``gbm``'s
+        **form_options: the form's own fitting options (its class's ``fit_options``), e.g. ``gbm``'s
             ``use_value=False`` (geometry only), ``use_geometry=False`` (value and incidence
             only), ``trees``; ``range_ring``'s ``width``; ``distance_quantile``'s ``tau``.
 
@@ -99,5 +101,5 @@ def fit(
         elevation_deg=elevation_deg,
         cos_incidence=cos_incidence,
         input=input,
-        **form_options,
+        options=cls.fit_options(**form_options),
     )

@@ -57,6 +57,7 @@ __all__ = [
     "GEOMETRY_FEATURES",
     "INCIDENCE_FEATURE",
     "VALUE_INCIDENCE_FEATURES",
+    "GbmFitOptions",
     "GbmMap",
 ]
 
@@ -131,6 +132,34 @@ def _params(
     return p
 
 
+@dataclass(frozen=True)
+class GbmFitOptions:
+    """How a ``gbm`` map is fitted (keyword options of :func:`nidar_mi.profiles.fit`).
+
+    Attributes:
+        use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
+        use_geometry: False: a value-and-incidence map of ``(v, cos_incidence)`` (needs
+            ``cos_incidence`` and the value; the ranges only set the number of returns).
+        monotone: constrain the map non-decreasing in the value.
+        trees: boosting rounds, 1 to :data:`MAX_TREES`.
+        leaves: most leaves per tree, 2 to :data:`MAX_LEAVES`.
+        learning_rate: shrinkage per round, in (0, 1].
+        min_leaf: fewest training returns per leaf.
+        max_samples: returns beyond this are subsampled (seeded) before fitting.
+        seed: the seed of the subsample and of LightGBM.
+    """
+
+    use_value: bool = True
+    use_geometry: bool = True
+    monotone: bool = True
+    trees: int = DEFAULT_TREES
+    leaves: int = DEFAULT_LEAVES
+    learning_rate: float = DEFAULT_LEARNING_RATE
+    min_leaf: int = DEFAULT_MIN_LEAF
+    max_samples: int = DEFAULT_MAX_SAMPLES
+    seed: int = 0
+
+
 @dataclass(frozen=True, eq=False)
 class GbmMap:
     """A fitted gradient-boosted sensor response (module docstring).
@@ -148,6 +177,8 @@ class GbmMap:
     form: ClassVar[str] = "gbm"
     #: Whether the form can read the returns' incidence cosines.
     reads_incidence: ClassVar[bool] = True
+    #: The keyword options of its :meth:`fit`.
+    fit_options: ClassVar[type] = GbmFitOptions
 
     features: tuple[str, ...]
     monotone: bool
@@ -274,15 +305,7 @@ class GbmMap:
         elevation_deg: Any = None,
         cos_incidence: Any = None,
         input: str = "R",
-        use_value: bool = True,
-        use_geometry: bool = True,
-        monotone: bool = True,
-        trees: int = DEFAULT_TREES,
-        leaves: int = DEFAULT_LEAVES,
-        learning_rate: float = DEFAULT_LEARNING_RATE,
-        min_leaf: int = DEFAULT_MIN_LEAF,
-        max_samples: int = DEFAULT_MAX_SAMPLES,
-        seed: int = 0,
+        options: GbmFitOptions | None = None,
     ) -> GbmMap:
         """Fit the map on training returns (least squares, deterministic;
         :func:`nidar_mi.profiles.fit` is the entry point).
@@ -296,76 +319,90 @@ class GbmMap:
                 with ``use_geometry=False``).
             cos_incidence: (N,) ``|cos θ|`` of the returns in [0, 1]: given, the map is
                 incidence-aware (module docstring); None: it is not.
-            use_value: False: a geometry-only map of ``(range_m, elevation_deg)``.
-            use_geometry: False: a value-and-incidence map of ``(v, cos_incidence)`` (needs
-                ``cos_incidence`` and the value; the ranges only set the number of returns).
-            monotone: constrain the map non-decreasing in the value.
-            trees: boosting rounds, 1 to :data:`MAX_TREES`.
-            leaves: most leaves per tree, 2 to :data:`MAX_LEAVES`.
-            learning_rate: shrinkage per round, in (0, 1].
-            min_leaf: fewest training returns per leaf.
-            max_samples: returns beyond this are subsampled (seeded) before fitting.
-            seed: the seed of the subsample and of LightGBM.
+            options: the fitting options (:class:`GbmFitOptions`; default its defaults).
 
         Raises:
             NidarError: mismatched, empty or non-finite inputs, or parameters out of range.
         """
-        if not use_geometry and (cos_incidence is None or not use_value):
-            raise NidarError(
-                "fit gbm: a map without range and elevation reads the value and the incidence"
-            )
-        if elevation_deg is None and use_geometry:
-            raise NidarError("fit gbm: the returns' elevations are needed")
-        if not 1 <= int(trees) <= MAX_TREES or not 2 <= int(leaves) <= MAX_LEAVES:
-            raise NidarError(f"fit gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
-        if not 0 < learning_rate <= 1 or min_leaf < 1 or max_samples < 1:
-            raise NidarError("fit gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
+        o = options or GbmFitOptions()
+        _check_options(
+            o, has_incidence=cos_incidence is not None, has_elevation=elevation_deg is not None
+        )
         x = _design(
             values,
             range_m,
             elevation_deg,
-            use_value,
+            o.use_value,
             "fit gbm",
             cos_incidence,
-            use_geometry=use_geometry,
+            use_geometry=o.use_geometry,
         )
-        y = np.asarray(intensity, dtype=np.float64).reshape(-1)
-        if y.shape != (x.shape[0],) or not y.size:
-            raise NidarError(f"fit gbm: {x.shape[0]} returns but {y.size} intensities")
-        if not np.all(np.isfinite(y)):
-            raise NidarError("fit gbm: intensities must be finite")
-        if y.size < 2 * min_leaf:
-            raise NidarError(
-                f"fit gbm: {y.size} returns are too few for leaves of at least {min_leaf} returns "
-                f"(need {2 * min_leaf}; fewer returns fit a constant)"
-            )
-        if y.size > max_samples:
-            keep = np.sort(np.random.default_rng(seed).choice(y.size, max_samples, replace=False))
+        y = _training_intensities(intensity, x.shape[0], o.min_leaf)
+        if y.size > o.max_samples:
+            rng = np.random.default_rng(o.seed)
+            keep = np.sort(rng.choice(y.size, o.max_samples, replace=False))
             x, y = x[keep], y[keep]
-        feats = FEATURES if use_value else GEOMETRY_FEATURES
+        feats = FEATURES if o.use_value else GEOMETRY_FEATURES
         if cos_incidence is not None:
-            feats = (*feats, INCIDENCE_FEATURE) if use_geometry else VALUE_INCIDENCE_FEATURES
-        params = _params(
-            feats,
-            monotone,
-            leaves=leaves,
-            learning_rate=learning_rate,
-            min_leaf=min_leaf,
-            seed=seed,
-        )
-        lgb = _lgb()
-        data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
-        booster = lgb.train(params, data, num_boost_round=int(trees))
-        record = {
-            k: params[k]
-            for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
-        } | {"trees": int(booster.num_trees()), "samples": int(y.size)}
+            feats = (*feats, INCIDENCE_FEATURE) if o.use_geometry else VALUE_INCIDENCE_FEATURES
+        model, record = _train(x, y, feats, o)
         return cls(
             features=feats,
-            monotone=bool(monotone and use_value),
-            model=booster.model_to_string(),
+            monotone=bool(o.monotone and o.use_value),
+            model=model,
             params=record,
         )
+
+
+def _check_options(o: GbmFitOptions, *, has_incidence: bool, has_elevation: bool) -> None:
+    """Refuse options out of range, or a feature set the data cannot give."""
+    if not o.use_geometry and (not has_incidence or not o.use_value):
+        raise NidarError(
+            "fit gbm: a map without range and elevation reads the value and the incidence"
+        )
+    if not has_elevation and o.use_geometry:
+        raise NidarError("fit gbm: the returns' elevations are needed")
+    if not 1 <= int(o.trees) <= MAX_TREES or not 2 <= int(o.leaves) <= MAX_LEAVES:
+        raise NidarError(f"fit gbm: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
+    if not 0 < o.learning_rate <= 1 or o.min_leaf < 1 or o.max_samples < 1:
+        raise NidarError("fit gbm: learning_rate in (0, 1], min_leaf and max_samples >= 1")
+
+
+def _training_intensities(intensity: Any, n: int, min_leaf: int) -> np.ndarray:
+    """(N,) float64 training intensities, one per row of the design matrix."""
+    y = np.asarray(intensity, dtype=np.float64).reshape(-1)
+    if y.shape != (n,) or not y.size:
+        raise NidarError(f"fit gbm: {n} returns but {y.size} intensities")
+    if not np.all(np.isfinite(y)):
+        raise NidarError("fit gbm: intensities must be finite")
+    if y.size < 2 * min_leaf:
+        raise NidarError(
+            f"fit gbm: {y.size} returns are too few for leaves of at least {min_leaf} returns "
+            f"(need {2 * min_leaf}; fewer returns fit a constant)"
+        )
+    return y
+
+
+def _train(
+    x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: GbmFitOptions
+) -> tuple[str, dict[str, Any]]:
+    """LightGBM on the design matrix ``x`` (N, F): its text model and the parameters recorded
+    in the profile file."""
+    params = _params(
+        feats,
+        o.monotone,
+        leaves=o.leaves,
+        learning_rate=o.learning_rate,
+        min_leaf=o.min_leaf,
+        seed=o.seed,
+    )
+    lgb = _lgb()
+    data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
+    booster = lgb.train(params, data, num_boost_round=int(o.trees))
+    record = {
+        k: params[k] for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
+    } | {"trees": int(booster.num_trees()), "samples": int(y.size)}
+    return booster.model_to_string(), record
 
 
 def _predict_threads() -> int:

@@ -38,6 +38,7 @@ from .quantile_map import DEFAULT_K, QuantileMap
 __all__ = [
     "DEFAULT_BIN_M",
     "DEFAULT_MIN_POINTS",
+    "RangeRingFitOptions",
     "RangeRingMap",
     "range_bins",
     "ring_gains",
@@ -131,6 +132,27 @@ def _gain(gains: np.ndarray, ring: np.ndarray) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True)
+class RangeRingFitOptions:
+    """How a ``range_ring`` map is fitted (keyword options of :func:`nidar_mi.profiles.fit`).
+
+    Attributes:
+        n_rings: number of rings (default: the largest ring + 1).
+        ring_gains_on: fit ring gains (else all 1).
+        width: initial range-bin width, m.
+        min_points: fewest returns per range bin.
+        min_ring_points: fewest returns for a ring's own gain.
+        K: quantile levels per map.
+    """
+
+    n_rings: int | None = None
+    ring_gains_on: bool = True
+    width: float = DEFAULT_BIN_M
+    min_points: int = DEFAULT_MIN_POINTS
+    min_ring_points: int = DEFAULT_MIN_RING_POINTS
+    K: int = DEFAULT_K
+
+
 @dataclass(frozen=True, eq=False)
 class RangeRingMap:
     """Per-range-bin monotone maps and ring gains (module docstring).
@@ -148,6 +170,8 @@ class RangeRingMap:
     form: ClassVar[str] = "range_ring"
     #: Whether the form can read the returns' incidence cosines.
     reads_incidence: ClassVar[bool] = False
+    #: The keyword options of its :meth:`fit`.
+    fit_options: ClassVar[type] = RangeRingFitOptions
 
     edges_m: np.ndarray
     centres_m: np.ndarray
@@ -288,12 +312,7 @@ class RangeRingMap:
         elevation_deg: Any = None,
         cos_incidence: Any = None,
         input: str = "R",
-        n_rings: int | None = None,
-        ring_gains_on: bool = True,
-        width: float = DEFAULT_BIN_M,
-        min_points: int = DEFAULT_MIN_POINTS,
-        min_ring_points: int = DEFAULT_MIN_RING_POINTS,
-        K: int = DEFAULT_K,
+        options: RangeRingFitOptions | None = None,
     ) -> RangeRingMap:
         """Fit the map on training returns (:func:`nidar_mi.profiles.fit` is the entry point).
 
@@ -304,16 +323,12 @@ class RangeRingMap:
             ring: optional (N,) rings (-1 unknown).
             elevation_deg: optional (N,) elevations, degrees (for the rings' median elevations).
             cos_incidence, input: not read by this form.
-            n_rings: number of rings (default: the largest ring + 1).
-            ring_gains_on: fit ring gains (else all 1).
-            width: initial range-bin width, m.
-            min_points: fewest returns per range bin.
-            min_ring_points: fewest returns for a ring's own gain.
-            K: quantile levels per map.
+            options: the fitting options (:class:`RangeRingFitOptions`; default its defaults).
 
         Raises:
             NidarError: mismatched, empty or non-finite inputs.
         """
+        o = options or RangeRingFitOptions()
         v = np.asarray(values, dtype=np.float64).reshape(-1)
         d = np.asarray(range_m, dtype=np.float64).reshape(-1)
         y = np.asarray(intensity, dtype=np.float64).reshape(-1)
@@ -324,42 +339,56 @@ class RangeRingMap:
             )
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d)) and np.all(np.isfinite(y))):
             raise NidarError("fit range_ring: values, ranges and references must be finite")
-        r = (
-            np.full(v.size, -1, np.int64)
-            if ring is None
-            else np.asarray(ring, np.int64).reshape(-1)
-        )
-        if r.shape != v.shape:
-            raise NidarError("fit range_ring: one ring per value expected")
-        n_r = int(n_rings) if n_rings is not None else max(int(r.max()) + 1, 0)
-        r = np.where(r < n_r, r, -1)
-        edges = range_bins(d, width, min_points)
+        r, n_r = _rings(ring, v.size, o.n_rings)
+        edges = range_bins(d, o.width, o.min_points)
         b = np.clip(np.searchsorted(edges, d, side="right") - 1, 0, edges.size - 2)
         n_b = edges.size - 1
-        if ring_gains_on and n_r > 0:
-            g = ring_gains(y, b, r, n_b, n_r, min_ring_points)
+        if o.ring_gains_on and n_r > 0:
+            g = ring_gains(y, b, r, n_b, n_r, o.min_ring_points)
         else:
             g = np.ones(n_r)
         y_norm = y / np.maximum(_gain(g, r), 1e-12)
-        maps, centres = [], []
-        for k in range(n_b):
-            s = b == k
-            if np.ptp(v[s]) == 0:  # one value in the bin (a range-only profile): its median
-                maps.append(QuantileMap([0.5], [v[s][0]], [float(np.median(y_norm[s]))]))
-            else:
-                maps.append(QuantileMap.fit(v[s], y_norm[s], K=K))
-            centres.append(float(np.median(d[s])))
-        el = np.full(n_r, np.nan)
-        if elevation_deg is not None and n_r:
-            e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
-            for k in range(n_r):
-                s = r == k
-                if s.any():
-                    el[k] = float(np.median(e[s]))
+        maps, centres = _bin_maps(v, d, y_norm, b, n_b, o.K)
         return cls(
             edges_m=edges,
-            centres_m=np.array(centres),
-            maps=tuple(maps),
+            centres_m=centres,
+            maps=maps,
             gains=g,
-            ring_elevation_deg=el,
+            ring_elevation_deg=_ring_elevations(elevation_deg, r, n_r),
         )
+
+
+def _rings(ring: Any, n: int, n_rings: int | None) -> tuple[np.ndarray, int]:
+    """(N,) int64 rings (-1 unknown, and for rings at or beyond ``n_rings``) and the number of
+    rings (default: the largest ring + 1)."""
+    r = np.full(n, -1, np.int64) if ring is None else np.asarray(ring, np.int64).reshape(-1)
+    if r.shape != (n,):
+        raise NidarError("fit range_ring: one ring per value expected")
+    n_r = int(n_rings) if n_rings is not None else max(int(r.max()) + 1, 0)
+    return np.where(r < n_r, r, -1), n_r
+
+
+def _bin_maps(v, d, y_norm, b, n_b: int, K: int) -> tuple[tuple[QuantileMap, ...], np.ndarray]:
+    """One quantile map per range bin (values ``v`` to gain-normalised intensities ``y_norm``,
+    bin ``b`` of each return) and each bin's median range, m."""
+    maps, centres = [], []
+    for k in range(n_b):
+        s = b == k
+        if np.ptp(v[s]) == 0:  # one value in the bin (a range-only profile): its median
+            maps.append(QuantileMap([0.5], [v[s][0]], [float(np.median(y_norm[s]))]))
+        else:
+            maps.append(QuantileMap.fit(v[s], y_norm[s], K=K))
+        centres.append(float(np.median(d[s])))
+    return tuple(maps), np.array(centres)
+
+
+def _ring_elevations(elevation_deg: Any, r: np.ndarray, n_r: int) -> np.ndarray:
+    """(n_r,) median elevation of each ring's returns, degrees (NaN without any)."""
+    el = np.full(n_r, np.nan)
+    if elevation_deg is not None and n_r:
+        e = np.asarray(elevation_deg, dtype=np.float64).reshape(-1)
+        for k in range(n_r):
+            s = r == k
+            if s.any():
+                el[k] = float(np.median(e[s]))
+    return el
