@@ -1,18 +1,24 @@
 """NIDAR inference speed: seconds per frame for pseudo-NIR, IRNet and the point assignment.
 
 ``python benchmarks/bench_nidar.py [--threads 2] [--repeats 5] [--sizes 1242x375,1600x900]
-[--weights DIR] [--configs before,fold,fold+cl,fold+cl+half] [--json out.json]``
+[--weights DIR] [--configs before,fold,fold+cl,fold+cl+half] [--devices auto] [--json out.json]``
 
-Per frame and image size, three steps are timed separately (after one warm-up call per
-configuration and size, ``repeats`` rounds that run every configuration and size in turn, so that
-all see the same machine load; medians of the wall time and of the process CPU time):
+Per frame, image size and device, the stages are timed separately (after one warm-up call per
+configuration, size and device, ``repeats`` rounds that run every cell in turn, so that all see
+the same machine load; medians of the wall time and of the process CPU time):
 
 * ``pseudo_nir``: 8-bit sRGB -> linear exposure-normalised RGB -> STN -> pseudo-NIR
   (:func:`nidar_mi.nidar.infer.pseudo_nir`);
 * ``irnet``: pseudo-NIR -> R, S, Î (:func:`nidar_mi.nidar.infer.run_irnet`);
-* ``assign``: the point cloud projected into the camera, the occlusion test (the cloud's own
-  z-buffer), bilinear sampling of R and the model's calibration
-  (:meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps).
+* ``assign``: :meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps,
+  timed in its three stages (``assign`` is their sum): ``sampling`` (the point cloud projected
+  into the camera, the occlusion test against the cloud's own z-buffer and bilinear sampling of
+  R; in torch on the device when it is not the CPU), ``normals`` (the incidence cosines of the
+  observed points, :func:`nidar_mi.geometry.incidence_cosine`) and ``profile`` (the weights'
+  default profile at the observed points).
+
+``--devices``: ``cpu``, ``cuda`` or both, comma-separated; ``auto`` (default): the CPU, and
+CUDA when torch sees a GPU. The networks and the assignment run on that device.
 
 Inputs are procedural and need no data: a textured street-like image of the given size and an
 HDL-64E-like cloud (64 rings x 2048 columns over a ground plane at -1.73 m and a wall 30 m
@@ -44,7 +50,9 @@ __all__ = ["build_parser", "main", "run_benchmark", "street_image", "hdl64e_clou
 
 DEFAULT_SIZES = ((1242, 375), (1600, 900))
 DEFAULT_CONFIGS = ("before", "fold", "fold+cl", "fold+cl+half")
-STEPS = ("pseudo_nir", "irnet", "assign")
+STEPS = ("pseudo_nir", "irnet", "sampling", "normals", "profile")
+#: The stages of the point assignment, summed as ``assign``.
+ASSIGN = ("sampling", "normals", "profile")
 
 
 def street_image(width: int, height: int, seed: int = 0) -> np.ndarray:
@@ -115,6 +123,40 @@ def _time(fn) -> tuple[float, float, object]:
     return time.perf_counter() - t0, time.process_time() - c0, out
 
 
+def _assign_stages(model, xyz, cam, maps, out: dict):
+    """:meth:`NidarModel.point_intensity` of the default profile, stage by stage, timed into
+    ``out``; returns the number of observed points."""
+    from nidar_mi.geometry import incidence_cosine, sample_cameras, sample_cameras_on
+    from nidar_mi.nidar.pipeline import _assignment_device
+
+    device = _assignment_device(model)
+    if device is None:
+        sample = lambda: sample_cameras(xyz, [cam], [maps["R"]])  # noqa: E731
+    else:
+        sample = lambda: sample_cameras_on(device, xyz, [cam], [maps["R"]])  # noqa: E731
+    wall, cpu, (values, observed, _) = _time(sample)
+    out["sampling"] = (wall, cpu)
+    observed = observed & np.isfinite(values)
+    p = xyz[observed]
+    wall, cpu, cos = _time(lambda: incidence_cosine(p))
+    out["normals"] = (wall, cpu)
+    profile = model.default_profile()
+    el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
+    rng = np.linalg.norm(p, axis=1)
+    out["profile"] = _time(
+        lambda: profile(values[observed], rng, elevation_deg=el, cos_incidence=cos)
+    )[:2]
+    return int(observed.sum())
+
+
+def _devices(spec: str) -> list[str]:
+    import torch
+
+    if spec == "auto":
+        return ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    return [d.strip() for d in spec.split(",") if d.strip()]
+
+
 def run_benchmark(
     sizes=DEFAULT_SIZES,
     configs=DEFAULT_CONFIGS,
@@ -123,72 +165,29 @@ def run_benchmark(
     threads: int = 2,
     weights: str | None = None,
     cols: int = 2048,
+    devices: str = "auto",
 ) -> dict:
-    """Time the three steps per configuration and size; returns a JSON-safe dict.
+    """Time the stages per configuration, size and device; returns a JSON-safe dict.
 
-    Every (configuration, size) is warmed up once; then the timed rounds run them all in turn,
-    ``repeats`` times, so that every cell sees the same machine load. Medians are reported, of
-    the wall time and of the process CPU time (all threads).
+    Every cell is warmed up once; then the timed rounds run them all in turn, ``repeats``
+    times, so that every cell sees the same machine load. Medians are reported, of the wall
+    time and of the process CPU time (all threads).
     """
     import torch
 
-    from nidar_mi.nidar.fold import prepare_for_inference
-    from nidar_mi.nidar.infer import pseudo_nir, run_irnet
-    from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.preprocess import colour_input
-
     torch.set_num_threads(int(threads))
-    base = NidarModel.load(weights, device="cpu", optimize=False)
     xyz = hdl64e_cloud(cols)
     cells = []
-    for name in configs:
-        cfg = _parse_config(name)
-        stn, irnet = base.stn, base.irnet
-        if cfg["fold"] or cfg["channels_last"]:
-            s = 2 * max(stn.stride, irnet.stride)
-            opts = {"fold": cfg["fold"], "channels_last": cfg["channels_last"]}
-            stn = prepare_for_inference(stn, torch.rand(1, 3, s, s), **opts)
-            irnet = prepare_for_inference(irnet, torch.rand(1, irnet.in_channels, s, s), **opts)
-        for width, height in sizes:
-            rgb = street_image(width, height)
-            cam = kitti_like_camera(width, height)
-
-            def steps(stn=stn, irnet=irnet, rgb=rgb, cam=cam, scale=cfg["scale"]):
-                out = {}
-                wall, cpu, p = _time(lambda: pseudo_nir(stn, rgb, scale=scale))
-                out["pseudo_nir"] = (wall, cpu)
-                x = torch.from_numpy(p)[None, None]
-                if irnet.in_channels == 4:  # colour channels stacked before the pseudo-NIR
-                    colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
-                    x = torch.cat((colour, x), 1)
-                wall, cpu, maps = _time(lambda: run_irnet(irnet, x, scale=scale))
-                out["irnet"] = (wall, cpu)
-                maps = maps | {"pseudo_nir": p}
-                wall, cpu, res = _time(lambda: base.point_intensity(xyz, [cam], [rgb], maps=[maps]))
-                out["assign"] = (wall, cpu)
-                return out, int(res.observed.sum())
-
-            cells.append({"config": name, "size": f"{width}x{height}", "run": steps, "t": []})
+    for device in _devices(devices):
+        base = _model(weights, device)
+        for name in configs:
+            cells += _cells(base, name, sizes, xyz, device)
     for cell in cells:  # warm-up
         cell["observed"] = cell["run"]()[1]
     for _ in range(int(repeats)):
         for cell in cells:
             cell["t"].append(cell["run"]()[0])
-    results = []
-    for cell in cells:
-        wall = {k: float(statistics.median(t[k][0] for t in cell["t"])) for k in STEPS}
-        cpu = {k: float(statistics.median(t[k][1] for t in cell["t"])) for k in STEPS}
-        results.append(
-            {
-                "config": cell["config"],
-                "size": cell["size"],
-                "seconds": wall,
-                "cpu_seconds": cpu,
-                "total_s": float(statistics.median(sum(t[k][0] for k in STEPS) for t in cell["t"])),
-                "points": int(len(xyz)),
-                "observed": cell["observed"],
-            }
-        )
+    results = [_summary(cell, len(xyz)) for cell in cells]
     return {
         "threads": int(threads),
         "repeats": int(repeats),
@@ -197,10 +196,74 @@ def run_benchmark(
         "machine": {
             "cpu": _cpu_name(),
             "cores": os.cpu_count(),
+            "gpu": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
             "python": platform.python_version(),
             "torch": torch.__version__,
         },
         "results": results,
+    }
+
+
+def _model(weights, device: str):
+    from nidar_mi.nidar.pipeline import NidarModel
+
+    return NidarModel.load(weights, device=device, optimize=False)
+
+
+def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
+    """One timed cell per size for a configuration of the networks on a device."""
+    import torch
+
+    from nidar_mi.nidar.fold import prepare_for_inference
+    from nidar_mi.nidar.infer import pseudo_nir, run_irnet
+    from nidar_mi.nidar.preprocess import colour_input
+
+    cfg = _parse_config(name)
+    stn, irnet = base.stn, base.irnet
+    if cfg["fold"] or cfg["channels_last"]:
+        s = 2 * max(stn.stride, irnet.stride)
+        opts = {"fold": cfg["fold"], "channels_last": cfg["channels_last"]}
+        stn = prepare_for_inference(stn, torch.rand(1, 3, s, s, device=device), **opts)
+        x = torch.rand(1, irnet.in_channels, s, s, device=device)
+        irnet = prepare_for_inference(irnet, x, **opts)
+    cells = []
+    for width, height in sizes:
+        rgb = street_image(width, height)
+        cam = kitti_like_camera(width, height)
+
+        def steps(stn=stn, irnet=irnet, rgb=rgb, cam=cam, scale=cfg["scale"]):
+            out = {}
+            wall, cpu, p = _time(lambda: pseudo_nir(stn, rgb, scale=scale))
+            out["pseudo_nir"] = (wall, cpu)
+            x = torch.from_numpy(p)[None, None]
+            if irnet.in_channels == 4:  # colour channels stacked before the pseudo-NIR
+                colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
+                x = torch.cat((colour, x), 1)
+            wall, cpu, maps = _time(lambda: run_irnet(irnet, x, scale=scale))
+            out["irnet"] = (wall, cpu)
+            return out, _assign_stages(base, xyz, cam, maps, out)
+
+        size = f"{width}x{height}"
+        cells.append({"config": name, "size": size, "device": device, "run": steps, "t": []})
+    return cells
+
+
+def _summary(cell: dict, points: int) -> dict:
+    """Medians of one cell's timed rounds."""
+    t = cell["t"]
+    wall = {k: float(statistics.median(r[k][0] for r in t)) for k in STEPS}
+    cpu = {k: float(statistics.median(r[k][1] for r in t)) for k in STEPS}
+    wall["assign"] = float(statistics.median(sum(r[k][0] for k in ASSIGN) for r in t))
+    cpu["assign"] = float(statistics.median(sum(r[k][1] for k in ASSIGN) for r in t))
+    return {
+        "config": cell["config"],
+        "size": cell["size"],
+        "device": cell["device"],
+        "seconds": wall,
+        "cpu_seconds": cpu,
+        "total_s": float(statistics.median(sum(r[k][0] for k in STEPS) for r in t)),
+        "points": int(points),
+        "observed": cell["observed"],
     }
 
 
@@ -218,15 +281,16 @@ def _cpu_name() -> str:
 def markdown(result: dict) -> str:
     """The results as a Markdown table (seconds per frame)."""
     lines = [
-        "| configuration | size | pseudo-NIR (s) | IRNet (s) | assignment (s) | total (s) "
-        "| total CPU (s) |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: |",
+        "| configuration | size | device | pseudo-NIR (s) | IRNet (s) | sampling (s) | normals (s) "
+        "| profile (s) | assignment (s) | total (s) | total CPU (s) |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in result["results"]:
         s, c = r["seconds"], r["cpu_seconds"]
+        stages = " | ".join(f"{s[k]:.4f}" for k in (*STEPS, "assign"))
         lines.append(
-            f"| {r['config']} | {r['size']} | {s['pseudo_nir']:.3f} | {s['irnet']:.3f} | "
-            f"{s['assign']:.3f} | **{r['total_s']:.3f}** | {sum(c.values()):.3f} |"
+            f"| {r['config']} | {r['size']} | {r['device']} | {stages} | "
+            f"**{r['total_s']:.3f}** | {sum(c[k] for k in STEPS):.3f} |"
         )
     return "\n".join(lines)
 
@@ -241,6 +305,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     p.add_argument("--cols", type=int, default=2048, help="LiDAR columns of the cloud")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
+    p.add_argument(
+        "--devices", default="auto", help="cpu, cuda or both; auto: cpu and cuda if available"
+    )
     p.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     return p
 
@@ -260,6 +327,10 @@ def main(argv=None) -> int:
                 _parse_config(c)
         except ValueError as e:
             raise NidarError(f"--sizes/--configs: {e}") from None
+        if any(
+            d != "auto" and d.split(":")[0] not in ("cpu", "cuda") for d in args.devices.split(",")
+        ):
+            raise NidarError(f"--devices: cpu, cuda or auto (got {args.devices})")
         if args.repeats < 1 or args.threads < 1 or any(len(s) != 2 for s in sizes):
             raise NidarError("--repeats and --threads must be >= 1; sizes are WxH")
         result = run_benchmark(
@@ -269,8 +340,10 @@ def main(argv=None) -> int:
             threads=args.threads,
             weights=args.weights,
             cols=args.cols,
+            devices=args.devices,
         )
-        print(f"{result['machine']['cpu']}, {result['threads']} torch threads")
+        gpu = result["machine"]["gpu"]
+        print(f"{result['machine']['cpu']}, {result['threads']} torch threads, GPU: {gpu}")
         print(markdown(result))
         if args.json:
             from nidar_mi.io.atomic import atomic_write_json

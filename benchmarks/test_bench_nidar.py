@@ -37,12 +37,18 @@ def test_main_writes_json(tmp_path, capsys):
     r = json.loads(out.read_text())
     assert [x["config"] for x in r["results"]] == ["before", "fold+cl+s0.5"]
     for x in r["results"]:
-        assert set(x["seconds"]) == {"pseudo_nir", "irnet", "assign"} and x["observed"] > 0
+        stages = {"pseudo_nir", "irnet", "sampling", "normals", "profile", "assign"}
+        assert set(x["seconds"]) == stages and x["observed"] > 0 and x["device"] == "cpu"
         assert x["total_s"] > 0
-    assert "| before | 96x48 |" in capsys.readouterr().out
+        s = x["seconds"]
+        assert s["assign"] == pytest.approx(s["sampling"] + s["normals"] + s["profile"])
+    assert "| before | 96x48 | cpu |" in capsys.readouterr().out
 
 
 def test_bad_arguments(capsys):
     assert bench.main(["--configs", "fold+turbo"]) == 2
     assert "configuration part" in capsys.readouterr().err
     assert bench.main(["--sizes", "12"]) == 2
+    capsys.readouterr()
+    assert bench.main(["--devices", "tpu"]) == 2
+    assert "--devices" in capsys.readouterr().err

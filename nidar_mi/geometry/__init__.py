@@ -11,6 +11,8 @@
   wins) and :func:`splat_points` (its maps alone).
 * :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
   cameras, fused by a rule).
+* :mod:`~nidar_mi.geometry.device_fusion`: :func:`sample_cameras_on` (the same in torch on a
+  device, a GPU's or the CPU).
 * :mod:`~nidar_mi.geometry.normals`: :func:`estimate_normals` (plane fits to each point's
   neighbours) and :func:`incidence_cosine` (the ray's ``|cos θ|`` on the surface).
 * :mod:`~nidar_mi.geometry.se3`: SE(3) exponential and logarithm, poses interpolated along a
@@ -21,6 +23,7 @@ Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are 
 
 from .camera_model import CONVENTIONS, R_OPENCV_FROM_WAYMO, CameraModel
 from .camera_returns import CameraReturns, camera_returns, splat_points
+from .device_fusion import sample_cameras_on
 from .fusion import FUSION_RULES, sample_cameras
 from .normals import estimate_normals, incidence_cosine
 from .projection import bilinear_sample, in_image, project, unproject
@@ -42,6 +45,7 @@ __all__ = [
     "incidence_cosine",
     "project",
     "sample_cameras",
+    "sample_cameras_on",
     "splat_points",
     "unproject",
     "visible_mask",

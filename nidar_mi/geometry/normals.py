@@ -4,7 +4,7 @@ A LiDAR return's intensity falls with the angle between the ray and the surface 
 ``cos θ`` for a diffuse surface, :mod:`nidar_mi.lidar`); a point cloud carries that angle in its
 geometry. :func:`estimate_normals` fits a plane to each point's ``k`` nearest neighbours
 (principal component analysis: the normal is the eigenvector of the neighbourhood's covariance
-with the smallest eigenvalue) and :func:`incidence_cosine` gives ``|cos θ| = |n · d|`` with
+with the smallest eigenvalue, from a closed-form 3×3 eigen-solver: :func:`_plane_eigen`) and :func:`incidence_cosine` gives ``|cos θ| = |n · d|`` with
 ``d`` the unit ray from the sensor at the origin to the point. Only the points are needed (no
 rings, no mesh), so it applies to any sensor's scans, real or simulated.
 
@@ -88,18 +88,94 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
     tree = cKDTree(p)
     normals = np.empty_like(p)
     for start in range(0, len(p), CHUNK):
-        q = p[start : start + CHUNK]
-        _, idx = tree.query(q, k=k, workers=-1)
-        nb = p[idx]  # (n, k, 3)
-        scale = np.einsum("nki,nki->n", nb, nb)  # k × mean squared distance from the origin
-        nb -= nb.mean(axis=1, keepdims=True)
-        cov = np.matmul(nb.transpose(0, 2, 1), nb)  # (n, 3, 3)
-        val, vec = np.linalg.eigh(cov)  # ascending eigenvalues
-        flat = ~(val[:, 1] > DEGENERATE * scale)  # a point or a line: no plane
-        normals[start : start + CHUNK] = np.where(flat[:, None], 0.0, vec[:, :, 0])
+        _, idx = tree.query(p[start : start + CHUNK], k=k, workers=-1)
+        cov, scale = _covariances(p, idx)
+        second, smallest = _plane_eigen(cov)
+        flat = ~(second > DEGENERATE * scale)  # a point or a line: no plane
+        normals[start : start + CHUNK] = np.where(flat[:, None], 0.0, smallest)
     flip = np.einsum("ni,ni->n", normals, p) > 0
     normals[flip] *= -1.0
     return normals
+
+
+def _covariances(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Scatter matrices of neighbourhoods.
+
+    Args:
+        p: (N, 3) points, m.
+        idx: (n, k) indices into ``p``: each row a neighbourhood.
+
+    Returns:
+        ``(cov, scale)``: (n, 6) entries ``xx, yy, zz, xy, xz, yz`` of the neighbourhoods'
+        scatter matrices about their means, m², and (n,) the sums of their squared distances
+        from the origin (k × the mean), m².
+    """
+    x = np.ascontiguousarray(p.T)[:, idx]  # (3, n, k)
+    scale = np.einsum("cnk,cnk->n", x, x)
+    x -= x.mean(axis=2, keepdims=True)
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    cov = np.stack([np.einsum("nk,nk->n", x[a], x[b]) for a, b in pairs], axis=1)
+    return cov, scale
+
+
+def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form eigen-analysis of symmetric 3×3 matrices, vectorised.
+
+    The eigenvalues come from the trigonometric solution of the characteristic cubic (on the
+    matrix scaled by its largest entry), the smallest refined by two Newton steps on
+    ``det(A - λI)``; its eigenvector is the longest cross product of two rows of ``A - λI``.
+    On KITTI scans and the benchmark cloud the incidence cosines agree with LAPACK's ``eigh``
+    to 2e-12.
+
+    Args:
+        cov: (n, 6) entries ``xx, yy, zz, xy, xz, yz``.
+
+    Returns:
+        ``(second, smallest)``: (n,) the middle eigenvalue (same units as ``cov``) and (n, 3)
+        the unit eigenvector of the smallest one (any sign; zero for a zero matrix).
+    """
+    s = np.abs(cov).max(axis=1)
+    s = np.where(s > 0, s, 1.0)
+    a00, a11, a22, a01, a02, a12 = (cov / s[:, None]).T
+    q = (a00 + a11 + a22) / 3.0
+    off = a01 * a01 + a02 * a02 + a12 * a12
+    p2 = ((a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * off) / 6.0
+    pp = np.sqrt(p2)
+    det = _det(a00 - q, a11 - q, a22 - q, a01, a02, a12)
+    r = np.clip(det / np.where(pp > 0, 2.0 * pp * p2, 1.0), -1.0, 1.0)
+    phi = np.arccos(r) / 3.0
+    top = q + 2.0 * pp * np.cos(phi)
+    low = q + 2.0 * pp * np.cos(phi + 2.0 * np.pi / 3.0)
+    for _ in range(2):  # Newton on det(A - λI), whose derivative is minus the minors' sum
+        m00, m11, m22 = a00 - low, a11 - low, a22 - low
+        slope = -(m11 * m22 - a12 * a12 + m00 * m22 - a02 * a02 + m00 * m11 - a01 * a01)
+        f = _det(m00, m11, m22, a01, a02, a12)
+        low = low - np.divide(f, slope, out=np.zeros_like(f), where=slope != 0)
+    second = (3.0 * q - top - low) * s
+    rows = np.stack([a00 - low, a01, a02, a01, a11 - low, a12, a02, a12, a22 - low], axis=1)
+    rows = rows.reshape(-1, 3, 3)
+    cross = np.stack(
+        [
+            np.cross(rows[:, 0], rows[:, 1]),
+            np.cross(rows[:, 0], rows[:, 2]),
+            np.cross(rows[:, 1], rows[:, 2]),
+        ],
+        axis=1,
+    )  # (n, 3 pairs, 3)
+    length2 = np.einsum("npi,npi->np", cross, cross)
+    best = length2.argmax(axis=1)
+    vec = cross[np.arange(len(cov)), best]
+    length = np.sqrt(length2[np.arange(len(cov)), best])
+    return second, vec / np.where(length > 0, length, 1.0)[:, None]
+
+
+def _det(m00, m11, m22, m01, m02, m12):
+    """Determinants of symmetric 3×3 matrices given by their entries (arrays)."""
+    return (
+        m00 * (m11 * m22 - m12 * m12)
+        - m01 * (m01 * m22 - m12 * m02)
+        + m02 * (m01 * m12 - m11 * m02)
+    )
 
 
 def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:

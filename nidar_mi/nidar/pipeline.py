@@ -1,7 +1,8 @@
 """NIDAR end to end: camera images -> per-point LiDAR intensity.
 
 RGB -> STN pseudo-NIR -> IRNet (R, S, Î) -> the R branch sampled at each point by calibrated
-projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on) -> the sensor's
+projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on; in torch on
+the networks' device when that is a GPU: :mod:`nidar_mi.geometry.device_fusion`) -> the sensor's
 response, a sensor profile (:mod:`nidar_mi.profiles`): by default the weights' own
 (:meth:`NidarModel.default_profile`). Points no camera sees get 0 and ``observed = False``.
 
@@ -24,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ..geometry import CameraModel, incidence_cosine, sample_cameras
+from ..geometry import CameraModel, incidence_cosine, sample_cameras, sample_cameras_on
 from ..profiles import DistanceQuantileMap, SensorProfile, load_profile
 
 __all__ = [
@@ -281,9 +282,16 @@ class NidarModel:
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
         maps = list(maps) if maps is not None else [self.predict_image(im) for im in images]
-        values, observed, cam_idx = sample_cameras(
-            xyz, cameras, [m[branch] for m in maps], depth_images=depth_images, occlusion=occlusion
-        )
+        branch_maps = [m[branch] for m in maps]
+        device = _assignment_device(self)
+        if device is None:
+            values, observed, cam_idx = sample_cameras(
+                xyz, cameras, branch_maps, depth_images=depth_images, occlusion=occlusion
+            )
+        else:
+            values, observed, cam_idx = sample_cameras_on(
+                device, xyz, cameras, branch_maps, depth_images=depth_images, occlusion=occlusion
+            )
         observed = observed & np.isfinite(values)
         if profile is None:  # the dense head, raw
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)
@@ -297,6 +305,14 @@ class NidarModel:
             )[0]
             refl = np.where(observed & np.isfinite(r_vals), r_vals, 0.0).astype(np.float32)
         return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1), refl)
+
+
+def _assignment_device(model: NidarModel):
+    """The torch device the point assignment runs on: the networks' when it is not the CPU
+    (:func:`nidar_mi.geometry.device_fusion.sample_cameras_on`), else None (the NumPy
+    reference, :func:`nidar_mi.geometry.fusion.sample_cameras`)."""
+    device = next(model.irnet.parameters()).device
+    return None if device.type == "cpu" else device
 
 
 def _profile_intensity(

@@ -145,3 +145,25 @@ def test_profile_in_point_intensity_uses_range_and_ring():
     assert res.observed.tolist() == [True, True, False] and res.intensity[2] == 0
     expect = p([0.6, 0.6], np.linalg.norm(xyz[:2], axis=1), ring=[1, 6])
     np.testing.assert_allclose(res.intensity[:2], expect, rtol=1e-6)
+
+
+def test_the_device_path_gives_the_reference_intensities(monkeypatch):
+    """The assignment in torch (as on a GPU, here on the CPU device) gives the NumPy path's
+    output: the benchmark scan through a KITTI-like camera and the shipped profile."""
+    import torch
+
+    from benchmarks.bench_nidar import hdl64e_cloud, kitti_like_camera
+    from nidar_mi.nidar import pipeline
+
+    model = NidarModel.load(device="cpu")
+    xyz, cam = hdl64e_cloud(512), kitti_like_camera(621, 188)
+    rng = np.random.default_rng(0)
+    maps = {b: rng.uniform(0, 1, (188, 621)).astype(np.float32) for b in ("R", "I_hat")}
+    ref = model.point_intensity(xyz, [cam], [None], maps=[maps])
+    monkeypatch.setattr(pipeline, "_assignment_device", lambda m: torch.device("cpu"))
+    got = model.point_intensity(xyz, [cam], [None], maps=[maps])
+    assert ref.observed.sum() > 1000
+    np.testing.assert_array_equal(got.observed, ref.observed)
+    np.testing.assert_array_equal(got.camera_index, ref.camera_index)
+    np.testing.assert_allclose(got.raw_R, ref.raw_R, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.intensity, ref.intensity, rtol=0, atol=1e-6)

@@ -325,3 +325,56 @@ def test_too_few_returns_and_bad_constraint_headers_are_errors():
     assert bad != m.model
     with pytest.raises(NidarError, match="monotone_constraints"):
         GbmMap(m.features, m.monotone, bad)
+
+
+def _table_probe(m, n=20_000, seed=5):
+    """(rows, F) design points: random ones, every split threshold exactly and one ulp either
+    side of it, and values LightGBM reads as 0."""
+    from nidar_mi.profiles import gbm
+
+    th = gbm._split_thresholds(m.model, len(m.features))
+    rng = np.random.default_rng(seed)
+    cols = []
+    for t in th:
+        edge = np.concatenate([t, np.nextafter(t, -np.inf), np.nextafter(t, np.inf)])
+        lo, hi = (t.min() - 1, t.max() + 1) if len(t) else (0.0, 1.0)
+        col = np.concatenate([rng.uniform(lo, hi, n), edge, [0.0, -0.0, 1e-36, -1e-36]])
+        cols.append(col)
+    size = max(len(c) for c in cols)
+    return np.stack([np.resize(rng.permutation(c), size) for c in cols], axis=1)
+
+
+@pytest.mark.parametrize("which", ["shipped", "value_incidence", "geometry"])
+def test_the_lookup_table_equals_lightgbm(which):
+    """The cell table gives LightGBM's own predictions bit for bit, at random points and at and
+    beside every split threshold (the shipped value-and-incidence profile and fitted maps)."""
+    from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.profiles import gbm
+
+    if which == "shipped":
+        m = NidarModel.load(device="cpu", optimize=False).default_profile().mapping
+    else:
+        v, d, e, y = _sample(20_000)
+        c = np.random.default_rng(6).uniform(0, 1, len(v))
+        if which == "value_incidence":
+            m = fit("gbm", v, d, y * c, cos_incidence=c, use_geometry=False, trees=60)
+        else:
+            m = fit("gbm", v, d, y, elevation_deg=e, use_value=False, trees=60)
+    x = _table_probe(m)
+    table = gbm._CellTable.build(m._booster, m.model, len(m.features))
+    assert table, "the map fits a table"
+    np.testing.assert_array_equal(table(x), m._booster.predict(x, num_threads=1))
+
+
+def test_a_map_beyond_the_table_size_goes_to_lightgbm(monkeypatch):
+    from nidar_mi.profiles import gbm
+
+    v, d, e, y = _sample(20_000)
+    tabled = fit("gbm", v, d, y, elevation_deg=e, use_value=False, trees=30)
+    gv, gd, ge, _ = _grid(_truth)
+    expected = tabled(gv, gd, elevation_deg=ge)
+    assert tabled._table
+    monkeypatch.setattr(gbm, "MAX_TABLE_CELLS", 0)
+    direct = gbm.GbmMap.from_dict(tabled.to_dict())
+    np.testing.assert_array_equal(direct(gv, gd, elevation_deg=ge), expected)
+    assert not direct._table
