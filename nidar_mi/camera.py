@@ -204,12 +204,19 @@ def _reflectance(scene, camera, W: int, H: int, wavelength: float) -> np.ndarray
     return np.where(np.isfinite(out), np.maximum(out, 0.0), 0.0).astype(np.float32)
 
 
+#: NIR twins of cameras, by variant, lens, film, band and spp (a few at most): a sequence moves
+#: its twin with the camera instead of loading a new sensor (and its kernels) every frame.
+_NIR_CAMERAS: dict = {}
+_NIR_CAMERAS_MAX = 8
+
+
 def _nir_camera(camera, wavelength: float, spp: int):
+    """The camera's NIR twin (module docstring) at the camera's current pose."""
+    import drjit as dr
     import mitsuba as mi
 
     params = mi.traverse(camera)
     W, H = (int(v) for v in camera.film().size())
-    pts, _ = nir_response(wavelength)
     if camera.class_name() == "ThinLensCamera":
         lens = {
             "type": "thinlens",
@@ -222,23 +229,34 @@ def _nir_camera(camera, wavelength: float, spp: int):
             "principal_point_offset_x": float(params["principal_point_offset_x"][0]),
             "principal_point_offset_y": float(params["principal_point_offset_y"][0]),
         }
-    return mi.load_dict(
-        lens
-        | {
-            "fov": float(params["x_fov"][0]),
-            "fov_axis": "x",
-            "near_clip": float(params["near_clip"]),
-            "far_clip": float(params["far_clip"]),
-            "to_world": mi.ScalarTransform4f(_matrix(camera.world_transform())),
-            "film": {
-                "type": "specfilm",
-                "width": W,
-                "height": H,
-                "nir": {"type": "spectrum", "value": pts},
-            },
-            "sampler": {"type": "independent", "sample_count": spp},
-        }
-    )
+    lens |= {
+        "fov": float(params["x_fov"][0]),
+        "fov_axis": "x",
+        "near_clip": float(params["near_clip"]),
+        "far_clip": float(params["far_clip"]),
+    }
+    to_world = _matrix(camera.world_transform())
+    key = (mi.variant(), tuple(lens.items()), W, H, float(wavelength), int(spp))
+    nir = _NIR_CAMERAS.get(key)
+    if nir is None:
+        pts, _ = nir_response(wavelength)
+        film = {"type": "specfilm", "width": W, "height": H}
+        nir = mi.load_dict(
+            lens
+            | {
+                "film": film | {"nir": {"type": "spectrum", "value": pts}},
+                "sampler": {"type": "independent", "sample_count": spp},
+            }
+        )
+        if len(_NIR_CAMERAS) >= _NIR_CAMERAS_MAX:
+            _NIR_CAMERAS.pop(next(iter(_NIR_CAMERAS)))
+        _NIR_CAMERAS[key] = nir
+    T = mi.AffineTransform4f(to_world.astype(np.float32))
+    dr.make_opaque(T)  # the pose is data: a moved camera reuses the render kernels
+    twin = mi.traverse(nir)
+    twin["to_world"] = T
+    twin.update()
+    return nir
 
 
 #: Peak memory of a render per pixel (RGB and NIR films, depth, the images written), bytes, and

@@ -322,6 +322,8 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
         loop[-1] += time.perf_counter() - t0
     finally:
         bar.close()
+        for cam in session.cameras:  # back to the scene's own pose
+            _set_camera_pose(cam, rig.cam_mounts[cam.id()])
     for entry, s in zip(frames.log, loop):
         entry["timings_s"]["frame_total"] = s
     return frames
@@ -553,8 +555,6 @@ def _shoot_frame(shot: _FrameShot) -> dict:
             "timings_s": r.timings | {"render_total": render_s},
         }
         cameras[cid] = (r, entry, {lid: T_rig @ rig.mounts[lid] for lid in rig.mounts})
-    for cam in session.cameras:  # back to the scene's own pose
-        _set_camera_pose(cam, rig.cam_mounts[cam.id()])
     return cameras
 
 
@@ -577,13 +577,14 @@ def _write_frame(rendered: _Rendered, stage, frames: _Frames, outputs: _Sequence
         files += written
         camera_entries[cid] = calib | entry
         images[cid] = {"rgb": r.srgb8(), "K": r.K, "T_world_cam": r.T_world_cam}
-        images[cid]["stamp_s"] = entry["time_s"]
+        images[cid]["stamp_s"] = entry["time_s"]  # srgb8 is cached: rgb.png computed it
     total = rendered.render_s + time.perf_counter() - t0
     _write_frame_manifest(shot, folder, rendered.lidar_entries, camera_entries, files, total)
-    pts = rendered.scans[shot.rig.lead].points()
-    points = {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}
     frames.written += files + [os.path.join(folder, rf.MANIFEST)]
-    frames.written += outputs.add(shot.k, points, images, rendered.lidar_start_pose, shot.t_k)
+    if outputs.formats:
+        pts = rendered.scans[shot.rig.lead].points()
+        points = {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}
+        frames.written += outputs.add(shot.k, points, images, rendered.lidar_start_pose, shot.t_k)
     frames.log.append(
         {
             "frame": shot.k,
