@@ -4,7 +4,8 @@
 * NIR: the same camera with a ``specfilm`` whose response is a trapezoid around λ (flat over
   λ ± :data:`NIR_HALF_PLATEAU_NM`, linear ramps of :data:`NIR_RAMP_NM` on each side). Mitsuba's
   specfilm integrates ``∫ L(λ') r(λ') dλ'``; the image is divided by ``∫ r`` so it reads band-averaged
-  radiance: a uniform sky of radiance 1 reads 1. One band image per wavelength asked for (a scene
+  radiance: a uniform sky of radiance 1 reads 1. This NIR twin is loaded once per lens, film, band
+  and spp and moved with the camera (its pose is data: a sequence compiles its kernels once). One band image per wavelength asked for (a scene
   with LiDARs at 905 and 1550 nm gets both).
 * Cameras: ``perspective`` and ``thinlens`` sensors (:data:`CAMERA_CLASSES`); a thin-lens camera's
   NIR image has the same aperture and focus distance, and its calibration is the pinhole through

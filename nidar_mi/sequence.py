@@ -236,7 +236,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
 
 def check_sequence(options: SequenceOptions):
     """Refuse options that cannot be rendered, before anything is loaded: a bad rate, frame
-    count or sequence format, a bad frame option, a missing trajectory file. The frames' cache
+    count, sequence format or previews value, a bad frame option, a missing trajectory file. The frames' cache
     key (:class:`~nidar_mi.render_folder.RenderRequest`).
 
     Raises:
