@@ -197,6 +197,7 @@ def write_lidar(
     bin_intensity: str = "unit",
     *,
     deskew: bool = False,
+    previews: bool = True,
 ) -> list[str]:
     """Write one LiDAR's points, range image and previews into ``folder/<lidar id>/``.
 
@@ -213,6 +214,7 @@ def write_lidar(
         extra: further per-point columns (e.g. ``intensity_nidar``).
         bin_intensity: ``unit`` or ``raw`` (:data:`BIN_INTENSITY`).
         deskew: add ``xyz_deskewed`` (the points in the LiDAR frame at the sweep's start).
+        previews: write the ``range.png`` and ``intensity.png`` previews.
 
     Returns:
         The paths written.
@@ -255,6 +257,8 @@ def write_lidar(
     path = os.path.join(d, "range_image.exr")
     images.write_exr(path, channels)
     written.append(path)
+    if not previews:
+        return written
     azimuth = np.degrees(np.arctan2(result.directions[0, :, 1], result.directions[0, :, 0]))
     unit = "1/m²" if cfg.intensity_mode == "raw" else "unitless"
     for key, label in (("range", "range (m)"), ("intensity", f"intensity ({unit})")):

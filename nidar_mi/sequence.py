@@ -6,8 +6,13 @@ starts at ``t_k = t_0 + k / rate``. Each LiDAR sweeps from ``t_k`` on: column ``
 ``t_k + t_j`` (:class:`nidar_mi.lidar.pattern.BeamPattern`) and is cast from the rig pose
 SE(3)-interpolated at that time (motion distortion; ``t`` per point). Each camera is exposed
 when the first LiDAR's sweep points along the camera's optical axis (how KITTI triggers its
-cameras), from the rig pose of that time. Poses enter the kernels as data: no recompilation per
-frame.
+cameras), from the rig pose of that time. Poses enter the kernels as data: after the first frame
+no kernel is compiled again, for any sensor.
+
+Frame ``k`` is written on a background thread (:class:`nidar_mi.io.background.BackgroundWriter`,
+two frames queued at most) while frame ``k + 1`` is rendered; the sequence outputs are written
+as the frames arrive. Ctrl-C or SIGTERM stops the writer after the file it is on and the staging
+folder is removed: ``OUT`` is complete or untouched.
 
 Layout (``OUT``)::
 
@@ -16,16 +21,18 @@ Layout (``OUT``)::
     poses.txt           KITTI odometry: per frame T_{lidar_0 <- lidar_k} (3×4 row-major), the
                         first LiDAR's pose at the frame's start relative to frame 0
     times.txt           per frame its start time t_k - t_0, s
-    frames/000000/ ...  one render folder per frame (:mod:`nidar_mi.render_folder`)
+    frames/000000/ ...  one render folder per frame (:mod:`nidar_mi.render_folder`); the range
+                        previews (``range.png``, ``intensity.png``) in the first frame only,
+                        in every frame or in none (``previews``)
     kitti/              with sequence format ``kitti``: the first LiDAR's sweeps in the KITTI
                         odometry layout (:func:`nidar_mi.io.kitti.write_sequence`)
     rosbag/             with ``rosbag``: a ROS 2 bag of the first LiDAR's sweeps and the camera
                         images (:func:`nidar_mi.io.rosbag.write_ros2_bag`), stamped in trajectory
                         time
 
-The ``kitti`` and ``rosbag`` outputs are written once every frame is rendered: the first LiDAR's
-points (x, y, z, intensity, ring, t, label, instance) and the camera images stay in memory until
-then.
+The ``kitti`` and ``rosbag`` outputs are streamed: each frame's scan (x, y, z, intensity, ring,
+t, label, instance of the first LiDAR) and camera images are written when the frame is;
+``kitti/poses.txt``, ``times.txt`` and ``calib.txt`` and the bag's index at the end.
 """
 
 from __future__ import annotations
@@ -42,6 +49,7 @@ from .errors import NidarError
 from .render_session import RenderOptions, RenderSession, check_options
 
 __all__ = [
+    "PREVIEWS",
     "SEQUENCE_FORMATS",
     "SequenceOptions",
     "camera_trigger_time",
@@ -51,6 +59,10 @@ __all__ = [
 
 #: Whole-sequence outputs beside the frame folders.
 SEQUENCE_FORMATS = ("kitti", "rosbag")
+#: ``previews``: the range previews of every frame, of the first frame only, or of none.
+PREVIEWS = ("all", "first", "none")
+#: Frames rendered but not yet written that the background writer may hold.
+WRITE_QUEUE = 2
 #: Points columns kept per frame for the sequence outputs.
 _SEQUENCE_COLUMNS = ("xyz", "intensity", "ring", "t", "label", "instance")
 
@@ -78,6 +90,8 @@ class SequenceOptions:
             frame's points.
         max_memory: bytes one scan or camera render may use (None: the default limit).
         progress: show a progress bar on stderr.
+        previews: range previews of ``all`` frames, the ``first`` only or ``none``
+            (:data:`PREVIEWS`).
     """
 
     scene: str
@@ -94,6 +108,7 @@ class SequenceOptions:
     deskew: bool = False
     max_memory: int | None = None
     progress: bool = True
+    previews: str = "first"
 
     def frame_options(self) -> RenderOptions:
         """The options every frame is rendered with (physics intensity, the scene itself)."""
@@ -135,7 +150,6 @@ class _Frames:
 
     log: list = field(default_factory=list)  # per frame its manifest entry
     start_poses: list = field(default_factory=list)  # per frame the lead LiDAR's (4, 4) pose
-    keep: list = field(default_factory=list)  # per frame what the sequence outputs need
     written: list = field(default_factory=list)
 
 
@@ -211,18 +225,8 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     session.check_memory()
     rig = _rig(session)
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
-        frames = _render_frames(
-            stage, session, traj, times, rig, keep=bool(options.sequence_formats)
-        )
+        frames = _render_frames(stage, session, options, traj, times, rig)
         frames.written += _write_poses_and_times(stage, frames.start_poses, times)
-        frames.written += _sequence_outputs(
-            stage,
-            options.sequence_formats,
-            frames.keep,
-            np.asarray(frames.start_poses),
-            times,
-            rig.lead,
-        )
         request = _sequence_request(session, options, rate, len(times))
         manifest = _sequence_manifest(session, request, rate, times, rig.lead, frames, stage)
         manifest["timings_s"]["total"] = time.perf_counter() - t_start
@@ -232,7 +236,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
 
 def check_sequence(options: SequenceOptions):
     """Refuse options that cannot be rendered, before anything is loaded: a bad rate, frame
-    count or sequence format, a bad frame option, a missing trajectory file. The frames' cache
+    count, sequence format or previews value, a bad frame option, a missing trajectory file. The frames' cache
     key (:class:`~nidar_mi.render_folder.RenderRequest`).
 
     Raises:
@@ -243,6 +247,10 @@ def check_sequence(options: SequenceOptions):
         raise NidarError(f"`rate` must be > 0 Hz (got {rate})")
     if frames is not None and frames < 1:
         raise NidarError(f"`frames` must be >= 1 (got {frames})")
+    if options.previews not in PREVIEWS:
+        raise NidarError(
+            f"`previews` must be one of {', '.join(PREVIEWS)} (got '{options.previews}')"
+        )
     bad = [f for f in options.sequence_formats if f not in SEQUENCE_FORMATS]
     if bad:
         raise NidarError(
@@ -282,26 +290,48 @@ def _rig(session: RenderSession) -> _Rig:
     return _Rig(mounts, cam_mounts, cam_offsets, lead.id())
 
 
-def _render_frames(stage, session: RenderSession, traj, times, rig: _Rig, keep: bool) -> _Frames:
-    """Render every frame into ``stage/frames/<k>`` under one progress bar (``keep``: hold
-    what the sequence outputs need of each frame)."""
+def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _Rig) -> _Frames:
+    """Render every frame into ``stage/frames/<k>`` under one progress bar: the sensors on this
+    thread, the files on a background writer (frame ``k`` is written while ``k + 1`` renders).
+
+    Each log entry's ``timings_s.frame_total`` is the frame's time in the loop (its render and
+    any wait for the writer; the last frame's includes writing what was left), so their sum is
+    the loop's wall time."""
     from tqdm.auto import tqdm
 
+    from .io.background import BackgroundWriter
+
     frames = _Frames()
-    disable = not session.options.progress
-    bar = tqdm(total=len(times), desc="sequence", unit="frame", disable=disable, file=sys.stderr)
+    outputs = _SequenceOutputs(stage, options.sequence_formats, rig.lead)
+    bar = tqdm(total=len(times), desc="sequence", unit="frame", disable=not options.progress,
+               file=sys.stderr)  # fmt: skip
+    loop = []
     try:
-        for k, t_k in enumerate(times):
-            folder = os.path.join(stage, "frames", f"{k:06d}")
-            shot = _FrameShot(session, traj, rig, k, float(t_k))
-            entry = _render_frame(shot, folder, frames.keep if keep else None)
-            frames.written += [os.path.join(folder, f) for f in entry.pop("files")]
-            frames.start_poses.append(entry.pop("lidar_start_pose"))
-            frames.log.append(entry)
-            bar.update(1)
+        with BackgroundWriter(depth=WRITE_QUEUE, on_abort=outputs.discard) as writer:
+            for k, t_k in enumerate(times):
+                t0 = time.perf_counter()
+                shot = _FrameShot(session, traj, rig, k, float(t_k))
+                rendered = _render_frame(shot, _previews(options.previews, k))
+                frames.start_poses.append(rendered.lidar_start_pose)
+                writer.submit(_write_frame, rendered, stage, frames, outputs)
+                loop.append(time.perf_counter() - t0)
+                bar.update(1)
+            t0 = time.perf_counter()
+            poses = np.asarray(frames.start_poses)
+            writer.submit(outputs.finish, poses, np.asarray(times), frames.written)
+        loop[-1] += time.perf_counter() - t0
     finally:
         bar.close()
+        for cam in session.cameras:  # back to the scene's own pose
+            _set_camera_pose(cam, rig.cam_mounts[cam.id()])
+    for entry, s in zip(frames.log, loop):
+        entry["timings_s"]["frame_total"] = s
     return frames
+
+
+def _previews(previews: str, k: int) -> bool:
+    """Whether frame ``k`` gets the range previews."""
+    return previews == "all" or (previews == "first" and k == 0)
 
 
 def _write_poses_and_times(stage, start_poses: list, times: np.ndarray) -> list[str]:
@@ -323,6 +353,7 @@ def _sequence_request(session: RenderSession, options: SequenceOptions, rate, fr
         "frames": frames,
         "deskew": options.deskew,
         "sequence_formats": list(options.sequence_formats),
+        "previews": options.previews,
     }
 
 
@@ -346,29 +377,57 @@ def _sequence_manifest(session, request, rate, times, lead, frames: _Frames, sta
     }
 
 
-def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> list[str]:
-    """Write the KITTI odometry layout and the ROS 2 bag of the kept frames."""
-    written = []
-    if "kitti" in sequence_formats:
-        from .io.kitti import write_sequence
+class _SequenceOutputs:
+    """The whole-sequence outputs (:data:`SEQUENCE_FORMATS`), written frame by frame as the
+    frames arrive; on the background writer's thread only (a bag's SQLite file belongs to the
+    thread that opened it).
 
-        clouds = [f["points"] for f in keep]
-        written += write_sequence(os.path.join(stage, "kitti"), clouds, poses, times - times[0])
-    if "rosbag" in sequence_formats:
-        from .io.rosbag import BagCamera, BagFrame, write_ros2_bag
+    Args:
+        stage: the sequence's staging folder.
+        formats: the sequence formats asked for.
+        lidar: the lead LiDAR's id (its sweeps are the outputs).
+    """
 
-        frames = [
-            BagFrame(
-                stamp_s=float(t),
-                T_world_lidar=P,
-                points=f["points"],
-                cameras={cid: BagCamera(**c) for cid, c in f["cameras"].items()},
-            )
-            for f, P, t in zip(keep, poses, times)
-        ]
-        bag = write_ros2_bag(os.path.join(stage, "rosbag"), frames, lidar=lidar)
-        written += [os.path.join(root, n) for root, _, names in os.walk(bag) for n in names]
-    return written
+    def __init__(self, stage, formats, lidar: str):
+        self.stage, self.formats, self.lidar = stage, tuple(formats), lidar
+        self._bag = None
+
+    def add(self, k: int, points: dict, cameras: dict, pose: np.ndarray, t: float) -> list[str]:
+        """Write frame ``k``: ``points`` of the lead LiDAR (its sequence columns), ``cameras``
+        (id -> rgb, K, T_world_cam, stamp_s), its (4, 4) start ``pose``, start time ``t`` (s).
+        The paths written."""
+        written = []
+        if "kitti" in self.formats:
+            from .io.kitti import write_sequence_frame
+
+            written += write_sequence_frame(os.path.join(self.stage, "kitti"), k, points)
+        if "rosbag" in self.formats:
+            from .io.rosbag import BagCamera, BagFrame, Ros2BagWriter
+
+            if self._bag is None:
+                self._bag = Ros2BagWriter(os.path.join(self.stage, "rosbag"), self.lidar).open()
+            cams = {cid: BagCamera(**c) for cid, c in cameras.items()}
+            self._bag.write(BagFrame(stamp_s=t, T_world_lidar=pose, points=points, cameras=cams))
+        return written
+
+    def finish(self, poses: np.ndarray, times: np.ndarray, written: list) -> None:
+        """Complete the outputs (KITTI poses, times, calibration; the bag), given every frame's
+        (4, 4) start pose and start time (s); append the paths written to ``written``."""
+        if "kitti" in self.formats:
+            from .io.kitti import write_sequence_index
+
+            kitti = os.path.join(self.stage, "kitti")
+            written += write_sequence_index(kitti, poses, times - times[0])
+        if self._bag is not None:
+            bag, self._bag = self._bag, None
+            path = bag.close()
+            written += [os.path.join(root, n) for root, _, names in os.walk(path) for n in names]
+
+    def discard(self) -> None:
+        """Drop an unfinished bag (after a failure or an interruption)."""
+        if self._bag is not None:
+            bag, self._bag = self._bag, None
+            bag.discard()
 
 
 @dataclass
@@ -394,40 +453,48 @@ class _FrameShot:
         return (base + self.k) % 2**32
 
 
-def _render_frame(shot: _FrameShot, folder: str, keep: list | None = None) -> dict:
-    """Scan every LiDAR and render every camera of one frame; write its render folder.
-    With ``keep`` (a list), append what the sequence outputs need of this frame."""
+@dataclass
+class _Rendered:
+    """One frame's sensor data, in memory (NumPy only): what the writer thread writes.
+
+    Attributes:
+        shot: the frame.
+        previews: write the range previews.
+        scans: LiDAR id -> its :class:`~nidar_mi.lidar.scan.ScanResult`.
+        lidar_entries: LiDAR id -> its manifest entry (the writer adds ``timings_s.write``).
+        cameras: camera id -> (its :class:`~nidar_mi.camera.CameraRender`, its manifest entry
+            without the calibration, LiDAR id -> (4, 4) LiDAR pose at the camera's time).
+        lidar_start_pose: (4, 4) the lead LiDAR's pose at the frame's start.
+        render_s: time the frame's scans and renders took, s.
+    """
+
+    shot: _FrameShot
+    previews: bool
+    scans: dict
+    lidar_entries: dict
+    cameras: dict
+    lidar_start_pose: np.ndarray
+    render_s: float
+
+
+def _render_frame(shot: _FrameShot, previews: bool) -> _Rendered:
+    """Scan every LiDAR and render every camera of one frame (this thread drives the JIT)."""
     t0 = time.perf_counter()
-    os.makedirs(folder, exist_ok=True)
-    results, lidar_entries, files = _scan_frame(shot, folder)
-    camera_entries, images = _shoot_frame(shot, folder, results, files, keep is not None)
-    frame_total = time.perf_counter() - t0
-    _write_frame_manifest(shot, folder, lidar_entries, camera_entries, files, frame_total)
-    lead = shot.rig.lead
-    if keep is not None:
-        pts = results[lead].points()
-        keep.append(
-            {"points": {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}, "cameras": images}
-        )
-    return {
-        "frame": shot.k,
-        "time_s": shot.t_k,
-        "folder": os.path.relpath(folder, os.path.dirname(os.path.dirname(folder))),
-        "cameras_time_s": {c: e["time_s"] for c, e in camera_entries.items()},
-        "timings_s": {"frame_total": frame_total},
-        "files": [os.path.relpath(p, folder) for p in files] + [rf.MANIFEST],
-        "lidar_start_pose": np.asarray(lidar_entries[lead]["to_world"]),
-    }
+    scans, lidar_entries = _scan_frame(shot)
+    cameras = _shoot_frame(shot)
+    pose = np.asarray(lidar_entries[shot.rig.lead]["to_world"])
+    render_s = time.perf_counter() - t0
+    return _Rendered(shot, previews, scans, lidar_entries, cameras, pose, render_s)
 
 
-def _scan_frame(shot: _FrameShot, folder: str):
-    """Scan every LiDAR along the trajectory (motion distortion) and write its files: the scan
-    results, their manifest entries and the files written."""
+def _scan_frame(shot: _FrameShot):
+    """Scan every LiDAR along the trajectory (motion distortion): the scan results and their
+    manifest entries."""
     from .lidar.scan import scan
 
     session, traj, t_k = shot.session, shot.traj, shot.t_k
     opts, loaded = session.options, session.loaded
-    lidar_entries, files, results = {}, [], {}
+    lidar_entries, results = {}, {}
     for sensor in session.lidars:
         lid = sensor.id()
         cfg = sensor.config
@@ -446,10 +513,6 @@ def _scan_frame(shot: _FrameShot, folder: str):
         )
         scan_s = time.perf_counter() - ts
         results[lid] = result
-        tw = time.perf_counter()
-        files += rf.write_lidar(
-            folder, result, opts.formats, None, opts.bin_intensity, deskew=opts.deskew
-        )
         lidar_entries[lid] = {
             "parameters": result.config.to_dict() | {"seed": frame_seed},
             "to_world": start.tolist(),
@@ -458,19 +521,19 @@ def _scan_frame(shot: _FrameShot, folder: str):
             "hits": int(result.hit.sum()),
             "returns": int(sum(layer.valid.sum() for layer in result.returns)),
             "materials": result.material_names,
-            "timings_s": result.timings | {"scan_total": scan_s, "write": time.perf_counter() - tw},
+            "timings_s": result.timings | {"scan_total": scan_s},
         }
-    return results, lidar_entries, files
+    return results, lidar_entries
 
 
-def _shoot_frame(shot: _FrameShot, folder: str, results: dict, files: list, keep: bool):
-    """Render every camera from the rig pose of its trigger time and write its files (appended
-    to ``files``); the manifest entries and (``keep``) the images the sequence outputs need."""
+def _shoot_frame(shot: _FrameShot) -> dict:
+    """Render every camera from the rig pose of its trigger time: camera id -> (render,
+    manifest entry without the calibration, LiDAR poses at the camera's time)."""
     from .camera import render_camera
 
     session, rig = shot.session, shot.rig
     wavelengths = session.nir_wavelengths
-    camera_entries, images = {}, {}
+    cameras = {}
     for cam in session.cameras:
         cid = cam.id()
         t_cam = shot.t_k + rig.cam_offsets[cid]
@@ -486,20 +549,55 @@ def _shoot_frame(shot: _FrameShot, folder: str, results: dict, files: list, keep
             seed=shot.seed(session.options.seed or 0),
         )
         render_s = time.perf_counter() - ts
-        lidar_poses = {lid: T_rig @ rig.mounts[lid] for lid in results}
-        calib, written = rf.write_camera(folder, r, lidar_poses)
-        if keep:
-            images[cid] = {"rgb": r.srgb8(), "K": r.K, "T_world_cam": r.T_world_cam}
-            images[cid]["stamp_s"] = float(t_cam)
-        files += written
-        camera_entries[cid] = calib | {
+        entry = {
             "spp": session.options.spp,
             "time_s": float(t_cam),
             "timings_s": r.timings | {"render_total": render_s},
         }
-    for cam in session.cameras:  # back to the scene's own pose
-        _set_camera_pose(cam, rig.cam_mounts[cam.id()])
-    return camera_entries, images
+        cameras[cid] = (r, entry, {lid: T_rig @ rig.mounts[lid] for lid in rig.mounts})
+    return cameras
+
+
+def _write_frame(rendered: _Rendered, stage, frames: _Frames, outputs: _SequenceOutputs) -> None:
+    """Write one rendered frame (on the writer thread): its render folder, its part of the
+    sequence outputs; append its log entry and files to ``frames``."""
+    t0 = time.perf_counter()
+    shot, opts = rendered.shot, rendered.shot.session.options
+    folder = os.path.join(stage, "frames", f"{shot.k:06d}")
+    os.makedirs(folder, exist_ok=True)
+    files = []
+    for lid, result in rendered.scans.items():
+        tw = time.perf_counter()
+        files += rf.write_lidar(folder, result, opts.formats, None, opts.bin_intensity,
+                                deskew=opts.deskew, previews=rendered.previews)  # fmt: skip
+        rendered.lidar_entries[lid]["timings_s"]["write"] = time.perf_counter() - tw
+    camera_entries, images = {}, {}
+    for cid, (r, entry, lidar_poses) in rendered.cameras.items():
+        calib, written = rf.write_camera(folder, r, lidar_poses)
+        files += written
+        camera_entries[cid] = calib | entry
+        images[cid] = {"rgb": r.srgb8(), "K": r.K, "T_world_cam": r.T_world_cam}
+        images[cid]["stamp_s"] = entry["time_s"]  # srgb8 is cached: rgb.png computed it
+    total = rendered.render_s + time.perf_counter() - t0
+    _write_frame_manifest(shot, folder, rendered.lidar_entries, camera_entries, files, total)
+    frames.written += files + [os.path.join(folder, rf.MANIFEST)]
+    if outputs.formats:
+        pts = rendered.scans[shot.rig.lead].points()
+        points = {c: pts[c] for c in _SEQUENCE_COLUMNS if c in pts}
+        frames.written += outputs.add(shot.k, points, images, rendered.lidar_start_pose, shot.t_k)
+    frames.log.append(
+        {
+            "frame": shot.k,
+            "time_s": shot.t_k,
+            "folder": os.path.relpath(folder, stage),
+            "cameras_time_s": {c: e["time_s"] for c, e in camera_entries.items()},
+            "timings_s": {
+                "frame_total": total,
+                "render": rendered.render_s,
+                "write": total - rendered.render_s,
+            },
+        }
+    )
 
 
 def _write_frame_manifest(shot, folder, lidar_entries, camera_entries, files, total_s) -> None:

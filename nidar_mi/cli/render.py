@@ -186,6 +186,13 @@ def _add_sequence_args(p) -> None:
         help="whole-sequence outputs beside the frame folders: kitti (KITTI odometry layout), "
         "rosbag (ROS 2 bag); comma-separated",
     )
+    seq.add_argument(
+        "--previews",
+        choices=("all", "first", "none"),
+        default=None,
+        help="range previews (range.png, intensity.png) of every frame, the first frame only "
+        "(default) or none",
+    )
 
 
 def _sequence_options(args):
@@ -216,6 +223,7 @@ def _sequence_options(args):
         deskew=args.deskew,
         max_memory=_memory(args.max_memory),
         progress=not args.quiet,
+        previews=args.previews or "first",
     )
 
 
@@ -262,9 +270,14 @@ def main(argv=None) -> int:
         from ..errors import NidarError
 
         if args.trajectory is None and (
-            args.rate is not None or args.frames is not None or args.sequence_formats
+            args.rate is not None
+            or args.frames is not None
+            or args.sequence_formats
+            or args.previews is not None
         ):
-            raise NidarError("--rate, --frames and --sequence-formats need --trajectory")
+            raise NidarError(
+                "--rate, --frames, --sequence-formats and --previews need --trajectory"
+            )
         if args.trajectory is not None:
             from ..sequence import check_sequence, render_sequence
 

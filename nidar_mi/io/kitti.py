@@ -65,6 +65,8 @@ __all__ = [
     "write_kitti_bin",
     "write_kitti_poses",
     "write_sequence",
+    "write_sequence_frame",
+    "write_sequence_index",
     "write_kitti_times",
 ]
 
@@ -303,8 +305,11 @@ def _checked_sequence(
     return poses, times, calib
 
 
-def _write_frame(out: str | os.PathLike, k: int, cloud: Mapping[str, np.ndarray]) -> list[str]:
-    """Frame ``k``'s ``velodyne/`` file and, with ``label``, its ``labels/`` file."""
+def write_sequence_frame(
+    out: str | os.PathLike, k: int, cloud: Mapping[str, np.ndarray]
+) -> list[str]:
+    """Frame ``k``'s ``velodyne/`` file and, with ``label``, its ``labels/`` file (a sequence
+    written frame by frame; :func:`write_sequence_index` completes it)."""
     if "xyz" not in cloud or "intensity" not in cloud:
         raise NidarError(f"frame {k}: a cloud needs 'xyz' and 'intensity'")
     path = os.path.join(out, "velodyne", f"{k:06d}.bin")
@@ -347,14 +352,30 @@ def write_sequence(
         NidarError: counts or shapes that do not agree, non-finite values, a pose that is not
             rigid, or a write failure.
     """
-    poses, times, calib = _checked_sequence(clouds, poses, times, calib)
-    Tr = np.vstack([calib["Tr"][:3], [0.0, 0.0, 0.0, 1.0]])
+    _checked_sequence(clouds, poses, times, calib)
     written = []
     for k, cloud in enumerate(clouds):
-        written += _write_frame(out, k, cloud)
+        written += write_sequence_frame(out, k, cloud)
+    return written + write_sequence_index(out, poses, times, calib)
+
+
+def write_sequence_index(
+    out: str | os.PathLike,
+    poses: np.ndarray,
+    times: Sequence[float],
+    calib: Mapping[str, np.ndarray] | None = None,
+) -> list[str]:
+    """``poses.txt``, ``times.txt`` and ``calib.txt`` of a sequence whose frames
+    :func:`write_sequence_frame` wrote (arguments as :func:`write_sequence`'s).
+
+    Returns:
+        The paths written.
+    """
+    poses, times, calib = _checked_sequence(range(len(poses)), poses, times, calib)
+    Tr = np.vstack([calib["Tr"][:3], [0.0, 0.0, 0.0, 1.0]])
     relative = np.linalg.inv(poses[0]) @ poses  # T_{lidar_0 <- lidar_k}
     paths = {name: os.path.join(out, name) for name in ("poses.txt", "times.txt", "calib.txt")}
     write_kitti_poses(paths["poses.txt"], Tr @ relative @ np.linalg.inv(Tr))
     write_kitti_times(paths["times.txt"], times)
     write_kitti_calib(paths["calib.txt"], calib)
-    return written + list(paths.values())
+    return list(paths.values())

@@ -22,7 +22,9 @@ Points are in the LiDAR frame (x forward, y left, z up, REP 103); cameras use th
 (x right, y down, z forward: OpenCV, as ``calib.json``). ``time`` comes from the points' ``t``,
 ``label`` / ``instance`` from theirs; a column a cloud lacks is written as zeros. Types are those
 of ROS 2 Humble (``rosbags.typesys.Stores.ROS2_HUMBLE``). The bag folder is written next to its
-final path and renamed onto it when complete: a failure leaves nothing behind.
+final path and renamed onto it when complete: a failure leaves nothing behind. A bag is written
+frame by frame (:class:`Ros2BagWriter`): a sequence streams its sweeps into it as they are
+rendered.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["BagCamera", "BagFrame", "POINT_FIELDS", "write_ros2_bag"]
+__all__ = ["BagCamera", "BagFrame", "POINT_FIELDS", "Ros2BagWriter", "write_ros2_bag"]
 
 #: PointCloud2 fields: name -> (points-dict key, numpy dtype, PointField datatype).
 POINT_FIELDS: dict[str, tuple[str, str, int]] = {
@@ -185,10 +187,146 @@ def _camera_info(typestore, cam: BagCamera, name: str):
     )
 
 
+class Ros2BagWriter:
+    """A ROS 2 bag written frame by frame (topics in the module docstring)::
+
+        with Ros2BagWriter(path, lidar="lidar_top") as bag:
+            for frame in frames:
+                bag.write(frame)
+
+    The bag grows in a hidden folder beside ``path`` and is renamed onto it when the block ends
+    without an exception and at least one frame was written; otherwise (an error, Ctrl-C,
+    SIGTERM) the folder is removed and nothing is left behind.
+
+    Args:
+        path: the bag folder to create; it must not exist.
+        lidar: the LiDAR id (topic prefix and frame id).
+
+    Raises:
+        NidarError: ``path`` exists, a frame out of time order, bad arrays, no frame at the
+            end, or a write failure.
+    """
+
+    def __init__(self, path: str | os.PathLike, lidar: str = "lidar_top"):
+        self.path = os.fspath(path)
+        self.lidar = lidar
+        self.frames = 0
+        self._last = -np.inf
+        self._writer = None
+        self._tmp_root = None
+        self._conns: dict[str, object] = {}
+
+    def __enter__(self) -> Ros2BagWriter:
+        return self.open()
+
+    def open(self) -> Ros2BagWriter:
+        """Start the bag (what entering the ``with`` block does).
+
+        Raises:
+            NidarError: ``path`` exists or cannot be written.
+        """
+        from rosbags.rosbag2 import Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        if os.path.exists(self.path):
+            raise NidarError(f"{self.path}: exists (a bag is written into a new folder)")
+        self._typestore = get_typestore(Stores.ROS2_HUMBLE)
+        parent = os.path.dirname(os.path.abspath(self.path))
+        try:
+            os.makedirs(parent, exist_ok=True)
+            name = os.path.basename(self.path)
+            self._tmp_root = tempfile.mkdtemp(prefix=f".{name}.partial-", dir=parent)
+            self._writer = Writer(os.path.join(self._tmp_root, "bag"), version=8)
+            self._writer.open()
+        except (OSError, ValueError) as e:
+            self._discard()
+            raise NidarError(f"{self.path}: cannot write the bag ({e})") from None
+        return self
+
+    def _put(self, topic: str, msg, t: float) -> None:
+        if topic not in self._conns:
+            self._conns[topic] = self._writer.add_connection(
+                topic, msg.__msgtype__, typestore=self._typestore
+            )
+        data = self._typestore.serialize_cdr(msg, msg.__msgtype__)
+        self._writer.write(self._conns[topic], int(round(t * 1e9)), data)
+
+    def write(self, frame: BagFrame) -> None:
+        """Append one sweep and its camera images (stamps finite, not before the last frame's).
+
+        Raises:
+            NidarError: a stamp out of order, bad arrays, or a write failure.
+        """
+        if not np.isfinite(frame.stamp_s) or frame.stamp_s < self._last:
+            raise NidarError("frame stamps must be finite and in time order")
+        ts, lidar = self._typestore, self.lidar
+        TFMessage = ts.types["tf2_msgs/msg/TFMessage"]
+        T = np.asarray(frame.T_world_lidar, dtype=np.float64)
+        try:
+            tf = _transform(ts, frame.stamp_s, WORLD_FRAME, lidar, T)
+            self._put("/tf", TFMessage(transforms=[tf]), frame.stamp_s)
+            self._put(f"/{lidar}/points", _cloud(ts, frame, lidar), frame.stamp_s)
+            for name, cam in sorted(frame.cameras.items()):
+                Tc = np.asarray(cam.T_world_cam, dtype=np.float64)
+                tf = _transform(ts, cam.stamp_s, WORLD_FRAME, name, Tc)
+                self._put("/tf", TFMessage(transforms=[tf]), cam.stamp_s)
+                self._put(f"/{name}/image_raw", _image(ts, cam, name), cam.stamp_s)
+                self._put(f"/{name}/camera_info", _camera_info(ts, cam, name), cam.stamp_s)
+        except (OSError, ValueError) as e:
+            raise NidarError(f"{self.path}: cannot write the bag ({e})") from None
+        self._last = frame.stamp_s
+        self.frames += 1
+
+    def _discard(self) -> None:
+        if self._tmp_root is not None:
+            shutil.rmtree(self._tmp_root, ignore_errors=True)
+            self._tmp_root = None
+
+    def close(self) -> str:
+        """Finish the bag and move it onto ``path`` (nothing is left behind on a failure).
+
+        Returns:
+            The bag folder.
+
+        Raises:
+            NidarError: no frame was written, or a write failure.
+        """
+        try:
+            writer, self._writer = self._writer, None
+            if writer is not None:
+                writer.close()
+            if not self.frames:
+                raise NidarError("a bag needs at least one frame")
+            os.replace(os.path.join(self._tmp_root, "bag"), self.path)
+        except (OSError, ValueError) as e:
+            raise NidarError(f"{self.path}: cannot write the bag ({e})") from None
+        finally:
+            self._discard()
+        return self.path
+
+    def discard(self) -> None:
+        """Stop writing and remove the unfinished bag."""
+        try:
+            writer, self._writer = self._writer, None
+            if writer is not None:
+                writer.close()
+        except (OSError, ValueError):
+            pass
+        finally:
+            self._discard()
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.discard()
+
+
 def write_ros2_bag(
     path: str | os.PathLike, frames: Sequence[BagFrame], lidar: str = "lidar_top"
 ) -> str:
-    """Write a sequence as a ROS 2 bag folder (topics in the module docstring).
+    """Write a sequence as a ROS 2 bag folder (topics in the module docstring; frame by frame
+    through :class:`Ros2BagWriter`).
 
     Args:
         path: the bag folder to create; it must not exist.
@@ -202,9 +340,6 @@ def write_ros2_bag(
         NidarError: ``path`` exists, no frames, frames out of time order, bad arrays, or a write
             failure (nothing is left behind).
     """
-    from rosbags.rosbag2 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
     path = os.fspath(path)
     if os.path.exists(path):
         raise NidarError(f"{path}: exists (a bag is written into a new folder)")
@@ -213,45 +348,7 @@ def write_ros2_bag(
     stamps = [f.stamp_s for f in frames]
     if any(b < a for a, b in zip(stamps, stamps[1:])) or not np.all(np.isfinite(stamps)):
         raise NidarError("frame stamps must be finite and in time order")
-    typestore = get_typestore(Stores.ROS2_HUMBLE)
-    parent = os.path.dirname(os.path.abspath(path))
-    os.makedirs(parent, exist_ok=True)
-    tmp_root = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.partial-", dir=parent)
-    tmp = os.path.join(tmp_root, "bag")
-    try:
-        with Writer(tmp, version=8) as writer:
-            conns: dict[str, object] = {}
-
-            def put(topic: str, msg, t: float) -> None:
-                if topic not in conns:
-                    conns[topic] = writer.add_connection(
-                        topic, msg.__msgtype__, typestore=typestore
-                    )
-                data = typestore.serialize_cdr(msg, msg.__msgtype__)
-                writer.write(conns[topic], int(round(t * 1e9)), data)
-
-            TFMessage = typestore.types["tf2_msgs/msg/TFMessage"]
-            for frame in frames:
-                T = np.asarray(frame.T_world_lidar, dtype=np.float64)
-                put(
-                    "/tf",
-                    TFMessage(
-                        transforms=[_transform(typestore, frame.stamp_s, WORLD_FRAME, lidar, T)]
-                    ),
-                    frame.stamp_s,
-                )
-                put(f"/{lidar}/points", _cloud(typestore, frame, lidar), frame.stamp_s)
-                for name, cam in sorted(frame.cameras.items()):
-                    Tc = np.asarray(cam.T_world_cam, dtype=np.float64)
-                    tf = _transform(typestore, cam.stamp_s, WORLD_FRAME, name, Tc)
-                    put("/tf", TFMessage(transforms=[tf]), cam.stamp_s)
-                    put(f"/{name}/image_raw", _image(typestore, cam, name), cam.stamp_s)
-                    put(f"/{name}/camera_info", _camera_info(typestore, cam, name), cam.stamp_s)
-        os.replace(tmp, path)
-    except NidarError:
-        raise
-    except (OSError, ValueError) as e:
-        raise NidarError(f"{path}: cannot write the bag ({e})") from None
-    finally:
-        shutil.rmtree(tmp_root, ignore_errors=True)
+    with Ros2BagWriter(path, lidar=lidar) as bag:
+        for frame in frames:
+            bag.write(frame)
     return path
