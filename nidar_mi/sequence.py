@@ -31,7 +31,6 @@ then.
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 
@@ -285,11 +284,12 @@ def _rig(session: RenderSession) -> _Rig:
 def _render_frames(stage, session: RenderSession, traj, times, rig: _Rig, keep: bool) -> _Frames:
     """Render every frame into ``stage/frames/<k>`` under one progress bar (``keep``: hold
     what the sequence outputs need of each frame)."""
-    from tqdm.auto import tqdm
+    from .progress import progress_bar
 
     frames = _Frames()
-    disable = not session.options.progress
-    bar = tqdm(total=len(times), desc="sequence", unit="frame", disable=disable, file=sys.stderr)
+    bar = progress_bar(
+        total=len(times), show=session.options.progress, desc="sequence", unit="frame"
+    )
     try:
         for k, t_k in enumerate(times):
             folder = os.path.join(stage, "frames", f"{k:06d}")
