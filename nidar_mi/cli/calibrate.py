@@ -4,7 +4,9 @@
                                  [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
                                  [--incidence [--no-geometry] | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
-                                 [--overwrite] [-q]
+                                 [--overwrite] [-q | -v] [--progress | --no-progress]
+
+A ``gbm`` profile reads the incidence by default (``--incidence`` says so explicitly).
 
 ``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
 ``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with

@@ -221,3 +221,17 @@ def test_no_progress_bar_in_a_log(tmp_path, capsys):
     assert main(["-o", str(tmp_path / "s"), "--count", "1"]) == 0
     err = capsys.readouterr().err
     assert "%|" not in err and "scenegen" not in err, err
+
+
+def test_readme_names_the_installed_console_scripts():
+    """The README lists every console script of pyproject.toml by its installed name, one per
+    command, and no other ``nidar-...`` script."""
+    import re
+
+    pyproject = open(os.path.join(REPO, "pyproject.toml"), encoding="utf-8").read()
+    table = pyproject.split("[project.scripts]", 1)[1].split("\n[", 1)[0]
+    scripts = set(re.findall(r"^([a-z-]+) = ", table, re.M))
+    readme = open(os.path.join(REPO, "README.md"), encoding="utf-8").read()
+    assert {f"nidar-{c.replace('_', '-')}" for c in COMMANDS} | {"nidar-mi"} == set(scripts)
+    named = set(re.findall(r"`(nidar-[a-z<][a-z>-]*)", readme))
+    assert named == set(scripts)
