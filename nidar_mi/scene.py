@@ -80,6 +80,50 @@ def _one_line(err: Exception) -> str:
     return text
 
 
+#: One file of an include chain in Mitsuba's nested messages: its name, line and column.
+_LOADING = re.compile(r"(?:Error w|W)hile loading (.+?) \(line (\d+), col (\d+)\):\s*")
+_INCLUDING = re.compile(r"while processing <include>:\s*")
+
+
+def _include_error(path: str, text: str) -> str | None:
+    """One short line for an error inside included files (None when no include is involved).
+
+    Mitsuba nests one "Error while loading FILE (line, col): while processing <include>:"
+    per level, up to 15 levels: a cycle (a file including itself, directly or not) becomes
+    ``scene include cycle: a.xml -> b.xml -> a.xml``, a chain deeper than Mitsuba allows
+    ``scene includes nested deeper than 15 levels: a.xml -> ... -> p.xml``, and any other error
+    ``in b.xml (included from a.xml), line L, col C: message``.
+    """
+    marks = list(_LOADING.finditer(text))
+    if len(marks) < 2 or not _INCLUDING.match(text, marks[0].end()):
+        return None
+    top = os.path.dirname(os.path.abspath(path))
+
+    def name(f: str) -> str:
+        return os.path.relpath(f, top) if os.path.isabs(f) else f
+
+    chain = [name(path)] + [name(m.group(1)) for m in marks[1:]]
+    for j, f in enumerate(chain):
+        if f in chain[:j]:
+            return "scene include cycle: " + " -> ".join(chain[chain.index(f) : j + 1])
+    last = marks[-1]
+    message = text[last.end() :].strip()
+    if "include recursion depth" in message:
+        depth = re.search(r"depth of (\d+)", message)
+        levels = depth.group(1) if depth else str(len(chain) - 1)
+        return (
+            f"scene includes nested deeper than {levels} levels: {chain[0]} -> ... -> {chain[-1]}"
+        )
+    via = " <- ".join(reversed(chain[:-1]))
+    return f"in {chain[-1]} (included from {via}), line {last.group(2)}, col {last.group(3)}: {message}"
+
+
+def _load_error(path: str, err: Exception) -> str:
+    """Mitsuba's message on a scene that did not load, as one short line."""
+    text = re.sub(r"\[[a-z_]+\.cpp:\d+\]\s*", "", " ".join(str(err).split()))
+    return _include_error(path, text) or _one_line(err)
+
+
 def load_scene(
     path: str,
     *,
@@ -136,7 +180,7 @@ def load_scene(
         values = {k: str(v) for k, v in (params or {}).items()}
         scene = mi.load_string(xml, optimize=optimize, **values)
     except Exception as e:
-        raise NidarError(f"{path}: {plugins.parameter_error(e) or _one_line(e)}") from None
+        raise NidarError(f"{path}: {plugins.parameter_error(e) or _load_error(path, e)}") from None
 
     lidars, cameras = _sensors(path, scene, variant)
     return LoadedScene(

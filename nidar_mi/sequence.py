@@ -38,7 +38,6 @@ t, label, instance of the first LiDAR) and camera images are written when the fr
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 
@@ -297,14 +296,12 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
     Each log entry's ``timings_s.frame_total`` is the frame's time in the loop (its render and
     any wait for the writer; the last frame's includes writing what was left), so their sum is
     the loop's wall time."""
-    from tqdm.auto import tqdm
-
     from .io.background import BackgroundWriter
+    from .progress import progress_bar
 
     frames = _Frames()
     outputs = _SequenceOutputs(stage, options.sequence_formats, rig.lead)
-    bar = tqdm(total=len(times), desc="sequence", unit="frame", disable=not options.progress,
-               file=sys.stderr)  # fmt: skip
+    bar = progress_bar(total=len(times), show=options.progress, desc="sequence", unit="frame")
     loop = []
     try:
         with BackgroundWriter(depth=WRITE_QUEUE, on_abort=outputs.discard) as writer:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -131,11 +130,10 @@ def _render_cameras(run: _Run, session: RenderSession, bar) -> None:
 
 def _sense(run: _Run, session: RenderSession) -> None:
     """Scan every LiDAR, then render every camera, under one progress bar."""
-    from tqdm.auto import tqdm
+    from .progress import progress_bar
 
     steps = len(session.lidars) + len(session.cameras)
-    disable = not session.options.progress
-    bar = tqdm(total=steps, desc="render", unit="sensor", disable=disable, file=sys.stderr)
+    bar = progress_bar(total=steps, show=session.options.progress, desc="render", unit="sensor")
     try:
         _scan_lidars(run, session, bar)
         if session.options.cameras:

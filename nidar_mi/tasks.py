@@ -234,10 +234,10 @@ class _Progress:
     def __init__(self, total: int, skipped: int, desc: str, unit: str, enabled: bool):
         from tqdm.auto import tqdm
 
+        from .progress import progress_bar
+
         self._tqdm = tqdm
-        self.bar = tqdm(
-            total=total, initial=skipped, desc=desc, unit=unit, disable=not enabled, file=sys.stderr
-        )
+        self.bar = progress_bar(total=total, initial=skipped, show=enabled, desc=desc, unit=unit)
         self.skipped, self.failed = skipped, 0
         self._postfix()
 

@@ -27,8 +27,8 @@ def test_reduced_study_end_to_end(study):
     assert res["drive"]["frames"] == 40 and res["drive"]["revisits"] == 0
     raw = res["odometry"]["instantaneous"]
     odo = res["odometry"]["instantaneous, ground removed"]
-    # KISS-ICP follows the street and the first turn: the whole sweeps drift 6.9 % over these
-    # 22 m (the flat road's rings hold it back), without their ground plane 0.9 %
+    # KISS-ICP follows the street and the first turn: the whole sweeps drift 9.7 % over these
+    # 22 m (the flat road's rings hold it back), without their ground plane 0.3 %
     assert 0 <= raw["end_drift"]["pct"] < 15.0
     assert 0 <= odo["end_drift"]["pct"] < 3.0 and odo["ate"]["rmse"] < 0.3
     assert odo["end_drift"]["path_m"] == pytest.approx(res["drive"]["length_m"], rel=1e-3)

@@ -236,6 +236,7 @@ def test_real_data_tables(tmp_path):
         "## Real data: KITTI, leave one frame out" in md
         and "## Pseudo-NIR against real NIR photos" in md
     )
+    assert "; data: none;" in md and "None" not in md  # no --data: said so, not `None`
     assert not (out / "figures").exists()  # no figure of real data
 
 

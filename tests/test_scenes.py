@@ -70,3 +70,54 @@ def test_scene_renders_small(path, tmp_path, variant):
     for el in ET.fromstring(text).iter("bsdf"):
         if el.get("type") == "nidar_material":
             assert el.find("string[@name='name']").get("value") in list_materials()
+
+
+def _including(folder, name: str, target: str) -> str:
+    path = os.path.join(folder, name)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(f'<scene version="3.0.0">\n  <include filename="{target}"/>\n</scene>\n')
+    return path
+
+
+@pytest.mark.parametrize(
+    "files, message",
+    [
+        ({"a.xml": "a.xml"}, "scene include cycle: a.xml -> a.xml"),
+        ({"a.xml": "b.xml", "b.xml": "a.xml"}, "scene include cycle: a.xml -> b.xml -> a.xml"),
+        (
+            {f"s{k:02d}.xml": f"s{k + 1:02d}.xml" for k in range(17)},
+            "scene includes nested deeper than 15 levels: s00.xml -> ... -> s14.xml",
+        ),
+    ],
+    ids=["self", "pair", "deep"],
+)
+def test_include_cycle_or_depth_is_one_short_line(tmp_path, variant, files, message):
+    """A scene that includes itself (or nests includes past Mitsuba's 15 levels) gives one short
+    line naming the chain once, not Mitsuba's message repeated per level."""
+    from nidar_mi.errors import NidarError
+    from nidar_mi.scene import load_scene
+
+    paths = [_including(tmp_path, name, target) for name, target in files.items()]
+    with pytest.raises(NidarError) as e:
+        load_scene(paths[0], variant=variant)
+    assert str(e.value) == f"{paths[0]}: {message}"
+    assert len(str(e.value)) < 200 + len(paths[0])
+
+
+def test_error_inside_an_include_names_the_file(tmp_path, variant):
+    """An error inside an included file names that file, its line and who included it."""
+    from nidar_mi.errors import NidarError
+    from nidar_mi.scene import load_scene
+
+    top = _including(tmp_path, "top.xml", "bad.xml")
+    (tmp_path / "bad.xml").write_text(
+        '<scene version="3.0.0">\n  <shape type="sphere"><float name="radius" value="x"/>'
+        "</shape>\n</scene>\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(NidarError) as e:
+        load_scene(top, variant=variant)
+    assert str(e.value) == (
+        f"{top}: in bad.xml (included from top.xml), line 2, col 25: "
+        'could not parse floating point value "x"'
+    )

@@ -1,7 +1,8 @@
 """The command line: one thin module per command, all sharing :mod:`nidar_mi.cli._common`.
 
-Every command runs as ``python -m nidar_mi.<command>``, as ``nidar-mi <command>`` and as the
-console script ``nidar-<command>``; ``python -m nidar_mi`` (or ``nidar-mi``) lists them.
+Every command runs as ``python -m nidar_mi.<command>``, as ``nidar-mi <command>`` and as its
+console script (``nidar-<command>`` with ``_`` written ``-``: ``nidar-pseudo-nir``; pyproject.toml
+lists them); ``python -m nidar_mi`` (or ``nidar-mi``) lists the commands.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """What every command shares: one-line errors, exit codes, Ctrl-C and SIGTERM, ``-D``, ``--version``.
 
-A command is ``main(argv=None) -> int``: it parses its arguments, then hands the work to
-:func:`run`, which turns every expected failure into one line on stderr and an exit status:
+A command is ``main(argv=None) -> int``: it parses its arguments (:func:`parser`), then hands
+the work to :func:`run`, which turns every expected failure into one line on stderr and an exit
+status:
 
 ======  ====================================================================================
 status  meaning
@@ -18,11 +19,18 @@ command's flag (``--spp``; :func:`flag_message`).
 Outputs are written through staging folders (:func:`nidar_mi.io.atomic.staged_directory`), so an
 interrupted or failed command leaves nothing behind. Warnings are printed as one
 ``warning: ...`` line each.
+
+Every command takes ``-q``/``--quiet`` (warnings and errors only, no summary) and
+``-v``/``--verbose`` (debug lines too, e.g. one per training epoch); the package's log lines go
+to stderr at that level while :func:`run` runs. Progress bars (:func:`show_progress`) show on
+a terminal only, unless ``--progress`` or ``--no-progress`` says otherwise.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
 import re
 import signal
 import sys
@@ -30,6 +38,7 @@ import warnings
 from collections.abc import Callable, Mapping
 
 from ..errors import MAX_SEED, NidarError, check_seed
+from ..progress import stderr_is_terminal
 
 __all__ = [
     "EXIT_OK",
@@ -42,6 +51,7 @@ __all__ = [
     "parse_defines",
     "run",
     "seed_arg",
+    "show_progress",
 ]
 
 EXIT_OK = 0
@@ -70,14 +80,83 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_USER_ERROR)
 
 
-def parser(command: str, description: str, **kwargs) -> argparse.ArgumentParser:
-    """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``; a usage error
-    (unknown option, a value of the wrong type) is one line on stderr and status 2."""
+def parser(
+    command: str, description: str, *, progress: bool = True, **kwargs
+) -> argparse.ArgumentParser:
+    """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``, ``-q`` and
+    ``-v`` (and ``--progress``/``--no-progress`` where the command shows ``progress`` bars); a
+    usage error (unknown option, a value of the wrong type) is one line on stderr and status 2."""
     from .. import __version__
 
     p = _Parser(prog=f"python -m nidar_mi.{command}", description=description, **kwargs)
     p.add_argument("--version", action="version", version=f"nidar_mi {__version__}")
+    level = p.add_mutually_exclusive_group()
+    level.add_argument(
+        "-q", "--quiet", action="store_true", help="warnings and errors only (no summary, no bars)"
+    )
+    level.add_argument(
+        "-v", "--verbose", action="store_true", help="debug lines too (e.g. one per epoch)"
+    )
+    if progress:
+        bars = p.add_mutually_exclusive_group()
+        bars.add_argument(
+            "--progress",
+            action="store_true",
+            default=None,
+            help="progress bars even when stderr is not a terminal (default: on a terminal only)",
+        )
+        bars.add_argument(
+            "--no-progress", dest="progress", action="store_false", help="no progress bars"
+        )
     return p
+
+
+def show_progress(args: argparse.Namespace) -> bool:
+    """Whether the command shows progress bars: ``--progress`` / ``--no-progress`` when given,
+    none with ``-q``, else only when stderr is a terminal (never in a log file or a pipe)."""
+    chosen = getattr(args, "progress", None)
+    if chosen is not None:
+        return bool(chosen)
+    if getattr(args, "quiet", False):
+        return False
+    return stderr_is_terminal()
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Log lines on the current ``sys.stderr`` (which tests and notebooks may replace)."""
+
+    def __init__(self):
+        super().__init__(sys.stderr)
+        self.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):  # the base class sets it; the property always answers sys.stderr
+        pass
+
+
+@contextlib.contextmanager
+def _log_level(args: argparse.Namespace | None):
+    """The package's log lines on stderr at the level ``-q`` / ``-v`` pick (INFO by default)."""
+    level = logging.INFO
+    if getattr(args, "quiet", False):
+        level = logging.WARNING
+    elif getattr(args, "verbose", False):
+        level = logging.DEBUG
+    logger = logging.getLogger("nidar_mi")
+    handler = _StderrHandler()
+    handler.setLevel(level)
+    previous = logger.level
+    logger.setLevel(min(level, logger.getEffectiveLevel()))
+    logger.addHandler(handler)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(previous)
 
 
 def seed_arg(text: str) -> int:
@@ -145,6 +224,7 @@ def run(
     *,
     on_interrupt: str | Callable[[], str] = "nothing written",
     flags: Mapping[str, str] | None = None,
+    args: argparse.Namespace | None = None,
 ) -> int:
     """Run a command's work and map every expected failure to one line and an exit status.
 
@@ -154,6 +234,7 @@ def run(
             that says it, called after the work was stopped).
         flags: the command's flags of the parameters library messages name, where a flag is
             not ``--`` and the name with hyphens (:func:`flag_message`).
+        args: the parsed command line, whose ``-q`` / ``-v`` set the log level (INFO without).
 
     Returns:
         The exit status (see the module docstring).
@@ -164,7 +245,7 @@ def run(
     except ValueError:  # not the main thread: leave SIGTERM alone
         previous = None
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _log_level(args):
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning
             status = work()

@@ -85,7 +85,7 @@ def build_parser():
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _assign(args), flags=FLAGS)
+    return run(lambda: _assign(args), flags=FLAGS, args=args)
 
 
 def _formats(text: str) -> list[str]:

@@ -4,7 +4,9 @@
                                  [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
                                  [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
-                                 [--overwrite] [-q]
+                                 [--overwrite] [-q | -v] [--progress | --no-progress]
+
+A ``gbm`` profile reads the incidence by default (``--incidence`` says so explicitly).
 
 ``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
 ``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with
@@ -35,7 +37,7 @@ import sys
 
 from ..datasets.sensor_profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
 from ..errors import NidarError
-from ._common import parser, run
+from ._common import parser, run, show_progress
 
 __all__ = ["build_parser", "main"]
 
@@ -93,7 +95,6 @@ def build_parser():
         action="store_true",
         help="replace an existing -o file that is not a sensor profile (an earlier profile is always replaced)",
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 
 
@@ -118,7 +119,7 @@ def _check_target(path: str, overwrite: bool) -> None:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _calibrate(args, argv))
+    return run(lambda: _calibrate(args, argv), args=args)
 
 
 def _calibrate(args, argv) -> None:
@@ -140,7 +141,10 @@ def _calibrate(args, argv) -> None:
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
     scans = load_scans(
-        args.scans, splits=splits, intensity_scale=args.intensity_scale, progress=not args.quiet
+        args.scans,
+        splits=splits,
+        intensity_scale=args.intensity_scale,
+        progress=show_progress(args),
     )
     model = NidarModel.load(args.weights)
     command = "python -m nidar_mi.calibrate " + " ".join(sys.argv[1:] if argv is None else argv)
@@ -152,7 +156,7 @@ def _calibrate(args, argv) -> None:
         form=args.form,
         branch=args.branch,
         provenance={"data": [os.path.abspath(s) for s in args.scans], "command": command},
-        progress=not args.quiet,
+        progress=show_progress(args),
         incidence=incidence,
         **({"use_geometry": False} if args.no_geometry else {}),
     )

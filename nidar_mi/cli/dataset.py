@@ -11,7 +11,7 @@ non-commercial: keep ``DATA`` out of any repository.
 from __future__ import annotations
 
 from ..errors import NidarError
-from ._common import parse_defines, parser, run, seed_arg
+from ._common import parse_defines, parser, run, seed_arg, show_progress
 from ._workers import add_worker_options
 
 __all__ = ["main", "build_parser"]
@@ -67,7 +67,6 @@ def build_parser():
         action="store_true",
         help="accept an output folder that holds other files (they are removed)",
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     add_worker_options(p, "scenes")
     return p
 
@@ -82,7 +81,7 @@ def main(argv=None) -> int:
         if args.kitti:
             from ..datasets.kitti_frames import build_kitti_frames
 
-            meta = build_kitti_frames(args.kitti, args.out, progress=not args.quiet)
+            meta = build_kitti_frames(args.kitti, args.out, progress=show_progress(args))
             if not args.quiet:
                 for s in SPLITS:
                     print(f"{s:5s}  {len(meta['frames'][s]):5d} frames")
@@ -101,7 +100,7 @@ def main(argv=None) -> int:
             params=parse_defines(args.params),
             lidar_id=args.lidar,
             intensity_scale=args.intensity_scale,
-            progress=not args.quiet,
+            progress=show_progress(args),
             overwrite=args.overwrite,
             workers=args.workers,
             ray_address=args.ray_address,
@@ -116,4 +115,5 @@ def main(argv=None) -> int:
         on_interrupt="no dataset published; the completed renders are kept in "
         f"{args.out}/renders for the next run",
         flags={"scene_dir": "--scenes", "fractions": "--split"},
+        args=args,
     )

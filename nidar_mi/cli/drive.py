@@ -8,7 +8,7 @@ NIDAR's columns and the analysis).
 
 from __future__ import annotations
 
-from ._common import parser, run
+from ._common import parser, run, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -54,7 +54,6 @@ def build_parser():
         action="store_true",
         help="write into OUT even when it holds files of something else (none is removed)",
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
 
@@ -96,9 +95,9 @@ def main(argv=None) -> int:
         )
         cfg.check()  # bad options are named before the variant starts
         set_variant()
-        results = run_study(args.out, cfg, progress=not args.quiet, overwrite=args.overwrite)
+        results = run_study(args.out, cfg, progress=show_progress(args), overwrite=args.overwrite)
         if not args.quiet:
             print(markdown_tables(results))
             print(f"report: {args.out}/report.md")
 
-    return run(work, on_interrupt="frames rendered so far are kept; run again to resume")
+    return run(work, on_interrupt="frames rendered so far are kept; run again to resume", args=args)

@@ -38,7 +38,7 @@ import logging
 import os
 import sys
 
-from ._common import parser, run
+from ._common import parser, run, show_progress
 from ._workers import add_worker_options
 
 __all__ = ["main"]
@@ -89,7 +89,6 @@ def _parser():
     p.add_argument(
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
     add_worker_options(p, "hand-made scenes to render")
     return p
 
@@ -113,7 +112,7 @@ def options(args, argv_text: str):
         figures=args.figures,
         cache=args.cache,
         overwrite=args.overwrite,
-        progress=not args.quiet,
+        progress=show_progress(args),
         workers=args.workers,
         ray_address=args.ray_address,
         command=argv_text,
@@ -123,10 +122,6 @@ def options(args, argv_text: str):
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 on a user error)."""
     args = _parser().parse_args(argv)
-    logging.basicConfig(
-        level=logging.WARNING if args.quiet else logging.INFO,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
     argv_text = "python -m nidar_mi.evaluate " + " ".join(
         sys.argv[1:] if argv is None else list(argv)
     )
@@ -142,4 +137,4 @@ def main(argv: list[str] | None = None) -> int:
         payload = evaluate(opts)
         log.info("wrote %s in %.0f s", os.path.join(opts.out, "results.md"), payload["seconds"])
 
-    return run(work, flags={"scene_dir": "--scenes"})
+    return run(work, flags={"scene_dir": "--scenes"}, args=args)

@@ -22,7 +22,9 @@ __all__ = ["main"]
 
 
 def _parser():
-    p = parser("materials", "List the spectral material library and plot material spectra.")
+    p = parser(
+        "materials", "List the spectral material library and plot material spectra.", progress=False
+    )
     p.add_argument("--list", action="store_true", help="print the material table (default)")
     p.add_argument("--plot", nargs="+", metavar="NAME", help="materials to plot")
     p.add_argument(
@@ -49,4 +51,4 @@ def main(argv: list[str] | None = None) -> int:
             plot_spectra(args.plot, output)
             sys.stdout.write(f"wrote {output}\n")
 
-    return run(work)
+    return run(work, args=args)

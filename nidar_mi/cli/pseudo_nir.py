@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ._common import parser, run
+from ._common import parser, run, show_progress
 
 __all__ = ["IMAGE_EXTENSIONS", "build_parser", "collect_inputs", "main", "output_names"]
 
@@ -194,24 +194,21 @@ def build_parser():
     p.add_argument("-r", "--recursive", action="store_true", help="descend into sub-folders")
     p.add_argument("--skip-bad", action="store_true", help="skip unreadable files with a warning")
     p.add_argument("--overwrite", action="store_true", help="replace a non-empty OUT")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _convert(args))
+    return run(lambda: _convert(args), args=args)
 
 
 def _convert(args) -> None:
-    import sys
-
-    from tqdm.auto import tqdm
 
     from ..io.atomic import atomic_write_json, check_output_folder, staged_directory
     from ..io.images import write_exr, write_png
     from ..nidar.infer import pseudo_nir_linear, reduced_size
     from ..nidar.pipeline import NidarModel
+    from ..progress import progress_bar
 
     check_output_folder(args.out, overwrite=args.overwrite, marker=INDEX)
     reduced_size(1, 1, args.scale)
@@ -229,7 +226,7 @@ def _convert(args) -> None:
         "images": [],
     }
     with staged_directory(args.out, overwrite=args.overwrite, marker=INDEX) as stage:
-        bar = tqdm(items, desc="pseudo-NIR", unit="image", disable=args.quiet, file=sys.stderr)
+        bar = progress_bar(items, show=show_progress(args), desc="pseudo-NIR", unit="image")
         for it, name in zip(bar, names):
             rgb = _read_rgb(it.path)
             scale = min(args.scale, args.max_side / max(rgb.shape[:2]))

@@ -14,7 +14,7 @@ import os
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
-from ._common import parse_defines, parser, run, seed_arg
+from ._common import parse_defines, parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -120,7 +120,6 @@ def build_parser():
         action="store_true",
         help="also write xyz_deskewed: the points in the lidar frame at the sweep's start",
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 
 
@@ -222,7 +221,7 @@ def _sequence_options(args):
         cameras=not args.no_cameras,
         deskew=args.deskew,
         max_memory=_memory(args.max_memory),
-        progress=not args.quiet,
+        progress=show_progress(args),
         previews=args.previews or "first",
     )
 
@@ -257,7 +256,7 @@ def _render_options(args):
         bin_intensity=args.bin_intensity,
         max_memory=_memory(args.max_memory),
         deskew=args.deskew,
-        progress=not args.quiet,
+        progress=show_progress(args),
     )
 
 
@@ -299,4 +298,4 @@ def main(argv=None) -> int:
         if not args.quiet:
             print(_summary(manifest, out))
 
-    return run(work)
+    return run(work, args=args)

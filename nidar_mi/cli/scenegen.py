@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from ..scenegen.drives import DEFAULT_FRAMES
 from ..scenegen.generate import KINDS
-from ._common import parser, run, seed_arg
+from ._common import parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -61,7 +61,6 @@ def build_parser():
     )
     p.add_argument("--rate", type=float, default=10.0, help="city/suburb: frame rate, Hz")
     p.add_argument("--speed", type=float, default=10.0, help="city/suburb: cruising speed, m/s")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     return p
 
 
@@ -90,7 +89,7 @@ def main(argv=None) -> int:
             args.count,
             args.seed,
             kind=args.kind,
-            progress=not args.quiet,
+            progress=show_progress(args),
             blocks=blocks,
             drive=drive,
             overwrite=args.overwrite,
@@ -104,4 +103,9 @@ def main(argv=None) -> int:
                 f"{len(index['scenes'])} in {args.out}/index.json"
             )
 
-    return run(work, on_interrupt="the scenes written so far are complete", flags={"out_dir": "-o"})
+    return run(
+        work,
+        on_interrupt="the scenes written so far are complete",
+        flags={"out_dir": "-o"},
+        args=args,
+    )

@@ -6,7 +6,7 @@
                              [--device auto|cpu|cuda] [--epochs N] [--max-steps N]
                              [--batch-size N] [--crop-size N] [--crop-width N]
                              [--scale S] [--threads N] [--all-frames] [--init-irnet W]
-                             [--renders DATA] [--no-progress]
+                             [--renders DATA] [--progress | --no-progress] [-q | -v]
 
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
 ``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
@@ -30,7 +30,7 @@ import logging
 from pathlib import Path
 
 from ..errors import NidarError
-from ._common import parser, run, seed_arg
+from ._common import parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_config"]
 
@@ -107,8 +107,6 @@ def _parser() -> argparse.ArgumentParser:
         help="train IRNet on every frame of DATA (train, val and test splits), without "
         "validation: the model to ship once the held-out evaluation is done",
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
     return p
 
 
@@ -167,10 +165,6 @@ def build_config(args: argparse.Namespace):
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 on a user error)."""
     args = _parser().parse_args(argv)
-    logging.basicConfig(
-        level=logging.WARNING if args.quiet else logging.INFO,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
 
     left = {"text": "nothing written"}
 
@@ -188,7 +182,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         logging.getLogger(__name__).info("weights written to %s", out)
 
-    return run(work, on_interrupt=lambda: left["text"], flags={"render_frames": "--renders"})
+    return run(
+        work, on_interrupt=lambda: left["text"], flags={"render_frames": "--renders"}, args=args
+    )
 
 
 def _photos(folder, progress: bool):
@@ -200,7 +196,7 @@ def _photos(folder, progress: bool):
 def _train(args: argparse.Namespace, cfg) -> None:
     from ..nidar import train as training
 
-    progress = not args.no_progress
+    progress = show_progress(args)
     if args.stage == "stn" and args.photos is not None:
         training.train_stn_photos(
             cfg,

@@ -145,10 +145,9 @@ def build_kitti_frames(
     Raises:
         NidarError: no frames, clashing folder names, or a malformed frame.
     """
-    from tqdm.auto import tqdm
-
     from ..frames import SPLITS, list_frames, write_frame
     from ..io.atomic import atomic_write_json
+    from ..progress import progress_bar
 
     dirs = [Path(d) for d in kitti_dirs]
     names = [d.resolve().name for d in dirs]
@@ -174,8 +173,8 @@ def build_kitti_frames(
         old_version, old_info = old.get("version"), old.get("frame_info", {})
     splits: dict[str, list[str]] = {s: [] for s in SPLITS}
     info: dict[str, dict] = {}
-    for kitti_dir, source, fid in tqdm(
-        jobs, desc="KITTI frames", unit="frame", disable=not progress
+    for kitti_dir, source, fid in progress_bar(
+        jobs, show=progress, desc="KITTI frames", unit="frame"
     ):
         name = frame_name(source, fid)
         split = next((s for s, names in held.items() if name in names), "train")

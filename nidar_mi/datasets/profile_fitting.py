@@ -75,10 +75,10 @@ def _scan_returns(scans, values, incidence: bool, progress: bool, name: str) -> 
     """The returns of ``scans`` with a finite value, concatenated: ``values``, ``range_m``,
     ``ring``, ``elevation_deg``, ``intensity`` and ``cos_incidence`` (None without
     ``incidence``) as (N,) arrays."""
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     cols: dict[str, list] = {k: [] for k in ("v", "d", "ring", "el", "y", "cos")}
-    for scan in tqdm(scans, desc=f"profile {name}", unit="frame", disable=not progress):
+    for scan in progress_bar(scans, show=progress, desc=f"profile {name}", unit="frame"):
         v = np.asarray(values(scan), dtype=np.float64).reshape(-1)
         if v.shape != scan.intensity.shape:
             raise NidarError(f"{scan.name}: {v.size} values for {scan.intensity.size} returns")

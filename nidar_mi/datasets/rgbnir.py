@@ -149,11 +149,11 @@ def stn_training_pairs(
     (logged during training); the ``test`` pairs are never read (the photo evaluation scores
     them, :mod:`nidar_mi.eval.photos`). Each pair is ``(rgb (H, W, 3) uint8, nir (H, W) uint8)``.
     """
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     pairs = {p.name: p for p in list_pairs(root)}
     split = split_pairs(list(pairs.values()))
     names = split["train"] + split["val"]
-    fit = [load_pair(pairs[n]) for n in tqdm(names, desc="photos", disable=not progress)]
+    fit = [load_pair(pairs[n]) for n in progress_bar(names, show=progress, desc="photos")]
     val = [load_pair(pairs[n]) for n in split["val"]]
     return fit, val

@@ -364,7 +364,7 @@ def leave_one_out(
     Raises:
         NidarError: a test name that is not a frame, or fewer than two frames.
     """
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     names = [s.name for s in scans]
     missing = [n for n in test_names if n not in names]
@@ -373,7 +373,7 @@ def leave_one_out(
     if len(scans) < 2 or not test_names:
         raise NidarError("leave-one-out needs at least two frames and one test frame")
     rows = []
-    bar = tqdm(total=len(test_names) * len(methods), desc="leave-one-out", disable=not progress)
+    bar = progress_bar(total=len(test_names) * len(methods), show=progress, desc="leave-one-out")
     for test in test_names:
         k = names.index(test)
         train = [s for j, s in enumerate(scans) if j != k]

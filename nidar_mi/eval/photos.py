@@ -79,17 +79,16 @@ def photo_table(
         ``{"images": names, "rows": one per image and method, "mean": one per method,
         "per_category": {method: {category: {"r", "ssim"}}}}``.
     """
-    from tqdm.auto import tqdm
-
     from ..datasets.rgbnir import load_pair
     from ..io.images import srgb_to_linear
+    from ..progress import progress_bar
 
     by_name = {p.name: p for p in pairs}
     missing = [n for n in names if n not in by_name]
     if missing:
         raise NidarError(f"photo pair(s) not found: {', '.join(missing[:5])}")
     rows = []
-    for name in tqdm(names, desc="photos", unit="pair", disable=not progress):
+    for name in progress_bar(names, show=progress, desc="photos", unit="pair"):
         rgb, nir = load_pair(by_name[name])
         target = srgb_to_linear(nir.astype(np.float64) / 255.0)
         for key, (label, fn) in methods.items():

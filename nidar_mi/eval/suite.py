@@ -436,8 +436,9 @@ def _tables(payload: dict) -> tuple[list[str], list[dict]]:
     if payload["command"]:
         md.append(f"Command: `{payload['command']}`\n\n")
     md.append(
-        f"Weights: `{payload['weights']}`; data: `{payload['data']}`; LPIPS: "
-        f"{payload['lpips'] or 'computed'}.\n\n"
+        f"Weights: `{payload['weights']}`; data: "
+        + (f"`{payload['data']}`" if payload["data"] else "none")
+        + f"; LPIPS: {payload['lpips'] or 'computed'}.\n\n"
     )
     if "ground_truth" in payload:
         md.append(

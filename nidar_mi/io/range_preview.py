@@ -6,18 +6,21 @@ camera looking forward: azimuth (counter-clockwise from the sensor's +x axis, wr
 (-180°, 180°]) *decreases* from left to right, so the vehicle's left is on the left, and on a
 360° scan straight ahead (0°) is in the middle with the rear at both edges. Below the image an
 azimuth axis and a colour bar with the quantity and its unit; pixels without a return are black.
+By default the colours span the 1st to 99th percentile of the values: the colour bar then says
+so, with the data's full range, and its ends point out (arrows) where values lie beyond them.
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import NidarError
 from .atomic import atomic_path
 
-__all__ = ["preview_columns", "write_range_preview"]
+__all__ = ["ColourRange", "colour_range", "preview_columns", "write_range_preview"]
 
 
 def preview_columns(azimuth_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -35,6 +38,56 @@ def preview_columns(azimuth_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     wrapped = 180.0 - np.mod(180.0 - az, 360.0)  # (-180, 180]
     order = np.argsort(-wrapped, kind="stable")
     return order, wrapped[order]
+
+
+@dataclass(frozen=True)
+class ColourRange:
+    """The values a preview's colours span, and what lies beyond them.
+
+    Attributes:
+        lo, hi: the values at the colour bar's two ends (``hi > lo``).
+        extend: matplotlib's colour bar ``extend``: ``"neither"``, ``"min"``, ``"max"`` or
+            ``"both"`` (values below ``lo`` / above ``hi`` shown in the end colour).
+        note: what the colour bar's caption adds about the clipping ("" when none).
+    """
+
+    lo: float
+    hi: float
+    extend: str
+    note: str
+
+
+def colour_range(
+    values: np.ndarray, vmin: float | None = None, vmax: float | None = None
+) -> ColourRange:
+    """The colour range of a preview of ``values``: ``vmin``/``vmax``, or by default the 1st and
+    99th percentile of the finite ``values`` (N,), with a note naming the clip and the full
+    range of the data when values lie beyond it (e.g. "colours clipped to the 1st-99th
+    percentile, 1.2-29; data 0.8-69.9")."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        lo, hi = (0.0, 1.0) if vmin is None or vmax is None else (float(vmin), float(vmax))
+        return ColourRange(lo, hi if hi > lo else lo + 1.0, "neither", "")
+    lo = float(np.percentile(v, 1)) if vmin is None else float(vmin)
+    hi = float(np.percentile(v, 99)) if vmax is None else float(vmax)
+    hi = hi if hi > lo else lo + 1.0
+    below, above = bool(v.min() < lo), bool(v.max() > hi)
+    extend = {(False, False): "neither", (True, False): "min", (False, True): "max"}.get(
+        (below, above), "both"
+    )
+    auto = [
+        p
+        for p, default, out in (("1st", vmin, below), ("99th", vmax, above))
+        if default is None and out
+    ]
+    note = ""
+    if below or above:
+        which = "-".join(auto) + (" percentile" if auto else "")
+        clip = f"{lo:.3g}-{hi:.3g}"
+        note = f"colours clipped to the {which}, {clip}" if auto else f"colours clipped to {clip}"
+        note += f"; data {v.min():.3g}-{v.max():.3g}"
+    return ColourRange(lo, hi, extend, note)
 
 
 def _tick_label(a: float) -> str:
@@ -63,7 +116,8 @@ def write_range_preview(
         azimuth_deg: (C,) azimuth of each column, degrees (see :func:`preview_columns`).
         label: the colour bar's caption, quantity and unit, e.g. ``"range (m)"``.
         cmap: matplotlib colour map.
-        vmin, vmax: colour range; default: 1st and 99th percentile of the valid values.
+        vmin, vmax: colour range; default: 1st and 99th percentile of the valid values
+            (:func:`colour_range`; the colour bar's caption states the clip).
 
     Raises:
         NidarError: shapes that do not agree, an unknown colour map, or a write failure.
@@ -85,12 +139,8 @@ def write_range_preview(
         raise NidarError(f"unknown colour map {cmap!r}") from None
     order, az_sorted = preview_columns(az)
     shown = np.ma.masked_array(image[:, order], mask=~valid[:, order])
-    if valid.any():
-        lo = float(np.percentile(image[valid], 1)) if vmin is None else float(vmin)
-        hi = float(np.percentile(image[valid], 99)) if vmax is None else float(vmax)
-    else:
-        lo, hi = (0.0, 1.0) if vmin is None or vmax is None else (float(vmin), float(vmax))
-    hi = hi if hi > lo else lo + 1.0
+    colours = colour_range(image[valid], vmin, vmax)
+    lo, hi = colours.lo, colours.hi
 
     rings, cols = image.shape
     dpi = 100
@@ -122,8 +172,9 @@ def write_range_preview(
     cax = fig.add_axes(
         (left, bottom_px / total_h, width, bar_px / total_h),
     )
-    bar = fig.colorbar(im, cax=cax, orientation="horizontal")
+    bar = fig.colorbar(im, cax=cax, orientation="horizontal", extend=colours.extend)
     bar.ax.tick_params(labelsize=7)
-    bar.set_label(f"{label}  (black: no return)", fontsize=8)
+    note = f"; {colours.note}" if colours.note else ""
+    bar.set_label(f"{label}  (black: no return{note})", fontsize=8)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi)

@@ -14,6 +14,18 @@ inputs.
 * IRNet: R, S and Î are predicted at the reduced size and resized bilinearly to the full size.
 
 The outputs always have the input's size.
+
+**JPEG blocks in the pseudo-NIR image.** The STN mixes the colour channels with weights of
+opposite sign (e.g. +6 G and -6 B on vegetation), so it amplifies colour differences, and with
+them a JPEG's chroma blocks (8 x 8 DCT blocks on chroma stored at half resolution: 16 px), most
+visibly in dark areas where the exposure normalisation lifts them. The weight maps themselves are
+smooth (bilinear, ``align_corners=False``; their own blockiness is ~1.0). The pseudo-NIR image
+(:func:`pseudo_nir_linear`: the ``pseudo_nir`` command, the photo evaluation) therefore mixes the
+weights with the image's per-pixel channel mean and its colour differences from that mean low-
+passed by a Gaussian of :data:`CHROMA_SIGMA_PX` (a camera's chroma carries no finer detail); on
+the held-out RGB/NIR photos this lowers the 16-px blockiness in dark areas from 1.35 to 1.15
+(the NIR photos: 1.09) and raises Pearson r from 0.8096 to 0.8104. :func:`pseudo_nir` and
+:func:`predict`, whose pseudo-NIR feeds IRNet, keep the input the IRNet was trained on.
 """
 
 from __future__ import annotations
@@ -29,7 +41,9 @@ from .stn import STN
 from .stn_lowres import LowResSTN
 
 __all__ = [
+    "CHROMA_SIGMA_PX",
     "pad_to_multiple",
+    "smooth_chroma",
     "predict",
     "pseudo_nir",
     "pseudo_nir_linear",
@@ -54,6 +68,28 @@ def reduced_size(h: int, w: int, scale: float) -> tuple[int, int]:
     if not 0.0 < float(scale) <= 1.0:
         raise NidarError(f"inference scale must lie in (0, 1], got {scale}")
     return max(1, round(scale * h)), max(1, round(scale * w))
+
+
+#: Standard deviation (px) of the Gaussian low-pass on the colour differences of the pseudo-NIR
+#: image (module docstring).
+CHROMA_SIGMA_PX = 2.0
+
+
+def smooth_chroma(x: torch.Tensor, sigma: float) -> torch.Tensor:
+    """``(B, C, H, W)`` with each pixel's channel mean kept and the channels' differences from
+    it low-passed by a Gaussian of ``sigma`` px (edges replicated); ``sigma <= 0``: ``x``."""
+    if sigma <= 0:
+        return x
+    mean = x.mean(1, keepdim=True)
+    r = max(1, int(3.0 * sigma + 0.5))
+    t = torch.arange(-r, r + 1, dtype=x.dtype, device=x.device)
+    k = torch.exp(-0.5 * (t / sigma) ** 2)
+    k = k / k.sum()
+    c = x.shape[1]
+    d = F.pad(x - mean, (r, r, r, r), mode="replicate")
+    d = F.conv2d(d, k.view(1, 1, 1, -1).repeat(c, 1, 1, 1), groups=c)
+    d = F.conv2d(d, k.view(1, 1, -1, 1).repeat(c, 1, 1, 1), groups=c)
+    return mean + d
 
 
 def _device(module: torch.nn.Module) -> torch.device:
@@ -88,10 +124,14 @@ def _resize(x: torch.Tensor, size: tuple[int, int], mode: str) -> torch.Tensor:
     return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
 
-def _stn_forward(stn: STN, x: torch.Tensor, scale: float) -> torch.Tensor:
-    """Full-size ``(1, 1, H, W)`` pseudo-NIR of prepared RGB ``x`` (``(1, 3, H, W)``)."""
+def _stn_forward(
+    stn: STN, x: torch.Tensor, scale: float, chroma_sigma: float = 0.0
+) -> torch.Tensor:
+    """Full-size ``(1, 1, H, W)`` pseudo-NIR of prepared RGB ``x`` (``(1, 3, H, W)``); the
+    weights are applied to ``x`` with its colour differences low-passed by ``chroma_sigma`` px
+    (:func:`smooth_chroma`; 0: ``x`` as it is)."""
     h, w = x.shape[-2:]
-    if scale == 1.0:
+    if scale == 1.0 and chroma_sigma <= 0:
         return _run(stn, x)[..., :h, :w]
     small = _resize(x, reduced_size(h, w, scale), "area")
     was_training = stn.training
@@ -105,12 +145,12 @@ def _stn_forward(stn: STN, x: torch.Tensor, scale: float) -> torch.Tensor:
             rows = -(-small.shape[-2] // stn.down)
             cols = -(-small.shape[-1] // stn.down)
             coef = _resize(coef[..., :rows, :cols], (h, w), "bilinear")
-            return LowResSTN.apply(x.to(coef.device), coef)
+            return LowResSTN.apply(smooth_chroma(x.to(coef.device), chroma_sigma), coef)
         weights = stn.channel_weights(xs)[0][..., : small.shape[-2], : small.shape[-1]]
     finally:
         stn.train(was_training)
     weights = _resize(weights, (h, w), "bilinear")
-    return (x.to(weights.device) * weights).sum(1, keepdim=True)
+    return (smooth_chroma(x.to(weights.device), chroma_sigma) * weights).sum(1, keepdim=True)
 
 
 @torch.no_grad()
@@ -125,8 +165,13 @@ def pseudo_nir(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
     Returns:
         ``(H, W)`` float32 pseudo-NIR in the exposure-normalised domain (mean ~0.5).
     """
+    return _pseudo_nir(stn, rgb, float(scale), 0.0)
+
+
+@torch.no_grad()
+def _pseudo_nir(stn: STN, rgb: np.ndarray, scale: float, chroma_sigma: float) -> np.ndarray:
     x = torch.from_numpy(prepare_rgb(rgb))[None]
-    return _stn_forward(stn, x, float(scale))[0, 0].float().cpu().numpy()
+    return _stn_forward(stn, x, scale, chroma_sigma)[0, 0].float().cpu().numpy()
 
 
 def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
@@ -135,6 +180,8 @@ def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.nd
     The network works on exposure-normalised linear RGB (mean 0.5,
     :mod:`nidar_mi.nidar.preprocess`); the normalising factor is undone here, so a grey surface
     the camera records at linear value ``v`` in every channel gets pseudo-NIR ``≈ v · Σ w_c``.
+    The colour differences are low-passed first (:data:`CHROMA_SIGMA_PX`, module docstring), so
+    a JPEG's chroma blocks do not show.
 
     Args:
         stn: trained STN.
@@ -146,7 +193,7 @@ def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.nd
     """
     from ..io.images import srgb_to_linear
 
-    p = pseudo_nir(stn, rgb, scale=scale)
+    p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX)
     mean = float(srgb_to_linear(rgb.astype(np.float32) / np.float32(255.0)).mean(dtype=np.float64))
     ratio = EXPOSURE_TARGET_MEAN / (mean + 1e-3)  # the factor prepare_rgb applied
     return np.maximum(p / np.float32(ratio), 0.0).astype(np.float32)

@@ -25,9 +25,9 @@ import numpy as np
 import torch
 from torch import nn
 from torch.utils.data import DataLoader
-from tqdm.auto import tqdm
 
 from ..errors import NidarError
+from ..progress import progress_bar
 from .checkpoint import (
     atomic_write,
     latest_checkpoint,
@@ -229,10 +229,10 @@ class _StageRun:
         )
         stage.model.train()
         done_in_epoch = skip
-        bar = tqdm(
+        bar = progress_bar(
             total=self.steps_per_epoch,
             initial=skip,
-            disable=not progress,
+            show=progress,
             desc=f"{stage.name} {epoch + 1}/{stage.optim.epochs}",
         )
         for item in loader:
@@ -282,7 +282,7 @@ class _StageRun:
                 **val,
             }
         )
-        log.info(
+        log.debug(
             "%s: epoch %d, step %d, val loss %s", stage.name, epoch, self.step, val["val_loss"]
         )
         write_stage_log(self.out_dir, stage.name, self.log)

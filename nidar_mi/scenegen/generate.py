@@ -18,7 +18,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import sys
 
 import numpy as np
 
@@ -199,10 +198,9 @@ def generate(
         NidarError: bad argument, an unreadable index, a scene file of another run (without
             ``overwrite``), or a file that cannot be written; nothing is written then.
     """
-    from tqdm.auto import tqdm
-
     from ..errors import check_seed
     from ..io.atomic import atomic_write_json, atomic_write_text, check_output_folder
+    from ..progress import progress_bar
 
     if count < 1:
         raise NidarError(f"`count` must be >= 1 (got {count})")
@@ -223,9 +221,7 @@ def generate(
     hashes = {e["layout_sha256"]: e["id"] for e in entries.values() if "layout_sha256" in e}
     todo = []
     drives = []  # (k, layout, entry) of the cities, whose drive files are written with them
-    for k in tqdm(
-        range(count), desc="scenegen", unit="scene", disable=not progress, file=sys.stderr
-    ):
+    for k in progress_bar(range(count), show=progress, desc="scenegen", unit="scene"):
         layout, text = generate_scene(seed, k, kind, blocks, materials, lighting)
         entry = index_entry(seed, k, layout, text, materials, lighting)
         other = hashes.get(entry["layout_sha256"], entry["id"])

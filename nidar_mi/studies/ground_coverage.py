@@ -385,10 +385,9 @@ def kitti_ground_rings(
     if frames is not None:
         wanted = set(frames)
         paths = [p for p in paths if os.path.splitext(os.path.basename(p))[0] in wanted]
-    if progress:
-        from tqdm import tqdm
+    from ..progress import progress_bar
 
-        paths = tqdm(paths, desc="KITTI sweeps", unit="sweep")
+    paths = progress_bar(paths, show=progress, desc="KITTI sweeps", unit="sweep")
     rng = np.random.default_rng(seed)
     ranges: list[list[np.ndarray]] = [[] for _ in range(rings)]
     detected = np.zeros(rings, dtype=np.int64)

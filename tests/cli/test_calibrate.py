@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -173,3 +174,23 @@ def test_a_branch_the_profile_was_not_fitted_on_is_refused(tmp_path):
     assert main(args) == 0
     with pytest.raises(NidarError, match="maps the I_hat branch"):
         assign_intensity(np.zeros((1, 3)), [], [], profile=str(out), branch="R")
+
+
+def test_synopsis_and_help_show_overwrite_and_the_incidence_default(capsys):
+    """The module synopsis, the README's and ``--help`` all show ``--overwrite`` and that a
+    ``gbm`` profile reads the incidence by default."""
+    import re
+
+    import nidar_mi.cli.calibrate as cli
+
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "--overwrite" in help_text and "(the default of the gbm form)" in help_text
+    readme = open(Path(cli.__file__).parents[2] / "README.md", encoding="utf-8").read()
+    synopsis = re.search(
+        r"python -m nidar_mi\.calibrate SCANS\.\.\. -o profile\.json \[.*?```", readme, re.S
+    ).group(0)
+    for text in (cli.__doc__, synopsis):
+        assert "[--overwrite]" in text and "--incidence" in text
+    assert "reads the incidence by default" in cli.__doc__ + readme

@@ -136,3 +136,102 @@ def test_signal_during_render_leaves_nothing(tmp_path, sig, status, word):
     assert proc.returncode == status, err
     assert err.strip().splitlines()[-1] == f"{word}; nothing written"
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_every_command_has_quiet_verbose_and_progress_options(command, capsys):
+    """``-q`` / ``-v`` on every command; ``--progress`` / ``--no-progress`` where it has bars."""
+    import importlib
+
+    module = importlib.import_module(f"nidar_mi.cli.{command}")
+    with pytest.raises(SystemExit) as e:
+        module.main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    assert "-q, --quiet" in text and "-v, --verbose" in text
+    if command != "materials":
+        assert "--progress" in text and "--no-progress" in text
+
+
+def _args(argv):
+    from nidar_mi.cli._common import parser
+
+    return parser("x", "a command").parse_args(argv)
+
+
+@pytest.mark.parametrize(
+    "argv, terminal, shown",
+    [
+        ([], False, False),  # a log file or a pipe: no bar
+        ([], True, True),  # a terminal: bars
+        (["--progress"], False, True),
+        (["--no-progress"], True, False),
+        (["-q"], True, False),
+        (["-q", "--progress"], False, True),
+    ],
+)
+def test_progress_bars_only_on_a_terminal_unless_asked(argv, terminal, shown, monkeypatch):
+    from nidar_mi.cli import _common
+
+    monkeypatch.setattr(_common, "stderr_is_terminal", lambda: terminal)
+    assert _common.show_progress(_args(argv)) is shown
+
+
+def test_progress_bar_follows_the_terminal(monkeypatch, capsys):
+    """``show=None`` shows the bar on a terminal only; the helper writes to stderr."""
+    import nidar_mi.progress as progress
+
+    monkeypatch.setattr(progress, "stderr_is_terminal", lambda: False)
+    assert list(progress.progress_bar(range(3), show=None, desc="quiet")) == [0, 1, 2]
+    assert capsys.readouterr().err == ""
+    list(progress.progress_bar(range(3), show=True, desc="shown"))
+    assert "shown" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, lines",
+    [([], ["INFO", "WARNING"]), (["-v"], ["DEBUG", "INFO", "WARNING"]), (["-q"], ["WARNING"])],
+)
+def test_log_level_follows_quiet_and_verbose(argv, lines, capsys):
+    """INFO by default, DEBUG with ``-v`` (e.g. training's per-epoch lines), warnings only with
+    ``-q``; the handler goes away with the command."""
+    import logging
+
+    log = logging.getLogger("nidar_mi.some_module")
+
+    def work():
+        log.debug("per-epoch detail")
+        log.info("a step done")
+        log.warning("look at this")
+
+    assert run(work, args=_args(argv)) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert [line.split()[0] for line in err] == lines
+    assert run(work) == 0  # without args: INFO
+    assert len(capsys.readouterr().err.splitlines()) == 2
+    assert not any(
+        type(h).__name__ == "_StderrHandler" for h in logging.getLogger("nidar_mi").handlers
+    )
+
+
+def test_no_progress_bar_in_a_log(tmp_path, capsys):
+    """A command whose stderr is not a terminal (here captured) writes no progress bar."""
+    from nidar_mi.cli.scenegen import main
+
+    assert main(["-o", str(tmp_path / "s"), "--count", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "%|" not in err and "scenegen" not in err, err
+
+
+def test_readme_names_the_installed_console_scripts():
+    """The README lists every console script of pyproject.toml by its installed name, one per
+    command, and no other ``nidar-...`` script."""
+    import re
+
+    pyproject = open(os.path.join(REPO, "pyproject.toml"), encoding="utf-8").read()
+    table = pyproject.split("[project.scripts]", 1)[1].split("\n[", 1)[0]
+    scripts = set(re.findall(r"^([a-z-]+) = ", table, re.M))
+    readme = open(os.path.join(REPO, "README.md"), encoding="utf-8").read()
+    assert {f"nidar-{c.replace('_', '-')}" for c in COMMANDS} | {"nidar-mi"} == set(scripts)
+    named = set(re.findall(r"`(nidar-[a-z<][a-z>-]*)", readme))
+    assert named == set(scripts)

@@ -202,3 +202,14 @@ def test_cli_fits_calibration_and_pipeline_runs(trained, data_dir, tmp_path):
     # deterministic: the same inputs give the same output
     res2 = model.point_intensity(xyz, [cam], [f["rgb"]])
     np.testing.assert_array_equal(res.intensity, res2.intensity)
+
+
+@pytest.mark.parametrize("verbose", [False, True])
+def test_cli_epoch_lines_only_with_verbose(data_dir, tmp_path, capsys, verbose):
+    """Training logs its start and end at INFO; one line per epoch only with ``-v`` (DEBUG)."""
+    argv = [str(data_dir), str(tmp_path / "w"), "--reduced", "--device", "cpu", "--stage", "stn"]
+    assert main(argv + (["-v"] if verbose else [])) == 0
+    err = capsys.readouterr().err
+    assert "steps of batch" in err and "weights written" in err
+    assert ("epoch 0, step" in err) is verbose
+    assert "%|" not in err  # stderr is not a terminal: no progress bar

@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import sys
 import warnings
 from dataclasses import dataclass
 
@@ -150,11 +149,10 @@ def render_drive(
 
 def _render(scene_path, poses, folder, todo, rgb_twin, cameras, params, spp, seed, progress):
     """Scan (and photograph) the frames ``todo`` into ``folder``."""
-    from tqdm.auto import tqdm
-
     from ...camera import render_camera
     from ...io.atomic import atomic_path
     from ...lidar.scan import scan
+    from ...progress import progress_bar
     from ...scene import load_scene
 
     # no labels: they keep ~2000 shapes apart and make every sweep ~7x slower
@@ -171,7 +169,7 @@ def _render(scene_path, poses, folder, todo, rgb_twin, cameras, params, spp, see
         M0 = np.array(camera.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
         lidar_to_cam_mount = np.linalg.inv(T_wl0) @ M0
     desc = f"{os.path.basename(folder)} frames"
-    for k in tqdm(todo, desc=desc, unit="frame", disable=not progress, file=sys.stderr):
+    for k in progress_bar(todo, show=progress, desc=desc, unit="frame"):
         result = scan(loaded.scene, lidar, seed=seed + k, to_world=poses[k])
         pts = result.points()
         with atomic_path(_frame_path(folder, k)) as tmp, open(tmp, "wb") as f:
@@ -208,12 +206,11 @@ def nidar_columns(
     Writes ``folder/nidar_<weights hash>/k:06d.npz`` (``intensity_nidar`` float32 in [0, 1],
     ``nidar_observed`` bool) and returns that folder; frames already there are kept.
     """
-    from tqdm.auto import tqdm
-
     from ...geometry.camera_model import CameraModel
     from ...io.atomic import atomic_path
     from ...io.points import read_npz
     from ...nidar.pipeline import NidarModel, shipped_weights_dir
+    from ...progress import progress_bar
     from ...render_folder import weights_sha256
 
     wdir = weights or str(shipped_weights_dir())
@@ -223,7 +220,7 @@ def nidar_columns(
     if not todo:
         return out
     model = NidarModel.load(weights)
-    for k in tqdm(todo, desc="NIDAR", unit="frame", disable=not progress, file=sys.stderr):
+    for k in progress_bar(todo, show=progress, desc="NIDAR", unit="frame"):
         pts = read_npz(_frame_path(folder, k))
         cam = read_npz(_frame_path(folder, k, "cam_"))
         H, W = cam["rgb"].shape[:2]

@@ -13,7 +13,6 @@ of aligned points that land within a distance of the target (the check a loop mu
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 
 import numpy as np
@@ -57,13 +56,12 @@ def run_odometry(
         (frames, 4, 4) float64 ``T_{lidar_0 <- lidar_k}``.
     """
     from kiss_icp.kiss_icp import KissICP
-    from tqdm.auto import tqdm
+
+    from ...progress import progress_bar
 
     odom = KissICP(kiss_config(deskew))
     poses = np.zeros((frames, 4, 4))
-    for k in tqdm(
-        range(frames), desc="KISS-ICP", unit="frame", disable=not progress, file=sys.stderr
-    ):
+    for k in progress_bar(range(frames), show=progress, desc="KISS-ICP", unit="frame"):
         xyz, t = load(k)
         stamps = np.zeros(0)
         if t is not None and len(t):

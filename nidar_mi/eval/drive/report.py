@@ -3,9 +3,11 @@
 * ``trajectory.png``: the true drive, KISS-ICP's estimate (aligned, as ATE sees it) and the
   pose-graph results per source, seen from above;
 * ``pr.png``: precision / recall of the loops per intensity source;
-* ``descriptors.png``: one frame's descriptor per source (rings by sectors);
+* ``descriptors.png``: one frame's descriptor per source (rings by sectors), with a colour bar;
 * ``map.png``: the city from above (buildings, walls, cars, poles and trunks) with the drive and
   the frames that revisit.
+
+Legends sit beside the axes, where they cover no data.
 """
 
 from __future__ import annotations
@@ -76,7 +78,7 @@ def _figures(out: str, gt, odometry: dict, loops: dict, graphs: dict, desc: dict
     ax.set_aspect("equal")
     ax.set_xlabel("x (m, first LiDAR frame)")
     ax.set_ylabel("y (m)")
-    ax.legend(fontsize=8)
+    _outside_legend(ax)
     ax.set_title("Simulated drive: trajectories (aligned for ATE)")
     path = os.path.join(out, "trajectory.png")
     fig.savefig(path, dpi=110, bbox_inches="tight")
@@ -102,14 +104,7 @@ def _figures(out: str, gt, odometry: dict, loops: dict, graphs: dict, desc: dict
     plt.close(fig)
     written.append(path)
 
-    k = len(gt) // 3
-    fig, axes = plt.subplots(len(desc), 1, figsize=(7, 1.3 * len(desc) + 0.6), squeeze=False)
-    for a, (source, (grids, _, _)) in zip(axes[:, 0], desc.items()):
-        a.imshow(grids[k], aspect="auto", cmap="viridis", vmin=0, vmax=1, origin="lower")
-        a.set_ylabel(source, rotation=0, ha="right", va="center")
-        a.set_yticks([])
-    axes[-1, 0].set_xlabel("sector (6° each, from -x)")
-    fig.suptitle(f"Descriptors of frame {k} (rings up to 40 m, value per bin)")
+    fig = _descriptors_figure(desc, len(gt) // 3)
     path = os.path.join(out, "descriptors.png")
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -117,7 +112,43 @@ def _figures(out: str, gt, odometry: dict, loops: dict, graphs: dict, desc: dict
     return written
 
 
+def _outside_legend(ax) -> None:
+    """The axes' legend to the right of them, where it covers no data."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, framealpha=0.9)
+
+
+def _descriptors_figure(desc: dict, k: int):
+    """Frame ``k``'s descriptor per source, one row each, with the colour bar of the values."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(desc), 1, figsize=(7.6, 1.3 * len(desc) + 0.6), squeeze=False)
+    im = None
+    for a, (source, (grids, _, _)) in zip(axes[:, 0], desc.items()):
+        im = a.imshow(grids[k], aspect="auto", cmap="viridis", vmin=0, vmax=1, origin="lower")
+        a.set_ylabel(source, rotation=0, ha="right", va="center")
+        a.set_yticks([])
+    axes[-1, 0].set_xlabel("sector (6° each, from -x)")
+    if im is not None:
+        bar = fig.colorbar(im, ax=list(axes[:, 0]), fraction=0.04, pad=0.02)
+        bar.set_label(
+            "largest value in the bin / the source's 99th percentile (0: empty)", fontsize=8
+        )
+    fig.suptitle(f"Descriptors of frame {k} (rings up to 40 m, value per bin)")
+    return fig
+
+
 def _map(out: str, layout, world_poses, revisit) -> str:
+    import matplotlib.pyplot as plt
+
+    fig = _map_figure(layout, world_poses, revisit)
+    path = os.path.join(out, "map.png")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _map_figure(layout, world_poses, revisit):
+    """The city from above with the drive; the legend beside the map, not over it."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -145,14 +176,11 @@ def _map(out: str, layout, world_poses, revisit) -> str:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.legend(loc="upper right", fontsize=8)
+    _outside_legend(ax)
     ax.set_title(
         "The city from above: buildings (grey), cars (red), walls (brown), poles and trunks (green)"
     )
-    path = os.path.join(out, "map.png")
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return fig
 
 
 def write_report(

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 
@@ -275,8 +274,7 @@ def _kiss_on_kitti_layout(cfg: StudyConfig, phys: str, gt: np.ndarray, progress:
 
 def _descriptors(cfg: StudyConfig, folders: dict, nidar_dir: str | None, progress: bool):
     """Per source: (N, rings, sectors) grids and occupancies."""
-    from tqdm.auto import tqdm
-
+    from ...progress import progress_bar
     from .frames import load_frame
     from .scan_context import descriptor, normalise
 
@@ -295,11 +293,8 @@ def _descriptors(cfg: StudyConfig, folders: dict, nidar_dir: str | None, progres
             pts.append(f.xyz[keep])
         scale = float(np.percentile(np.concatenate(vals), 99)) or 1.0
         grids, occs = [], []
-        for xyz, v in tqdm(
-            list(zip(pts, vals)),
-            desc=f"descriptors {source}",
-            disable=not progress,
-            file=sys.stderr,
+        for xyz, v in progress_bar(
+            list(zip(pts, vals)), show=progress, desc=f"descriptors {source}"
         ):
             g, o = descriptor(xyz, normalise(v, scale))
             grids.append(g)
