@@ -173,3 +173,29 @@ def test_a_branch_the_profile_was_not_fitted_on_is_refused(tmp_path):
     assert main(args) == 0
     with pytest.raises(NidarError, match="maps the I_hat branch"):
         assign_intensity(np.zeros((1, 3)), [], [], profile=str(out), branch="R")
+
+
+def test_max_frames_and_the_physical_form(tmp_path, capsys):
+    """--max-frames K fits on K frames evenly spaced over the scans; --form physical fits the
+    generic profiles' closed form."""
+    from nidar_mi.datasets.profile_fitting import select_frames
+    from nidar_mi.errors import NidarError
+
+    assert select_frames(list("abcdefg"), 3) == ["a", "d", "g"]
+    assert select_frames(list("ab"), 5) == ["a", "b"] and select_frames(list("ab"), None) == [
+        "a",
+        "b",
+    ]
+    with pytest.raises(NidarError, match="`max_frames` must be at least 1"):
+        select_frames(list("ab"), 0)
+    kitti = make_kitti(tmp_path / "drive", frames=3)
+    out = tmp_path / "k1.json"
+    assert main([str(kitti), "-o", str(out), "--max-frames", "1"]) == 0
+    assert "fitted on 1 frames" in capsys.readouterr().out
+    assert load_profile(out).provenance["frames"] == 1
+    assert main([str(kitti), "-o", str(out), "--max-frames", "0", "-q"]) == 2
+    assert "--max-frames must be at least 1" in capsys.readouterr().err
+    assert main([str(kitti), "-o", str(out), "--form", "physical"]) == 0
+    assert "physical profile 'k1' (with incidence) fitted on 3 frames" in capsys.readouterr().out
+    p = load_profile(out)
+    assert p.form == "physical" and p.uses_incidence and p.mapping.gain > 0
