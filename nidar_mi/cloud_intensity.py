@@ -50,6 +50,9 @@ class CloudInputs:
     """How messages name the cloud (its file, or the KITTI frame)."""
     kitti: bool = False
     """The cloud is a KITTI HDL-64E frame (its sensor profile is ``kitti-hdl64e``)."""
+    simulator: bool = False
+    """The cloud is a render of the simulator (its calibration is a renderer ``calib.json``; its
+    sensor profile is the weights' own, ``sim-905``)."""
 
 
 def kitti_inputs(folder: str, frame: str) -> CloudInputs:
@@ -84,7 +87,7 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
     Raises:
         NidarError: the count of images or an image's size does not match the cameras.
     """
-    from .io.calib import load_calib
+    from .io.calib import is_render_calib, load_calib
     from .io.images import read_rgb8
     from .io.point_cloud import read_point_cloud
 
@@ -103,7 +106,7 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
     if "intensity" in cloud:
         cloud["intensity"] = np.asarray(cloud["intensity"], dtype=np.float32)
     name = os.path.splitext(os.path.basename(points))[0]
-    return CloudInputs(cloud, cameras, rgb, name, points)
+    return CloudInputs(cloud, cameras, rgb, name, points, simulator=is_render_calib(calib))
 
 
 def assign_intensity(
@@ -198,13 +201,19 @@ def assign_cloud(
 ) -> dict[str, np.ndarray]:
     """The cloud's finite points with NIDAR's columns added (:func:`assign_intensity`).
 
-    ``profile`` None picks ``kitti-hdl64e`` for a KITTI frame on the ``R`` branch (None or
-    ``R``), none otherwise (the weights' own calibration, or the raw ``I_hat`` head). The
-    cloud's ``ring`` column, when present, gives the profile its rings.
+    ``profile`` None on the ``R`` branch (None or ``R``) picks the cloud's default
+    (:func:`nidar_mi.datasets.sensor_profiles.default_profile`): ``kitti-hdl64e`` for a KITTI
+    frame, the weights' own for a render of the simulator, else ``generic-compensated`` with a
+    warning (an unknown sensor); on ``I_hat`` the raw head. The cloud's ``ring`` column, when
+    present, gives the profile its rings.
     """
     points = dict(finite_points(inputs.points, inputs.where))
-    if profile is None and inputs.kitti and branch in (None, "R"):
-        profile = "kitti-hdl64e"
+    if profile is None and branch in (None, "R"):
+        from .datasets.sensor_profiles import default_profile, warn_unknown_sensor
+
+        profile = default_profile(kitti=inputs.kitti, simulator=inputs.simulator)
+        if not (inputs.kitti or inputs.simulator):
+            warn_unknown_sensor()
     ring = np.asarray(points["ring"], dtype=np.int64) if "ring" in points else None
     points.update(
         assign_intensity(

@@ -17,8 +17,11 @@ cloud) are dropped before any work, with a warning that counts them.
 
 ``--profile NAME|FILE`` chooses the sensor profile that turns NIDAR's map into the sensor's
 intensity (:mod:`nidar_mi.datasets.sensor_profiles`): ``kitti-hdl64e`` by default with ``--kitti`` (fitted
-on the real KITTI frames at first use and cached), ``sim-905`` (the simulator's) by default
-otherwise, or a file from ``python -m nidar_mi.calibrate``. A cloud's ``ring`` column gives the
+on the real KITTI frames at first use and cached), ``sim-905`` (the simulator's) by default for
+a render of the simulator (a renderer ``calib.json``), ``generic-compensated`` (a closed form,
+``R·|cos θ|``) with a warning for any other cloud (an unknown sensor; ``generic-raw`` for one
+without range compensation), or a file from ``python -m nidar_mi.calibrate``. One stderr line
+names the profile used. A cloud's ``ring`` column gives the
 profile its rings; with ``--kitti`` they are recovered from the storage order
 (:func:`nidar_mi.datasets.kitti_rings.checked_rings`) and written as ``ring``. ``--branch I_hat``
 without ``--profile`` assigns the dense head raw.
@@ -35,6 +38,7 @@ The work is :mod:`nidar_mi.cloud_intensity`'s; this module parses the command li
 from __future__ import annotations
 
 import os
+import sys
 
 from ..errors import NidarError
 from ._common import parser, run
@@ -74,8 +78,9 @@ def build_parser():
     )
     p.add_argument(
         "--profile",
-        help="sensor profile: kitti-hdl64e (default with --kitti), sim-905 (default otherwise) "
-        "or a profile file from python -m nidar_mi.calibrate",
+        help="sensor profile: kitti-hdl64e (default with --kitti), sim-905 (default for a "
+        "render's calib.json), generic-compensated (default otherwise, with a warning), "
+        "generic-raw, or a profile file from python -m nidar_mi.calibrate",
     )
     p.add_argument(
         "--overwrite", action="store_true", help="replace OUT even when it holds other files"
@@ -113,22 +118,38 @@ def _inputs(args):
     return read_inputs(args.points, args.calib, args.image, lidar=args.lidar)
 
 
+def _profile(args, inputs) -> tuple[str | None, bool]:
+    """The profile named or chosen for the cloud, and whether its sensor is unknown (no
+    profile named for a cloud that is neither KITTI's nor the simulator's)."""
+    from ..datasets.sensor_profiles import default_profile
+
+    if args.profile is not None or args.branch not in (None, "R"):
+        return args.profile, False
+    unknown = not (inputs.kitti or inputs.simulator)
+    return default_profile(kitti=inputs.kitti, simulator=inputs.simulator), unknown
+
+
 def _assign(args) -> None:
     from ..cloud_intensity import assign_cloud, write_points
+    from ..datasets.sensor_profiles import profile_line, warn_unknown_sensor
     from ..io.atomic import check_output_folder
 
     formats = _formats(args.formats)
     inputs = _inputs(args)
     out = args.out or os.path.join("out", "assign", inputs.name)
     check_output_folder(out, overwrite=args.overwrite, marker="points.npz")
+    profile, unknown = _profile(args, inputs)
     points = assign_cloud(
         inputs,
         weights=args.weights,
         occlusion=not args.no_occlusion,
         branch=args.branch,
-        profile=args.profile,
+        profile=profile,
     )
     written = write_points(out, points, formats, args.overwrite)
+    print(profile_line(profile, branch=args.branch), file=sys.stderr)
+    if unknown:
+        warn_unknown_sensor()
     n, seen = len(points["xyz"]), int(points["nidar_observed"].sum())
     print(
         f"{seen} of {n} points seen by a camera ({100.0 * seen / max(n, 1):.1f} %); "

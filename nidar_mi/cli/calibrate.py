@@ -1,10 +1,10 @@
 """``python -m nidar_mi.calibrate``: fit a sensor profile on a sensor's own scans.
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
-                                 [--form gbm|range_ring|distance_quantile] [--branch R|I_hat]
-                                 [--no-geometry | --no-incidence]
+                                 [--form gbm|range_ring|distance_quantile|physical] [--branch R|I_hat]
+                                 [--incidence [--no-geometry] | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
-                                 [--overwrite] [-q | -v] [--progress | --no-progress]
+                                 [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
 
 A ``gbm`` profile reads the incidence by default (``--incidence`` says so explicitly).
 
@@ -21,7 +21,10 @@ scripts). ``assign`` and ``render`` then estimate it the same way on the clouds 
 given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
-The profile file
+``--max-frames K`` fits on K of the frames, evenly spaced over their order
+(:func:`nidar_mi.datasets.profile_fitting.select_frames`): one to ten frames of a sensor already
+beat the generic profiles (docs/NIDAR.md, "Calibrating from a few frames"). ``--form physical``
+fits the closed form of the generic profiles (gain and range exponent). The profile file
 (:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -57,10 +60,11 @@ def build_parser():
     p.add_argument(
         "--form",
         default=KITTI_PROFILE_FORM,
-        choices=("gbm", "range_ring", "distance_quantile"),
+        choices=("gbm", "range_ring", "distance_quantile", "physical"),
         help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
         "value (default); range_ring: monotone map per range bin + ring gains; "
-        "distance_quantile: the paper's distance encoding + quantile map",
+        "distance_quantile: the paper's distance encoding + quantile map; physical: "
+        "gain * R * |cos θ| / d^p, the generic profiles' closed form",
     )
     inc = p.add_mutually_exclusive_group()
     inc.add_argument(
@@ -90,6 +94,12 @@ def build_parser():
         help="divide generic clouds' intensities by this (default: 1 or 255, from their range)",
     )
     p.add_argument("--splits", help="data folders: only these splits, e.g. train,val")
+    p.add_argument(
+        "--max-frames",
+        type=int,
+        metavar="K",
+        help="fit on K of the frames, evenly spaced over their order (default: all)",
+    )
     p.add_argument(
         "--overwrite",
         action="store_true",
@@ -123,13 +133,15 @@ def main(argv=None) -> int:
 
 
 def _calibrate(args, argv) -> None:
-    from ..datasets.profile_fitting import fit_scan_profile
+    from ..datasets.profile_fitting import fit_scan_profile, select_frames
     from ..datasets.scans import load_scans
     from ..nidar.pipeline import NidarModel
 
-    if args.incidence and args.form != "gbm":
-        raise NidarError(f"--incidence needs --form gbm (got --form {args.form})")
-    incidence = args.form == "gbm" and (
+    if args.incidence and args.form not in ("gbm", "physical"):
+        raise NidarError(f"--incidence needs --form gbm or physical (got --form {args.form})")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise NidarError(f"--max-frames must be at least 1 (got {args.max_frames})")
+    incidence = args.form in ("gbm", "physical") and (
         KITTI_PROFILE_INCIDENCE if args.incidence is None else args.incidence
     )
     if args.no_geometry and not incidence:
@@ -137,6 +149,8 @@ def _calibrate(args, argv) -> None:
             "--no-geometry needs the incidence (--form gbm, without --no-incidence): the profile "
             "reads the value and the incidence"
         )
+    if args.no_geometry and args.form != "gbm":
+        raise NidarError(f"--no-geometry needs --form gbm (got --form {args.form})")
     _check_target(args.out, args.overwrite)
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
@@ -146,6 +160,7 @@ def _calibrate(args, argv) -> None:
         intensity_scale=args.intensity_scale,
         progress=show_progress(args),
     )
+    scans = select_frames(scans, args.max_frames)
     model = NidarModel.load(args.weights)
     command = "python -m nidar_mi.calibrate " + " ".join(sys.argv[1:] if argv is None else argv)
     profile = fit_scan_profile(
@@ -174,4 +189,6 @@ def _reads(profile) -> str:
     """What the summary line adds about the incidence."""
     if not profile.uses_incidence:
         return ""
+    if profile.form == "physical":
+        return " (with incidence)"
     return " (with incidence)" if profile.mapping.uses_geometry else " (value and incidence only)"

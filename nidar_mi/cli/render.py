@@ -11,6 +11,7 @@ scene is rendered along a trajectory, one render folder per frame
 from __future__ import annotations
 
 import os
+import sys
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
@@ -153,8 +154,8 @@ def _add_intensity_args(p) -> None:
     p.add_argument(
         "--profile",
         default=None,
-        help="NIDAR sensor profile: sim-905 (the simulator's; default), kitti-hdl64e, or a "
-        "profile file from python -m nidar_mi.calibrate",
+        help="NIDAR sensor profile: sim-905 (the simulator's; default), kitti-hdl64e, "
+        "generic-compensated, generic-raw, or a profile file from python -m nidar_mi.calibrate",
     )
 
 
@@ -234,6 +235,10 @@ def _render_options(args):
     if args.intensity == "nidar" and args.no_cameras:
         raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
     profile = None
+    if args.intensity == "nidar":
+        from ..datasets.sensor_profiles import profile_line
+
+        print(profile_line(args.profile, branch=args.nidar_branch), file=sys.stderr)
     if args.profile is not None:
         if args.intensity != "nidar":
             raise NidarError("--profile applies to --intensity nidar")

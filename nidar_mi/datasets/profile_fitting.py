@@ -35,6 +35,7 @@ __all__ = [
     "fit_values_profile",
     "scan_branches",
     "scan_values",
+    "select_frames",
 ]
 
 #: Maps :func:`fit_split_calibration` can calibrate: the reflectance branch, or the STN's
@@ -69,6 +70,21 @@ def scan_branches(
 def scan_values(model: NidarModel, scan: ScanFrame, branch: str) -> np.ndarray:
     """One branch of :func:`scan_branches`."""
     return scan_branches(model, scan, (branch,))[branch]
+
+
+def select_frames(scans: Sequence[ScanFrame], k: int | None) -> list[ScanFrame]:
+    """``k`` of ``scans`` evenly spaced over their order (the first and the last among them;
+    consecutive frames of a drive are alike, spread ones are not); None or ``k >= len``: all.
+
+    Raises:
+        NidarError: ``k`` below 1.
+    """
+    if k is None or k >= len(scans):
+        return list(scans)
+    if k < 1:
+        raise NidarError(f"`max_frames` must be at least 1 (got {k})")
+    idx = np.unique(np.round(np.linspace(0, len(scans) - 1, k)).astype(np.int64))
+    return [scans[i] for i in idx]
 
 
 def _scan_returns(scans, values, incidence: bool, progress: bool, name: str) -> dict:

@@ -15,6 +15,18 @@ Names :func:`resolve_profile` knows (besides a path to a profile file):
   the key covers the weights, the folders and the form). Form :data:`KITTI_PROFILE_FORM` with
   the incidence (:data:`KITTI_PROFILE_INCIDENCE`), input the ``R`` branch, fitted on every frame
   of those folders. The default of ``assign --kitti``.
+* ``generic-compensated``: a range-compensated sensor of unknown make, from physics, not from
+  data: ``I = clip(ρ·|cos θ|, 0, 1)`` with ``ρ`` the NIDAR ``R`` value (a ``physical`` profile,
+  :class:`~nidar_mi.profiles.PhysicalMap`, gain 1, no range term). The default of ``assign``
+  for a cloud of an unknown sensor, with a warning.
+* ``generic-raw``: a raw sensor of unknown make: ``I = clip(k·ρ·|cos θ|/d², 0, 1)`` (``d`` in m,
+  at least 1 m), ``k`` = :data:`GENERIC_RAW_GAIN` so that a 10 %-reflective target seen
+  head-on at 10 m reads :data:`GENERIC_RAW_LEVEL`; nearer and brighter targets saturate at 1.
+
+Which profile applies when none is named is :func:`default_profile`'s choice: ``kitti-hdl64e``
+for a KITTI frame, the weights' own (``sim-905``) for the simulator's own renders, else
+``generic-compensated`` with a warning naming ``python -m nidar_mi.calibrate``
+(:func:`warn_unknown_sensor`).
 
 A profile fitted for other weights still applies, with a warning: it maps another network's
 values. ``python -m nidar_mi.calibrate`` fits a profile for any sensor
@@ -31,23 +43,45 @@ from typing import TYPE_CHECKING
 
 from ..errors import NidarError
 from ..nidar.pipeline import SIM_PROFILE
-from ..profiles import SensorProfile, load_profile
+from ..profiles import PhysicalMap, SensorProfile, load_profile
 
 if TYPE_CHECKING:
     from ..nidar.pipeline import NidarModel
 
 __all__ = [
+    "DEFAULT_GENERIC_PROFILE",
     "DEFAULT_KITTI_PROFILE",
     "DEFAULT_SIM_PROFILE",
+    "GENERIC_COMPENSATED_PROFILE",
+    "GENERIC_RAW_GAIN",
+    "GENERIC_RAW_LEVEL",
+    "GENERIC_RAW_PROFILE",
     "KITTI_PROFILE_FORM",
     "KITTI_PROFILE_INCIDENCE",
     "PROFILE_NAMES",
+    "default_profile",
+    "generic_profile",
+    "profile_line",
     "resolve_profile",
+    "warn_unknown_sensor",
 ]
 
 DEFAULT_SIM_PROFILE = SIM_PROFILE
 DEFAULT_KITTI_PROFILE = "kitti-hdl64e"
-PROFILE_NAMES = (DEFAULT_SIM_PROFILE, DEFAULT_KITTI_PROFILE)
+GENERIC_RAW_PROFILE = "generic-raw"
+GENERIC_COMPENSATED_PROFILE = "generic-compensated"
+#: The profile of a sensor nobody calibrated (:func:`default_profile`).
+DEFAULT_GENERIC_PROFILE = GENERIC_COMPENSATED_PROFILE
+PROFILE_NAMES = (
+    DEFAULT_SIM_PROFILE,
+    DEFAULT_KITTI_PROFILE,
+    GENERIC_COMPENSATED_PROFILE,
+    GENERIC_RAW_PROFILE,
+)
+#: The intensity of a 10 %-reflective target seen head-on at 10 m under ``generic-raw``.
+GENERIC_RAW_LEVEL = 0.05
+#: ``generic-raw``'s gain k, m²: ``k · 0.1 / 10² = GENERIC_RAW_LEVEL``.
+GENERIC_RAW_GAIN = GENERIC_RAW_LEVEL * 10.0**2 / 0.1
 #: Form of the ``kitti-hdl64e`` profile (the one that generalised better in the
 #: leave-one-frame-out evaluation, docs/RESULTS.md).
 KITTI_PROFILE_FORM = "gbm"
@@ -118,6 +152,79 @@ def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfi
     return profile
 
 
+def generic_profile(name: str) -> SensorProfile:
+    """``generic-raw`` or ``generic-compensated`` (module docstring): closed forms, no data.
+
+    Raises:
+        NidarError: another name.
+    """
+    if name == GENERIC_COMPENSATED_PROFILE:
+        mapping = PhysicalMap(gain=1.0, range_exponent=0.0)
+        sensor, formula = "a range-compensated LiDAR (not calibrated)", "I = clip(R*|cos t|, 0, 1)"
+    elif name == GENERIC_RAW_PROFILE:
+        mapping = PhysicalMap(gain=GENERIC_RAW_GAIN, range_exponent=2.0)
+        sensor = "a raw LiDAR with a 1/d^2 range fall-off (not calibrated)"
+        formula = f"I = clip({GENERIC_RAW_GAIN:g}*R*|cos t|/max(d, 1 m)^2, 0, 1)"
+    else:
+        raise NidarError(
+            f"no generic profile {name!r} (one of {GENERIC_COMPENSATED_PROFILE}, "
+            f"{GENERIC_RAW_PROFILE})"
+        )
+    provenance = {"data": None, "formula": formula, "source": "closed form (physics), no data"}
+    return SensorProfile(
+        name=name,
+        sensor=sensor,
+        form=PhysicalMap.form,
+        input="nidar:R",
+        mapping=mapping,
+        provenance=provenance,
+    )
+
+
+def default_profile(*, kitti: bool = False, simulator: bool = False) -> str | None:
+    """The profile of a cloud given none: ``kitti-hdl64e`` for a KITTI frame, None (the
+    weights' own, ``sim-905``) for a render of the simulator, else ``generic-compensated``
+    (an unknown sensor: :func:`warn_unknown_sensor`)."""
+    if kitti:
+        return DEFAULT_KITTI_PROFILE
+    return None if simulator else DEFAULT_GENERIC_PROFILE
+
+
+def warn_unknown_sensor() -> None:
+    """Warn that the sensor is unknown, which profile applies and how to calibrate it."""
+    warnings.warn(
+        f"unknown sensor: the {DEFAULT_GENERIC_PROFILE} profile applies (intensity = R x "
+        f"|cos incidence|; {GENERIC_RAW_PROFILE} for a sensor without range compensation); "
+        "calibrate yours with python -m nidar_mi.calibrate SCANS -o profile.json and use that "
+        "profile file",
+        stacklevel=2,
+    )
+
+
+def profile_line(spec: str | os.PathLike | None, *, branch: str | None = None) -> str:
+    """One line naming the profile a command uses, ``profile: <name> (<what it is>)``, from its
+    name or file alone (neither the weights nor any data are read; an unreadable file is named
+    as given, :func:`resolve_profile` reports it). ``spec`` None: the weights' own on the ``R``
+    branch (``branch`` None or ``"R"``), none on ``I_hat``."""
+    if spec is None:
+        if branch not in (None, "R"):
+            return f"profile: none (the {branch} head, raw)"
+        spec = DEFAULT_SIM_PROFILE
+    name = str(spec)
+    if name == DEFAULT_SIM_PROFILE:
+        return f"profile: {name} (the simulator's 905 nm LiDAR, the weights' own)"
+    if name == DEFAULT_KITTI_PROFILE:
+        return f"profile: {name} ({_KITTI_SENSOR}; fitted on KITTI frames at first use)"
+    if name in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):
+        p = generic_profile(name)
+        return f"profile: {name} ({p.sensor}: {p.provenance['formula']})"
+    try:
+        p = load_profile(spec)
+    except NidarError:
+        return f"profile: {name}"
+    return f"profile: {p.name} ({p.form}, {p.sensor}; file {name})"
+
+
 def resolve_profile(
     spec: str | os.PathLike | None,
     model: NidarModel,
@@ -125,7 +232,7 @@ def resolve_profile(
     kitti_dirs: Sequence[str | os.PathLike] | None = None,
     progress: bool = True,
 ) -> SensorProfile:
-    """The profile named by ``spec``: a file, ``sim-905``, ``kitti-hdl64e`` (module docstring).
+    """The profile named by ``spec``: a file, or one of :data:`PROFILE_NAMES` (module docstring).
 
     Args:
         spec: a profile name or a path to a profile file; None: ``sim-905``.
@@ -141,6 +248,8 @@ def resolve_profile(
         profile = _sim_profile(model)
     elif str(spec) == DEFAULT_KITTI_PROFILE:
         profile = _kitti_profile(model, kitti_dirs, progress)
+    elif str(spec) in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):
+        profile = generic_profile(str(spec))
     elif Path(spec).is_file() or str(spec).endswith(".json"):
         profile = load_profile(spec)
     else:

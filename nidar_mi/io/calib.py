@@ -40,7 +40,14 @@ from nidar_mi.errors import NidarError
 from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.atomic import atomic_write_text
 
-__all__ = ["render_camera", "camera_from_dict", "camera_to_dict", "load_calib", "save_calib"]
+__all__ = [
+    "render_camera",
+    "camera_from_dict",
+    "camera_to_dict",
+    "is_render_calib",
+    "load_calib",
+    "save_calib",
+]
 
 
 def _matrix(value: Any, shapes: Sequence[tuple[int, int]], what: str) -> np.ndarray:
@@ -125,6 +132,17 @@ def _is_render_calib(data: Any) -> bool:
         and "cameras" not in data
         and isinstance(data.get("T_cam_lidar"), Mapping)
     )
+
+
+def is_render_calib(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a renderer ``calib.json`` (False for any other or unreadable file)."""
+    path = Path(path)
+    if path.suffix.lower() != ".json":
+        return False
+    try:
+        return _is_render_calib(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
 
 
 def render_camera(

@@ -4,7 +4,7 @@ NIDAR's networks rank surfaces (a reflectance-like value per pixel); how bright 
 given surface comes out depends on the sensor: its range response (some sensors report
 range-compensated intensity, some do not), per-laser gains, its intensity scale. A sensor
 profile holds that part, fitted on the sensor's own scans (``python -m nidar_mi.calibrate``)
-and kept out of the model. Three forms, one interface (:mod:`~nidar_mi.profiles.forms`):
+and kept out of the model. Four forms, one interface (:mod:`~nidar_mi.profiles.forms`):
 
 * ``distance_quantile``: the paper's (§III.E) distance encoding and quantile map
   (:class:`~nidar_mi.profiles.distance_quantile.DistanceQuantileMap`; a weights folder's
@@ -15,13 +15,18 @@ and kept out of the model. Three forms, one interface (:mod:`~nidar_mi.profiles.
   elevation, monotone in the value, or on the range and elevation alone; optionally also on
   the incidence ``|cos θ|`` of the ray on the surface, estimated from the scan's own points;
   or on the value and the incidence alone, without range and elevation
-  (:class:`~nidar_mi.profiles.gbm.GbmMap`; LightGBM's text model in the file).
+  (:class:`~nidar_mi.profiles.gbm.GbmMap`; LightGBM's text model in the file);
+* ``physical``: the LiDAR equation in closed form, ``clip(k·ρ·|cos θ|/d^p, 0, 1)`` with ``p = 2``
+  for a raw sensor and ``p = 0`` for a range-compensated one
+  (:class:`~nidar_mi.profiles.physical.PhysicalMap`; the generic profiles of sensors not
+  calibrated).
 
 Every map and every :class:`SensorProfile` is called the same way,
 ``profile(values, range_m, *, ring=None, elevation_deg=None, cos_incidence=None)``, and every
 form is fitted by :func:`fit`. The profile file format is
 :mod:`~nidar_mi.profiles.sensor_profile`'s.
-Which data a profile is fitted on, and the named profiles (``sim-905``, ``kitti-hdl64e``), are
+Which data a profile is fitted on, and the named profiles (``sim-905``, ``kitti-hdl64e``, ``generic-raw``,
+``generic-compensated``), are
 the datasets' side (:mod:`nidar_mi.datasets.sensor_profiles`). Pure NumPy and LightGBM: the
 package imports neither the networks nor any data.
 """
@@ -29,6 +34,7 @@ package imports neither the networks nor any data.
 from .distance_quantile import DistanceQuantileMap
 from .forms import FORMS, ProfileMap, fit
 from .gbm import GbmMap
+from .physical import PhysicalMap
 from .quantile_map import QuantileMap
 from .range_ring import RangeRingMap
 from .sensor_profile import PROFILE_SCHEMA, SensorProfile, load_profile
@@ -38,6 +44,7 @@ __all__ = [
     "PROFILE_SCHEMA",
     "DistanceQuantileMap",
     "GbmMap",
+    "PhysicalMap",
     "ProfileMap",
     "QuantileMap",
     "RangeRingMap",

@@ -17,6 +17,7 @@ import numpy as np
 from ..errors import NidarError
 from .distance_quantile import DistanceQuantileMap
 from .gbm import GbmMap
+from .physical import PhysicalMap
 from .range_ring import RangeRingMap
 
 __all__ = ["FORMS", "ProfileMap", "fit", "form_class"]
@@ -46,7 +47,9 @@ class ProfileMap(Protocol):
 
 
 #: Form name -> its map class.
-FORMS: dict[str, type] = {cls.form: cls for cls in (DistanceQuantileMap, RangeRingMap, GbmMap)}
+FORMS: dict[str, type] = {
+    cls.form: cls for cls in (DistanceQuantileMap, RangeRingMap, GbmMap, PhysicalMap)
+}
 
 
 def form_class(form: str) -> type:
@@ -84,7 +87,8 @@ def fit(
             by forms that record it (``distance_quantile``'s ``branch``).
         **form_options: the form's own fitting options (its class's ``fit_options``), e.g. ``gbm``'s
             ``use_value=False`` (geometry only), ``use_geometry=False`` (value and incidence
-            only), ``trees``; ``range_ring``'s ``width``; ``distance_quantile``'s ``tau``.
+            only), ``trees``; ``range_ring``'s ``width``; ``distance_quantile``'s ``tau``;
+            ``physical``'s ``range_exponent``.
 
     Raises:
         NidarError: an unknown form, incidences for a form that cannot read them, or unusable
@@ -92,7 +96,9 @@ def fit(
     """
     cls = form_class(form)
     if cos_incidence is not None and not cls.reads_incidence:
-        raise NidarError(f"only a gbm profile reads the incidence (form {form!r} does not)")
+        raise NidarError(
+            f"only a gbm or physical profile reads the incidence (form {form!r} does not)"
+        )
     return cls.fit(
         values,
         range_m,

@@ -9,7 +9,7 @@ the profile calls it, after checking the inputs, and gives float32.
       "schema": "nidar_mi.sensor_profile/1",
       "name": "kitti-hdl64e",                 # letters, digits, '-', '_', '.'
       "sensor": "Velodyne HDL-64E (KITTI)",   # free text
-      "form": "range_ring",                   # or "distance_quantile", "gbm"
+      "form": "range_ring",                   # or "distance_quantile", "gbm", "physical"
       "input": "nidar:R",                     # the value it maps (nidar:<branch>, or a baseline)
       "model": {"irnet_sha256": "...", "stn_sha256": "..."},   # or null: any model
       "mapping": {...},                       # the form's parameters (its to_dict())

@@ -58,7 +58,10 @@ def test_non_finite_points_are_dropped_with_a_count(tmp_path, call, assign_input
     argv = ["--points", path, *assign_inputs[2:], "-o", tmp_path / "out"]
     status, out, err = call("assign", argv)
     assert status == 0, err
-    assert err.strip() == f"warning: {path}: dropped 4 of {n} points with NaN or infinite values"
+    lines = err.strip().splitlines()  # then the profile line and the unknown sensor's warning
+    assert lines[0] == f"warning: {path}: dropped 4 of {n} points with NaN or infinite values"
+    assert lines[1].startswith("profile: generic-compensated (")
+    assert lines[2].startswith("warning: unknown sensor") and len(lines) == 3
     keep = np.ones(n, bool)
     keep[[3, 7, 11, 20]] = False
     for fmt, p in _outputs(tmp_path / "out").items():
@@ -134,6 +137,8 @@ def test_the_renderers_own_files_and_columns(tmp_path, call, tiny_scene, variant
     argv += ["--image", render / "cam/rgb.png", "-o", tmp_path / "out"]
     status, _, err = call("assign", argv)
     assert status == 0, err
+    # the simulator's own cloud: its own profile, no warning of an unknown sensor
+    assert "profile: sim-905 (" in err and "unknown sensor" not in err
     src = read_npz(render / "lidar/points.npz")
     outs = _outputs(tmp_path / "out")
     for fmt, p in outs.items():

@@ -186,7 +186,7 @@ def test_synopsis_and_help_show_overwrite_and_the_incidence_default(capsys):
     with pytest.raises(SystemExit):
         cli.main(["--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "--overwrite" in help_text and "(the default of the gbm form)" in help_text
+    assert "--overwrite" in help_text and "the default of the gbm form" in help_text
     readme = open(Path(cli.__file__).parents[2] / "README.md", encoding="utf-8").read()
     synopsis = re.search(
         r"python -m nidar_mi\.calibrate SCANS\.\.\. -o profile\.json \[.*?```", readme, re.S
@@ -194,3 +194,29 @@ def test_synopsis_and_help_show_overwrite_and_the_incidence_default(capsys):
     for text in (cli.__doc__, synopsis):
         assert "[--overwrite]" in text and "--incidence" in text
     assert "reads the incidence by default" in cli.__doc__ + readme
+
+
+def test_max_frames_and_the_physical_form(tmp_path, capsys):
+    """--max-frames K fits on K frames evenly spaced over the scans; --form physical fits the
+    generic profiles' closed form."""
+    from nidar_mi.datasets.profile_fitting import select_frames
+    from nidar_mi.errors import NidarError
+
+    assert select_frames(list("abcdefg"), 3) == ["a", "d", "g"]
+    assert select_frames(list("ab"), 5) == ["a", "b"] and select_frames(list("ab"), None) == [
+        "a",
+        "b",
+    ]
+    with pytest.raises(NidarError, match="`max_frames` must be at least 1"):
+        select_frames(list("ab"), 0)
+    kitti = make_kitti(tmp_path / "drive", frames=3)
+    out = tmp_path / "k1.json"
+    assert main([str(kitti), "-o", str(out), "--max-frames", "1"]) == 0
+    assert "fitted on 1 frames" in capsys.readouterr().out
+    assert load_profile(out).provenance["frames"] == 1
+    assert main([str(kitti), "-o", str(out), "--max-frames", "0", "-q"]) == 2
+    assert "--max-frames must be at least 1" in capsys.readouterr().err
+    assert main([str(kitti), "-o", str(out), "--form", "physical"]) == 0
+    assert "physical profile 'k1' (with incidence) fitted on 3 frames" in capsys.readouterr().out
+    p = load_profile(out)
+    assert p.form == "physical" and p.uses_incidence and p.mapping.gain > 0

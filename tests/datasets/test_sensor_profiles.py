@@ -96,3 +96,42 @@ def test_kitti_profile_is_fitted_at_first_use_and_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("NIDAR_MI_CACHE", str(tmp_path / "cache2"))
     with pytest.raises(NidarError, match="not shipped"):
         resolve_profile("kitti-hdl64e", model)
+
+
+def test_generic_profiles_are_closed_forms():
+    """generic-compensated is R·|cos θ|, generic-raw k·R·|cos θ|/d² with a 10 %-reflective
+    target head-on at 10 m reading GENERIC_RAW_LEVEL; neither is tied to weights or data."""
+    from nidar_mi.datasets.sensor_profiles import GENERIC_RAW_LEVEL, PROFILE_NAMES
+
+    model = NidarModel.load(device="cpu")
+    assert {"generic-raw", "generic-compensated"} <= set(PROFILE_NAMES)
+    rng = np.random.default_rng(0)
+    v, d, c = rng.uniform(0, 1, 500), rng.uniform(1, 80, 500), rng.uniform(0, 1, 500)
+    comp = resolve_profile("generic-compensated", model)
+    assert comp.form == "physical" and comp.branch == "R" and comp.model is None
+    np.testing.assert_allclose(comp(v, d, cos_incidence=c), v * c, rtol=1e-6)
+    raw = resolve_profile("generic-raw", model)
+    k = GENERIC_RAW_LEVEL * 100 / 0.1
+    np.testing.assert_allclose(
+        raw(v, d, cos_incidence=c), np.clip(k * v * c / d**2, 0, 1), rtol=1e-6
+    )
+    assert raw([0.1], [10.0], cos_incidence=[1.0])[0] == pytest.approx(GENERIC_RAW_LEVEL)
+
+
+def test_default_profiles_and_the_unknown_sensor_warning():
+    from nidar_mi.datasets.sensor_profiles import (
+        default_profile,
+        profile_line,
+        warn_unknown_sensor,
+    )
+
+    assert default_profile(kitti=True) == "kitti-hdl64e"
+    assert default_profile(simulator=True) is None
+    assert default_profile() == "generic-compensated"
+    with pytest.warns(UserWarning, match=r"unknown sensor.*python -m nidar_mi\.calibrate"):
+        warn_unknown_sensor()
+    assert profile_line(None).startswith("profile: sim-905 (")
+    assert profile_line(None, branch="I_hat") == "profile: none (the I_hat head, raw)"
+    assert profile_line("generic-raw").startswith("profile: generic-raw (a raw LiDAR")
+    assert profile_line("kitti-hdl64e").startswith("profile: kitti-hdl64e (")
+    assert "\n" not in profile_line("generic-compensated")

@@ -264,7 +264,7 @@ def test_incidence_profile_round_trip_and_checks(tmp_path):
         p(v[:2], d[:2], elevation_deg=e[:2], cos_incidence=[0.5, 1.5])
     with pytest.raises(NidarError, match="differ in length"):
         p(v[:2], d[:2], elevation_deg=e[:2], cos_incidence=[0.5])
-    with pytest.raises(NidarError, match="only a gbm profile reads the incidence"):
+    with pytest.raises(NidarError, match="only a gbm or physical profile reads the incidence"):
         fitted_profile(v, d, y, form="range_ring", name="r", sensor="x", input="nidar:R",
                     elevation_deg=e, cos_incidence=c)  # fmt: skip
     # a map without the incidence ignores one given
