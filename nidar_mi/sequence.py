@@ -42,17 +42,26 @@ from .errors import NidarError
 from .render_session import RenderOptions, RenderSession, check_options
 
 __all__ = [
+    "MAX_FRAMES",
     "SEQUENCE_FORMATS",
     "SequenceOptions",
     "camera_trigger_time",
     "check_sequence",
     "render_sequence",
+    "sequence_bytes",
 ]
 
 #: Whole-sequence outputs beside the frame folders.
 SEQUENCE_FORMATS = ("kitti", "rosbag")
 #: Points columns kept per frame for the sequence outputs.
 _SEQUENCE_COLUMNS = ("xyz", "intensity", "ring", "t", "label", "instance")
+#: Frames a sequence may have unless ``max_frames`` says otherwise (KITTI's longest odometry
+#: sequence has 4,661; this is 2.8 h at 10 Hz).
+MAX_FRAMES = 100_000
+#: Bytes per point the sequence outputs keep in memory (``_SEQUENCE_COLUMNS``), and write: a
+#: KITTI ``.bin`` and ``.label``; a ROS 2 bag's PointCloud2 (rounded up).
+_KEPT_POINT_BYTES = 28
+_OUTPUT_POINT_BYTES = {"kitti": 20, "rosbag": 32}
 
 
 @dataclass(frozen=True)
@@ -76,7 +85,10 @@ class SequenceOptions:
         cameras: render the cameras.
         deskew: add ``xyz_deskewed`` (points in the LiDAR frame at the sweep's start) to every
             frame's points.
-        max_memory: bytes one scan or camera render may use (None: the default limit).
+        max_memory: bytes one scan or camera render may use, and the sequence outputs keep in
+            memory (None: the default limit).
+        max_frames: the most frames the sequence may have (:data:`MAX_FRAMES`).
+        max_disk: bytes the sequence may take on disk (None: the free space of its filesystem).
         progress: show a progress bar on stderr.
     """
 
@@ -93,6 +105,8 @@ class SequenceOptions:
     cameras: bool = True
     deskew: bool = False
     max_memory: int | None = None
+    max_frames: int = MAX_FRAMES
+    max_disk: int | None = None
     progress: bool = True
 
     def frame_options(self) -> RenderOptions:
@@ -170,13 +184,20 @@ def _set_camera_pose(camera, pose: np.ndarray) -> None:
     params.update()
 
 
-def _frame_times(traj, rate: float, frames: int | None, sweep_s: float) -> np.ndarray:
+def _frame_times(
+    traj, rate: float, frames: int | None, sweep_s: float, max_frames: int = MAX_FRAMES
+) -> np.ndarray:
     t0, t1 = traj.span
     fit = int(np.floor((t1 - t0 - sweep_s) * rate + 1e-9)) + 1 if t1 - t0 >= sweep_s else 0
     if fit < 1:
         raise NidarError(
             f"{traj.path}: the trajectory spans {t1 - t0:.3g} s, less than one sweep "
             f"({sweep_s:.3g} s)"
+        )
+    if frames is None and fit > max_frames:
+        raise NidarError(
+            f"the trajectory ({t1 - t0:.3g} s) holds {fit} frames at {rate:g} Hz, more than the "
+            f"limit of {max_frames} frames (`max_frames`); give `frames` or a lower `rate`"
         )
     if frames is None:
         frames = fit
@@ -209,6 +230,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     t_start = time.perf_counter()
     session, traj, rate, times = _open(options)
     session.check_memory()
+    _check_bounds(session, options, len(times), out_dir)
     rig = _rig(session)
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
         frames = _render_frames(
@@ -217,11 +239,11 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
         frames.written += _write_poses_and_times(stage, frames.start_poses, times)
         frames.written += _sequence_outputs(
             stage,
-            options.sequence_formats,
+            options,
             frames.keep,
             np.asarray(frames.start_poses),
             times,
-            rig.lead,
+            session.lidars[0].config,
         )
         request = _sequence_request(session, options, rate, len(times))
         manifest = _sequence_manifest(session, request, rate, times, rig.lead, frames, stage)
@@ -232,7 +254,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
 
 def check_sequence(options: SequenceOptions):
     """Refuse options that cannot be rendered, before anything is loaded: a bad rate, frame
-    count or sequence format, a bad frame option, a missing trajectory file. The frames' cache
+    count (or more than ``max_frames``) or sequence format, a bad frame option, a missing trajectory file. The frames' cache
     key (:class:`~nidar_mi.render_folder.RenderRequest`).
 
     Raises:
@@ -243,6 +265,13 @@ def check_sequence(options: SequenceOptions):
         raise NidarError(f"`rate` must be > 0 Hz (got {rate})")
     if frames is not None and frames < 1:
         raise NidarError(f"`frames` must be >= 1 (got {frames})")
+    if not options.max_frames >= 1:
+        raise NidarError(f"`max_frames` must be >= 1 (got {options.max_frames})")
+    if frames is not None and frames > options.max_frames:
+        raise NidarError(
+            f"`frames` {frames} is more than the limit of {options.max_frames} frames "
+            "(`max_frames`); render the sequence in parts or raise the limit"
+        )
     bad = [f for f in options.sequence_formats if f not in SEQUENCE_FORMATS]
     if bad:
         raise NidarError(
@@ -266,7 +295,47 @@ def _open(options: SequenceOptions):
     rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
-    return session, traj, rate, _frame_times(traj, rate, options.frames, sweep_s)
+    times = _frame_times(traj, rate, options.frames, sweep_s, options.max_frames)
+    return session, traj, rate, times
+
+
+def sequence_bytes(session: RenderSession, options: SequenceOptions, frames: int):
+    """Estimated size of a sequence: ``(per_frame, on_disk, kept)`` bytes, per frame folder
+    (:func:`nidar_mi.render_folder.folder_bytes`), on disk in all (with the sequence outputs)
+    and kept in memory for the sequence outputs until the last frame."""
+    lidars = [s.config for s in session.lidars]
+    cameras = [tuple(int(v) for v in c.film().size()) for c in session.cameras]
+    bands = len(session.nir_wavelengths)
+    per_frame = rf.folder_bytes(
+        lidars, cameras, options.formats, deskew=options.deskew, bands=bands
+    )
+    lead = lidars[0].rings * lidars[0].horizontal_resolution * lidars[0].max_returns
+    pixels = sum(w * h for w, h in cameras)
+    out = sum(_OUTPUT_POINT_BYTES[f] * lead for f in options.sequence_formats)
+    out += 3 * pixels if "rosbag" in options.sequence_formats else 0
+    kept = lead * _KEPT_POINT_BYTES + 3 * pixels if options.sequence_formats else 0
+    return per_frame, frames * (per_frame + out), frames * kept
+
+
+def _check_bounds(session: RenderSession, options: SequenceOptions, frames: int, out_dir) -> None:
+    """Refuse, before any work, a sequence that does not fit on disk (``max_disk``, the free
+    space) or whose sequence outputs would keep more than ``max_memory`` in memory."""
+    from .io.sizes import check_disk, format_size
+    from .lidar.memory import default_limit
+
+    per_frame, on_disk, kept = sequence_bytes(session, options, frames)
+    what = f"{frames} frames x {format_size(per_frame)}"
+    if options.sequence_formats:
+        what += " and the " + ", ".join(options.sequence_formats) + " outputs"
+    check_disk(on_disk, out_dir, what, options.max_disk)
+    limit = default_limit() if options.max_memory is None else int(options.max_memory)
+    if kept > limit:
+        raise NidarError(
+            f"`sequence_formats` {','.join(options.sequence_formats)} keep every frame's points "
+            f"and images in memory until the last frame: about {format_size(kept)} for {frames} "
+            f"frames, more than the limit of {format_size(limit)}; render fewer `frames` or "
+            "raise the limit with `max_memory` (or NIDAR_MAX_MEMORY)"
+        )
 
 
 def _rig(session: RenderSession) -> _Rig:
@@ -346,13 +415,23 @@ def _sequence_manifest(session, request, rate, times, lead, frames: _Frames, sta
     }
 
 
-def _sequence_outputs(stage, sequence_formats, keep, poses, times, lidar) -> list[str]:
-    """Write the KITTI odometry layout and the ROS 2 bag of the kept frames."""
-    written = []
+def _sequence_outputs(stage, options, keep, poses, times, lead) -> list[str]:
+    """Write the KITTI odometry layout (its ``.bin`` intensity as each frame's ``points.bin``:
+    ``options.bin_intensity``) and the ROS 2 bag of the kept frames of the ``lead`` LiDAR
+    (its :class:`~nidar_mi.lidar.config.LidarConfig`)."""
+    written, sequence_formats, lidar = [], options.sequence_formats, lead.name
     if "kitti" in sequence_formats:
         from .io.kitti import write_sequence
 
-        clouds = [f["points"] for f in keep]
+        clouds = [
+            f["points"]
+            | {
+                "intensity": rf.bin_intensity_values(
+                    f["points"]["intensity"], lead, options.bin_intensity
+                )
+            }
+            for f in keep
+        ]
         written += write_sequence(os.path.join(stage, "kitti"), clouds, poses, times - times[0])
     if "rosbag" in sequence_formats:
         from .io.rosbag import BagCamera, BagFrame, write_ros2_bag

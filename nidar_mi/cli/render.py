@@ -14,6 +14,7 @@ import os
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
+from ..sequence import MAX_FRAMES
 from ._common import parse_defines, parser, run, seed_arg
 
 __all__ = ["main", "build_parser"]
@@ -31,16 +32,16 @@ def _parse_formats(text: str) -> list[str]:
     return fmts
 
 
-def _memory(text: str | None) -> int | None:
+def _memory(text: str | None, flag: str = "--max-memory") -> int | None:
     from ..errors import NidarError
-    from ..lidar.memory import parse_size
+    from ..io.sizes import parse_size
 
     if text is None:
         return None
     try:
         return parse_size(text)
     except ValueError as e:
-        raise NidarError(f"--max-memory: {e}") from None
+        raise NidarError(f"{flag}: {e}") from None
 
 
 def _sequence_summary(manifest: dict, out_dir: str) -> str:
@@ -186,6 +187,21 @@ def _add_sequence_args(p) -> None:
         help="whole-sequence outputs beside the frame folders: kitti (KITTI odometry layout), "
         "rosbag (ROS 2 bag); comma-separated",
     )
+    seq.add_argument(
+        "--max-frames",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"the most frames a sequence may have (default {MAX_FRAMES}); longer ones are "
+        "refused before anything runs",
+    )
+    seq.add_argument(
+        "--max-disk",
+        default=None,
+        metavar="SIZE",
+        help="disk space a sequence may take, e.g. 50G (default: the free space of OUT's "
+        "filesystem); a sequence estimated larger is refused before anything runs",
+    )
 
 
 def _sequence_options(args):
@@ -215,6 +231,8 @@ def _sequence_options(args):
         cameras=not args.no_cameras,
         deskew=args.deskew,
         max_memory=_memory(args.max_memory),
+        max_frames=MAX_FRAMES if args.max_frames is None else args.max_frames,
+        max_disk=_memory(args.max_disk, "--max-disk"),
         progress=not args.quiet,
     )
 
@@ -261,10 +279,14 @@ def main(argv=None) -> int:
         from ..backend import set_variant
         from ..errors import NidarError
 
+        sequence_only = (args.rate, args.frames, args.max_frames, args.max_disk)
         if args.trajectory is None and (
-            args.rate is not None or args.frames is not None or args.sequence_formats
+            any(v is not None for v in sequence_only) or args.sequence_formats
         ):
-            raise NidarError("--rate, --frames and --sequence-formats need --trajectory")
+            raise NidarError(
+                "--rate, --frames, --sequence-formats, --max-frames and --max-disk need "
+                "--trajectory"
+            )
         if args.trajectory is not None:
             from ..sequence import check_sequence, render_sequence
 
