@@ -279,7 +279,8 @@ def check_render_memory(camera, spp: int, limit: int | None = None) -> None:
         NidarError: one line with the estimate, the limit and how to raise it.
     """
     from .errors import NidarError
-    from .lidar.memory import default_limit, format_size
+    from .io.sizes import format_size
+    from .lidar.memory import default_limit
 
     W, H = (int(v) for v in camera.film().size())
     limit = default_limit() if limit is None else int(limit)

@@ -35,6 +35,8 @@ __all__ = [
     "RenderRequest",
     "RenderedCamera",
     "RenderedScan",
+    "bin_intensity_values",
+    "folder_bytes",
     "is_current",
     "read_manifest",
     "read_render",
@@ -186,7 +188,78 @@ def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
     return all(os.path.isfile(os.path.join(folder, f)) for f in manifest.get("files", []))
 
 
+# --------------------------------------------------------------------------- size
+
+#: Bytes per point of each format, the simulator's columns (:mod:`nidar_mi.io.points`), rounded
+#: up; LAS adds its point record, ``bin`` holds x, y, z and intensity only.
+POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "bin": 16}
+#: Bytes per point of ``xyz_deskewed`` (every format but ``bin``).
+DESKEW_BYTES = 12
+#: Bytes per beam of ``range_image.exr`` (4 float32 channels, uncompressed).
+RANGE_IMAGE_BYTES = 16
+#: Bytes per pixel of a camera: rgb.exr, nir.exr, depth.exr, reflectance.exr, rgb.png, nir.png.
+PIXEL_BYTES = 28
+#: Bytes per pixel of each further NIR band (its .exr and .png).
+BAND_PIXEL_BYTES = 5
+#: A manifest's entry and calib.json, per sensor, bytes (a LiDAR's laser table is most of it).
+SENSOR_META_BYTES = 32 << 10
+
+
+def _preview_bytes(rings: int, columns: int) -> int:
+    """A range or intensity preview (:func:`nidar_mi.io.range_preview.write_range_preview`):
+    one byte per pixel of its figure, more than its PNG takes."""
+    w = max(columns, 640)
+    return (w + 80) * (max(rings, min(w // 6, rings * 8)) + 104)
+
+
+def folder_bytes(lidars, cameras, formats, *, deskew: bool = False, bands: int = 1) -> int:
+    """Estimated size of one render folder, bytes: an upper bound for the points (every beam
+    returns ``max_returns`` times) and the uncompressed images, the previews and manifests.
+
+    Args:
+        lidars: the LiDARs' :class:`~nidar_mi.lidar.config.LidarConfig`.
+        cameras: (width, height) of each camera rendered, pixels.
+        formats: point formats written (:data:`FORMATS`).
+        deskew: ``xyz_deskewed`` is written.
+        bands: NIR bands per camera (one per distinct LiDAR wavelength).
+    """
+    per_point = sum(
+        POINT_BYTES[f] + (DESKEW_BYTES if deskew and f != "bin" else 0) for f in formats
+    )
+    total = 0
+    for cfg in lidars:
+        beams = cfg.rings * cfg.horizontal_resolution
+        total += beams * (cfg.max_returns * per_point + RANGE_IMAGE_BYTES) + SENSOR_META_BYTES
+        total += 2 * _preview_bytes(cfg.rings, cfg.horizontal_resolution)
+    pixel = PIXEL_BYTES + BAND_PIXEL_BYTES * (bands - 1)
+    total += sum(w * h * pixel + SENSOR_META_BYTES for w, h in cameras)
+    return total
+
+
 # --------------------------------------------------------------------------- writing
+
+
+def bin_intensity_values(intensity: np.ndarray, config, bin_intensity: str = "unit") -> np.ndarray:
+    """The intensity a KITTI ``.bin`` of this simulator holds, per frame or in a sequence.
+
+    Args:
+        intensity: (N,) the simulated intensity (``points["intensity"]``).
+        config: the LiDAR's :class:`~nidar_mi.lidar.config.LidarConfig`.
+        bin_intensity: ``unit``: KITTI's [0, 1], ``clip(I / I_full, 0, 1)`` with ``I_full`` the
+            sensor's :func:`~nidar_mi.lidar.return_model.full_scale_intensity`; ``raw``: as it is.
+
+    Returns:
+        (N,) float32.
+    """
+    from .lidar.return_model import full_scale_intensity
+
+    if bin_intensity not in BIN_INTENSITY:
+        raise NidarError(f"`bin_intensity` must be one of {', '.join(BIN_INTENSITY)}")
+    intensity = np.asarray(intensity, dtype=np.float32)
+    if bin_intensity == "raw":
+        return intensity
+    full = full_scale_intensity(config.gain, config.intensity_mode)
+    return np.clip(intensity / np.float32(full), 0, 1).astype(np.float32)
 
 
 def write_lidar(
@@ -234,7 +307,7 @@ def write_lidar(
     os.makedirs(d, exist_ok=True)
     pts = result.points(deskew=deskew) | dict(extra or {})
     full = full_scale_intensity(cfg.gain, cfg.intensity_mode)
-    bin_i = pts["intensity"] if bin_intensity == "raw" else np.clip(pts["intensity"] / full, 0, 1)
+    bin_i = bin_intensity_values(pts["intensity"], cfg, bin_intensity)
     writers = {
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),

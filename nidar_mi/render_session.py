@@ -32,6 +32,7 @@ __all__ = [
     "RenderSession",
     "check_options",
     "nir_wavelengths",
+    "profile_key",
     "versions",
 ]
 
@@ -102,13 +103,14 @@ class RenderOptions:
             intensity=self.intensity,
             weights=self.weights,
             nidar_branch=self.nidar_branch or "R",
-            profile=_profile_key(self.profile),
+            profile=profile_key(self.profile),
             bin_intensity=self.bin_intensity,
         )
 
 
-def _profile_key(profile) -> str | None:
-    """``<name>@<sha256 of its JSON, 16 digits>``: what a render's request records of a profile."""
+def profile_key(profile) -> str | None:
+    """``<name>@<sha256 of its JSON, 16 digits>``: what a render's request and manifest record of
+    a profile (None: None)."""
     if profile is None:
         return None
     from .io.cache_key import cache_key

@@ -48,18 +48,26 @@ from .errors import NidarError
 from .render_session import RenderOptions, RenderSession, check_options
 
 __all__ = [
+    "MAX_FRAMES",
     "PREVIEWS",
     "SEQUENCE_FORMATS",
     "SequenceOptions",
     "camera_trigger_time",
     "check_sequence",
     "render_sequence",
+    "sequence_bytes",
 ]
 
 #: Whole-sequence outputs beside the frame folders.
 SEQUENCE_FORMATS = ("kitti", "rosbag")
 #: ``previews``: the range previews of every frame, of the first frame only, or of none.
 PREVIEWS = ("all", "first", "none")
+#: Frames a sequence may have unless ``max_frames`` says otherwise (KITTI's longest odometry
+#: sequence has 4,661; this is 2.8 h at 10 Hz).
+MAX_FRAMES = 100_000
+#: Bytes per point the sequence outputs write: a KITTI ``.bin`` and ``.label``; a ROS 2 bag's
+#: PointCloud2 (rounded up).
+_OUTPUT_POINT_BYTES = {"kitti": 20, "rosbag": 32}
 #: Frames rendered but not yet written that the background writer may hold.
 WRITE_QUEUE = 2
 #: Points columns kept per frame for the sequence outputs.
@@ -88,6 +96,8 @@ class SequenceOptions:
         deskew: add ``xyz_deskewed`` (points in the LiDAR frame at the sweep's start) to every
             frame's points.
         max_memory: bytes one scan or camera render may use (None: the default limit).
+        max_frames: the most frames the sequence may have (:data:`MAX_FRAMES`).
+        max_disk: bytes the sequence may take on disk (None: the free space of its filesystem).
         progress: show a progress bar on stderr.
         previews: range previews of ``all`` frames, the ``first`` only or ``none``
             (:data:`PREVIEWS`).
@@ -106,6 +116,8 @@ class SequenceOptions:
     cameras: bool = True
     deskew: bool = False
     max_memory: int | None = None
+    max_frames: int = MAX_FRAMES
+    max_disk: int | None = None
     progress: bool = True
     previews: str = "first"
 
@@ -183,13 +195,20 @@ def _set_camera_pose(camera, pose: np.ndarray) -> None:
     params.update()
 
 
-def _frame_times(traj, rate: float, frames: int | None, sweep_s: float) -> np.ndarray:
+def _frame_times(
+    traj, rate: float, frames: int | None, sweep_s: float, max_frames: int = MAX_FRAMES
+) -> np.ndarray:
     t0, t1 = traj.span
     fit = int(np.floor((t1 - t0 - sweep_s) * rate + 1e-9)) + 1 if t1 - t0 >= sweep_s else 0
     if fit < 1:
         raise NidarError(
             f"{traj.path}: the trajectory spans {t1 - t0:.3g} s, less than one sweep "
             f"({sweep_s:.3g} s)"
+        )
+    if frames is None and fit > max_frames:
+        raise NidarError(
+            f"the trajectory ({t1 - t0:.3g} s) holds {fit} frames at {rate:g} Hz, more than the "
+            f"limit of {max_frames} frames (`max_frames`); give `frames` or a lower `rate`"
         )
     if frames is None:
         frames = fit
@@ -222,6 +241,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     t_start = time.perf_counter()
     session, traj, rate, times = _open(options)
     session.check_memory()
+    _check_bounds(session, options, len(times), out_dir)
     rig = _rig(session)
     with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
         frames = _render_frames(stage, session, options, traj, times, rig)
@@ -246,6 +266,13 @@ def check_sequence(options: SequenceOptions):
         raise NidarError(f"`rate` must be > 0 Hz (got {rate})")
     if frames is not None and frames < 1:
         raise NidarError(f"`frames` must be >= 1 (got {frames})")
+    if not options.max_frames >= 1:
+        raise NidarError(f"`max_frames` must be >= 1 (got {options.max_frames})")
+    if frames is not None and frames > options.max_frames:
+        raise NidarError(
+            f"`frames` {frames} is more than the limit of {options.max_frames} frames "
+            "(`max_frames`); render the sequence in parts or raise the limit"
+        )
     if options.previews not in PREVIEWS:
         raise NidarError(
             f"`previews` must be one of {', '.join(PREVIEWS)} (got '{options.previews}')"
@@ -273,7 +300,37 @@ def _open(options: SequenceOptions):
     rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
-    return session, traj, rate, _frame_times(traj, rate, options.frames, sweep_s)
+    times = _frame_times(traj, rate, options.frames, sweep_s, options.max_frames)
+    return session, traj, rate, times
+
+
+def sequence_bytes(session: RenderSession, options: SequenceOptions, frames: int):
+    """Estimated size of a sequence: ``(per_frame, on_disk)`` bytes, per frame folder
+    (:func:`nidar_mi.render_folder.folder_bytes`) and on disk in all, with the sequence
+    outputs (streamed frame by frame, so nothing of them accumulates in memory)."""
+    lidars = [s.config for s in session.lidars]
+    cameras = [tuple(int(v) for v in c.film().size()) for c in session.cameras]
+    bands = len(session.nir_wavelengths)
+    per_frame = rf.folder_bytes(
+        lidars, cameras, options.formats, deskew=options.deskew, bands=bands
+    )
+    lead = lidars[0].rings * lidars[0].horizontal_resolution * lidars[0].max_returns
+    pixels = sum(w * h for w, h in cameras)
+    out = sum(_OUTPUT_POINT_BYTES[f] * lead for f in options.sequence_formats)
+    out += 3 * pixels if "rosbag" in options.sequence_formats else 0
+    return per_frame, frames * (per_frame + out)
+
+
+def _check_bounds(session: RenderSession, options: SequenceOptions, frames: int, out_dir) -> None:
+    """Refuse, before any work, a sequence that does not fit on disk (``max_disk``, and the
+    free space of ``out_dir``'s filesystem)."""
+    from .io.sizes import check_disk, format_size
+
+    per_frame, on_disk = sequence_bytes(session, options, frames)
+    what = f"{frames} frames x {format_size(per_frame)}"
+    if options.sequence_formats:
+        what += " and the " + ", ".join(options.sequence_formats) + " outputs"
+    check_disk(on_disk, out_dir, what, options.max_disk)
 
 
 def _rig(session: RenderSession) -> _Rig:
@@ -300,7 +357,13 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
     from .progress import progress_bar
 
     frames = _Frames()
-    outputs = _SequenceOutputs(stage, options.sequence_formats, rig.lead)
+    lead = session.lidars[0].config
+    outputs = _SequenceOutputs(
+        stage,
+        options.sequence_formats,
+        rig.lead,
+        lambda i: rf.bin_intensity_values(i, lead, options.bin_intensity),
+    )
     bar = progress_bar(total=len(times), show=options.progress, desc="sequence", unit="frame")
     loop = []
     try:
@@ -383,10 +446,13 @@ class _SequenceOutputs:
         stage: the sequence's staging folder.
         formats: the sequence formats asked for.
         lidar: the lead LiDAR's id (its sweeps are the outputs).
+        bin_intensity: maps the lead LiDAR's (N,) intensity to what a KITTI ``.bin`` holds, as
+            each frame's ``points.bin`` (:func:`nidar_mi.render_folder.bin_intensity_values`).
     """
 
-    def __init__(self, stage, formats, lidar: str):
+    def __init__(self, stage, formats, lidar: str, bin_intensity):
         self.stage, self.formats, self.lidar = stage, tuple(formats), lidar
+        self.bin_intensity = bin_intensity
         self._bag = None
 
     def add(self, k: int, points: dict, cameras: dict, pose: np.ndarray, t: float) -> list[str]:
@@ -397,7 +463,8 @@ class _SequenceOutputs:
         if "kitti" in self.formats:
             from .io.kitti import write_sequence_frame
 
-            written += write_sequence_frame(os.path.join(self.stage, "kitti"), k, points)
+            kitti_points = points | {"intensity": self.bin_intensity(points["intensity"])}
+            written += write_sequence_frame(os.path.join(self.stage, "kitti"), k, kitti_points)
         if "rosbag" in self.formats:
             from .io.rosbag import BagCamera, BagFrame, Ros2BagWriter
 

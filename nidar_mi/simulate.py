@@ -23,7 +23,7 @@ import numpy as np
 
 from . import render_folder as rf
 from .errors import NidarError
-from .render_session import RenderOptions, RenderSession
+from .render_session import RenderOptions, RenderSession, profile_key
 
 __all__ = ["render_scene", "ensure_rendered", "nidar_columns"]
 
@@ -39,6 +39,7 @@ class _Run:
     cameras: dict = field(default_factory=dict)  # camera id -> manifest entry
     written: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    profile: str | None = None  # the sensor profile NIDAR applied (render_session.profile_key)
 
 
 _RGB_ONLY = re.compile(r"lidar '(?P<lidar>.*)': material '(?P<name>.*)' is RGB-only; (?P<rest>.*)")
@@ -195,6 +196,8 @@ def _nidar_step(run: _Run, options: RenderOptions) -> dict[str, dict]:
 
     model = NidarModel.load(options.weights)
     branch = options.nidar_branch or "R"
+    applied = options.profile or (model.default_profile() if branch == "R" else None)
+    run.profile = profile_key(applied)
     return nidar_columns(model, run.results, run.renders, branch, options.profile)
 
 
@@ -235,7 +238,7 @@ def _manifest(session: RenderSession, run: _Run, total_s: float) -> dict:
         "intensity": opts.intensity,
         "nidar_weights": req.weights,
         "nidar_branch": req.nidar_branch,
-        "nidar_profile": req.profile,
+        "nidar_profile": run.profile,
         "lidars": run.lidars,
         "cameras": run.cameras,
         "timings_s": run.timings | {"total": total_s},

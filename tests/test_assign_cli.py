@@ -216,6 +216,28 @@ def test_render_with_nidar_intensity(tmp_path):
     np.testing.assert_array_equal(ply["nidar_observed"], obs)
 
 
+def test_render_manifest_names_the_default_profile_applied(tmp_path):
+    """Without --profile the weights' own sim-905 maps R: the manifest names it (the request,
+    the cache key, leaves it to the weights' hash); with --nidar-branch I_hat none is applied."""
+    import json
+
+    from nidar_mi.nidar.pipeline import NidarModel
+    from nidar_mi.render_session import profile_key
+
+    small = ["-q", "-D", "width=48", "-D", "height=32", "-D", "cols=128", "--spp", "1"]
+    small += ["--formats", "npz"]
+    default = profile_key(NidarModel.load(device="cpu").default_profile())
+    assert default.startswith("sim-905@")
+    for branch, expected in (("R", default), ("I_hat", None)):
+        out = tmp_path / branch
+        r = run("nidar_mi.render", "scenes/street.xml", "-o", str(out), "--intensity", "nidar",
+                "--nidar-branch", branch, *small)  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        manifest = json.loads((out / "manifest.json").read_text())
+        assert manifest["nidar_profile"] == expected
+        assert manifest["request"]["profile"] is None
+
+
 def test_i_hat_branch_is_the_head_sampled_at_the_points():
     """branch="I_hat": Î bilinearly sampled at each observed point, clipped to [0, 1]."""
     from nidar_mi.geometry import CameraModel, bilinear_sample, project

@@ -148,3 +148,109 @@ def test_memory_limit_refuses_with_one_line(tmp_path):
     assert not out.exists() and not [p for p in tmp_path.iterdir() if ".partial-" in p.name]
     r = run_cli(STREET, "-o", str(out), "--max-memory", "lots", *SMALL)
     assert r.returncode == 2 and "not a memory size" in r.stderr
+
+
+@pytest.fixture(scope="module")
+def long_trajectory(tmp_path_factory):
+    """100 s along x: room for more frames than any bound allows."""
+    path = tmp_path_factory.mktemp("traj") / "long.txt"
+    rows = [f"{t:.3f} {SPEED * t:.6f} 0 0 0 0 0 1" for t in (10.0, 60.0, 110.0)]
+    path.write_text("# t x y z qx qy qz qw (TUM)\n" + "\n".join(rows) + "\n")
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    "extra, pattern",
+    [
+        (  # the frame count asked for
+            ["--rate", "1e9", "--frames", "100000000"],
+            r"--frames 100000000 is more than the limit of 100000 frames \(--max-frames\)",
+        ),
+        (  # all that fit
+            ["--rate", "1e9"],
+            r"holds \d+ frames at 1e\+09 Hz, more than the limit of 100000 frames \(--max-frames\)",
+        ),
+        (  # the free space of OUT's filesystem
+            ["--rate", "1e9", "--frames", "10000000", "--max-frames", "10000000"],
+            r"needs about [\d.]+ TiB \(10000000 frames x [\d.]+ MiB\), more than the [\d.]+ \w+ "
+            r"free on /",
+        ),
+        (
+            ["--frames", "500", "--max-disk", "1G"],
+            r"needs about [\d.]+ GiB \(500 frames x [\d.]+ MiB\), more than the limit of 1.0 GiB "
+            r"\(--max-disk\)",
+        ),
+        (  # what the sequence outputs keep in memory
+            ["--frames", "500", "--sequence-formats", "kitti", "--max-memory", "64M"],
+            r"--sequence-formats kitti keep every frame's points and images in memory until the "
+            r"last frame: about [\d.]+ MiB for 500 frames, more than the limit of 64.0 MiB",
+        ),
+    ],
+    ids=["frames", "all-that-fit", "free-space", "max-disk", "kept-memory"],
+)
+def test_unbounded_sequences_are_refused_before_any_work(tmp_path, long_trajectory, extra, pattern):
+    import re
+
+    out = tmp_path / "out"
+    r = run_cli(STREET, "-o", str(out), "--trajectory", long_trajectory, *SMALL, *extra)
+    assert r.returncode == 2 and r.stderr.startswith("error:") and r.stderr.count("\n") == 1
+    assert re.search(pattern, r.stderr), r.stderr
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_max_frames_and_max_disk_need_a_trajectory(tmp_path):
+    for flag, value in (("--max-frames", "5"), ("--max-disk", "1G")):
+        r = run_cli(STREET, "-o", str(tmp_path / "o"), flag, value, *SMALL)
+        assert r.returncode == 2 and f"{flag}" in r.stderr and "need --trajectory" in r.stderr
+
+
+def test_sequence_estimate_bounds_what_is_written(sequence_out):
+    """The disk estimate of a frame folder is an upper bound of what is written."""
+    from types import SimpleNamespace
+
+    from nidar_mi.render_folder import folder_bytes
+
+    m = json.loads((sequence_out / "frames" / "000000" / "manifest.json").read_text())
+    params, cam = m["lidars"]["lidar_top"]["parameters"], m["cameras"]["cam_front"]
+    cfg = SimpleNamespace(rings=64, horizontal_resolution=params["horizontal_resolution"])
+    cfg.max_returns = 1
+    need = folder_bytes([cfg], [(cam["width"], cam["height"])], ("npz", "bin"), deskew=True)
+    for k in range(3):
+        folder = sequence_out / "frames" / f"{k:06d}"
+        size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+        assert size < need < 10 * size
+
+
+def _compensated_street(tmp_path) -> str:
+    """The street with a compensated-mode LiDAR of gain 0.5: its full scale is 0.5."""
+    text = open(STREET, encoding="utf-8").read()
+    old = '<string name="intensity_mode" value="raw"/>'
+    assert old in text
+    new = '<string name="intensity_mode" value="compensated"/><float name="gain" value="0.5"/>'
+    path = tmp_path / "street_compensated.xml"
+    path.write_text(text.replace(old, new))
+    return str(path)
+
+
+@pytest.mark.parametrize("convention", ["unit", "raw"])
+def test_kitti_sequence_intensity_is_that_of_each_frames_bin(tmp_path, trajectory, convention):
+    """The KITTI export holds the intensity of each frame's points.bin: KITTI's [0, 1] (the
+    sensor's full scale, clipped) by default, the simulated intensity with --bin-intensity raw."""
+    from nidar_mi.io.kitti import read_kitti_bin
+    from nidar_mi.io.points import read_npz
+
+    out = tmp_path / "seq"
+    r = run_cli(_compensated_street(tmp_path), "-o", str(out), "--trajectory", trajectory,
+                "--frames", "2", "--formats", "npz,bin", "--no-cameras", "-q",
+                "--sequence-formats", "kitti", "--bin-intensity", convention, *SMALL)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    for k in range(2):
+        _, exported = read_kitti_bin(out / "kitti" / "velodyne" / f"{k:06d}.bin")
+        _, frame_bin = read_kitti_bin(out / "frames" / f"{k:06d}" / "lidar_top" / "points.bin")
+        raw = read_npz(out / "frames" / f"{k:06d}" / "lidar_top" / "points.npz")["intensity"]
+        np.testing.assert_array_equal(exported, frame_bin)
+        if convention == "unit":
+            np.testing.assert_allclose(exported, np.clip(raw / 0.5, 0, 1), rtol=1e-6)
+            assert exported.max() <= 1.0 and exported.max() > raw.max()
+        else:
+            np.testing.assert_array_equal(exported, raw)

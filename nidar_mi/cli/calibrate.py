@@ -91,7 +91,8 @@ def build_parser():
     p.add_argument(
         "--intensity-scale",
         type=float,
-        help="divide generic clouds' intensities by this (default: 1 or 255, from their range)",
+        help="divide generic clouds' intensities by this (default: the simulator's own clouds by "
+        "their sensor's full scale; others by 1 or 255, from their range)",
     )
     p.add_argument("--splits", help="data folders: only these splits, e.g. train,val")
     p.add_argument(

@@ -15,6 +15,7 @@ import sys
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
+from ..sequence import MAX_FRAMES
 from ._common import parse_defines, parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -32,16 +33,16 @@ def _parse_formats(text: str) -> list[str]:
     return fmts
 
 
-def _memory(text: str | None) -> int | None:
+def _memory(text: str | None, flag: str = "--max-memory") -> int | None:
     from ..errors import NidarError
-    from ..lidar.memory import parse_size
+    from ..io.sizes import parse_size
 
     if text is None:
         return None
     try:
         return parse_size(text)
     except ValueError as e:
-        raise NidarError(f"--max-memory: {e}") from None
+        raise NidarError(f"{flag}: {e}") from None
 
 
 def _sequence_summary(manifest: dict, out_dir: str) -> str:
@@ -193,6 +194,21 @@ def _add_sequence_args(p) -> None:
         help="range previews (range.png, intensity.png) of every frame, the first frame only "
         "(default) or none",
     )
+    seq.add_argument(
+        "--max-frames",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"the most frames a sequence may have (default {MAX_FRAMES}); longer ones are "
+        "refused before anything runs",
+    )
+    seq.add_argument(
+        "--max-disk",
+        default=None,
+        metavar="SIZE",
+        help="disk space a sequence may take, e.g. 50G (default: the free space of OUT's "
+        "filesystem); a sequence estimated larger is refused before anything runs",
+    )
 
 
 def _sequence_options(args):
@@ -222,6 +238,8 @@ def _sequence_options(args):
         cameras=not args.no_cameras,
         deskew=args.deskew,
         max_memory=_memory(args.max_memory),
+        max_frames=MAX_FRAMES if args.max_frames is None else args.max_frames,
+        max_disk=_memory(args.max_disk, "--max-disk"),
         progress=show_progress(args),
         previews=args.previews or "first",
     )
@@ -273,14 +291,15 @@ def main(argv=None) -> int:
         from ..backend import set_variant
         from ..errors import NidarError
 
+        sequence_only = (args.rate, args.frames, args.max_frames, args.max_disk)
         if args.trajectory is None and (
-            args.rate is not None
-            or args.frames is not None
+            any(v is not None for v in sequence_only)
             or args.sequence_formats
             or args.previews is not None
         ):
             raise NidarError(
-                "--rate, --frames, --sequence-formats and --previews need --trajectory"
+                "--rate, --frames, --sequence-formats, --previews, --max-frames and --max-disk "
+                "need --trajectory"
             )
         if args.trajectory is not None:
             from ..sequence import check_sequence, render_sequence

@@ -15,7 +15,11 @@ when asked for, so that many frames fit in memory). :func:`load_scans` reads any
   ``images/<camera name>/<id>.png`` (several). A return is kept when a camera sees it
   (:func:`nidar_mi.geometry.sample_cameras`, the cloud's own z-buffer). Intensities are divided
   by ``intensity_scale`` (default: 1 when they all lie in [0, 1], 255 when they lie in
-  [0, 255]; otherwise it must be given).
+  [0, 255]; otherwise it must be given). The simulator's own clouds are never taken for 8-bit
+  ones: a cloud in a render folder (its real path ``<render>/<lidar id>/points.<ext>`` beside a
+  manifest that lists the LiDAR) is divided by the sensor's full-scale intensity (the convention
+  of its ``points.bin``), one with the simulator's points schema elsewhere by 1
+  (:func:`simulator_scale`).
 """
 
 from __future__ import annotations
@@ -31,7 +35,17 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["ScanFrame", "frames_from_data", "frames_from_generic", "load_scans", "scan_kind"]
+__all__ = [
+    "ScanFrame",
+    "frames_from_data",
+    "frames_from_generic",
+    "load_scans",
+    "scan_kind",
+    "simulator_scale",
+]
+
+#: Columns only the simulator's points carry (:mod:`nidar_mi.io.points`): its schema.
+_SIMULATOR_COLUMNS = ("material_names", "return_index", "reflectance")
 
 _IMAGE_EXT = (".png", ".jpg", ".jpeg")
 
@@ -154,6 +168,33 @@ def _auto_scale(values: np.ndarray, given: float | None, where: str) -> float:
     raise NidarError(f"{where}: intensities up to {top:g}; give the intensity scale")
 
 
+def simulator_scale(path: str | os.PathLike, cloud: dict) -> float | None:
+    """The divisor that puts the simulator's own cloud on the [0, 1] scale; None for a cloud of
+    another tool.
+
+    The cloud is the simulator's when its file (symbolic links followed) is
+    ``<render>/<lidar id>/points.<ext>`` of a render folder whose manifest lists the LiDAR: the
+    sensor's :func:`~nidar_mi.lidar.return_model.full_scale_intensity` (from the manifest's
+    ``gain`` and ``intensity_mode``; ``points.bin``'s convention); or when it carries the
+    simulator's schema (``material_names``, ``return_index``, ``reflectance``): 1, the full
+    scale of the default gain and the ``intensity_scale`` of rendered training data.
+    """
+    from ..lidar.return_model import full_scale_intensity
+    from ..render_folder import read_manifest
+
+    real = Path(os.path.realpath(path))
+    render, lidar = real.parent.parent, real.parent.name
+    if (render / "manifest.json").is_file():
+        try:
+            params = read_manifest(render)["lidars"][lidar]["parameters"]
+            return full_scale_intensity(params["gain"], params["intensity_mode"])
+        except (NidarError, KeyError, TypeError, ValueError):
+            pass
+    if all(name in cloud for name in _SIMULATOR_COLUMNS):
+        return 1.0
+    return None
+
+
 def _image_path(folder: Path, fid: str, camera: str, n_cams: int) -> Path:
     base = folder / "images" / (camera if n_cams > 1 else "")
     for ext in _IMAGE_EXT:
@@ -219,7 +260,9 @@ def frames_from_generic(
             )
         zeros = [np.zeros((c.height, c.width), np.float32) for c in cameras]
         _, seen, _ = sample_cameras(xyz, cameras, zeros)
-        scale = _auto_scale(inten, intensity_scale, str(pts_path))
+        scale = None if intensity_scale is not None else simulator_scale(pts_path, cloud)
+        if scale is None:
+            scale = _auto_scale(inten, intensity_scale, str(pts_path))
         out.append(
             ScanFrame(
                 name=fid,

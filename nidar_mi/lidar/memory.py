@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 
+from ..io.sizes import format_size, parse_size
 from .config import LidarConfig
 
 __all__ = [
@@ -20,8 +21,6 @@ __all__ = [
     "BEAM_BYTES",
     "RETURN_BYTES",
     "default_limit",
-    "parse_size",
-    "format_size",
     "scan_memory",
     "check_scan_memory",
     "chunk_beams",
@@ -46,32 +45,6 @@ def default_limit() -> int:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
     except (ValueError, OSError, AttributeError):  # not POSIX
         return 8 << 30
-
-
-def parse_size(text: str) -> int:
-    """Bytes from ``'512M'``, ``'16G'``, ``'1.5T'`` or a plain number of bytes.
-
-    Raises:
-        ValueError: not a positive size.
-    """
-    t = str(text).strip().upper().removesuffix("B").removesuffix("I")
-    scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}.get(t[-1:], 1)
-    number = t[:-1] if t[-1:] in "KMGT" and t else t
-    try:
-        value = float(number) * scale
-    except ValueError:
-        raise ValueError(f"not a memory size: '{text}' (e.g. 512M, 16G)") from None
-    if not value > 0 or value != value or value == float("inf"):
-        raise ValueError(f"not a positive memory size: '{text}'")
-    return int(value)
-
-
-def format_size(n: int | float) -> str:
-    """``'1.5 GiB'``-style text."""
-    for unit, scale in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
-        if n >= scale:
-            return f"{n / scale:.1f} {unit}"
-    return f"{int(n)} B"
 
 
 def scan_memory(cfg: LidarConfig) -> int:

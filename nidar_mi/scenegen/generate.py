@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,10 +34,12 @@ from .xml import scene_xml
 __all__ = [
     "INDEX_NAME",
     "KINDS",
+    "MAX_SCENES",
     "generate",
     "generate_scene",
     "index_entry",
     "layout_hash",
+    "run_bytes",
     "scene_id",
     "scene_rng",
 ]
@@ -155,6 +158,155 @@ def _file_sha256(path: str) -> str | None:
         return None
 
 
+#: Scenes one run may have (scene ``k`` of a run is the same whatever ``count`` is: a larger
+#: set is several runs, with other seeds, into one folder).
+MAX_SCENES = 100_000
+#: Estimated bytes of a scene file by kind (measured, rounded up; a city or suburb per block),
+#: of its index entry, and of its drive files per frame.
+_SCENE_BYTES = {"urban": 256 << 10, "vegetated": 64 << 10, "city": 96 << 10, "suburb": 96 << 10}
+_ENTRY_BYTES = 4 << 10
+_DRIVE_FRAME_BYTES = 512
+
+
+def run_bytes(count: int, kind: str | None, blocks, drive: dict | None) -> int:
+    """Estimated size of a run of ``count`` scenes (files, drives and index entries), bytes."""
+    from .drives import DEFAULT_FRAMES
+
+    per_scene = _SCENE_BYTES[kind or "urban"] + _ENTRY_BYTES
+    if kind in CITY_KINDS:
+        nx, ny = blocks or DEFAULT_BLOCKS
+        per_scene += _SCENE_BYTES[kind] * (nx * ny - 1)
+        per_scene += _DRIVE_FRAME_BYTES * int((drive or {}).get("frames", DEFAULT_FRAMES))
+    return count * per_scene
+
+
+def _check_run(out_dir: str, count: int, seed: int, kind, blocks, drive) -> None:
+    """Refuse, before anything is written, a bad argument or a run that does not fit on disk."""
+    from ..errors import check_seed
+    from ..io.sizes import check_disk, format_size
+
+    if count < 1:
+        raise NidarError(f"`count` must be >= 1 (got {count})")
+    if count > MAX_SCENES:
+        raise NidarError(
+            f"`count` {count} is more than {MAX_SCENES} scenes, the most one run writes; "
+            "write a larger set as several runs with other seeds into one folder"
+        )
+    check_seed(seed)
+    if kind is not None and kind not in KINDS:
+        raise NidarError(f"`kind` must be one of {', '.join(KINDS)} (got '{kind}')")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise NidarError(f"`out_dir`: {out_dir} exists and is not a directory")
+    need = run_bytes(count, kind, blocks, drive)
+    check_disk(need, out_dir, f"{count} scenes x {format_size(need / count)}")
+
+
+@dataclass
+class _Folder:
+    """The folder a run writes into: its index entries and the layouts they place.
+
+    Attributes:
+        out_dir: the folder.
+        old: scene id -> its entry in ``index.json`` as the run found it.
+        entries: scene id -> its entry now (files that are gone dropped, edited ones marked).
+        hashes: layout sha256 -> the id of the scene that places it.
+    """
+
+    out_dir: str
+    old: dict
+    entries: dict
+    hashes: dict
+
+    @classmethod
+    def read(cls, out_dir: str) -> _Folder:
+        old = {e["id"]: e for e in _read_index(os.path.join(out_dir, INDEX_NAME))}
+        entries = {}  # the index describes the files beside it: gone files drop, edited say so
+        for key, e in old.items():
+            sha = _file_sha256(os.path.join(out_dir, e.get("file", "")))
+            if sha is not None:
+                entries[key] = e if sha == e.get("sha256") else e | {"sha256": sha, "edited": True}
+        # a layout repeated in the folder would leak across a split by scene
+        hashes = {e["layout_sha256"]: e["id"] for e in entries.values() if "layout_sha256" in e}
+        return cls(out_dir, old, entries, hashes)
+
+    def _path(self, entry: dict) -> str:
+        return os.path.join(self.out_dir, entry.get("file", ""))
+
+    def write_index(self) -> dict:
+        """Write ``index.json`` of the entries whose file is there; the index."""
+        from ..io.atomic import atomic_write_json
+
+        there = [e for e in self.entries.values() if os.path.isfile(self._path(e))]
+        scenes = sorted(there, key=lambda e: (e["seed"], e["index"]))
+        index = {"generator": "nidar_mi.scenegen", "scenes": scenes}
+        atomic_write_json(os.path.join(self.out_dir, INDEX_NAME), index)
+        return index
+
+
+@dataclass
+class _Scene:
+    """Scene ``k`` of the run: its index entry, file and what the run does with it
+    (``write``, ``skip``: the file holds it; ``keep``: a file edited by hand)."""
+
+    k: int
+    entry: dict
+    path: str
+    action: str
+    text: str | None = None  # ``write`` only
+    mount: object = None  # a city's or suburb's LiDAR mounting, for its drive
+
+
+def _plan(folder: _Folder, seed: int, k: int, options: dict, overwrite: bool) -> _Scene:
+    """Draw scene ``k`` and decide what to do with its file.
+
+    Raises:
+        NidarError: its layout repeats one in the folder, or its file holds the scene of another
+            run (without ``overwrite``).
+    """
+    layout, text = generate_scene(
+        seed, k, options["kind"], options["blocks"], options["materials"], options["lighting"]
+    )
+    entry = index_entry(seed, k, layout, text, options["materials"], options["lighting"])
+    other = folder.hashes.get(entry["layout_sha256"], entry["id"])
+    if other != entry["id"]:
+        raise NidarError(f"{entry['id']} repeats the layout of {other}")
+    folder.hashes[entry["layout_sha256"]] = entry["id"]
+    path = os.path.join(folder.out_dir, entry["file"])
+    on_disk = _file_sha256(path) if os.path.exists(path) else None
+    mount = layout.rig.T_world_lidar() if layout.kind in CITY_KINDS else None
+    if on_disk is None or (on_disk != entry["sha256"] and overwrite):
+        return _Scene(k, entry, path, "write", text, mount)
+    if on_disk == entry["sha256"]:
+        return _Scene(k, entry, path, "skip", mount=mount)
+    old = folder.old.get(entry["id"])
+    if old is not None and old.get("sha256") == on_disk and not old.get("edited"):
+        raise NidarError(
+            f"{path} holds scene {k} of another run (kind {old.get('kind')}, materials "
+            f"{old.get('material_set', 'all')}): choose another folder or pass `overwrite`"
+        )
+    # edited by hand (or of unknown origin): kept, marked edited
+    return _Scene(k, (old or entry) | {"sha256": on_disk, "edited": True}, path, "keep")
+
+
+def _write(folder: _Folder, scene: _Scene, seed: int, options: dict) -> None:
+    """Write a scene's drive (a city or suburb), then its file (``write``), and its entry."""
+    from ..io.atomic import atomic_write_text
+
+    if scene.mount is not None and scene.action != "keep":
+        from .drives import write_drive
+
+        k, kind = scene.k, scene.entry["kind"]
+        grid = sample_grid(scene_rng(seed, k), kind, options["blocks"] or DEFAULT_BLOCKS)
+        body_seed = int(np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(1)[0])
+        scene.entry["drive"] = write_drive(
+            folder.out_dir, scene.entry["id"], grid, scene.mount, seed=body_seed,
+            **(options["drive"] or {}),
+        )  # fmt: skip
+    folder.entries[scene.entry["id"]] = scene.entry  # listed once its file is there
+    if scene.action == "write":
+        atomic_write_text(scene.path, scene.text)
+
+
 def generate(
     out_dir: str,
     count: int,
@@ -170,16 +322,17 @@ def generate(
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
-    Every scene is generated before anything is written. A scene whose file already holds
-    exactly this scene is skipped (an interrupted run resumes); a file that holds the scene of
-    another run (another ``kind``: its index entry says so) is refused unless ``overwrite``;
-    a file edited by hand is kept and its entry marked ``"edited": true`` with the file's
-    sha256. ``index.json`` always describes the files beside it: entries whose file is gone
-    are dropped.
+    Each scene is written as soon as it is drawn (its drive first, then its file, atomically),
+    so an interrupted run leaves complete scenes and an ``index.json`` that lists them. A scene
+    whose file already holds exactly this scene is skipped (an interrupted run resumes); a file
+    that holds the scene of another run (another ``kind``: its index entry says so) is refused
+    unless ``overwrite``, before anything is written; a file edited by hand is kept and its
+    entry marked ``"edited": true`` with the file's sha256. ``index.json`` always describes the
+    files beside it: entries whose file is gone are dropped.
 
     Args:
         out_dir: destination folder (created).
-        count: number of scenes (>= 1).
+        count: number of scenes, 1 .. :data:`MAX_SCENES`.
         seed: run seed (>= 0).
         kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
@@ -195,75 +348,46 @@ def generate(
         scenes written and skipped.
 
     Raises:
-        NidarError: bad argument, an unreadable index, a scene file of another run (without
-            ``overwrite``), or a file that cannot be written; nothing is written then.
+        NidarError: bad argument, a run estimated larger than the free disk space, an unreadable
+            index, a scene file of another run (without ``overwrite``): nothing is written then;
+            a new scene that repeats a layout of the folder, or a file that cannot be written:
+            the scenes before it are written and indexed.
     """
-    from ..errors import check_seed
-    from ..io.atomic import atomic_write_json, atomic_write_text, check_output_folder
+    from ..io.atomic import check_output_folder
     from ..progress import progress_bar
 
-    if count < 1:
-        raise NidarError(f"`count` must be >= 1 (got {count})")
-    check_seed(seed)
-    if kind is not None and kind not in KINDS:
-        raise NidarError(f"`kind` must be one of {', '.join(KINDS)} (got '{kind}')")
-    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise NidarError(f"`out_dir`: {out_dir} exists and is not a directory")
+    _check_run(out_dir, count, seed, kind, blocks, drive)
     check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
-    index_path = os.path.join(out_dir, INDEX_NAME)
-    old_entries = {e["id"]: e for e in _read_index(index_path)}
-    entries = {}  # the index describes the files beside it: gone files drop, edited ones say so
-    for key, e in old_entries.items():
-        sha = _file_sha256(os.path.join(out_dir, e.get("file", "")))
-        if sha is not None:
-            entries[key] = e if sha == e.get("sha256") else e | {"sha256": sha, "edited": True}
-    # a layout repeated in the folder would leak across a split by scene
-    hashes = {e["layout_sha256"]: e["id"] for e in entries.values() if "layout_sha256" in e}
-    todo = []
-    drives = []  # (k, layout, entry) of the cities, whose drive files are written with them
-    for k in progress_bar(range(count), show=progress, desc="scenegen", unit="scene"):
-        layout, text = generate_scene(seed, k, kind, blocks, materials, lighting)
-        entry = index_entry(seed, k, layout, text, materials, lighting)
-        other = hashes.get(entry["layout_sha256"], entry["id"])
-        if other != entry["id"]:
-            raise NidarError(f"{entry['id']} repeats the layout of {other}")
-        hashes[entry["layout_sha256"]] = entry["id"]
-        path = os.path.join(out_dir, entry["file"])
-        on_disk = _file_sha256(path) if os.path.exists(path) else None
-        action = "write"
-        if on_disk == entry["sha256"]:
-            action = "skip"
-        elif on_disk is not None and not overwrite:
-            old = old_entries.get(entry["id"])
-            if old is not None and old.get("sha256") == on_disk and not old.get("edited"):
-                raise NidarError(
-                    f"{path} holds scene {k} of another run (kind {old.get('kind')}, materials "
-                    f"{old.get('material_set', 'all')}): choose "
-                    "another folder or pass `overwrite`"
-                )
-            action = "keep"  # edited by hand (or of unknown origin): kept, marked edited
-            entry = (old or entry) | {"sha256": on_disk, "edited": True}
-        todo.append((path, text, entry, action))
-        if layout.kind in CITY_KINDS and action != "keep":
-            drives.append((k, layout, entry))
+    folder = _Folder.read(out_dir)
+    options = {
+        "kind": kind,
+        "blocks": blocks,
+        "materials": materials,
+        "lighting": lighting,
+        "drive": drive,
+    }
+    bar = progress_bar(total=count, show=progress, desc="scenegen", unit="scene")
     written = skipped = 0
-    for k, layout, entry in drives:
-        from .drives import write_drive
-
-        grid = sample_grid(scene_rng(seed, k), layout.kind, blocks or DEFAULT_BLOCKS)
-        body_seed = int(np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(1)[0])
-        mount = layout.rig.T_world_lidar()
-        entry["drive"] = write_drive(
-            out_dir, entry["id"], grid, mount, seed=body_seed, **(drive or {})
-        )
-    for path, text, entry, action in todo:
-        if action == "write":
-            atomic_write_text(path, text)
-            written += 1
-        else:
-            skipped += 1
-        entries[entry["id"]] = entry
-    scenes = sorted(entries.values(), key=lambda e: (e["seed"], e["index"]))
-    index = {"generator": "nidar_mi.scenegen", "scenes": scenes}
-    atomic_write_json(index_path, index)
+    try:
+        # the files already there first: one of another run is refused before anything is written
+        there = {}
+        for k in range(count):
+            if os.path.exists(os.path.join(out_dir, f"{scene_id(seed, k)}.xml")):
+                there[k] = _plan(folder, seed, k, options, overwrite)
+                bar.update(1)
+        for k in range(count):
+            scene = there.pop(k, None)
+            if scene is None:
+                scene = _plan(folder, seed, k, options, overwrite)
+                bar.update(1)
+            _write(folder, scene, seed, options)
+            written += scene.action == "write"
+            skipped += scene.action != "write"
+    except BaseException:  # interrupted or failed: the index lists the scenes written so far
+        if written:
+            folder.write_index()
+        raise
+    finally:
+        bar.close()
+    index = folder.write_index()
     return index | {"run": {"seed": seed, "count": count, "written": written, "skipped": skipped}}

@@ -220,3 +220,64 @@ def test_max_frames_and_the_physical_form(tmp_path, capsys):
     assert "physical profile 'k1' (with incidence) fitted on 3 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.form == "physical" and p.uses_incidence and p.mapping.gain > 0
+
+
+def _simulator_folder(root, *, render_manifest: bool):
+    """A generic scan folder of two frames of the simulator's own points (its schema, and
+    intensities up to 1.6 as a raw-mode scan has near by); with ``render_manifest`` each cloud
+    is a link to ``points.npz`` of a render folder of a gain-0.5 compensated LiDAR."""
+    from nidar_mi.io.points import write_npz
+
+    def inten(rng_m, rng):
+        return 2.0 * np.exp(-rng_m / 20)
+
+    root = _generic_folder(root, inten)
+    for k in range(2):
+        path = root / "points" / f"{k:04d}.npz"
+        cloud = dict(np.load(path))
+        n = len(cloud["xyz"])
+        cloud |= {"reflectance": np.full(n, 0.5, np.float32), "return_index": np.zeros(n, np.uint8)}
+        cloud["material_names"] = np.asarray(["asphalt"], dtype=np.str_)
+        if not render_manifest:
+            write_npz(path, cloud)
+            continue
+        render = root.parent / f"render_{k}"
+        (render / "lidar_top").mkdir(parents=True)
+        write_npz(render / "lidar_top" / "points.npz", cloud)
+        params = {"gain": 0.5, "intensity_mode": "compensated"}
+        manifest = {"lidars": {"lidar_top": {"parameters": params}}}
+        (render / "manifest.json").write_text(json.dumps(manifest))
+        path.unlink()
+        path.symlink_to(render / "lidar_top" / "points.npz")
+    return root
+
+
+@pytest.mark.parametrize("render_manifest, scale", [(False, 1.0), (True, 0.5)])
+def test_simulator_clouds_are_never_taken_for_8_bit(tmp_path, render_manifest, scale):
+    """The simulator's points (by their render folder's manifest, or their schema) are divided
+    by the sensor's full scale, never by 255, and without the 8-bit warning."""
+    import warnings
+
+    from nidar_mi.datasets.scans import frames_from_generic, simulator_scale
+
+    root = _simulator_folder(tmp_path / "scans", render_manifest=render_manifest)
+    cloud = dict(np.load(root / "points" / "0000.npz"))
+    assert simulator_scale(root / "points" / "0000.npz", cloud) == scale
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        frames = frames_from_generic(root)
+    for f in frames:
+        raw = 2.0 * np.exp(-np.linalg.norm(f.xyz, axis=1) / 20)
+        np.testing.assert_allclose(f.intensity, np.clip(raw / scale, 0, 1), rtol=1e-5, atol=1e-6)
+        assert f.intensity.max() == 1.0
+    # another tool's cloud is not the simulator's
+    assert simulator_scale(tmp_path / "other.npz", {"xyz": cloud["xyz"]}) is None
+
+
+def test_calibrate_on_the_simulators_points_does_not_rescale(tmp_path, capsys):
+    root = _simulator_folder(tmp_path / "scans", render_manifest=False)
+    out = tmp_path / "sim.json"
+    assert main([str(root), "-o", str(out), "--form", "distance_quantile", "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "255" not in err, err
+    assert load_profile(out).provenance["frames"] == 2

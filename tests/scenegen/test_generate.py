@@ -172,3 +172,22 @@ def test_every_scene_of_a_run_loads_and_scans(tmp_path, variant):
         seen.add((e["kind"], e["lidar"]["preset"]))
     assert {k for k, _ in seen} == {"urban", "vegetated"}
     assert {p for _, p in seen} == {"hdl64e", "vlp16"}
+
+
+def test_a_run_larger_than_the_free_space_is_refused(tmp_path, monkeypatch):
+    import shutil
+
+    from nidar_mi.scenegen.generate import run_bytes
+
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=100 << 10))
+    need = run_bytes(3, None, None, None)
+    assert need > 100 << 10
+    with pytest.raises(NidarError, match=r"needs about [\d.]+ KiB \(3 scenes x [\d.]+ KiB\), "
+                       r"more than the 100.0 KiB free on "):  # fmt: skip
+        generate(str(tmp_path / "gen"), 3, 0, progress=False)
+    assert not (tmp_path / "gen").exists()
+    # a city's estimate grows with its blocks and drive frames
+    small = run_bytes(1, "city", (2, 1), {"frames": 2})
+    assert run_bytes(1, "city", (4, 3), {"frames": 2}) > small
+    assert run_bytes(1, "city", (2, 1), {"frames": 2000}) > small

@@ -1,8 +1,12 @@
 """``python -m nidar_mi.scenegen``: writes scenes, resumes, reports bad input on one line."""
 
 import json
+import signal
 import subprocess
 import sys
+import time
+
+import pytest
 
 from nidar_mi.cli.scenegen import main
 from nidar_mi.scenegen.generate import generate_scene
@@ -42,3 +46,45 @@ def test_output_that_is_a_file(tmp_path, capsys):
     assert main(["--count", "1", "-o", str(f)]) == 2
     assert "not a directory" in capsys.readouterr().err
     assert f.read_text() == "x"
+
+
+def test_count_is_bounded_with_one_line(tmp_path, capsys):
+    out = tmp_path / "gen"
+    assert main(["--count", "10000000000", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("error: --count 10000000000 is more than 100000 scenes")
+        and err.count("\n") == 1
+    ), err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "signum, status, word",
+    [(signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted")],
+)
+def test_an_interrupted_run_leaves_complete_indexed_scenes(tmp_path, variant, signum, status, word):
+    """Scenes are written as they are drawn: after a signal, those on disk are complete (they
+    load), the index lists them, and the message says so."""
+    from nidar_mi.scene import load_scene
+
+    out = tmp_path / "gen"
+    cmd = [sys.executable, "-m", "nidar_mi.scenegen", "--count", "500", "--seed", "3"]
+    proc = subprocess.Popen(
+        [*cmd, "--kind", "vegetated", "-o", str(out), "-q"], stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 90
+    while time.monotonic() < deadline and len(list(out.glob("scene_*.xml"))) < 2:
+        time.sleep(0.2)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == status, err
+    assert err.strip().splitlines()[-1] == f"{word}; the scenes written so far are complete"
+    files = sorted(out.glob("scene_*.xml"), key=lambda p: int(p.stem.split("_")[-1]))
+    assert 2 <= len(files) < 500
+    index = json.loads((out / "index.json").read_text())
+    assert [e["file"] for e in index["scenes"]] == [p.name for p in files]
+    for e, path in zip(index["scenes"], files):
+        assert path.read_text() == generate_scene(3, e["index"], "vegetated")[1]
+    for path in files[:2]:
+        assert load_scene(str(path)).lidars
