@@ -180,13 +180,8 @@ def long_trajectory(tmp_path_factory):
             r"needs about [\d.]+ GiB \(500 frames x [\d.]+ MiB\), more than the limit of 1.0 GiB "
             r"\(--max-disk\)",
         ),
-        (  # what the sequence outputs keep in memory
-            ["--frames", "500", "--sequence-formats", "kitti", "--max-memory", "64M"],
-            r"--sequence-formats kitti keep every frame's points and images in memory until the "
-            r"last frame: about [\d.]+ MiB for 500 frames, more than the limit of 64.0 MiB",
-        ),
     ],
-    ids=["frames", "all-that-fit", "free-space", "max-disk", "kept-memory"],
+    ids=["frames", "all-that-fit", "free-space", "max-disk"],
 )
 def test_unbounded_sequences_are_refused_before_any_work(tmp_path, long_trajectory, extra, pattern):
     import re

@@ -15,10 +15,10 @@ from nidar_mi.scenegen.generate import generate_scene
 def test_module_runs_and_resumes(tmp_path):
     out = tmp_path / "gen"
     cmd = [sys.executable, "-m", "nidar_mi.scenegen", "--count", "2", "--seed", "6", "-o", str(out)]
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    r = subprocess.run([*cmd, "--progress"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "2 scenes written, 0 already there" in r.stdout
-    assert "scenegen" in r.stderr  # the progress bar
+    assert "scenegen" in r.stderr  # the progress bar, asked for (stderr is not a terminal)
     assert (out / "scene_6_1.xml").read_text() == generate_scene(6, 1)[1]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and "0 scenes written, 2 already there" in r.stdout
