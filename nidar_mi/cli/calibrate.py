@@ -96,9 +96,10 @@ def build_parser():
     return p
 
 
-def _check_target(path: str, overwrite: bool) -> None:
-    from ..io.atomic import check_output_folder
+def _check_target(path: str, overwrite: bool, inputs: list) -> None:
+    from ..io.atomic import check_output_folder, check_outside_inputs
 
+    check_outside_inputs(path, inputs)
     if os.path.isdir(path):
         raise NidarError(f"{path} is a folder; give a file name for the profile")
     check_output_folder(os.path.dirname(os.path.abspath(path)), overwrite=True)
@@ -125,8 +126,9 @@ def _calibrate(args, argv) -> None:
     from ..datasets.scans import load_scans
     from ..nidar.pipeline import NidarModel
 
-    if args.incidence and args.form != "gbm":
-        raise NidarError(f"--incidence needs --form gbm (got --form {args.form})")
+    if args.incidence is not None and args.form != "gbm":
+        flag = "--incidence" if args.incidence else "--no-incidence"
+        raise NidarError(f"{flag} needs --form gbm (got --form {args.form})")
     incidence = args.form == "gbm" and (
         KITTI_PROFILE_INCIDENCE if args.incidence is None else args.incidence
     )
@@ -135,7 +137,7 @@ def _calibrate(args, argv) -> None:
             "--no-geometry needs the incidence (--form gbm, without --no-incidence): the profile "
             "reads the value and the incidence"
         )
-    _check_target(args.out, args.overwrite)
+    _check_target(args.out, args.overwrite, [*args.scans, args.weights])
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
     scans = load_scans(

@@ -14,7 +14,7 @@ import os
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
-from ._common import parse_defines, parser, run, seed_arg
+from ._common import parse_defines, parser, run, scene_inputs, seed_arg
 
 __all__ = ["main", "build_parser"]
 
@@ -260,7 +260,10 @@ def main(argv=None) -> int:
     def work():
         from ..backend import set_variant
         from ..errors import NidarError
+        from ..io.atomic import check_outside_inputs
 
+        inputs = [*scene_inputs(args.scene), args.trajectory, args.weights, args.profile]
+        check_outside_inputs(out, inputs)
         if args.trajectory is None and (
             args.rate is not None or args.frames is not None or args.sequence_formats
         ):
