@@ -129,10 +129,13 @@ def _assign(args) -> None:
     from ..io.atomic import check_output_folder
 
     formats = _formats(args.formats)
+    read = [args.points, args.calib, *args.image, args.kitti, args.weights, args.profile]
+    publish = dict(overwrite=args.overwrite, marker="points.npz", inputs=read)
+    if args.out:  # before the inputs are read; the default OUT is named after them
+        check_output_folder(args.out, **publish)
     inputs = _inputs(args)
     out = args.out or os.path.join("out", "assign", inputs.name)
-    inputs_read = [args.points, args.calib, *args.image, args.kitti, args.weights, args.profile]
-    check_output_folder(out, overwrite=args.overwrite, marker="points.npz", inputs=inputs_read)
+    check_output_folder(out, **publish)
     points = assign_cloud(
         inputs,
         weights=args.weights,

@@ -10,8 +10,6 @@ non-commercial: keep ``DATA`` out of any repository.
 
 from __future__ import annotations
 
-import math
-
 from ..errors import NidarError
 from ._common import parse_defines, parser, run, seed_arg
 from ._workers import add_worker_options
@@ -112,11 +110,11 @@ def main(argv=None) -> int:
             fractions = tuple(float(x) for x in args.split.split(","))
         except ValueError:
             raise NidarError(f"--split: expected three numbers (got '{args.split}')") from None
-        if len(fractions) == 3 and all(math.isfinite(f) for f in fractions):
-            if any(not 0 <= f <= 1 for f in fractions) or abs(sum(fractions) - 1) > 1e-6:
-                raise NidarError(
-                    f"--split: three fractions in [0, 1] summing to 1 expected (got '{args.split}')"
-                )
+        legal = len(fractions) == 3 and all(0 <= f <= 1 for f in fractions)  # NaN: False
+        if not legal or abs(sum(fractions) - 1) > 1e-6:
+            raise NidarError(
+                f"--split: three fractions in [0, 1] summing to 1 expected (got '{args.split}')"
+            )
         meta = build_dataset(
             args.scenes,
             args.out,

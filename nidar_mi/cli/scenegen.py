@@ -73,8 +73,11 @@ def build_parser():
 def _check_out(out: str, overwrite: bool) -> None:
     """A non-empty ``-o`` folder that holds no scenegen output (its ``index.json``) is refused
     without ``--overwrite`` (scenes are added to it; nothing in it is removed)."""
-    if overwrite or not os.path.isdir(out) or not any(os.scandir(out)):
+    if overwrite or not os.path.isdir(out):
         return
+    with os.scandir(out) as entries:
+        if not any(entries):
+            return
     try:
         with open(os.path.join(out, INDEX_NAME), encoding="utf-8") as f:
             if json.load(f).get("generator") == "nidar_mi.scenegen":
