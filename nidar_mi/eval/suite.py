@@ -153,11 +153,6 @@ def _check_inputs(options: EvaluateOptions) -> dict | None:
         raise NidarError("nothing to evaluate: give `data`, `kitti` and/or `photos`")
     if isinstance(o.figures, bool) or not isinstance(o.figures, int) or o.figures < 0:
         raise NidarError(f"`figures` must be an integer >= 0 (got {o.figures})")
-    if not o.data and not _real_data(o):
-        given = [f"`kitti` {d}" for d in o.kitti] + [f"`photos` {o.photos}"] * bool(o.photos)
-        raise NidarError(
-            f"nothing to evaluate: no KITTI frame or RGB/NIR photo pair in {', '.join(given)}"
-        )
     if o.scenes and not os.path.isdir(o.scenes):
         raise NidarError(f"`scenes`: no such directory {o.scenes}")
     if o.heldout_materials and not os.path.isdir(o.heldout_materials):
@@ -166,6 +161,11 @@ def _check_inputs(options: EvaluateOptions) -> dict | None:
         for name in ("scenes", "ablation", "heldout_materials"):
             if getattr(o, name):
                 raise NidarError(f"`{name}` needs `data` (the training scenes)")
+        if not _real_data(o):
+            given = [f"`kitti` {d}" for d in o.kitti] + [f"`photos` {o.photos}"] * bool(o.photos)
+            raise NidarError(
+                f"nothing to evaluate: no KITTI frame or RGB/NIR photo pair in {', '.join(given)}"
+            )
         return None
     meta = load_meta(o.data)
     splits = meta.get("scenes", {})
