@@ -23,6 +23,7 @@ __all__ = [
     "CloudInputs",
     "assign_cloud",
     "assign_intensity",
+    "check_observed",
     "finite_points",
     "kitti_inputs",
     "read_inputs",
@@ -163,6 +164,42 @@ def assign_intensity(
     }
 
 
+def check_observed(xyz, cameras) -> None:
+    """Refuse, before any inference, a cloud of which no point falls inside a camera image.
+
+    A camera whose principal point lies outside its image (an image far too small for the
+    calibration, e.g. a thumbnail beside a full-size calibration) is warned about first.
+
+    Args:
+        xyz: (N, 3) points in the LiDAR frame (m).
+        cameras: the cameras (:class:`~nidar_mi.geometry.camera_model.CameraModel`).
+
+    Raises:
+        NidarError: N > 0 and no point projects into any camera's image.
+    """
+    import warnings
+
+    from .geometry.projection import in_image, project
+
+    n = len(xyz)
+    if n == 0:
+        return
+    seen = np.zeros(n, dtype=bool)
+    for cam in cameras:
+        uv, _, front = project(xyz, cam)
+        seen[front] |= in_image(uv[front], cam)
+        cx, cy = cam.K[0, 2], cam.K[1, 2]
+        if not (0 <= cx <= cam.width and 0 <= cy <= cam.height):
+            warnings.warn(
+                f"camera '{cam.name}': the image is {cam.width}x{cam.height} but the "
+                f"calibration's principal point is at ({cx:g}, {cy:g}): an image far too small "
+                "for the calibration",
+                stacklevel=2,
+            )
+    if not seen.any():
+        raise NidarError(f"0 of {n} points observed: no point falls inside a camera image")
+
+
 def finite_points(points: dict, where: str) -> dict:
     """``points`` without the points that hold a non-finite value in any float column.
 
@@ -208,6 +245,7 @@ def assign_cloud(
     present, gives the profile its rings.
     """
     points = dict(finite_points(inputs.points, inputs.where))
+    check_observed(points["xyz"], inputs.cameras)
     if profile is None and branch in (None, "R"):
         from .datasets.sensor_profiles import default_profile, warn_unknown_sensor
 

@@ -174,6 +174,23 @@ def _published(out_dir: str, meta: dict | None, request: dict, renders: dict) ->
     )
 
 
+def _check_lidar(path: str, name: str, lidar_id: str) -> None:
+    """Refuse, before any render, a ``lidar_id`` that the scene file does not declare (a scene
+    with ``<include>`` elements or one that does not parse is left to the render)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError):
+        return
+    if any(el.tag == "include" for el in root.iter()):
+        return
+    ids = sorted(el.get("id", "") for el in root.iter("sensor") if el.get("type") == "lidar")
+    if lidar_id not in ids:
+        have = ", ".join(ids) if ids else "none"
+        raise NidarError(f"`lidar_id` '{lidar_id}': scene {name} has no such lidar (has {have})")
+
+
 def _withdraw(out_dir: str) -> None:
     """Remove a published dataset (``meta.json`` first, then the splits); the renders stay."""
     import shutil
@@ -232,6 +249,7 @@ def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, 
         progress=parallel["progress"],
         desc="dataset",
         unit="scene",
+        started=parallel["started"],
     )
     report.raise_on_failure("scenes")
     frames: dict[str, list[str]] = {s: [] for s in SPLITS}
@@ -281,7 +299,8 @@ def build_dataset(
     ``DATA`` holds a render cache (``renders/``, one complete render folder per scene, reused
     while its request is unchanged) and the published dataset (``meta.json`` and the split
     folders). The dataset is built in a staging folder and published whole at the end
-    (``meta.json`` last); a build with other inputs first withdraws the published dataset, so
+    (``meta.json`` last); a build with other inputs withdraws the published dataset before its
+    first render (every check of the inputs, the options and the Ray cluster has passed), so
     a failed or interrupted build never leaves frames that mix two builds, only the completed
     renders for the next run to reuse. A build with the same inputs as the published dataset
     (:data:`meta.json`'s ``request``) does nothing.
@@ -332,9 +351,12 @@ def build_dataset(
     if unused:
         raise NidarError(f"-D {', '.join(unused)}: no scene in {scene_dir} has such a parameter")
     splits = split_scenes(names, fractions, seed)
+    if lidar_id is not None:
+        for path, name in zip(files, names):
+            _check_lidar(path, name, lidar_id)
     old = _read_meta(out_dir)
     earlier = old is not None or os.path.isdir(os.path.join(out_dir, "renders"))
-    check_output_folder(out_dir, overwrite=overwrite or earlier)
+    check_output_folder(out_dir, overwrite=overwrite or earlier, inputs=[scene_dir, *files])
     request = {
         "scenes": {n: file_sha256(f) for f, n in zip(files, names)},
         "params": dict(sorted((params or {}).items())),
@@ -347,11 +369,11 @@ def build_dataset(
     renders = {n: _render_request(f, used[f], seed, spp) for f, n in zip(files, names)}
     if _published(out_dir, old, request, renders):
         return old
-    if old is not None:
-        _withdraw(out_dir)
     split_of = {n: s for s, ns in splits.items() for n in ns}
     opts = dict(formats=("npz",), seed=seed, spp=spp, progress=False)
     parallel = dict(workers=workers, address=ray_address, progress=progress)
+    # the old dataset is withdrawn only once the tasks can run (a Ray cluster answered)
+    parallel["started"] = (lambda: _withdraw(out_dir)) if old is not None else None
     out_dir = os.path.abspath(out_dir)
     with staged_entries(out_dir, [*SPLITS, "meta.json"], last="meta.json") as stage:
         frames, wavelength = _build_frames(

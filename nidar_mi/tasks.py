@@ -301,10 +301,34 @@ def _check_address(address: str) -> None:
     if not host:  # "auto", or a form Ray resolves itself
         return
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=_CONNECT_TIMEOUT_S):
-            pass
+        with socket.create_connection(
+            (host.strip("[]"), int(port)), timeout=_CONNECT_TIMEOUT_S
+        ) as conn:
+            conn.sendall(_HTTP2_PREFACE)
+            header = _read_exactly(conn, 9)
     except (OSError, ValueError) as e:
         raise NidarError(f"`ray_address` {address}: no Ray cluster answers there ({e})") from None
+    if len(header) < 9 or header[3] != _HTTP2_SETTINGS:
+        raise NidarError(
+            f"`ray_address` {address}: something answers there, but not a Ray cluster (no gRPC)"
+        )
+
+
+#: An HTTP/2 client's connection preface and an empty SETTINGS frame: a Ray cluster (GCS or
+#: Ray Client server) is a gRPC server and answers with its own SETTINGS frame (type 4).
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + b"\x00\x00\x00\x04\x00\x00\x00\x00\x00"
+_HTTP2_SETTINGS = 4
+
+
+def _read_exactly(conn, n: int) -> bytes:
+    """Up to ``n`` bytes from a socket (fewer when the peer closes first)."""
+    data = b""
+    while len(data) < n:
+        chunk = conn.recv(n - len(data))
+        if not chunk:
+            break
+        data += chunk
+    return data
 
 
 def _connect(ray, workers: int | None, address: str | None, after_init: Callable[[], None]) -> bool:
@@ -444,17 +468,21 @@ def _sigterm_through_ray():
         signal.signal(signal.SIGTERM, previous)
 
 
-def _run_ray(pending, setup, report, bar, workers, address, retries) -> None:
+def _run_ray(pending, setup, report, bar, where, started) -> None:
+    """``where``: (workers, address, retries) of :func:`run_tasks`."""
     ray = _import_ray()
+    address = where[1]
     bar.note("starting Ray" if address is None else f"connecting to {address}")
     with _raylet_messages_to_log(), _sigterm_through_ray() as after_init:
-        _run_on(ray, pending, setup, report, bar, workers, address, retries, after_init)
+        _run_on(ray, pending, setup, report, bar, where, after_init, started)
 
 
-def _run_on(ray, pending, setup, report, bar, workers, address, retries, after_init) -> None:
+def _run_on(ray, pending, setup, report, bar, where, after_init, started) -> None:
+    workers, address, retries = where
     owned = _connect(ray, workers, address, after_init)
     inflight: dict = {}
     try:
+        started()
         resources = ray.cluster_resources()
         concurrency, threads, gpus = placement(
             workers,
@@ -544,6 +572,7 @@ def run_tasks(
     desc: str = "tasks",
     unit: str = "task",
     retries: int = 1,
+    started: Callable[[], None] | None = None,
 ) -> TaskReport:
     """Run the tasks serially (default) or on Ray; see the module docstring.
 
@@ -558,6 +587,8 @@ def run_tasks(
         desc: the bar's label.
         unit: what one task is called on the bar (``scene``, ``frame``).
         retries: how often a task whose worker process died is run again (Ray only).
+        started: called once before the first task runs, when the runtime is up (after Ray
+            connected or started): a caller removes what the job replaces only then.
 
     Returns:
         The report; call :meth:`TaskReport.raise_on_failure` to turn failures into an error.
@@ -579,14 +610,16 @@ def run_tasks(
             pending.append((index, task))
     _sweep(tasks)
     bar = _Progress(len(tasks), len(report.skipped), desc, unit, progress)
+    started = started or (lambda: None)
     finished = False
     try:
         if not pending:
-            pass
+            started()
         elif workers is None and address is None:
+            started()
             _run_serial(pending, setup, report, bar)
         else:
-            _run_ray(pending, setup, report, bar, workers, address, retries)
+            _run_ray(pending, setup, report, bar, (workers, address, retries), started)
         finished = True
     finally:
         bar.close()

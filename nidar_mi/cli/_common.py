@@ -50,6 +50,7 @@ __all__ = [
     "parser",
     "parse_defines",
     "run",
+    "scene_inputs",
     "seed_arg",
     "show_progress",
 ]
@@ -184,6 +185,34 @@ def parse_defines(items: list[str]) -> dict[str, str]:
             raise NidarError(f"-D expects NAME=VALUE (got '{item}')")
         out[name.strip()] = value.strip()
     return out
+
+
+def scene_inputs(scene: str, depth: int = 8) -> list[str]:
+    """A scene file and the files it names (``<include>``, meshes, textures, ``filename``
+    strings), resolved against its folder, includes followed ``depth`` levels: the inputs an
+    output must not hold (:func:`nidar_mi.io.atomic.check_outside_inputs`). A file that does not
+    parse lists only itself; the scene's own checks report it."""
+    import os
+    import xml.etree.ElementTree as ET
+
+    found = [scene]
+    try:
+        root = ET.parse(scene).getroot()
+    except (OSError, ET.ParseError):
+        return found
+    base = os.path.dirname(os.path.abspath(scene))
+    for el in root.iter():
+        name = el.get("filename") if el.tag == "include" else None
+        if el.tag == "string" and el.get("name") == "filename":
+            name = el.get("value")
+        if not name or "$" in name:
+            continue
+        path = os.path.join(base, name)
+        if el.tag == "include" and depth > 0 and path not in found:
+            found += [p for p in scene_inputs(path, depth - 1) if p not in found]
+        elif path not in found:
+            found.append(path)
+    return found
 
 
 #: A parameter named in a library message: a Python identifier in backticks.

@@ -103,16 +103,27 @@ def _formats(text: str) -> list[str]:
     return formats
 
 
+#: The input flags of the --points mode, each with its argparse attribute.
+_OWN_INPUTS = {"--points": "points", "--image": "image", "--calib": "calib", "--lidar": "lidar"}
+
+
 def _inputs(args):
     """The cloud, its cameras and images named on the command line."""
     from ..cloud_intensity import kitti_inputs, read_inputs
 
-    if args.lidar and not args.calib:
-        raise NidarError("--lidar applies to --calib (a render calib.json)")
     if args.kitti:
+        given = [f for f, v in _OWN_INPUTS.items() if getattr(args, v)]
+        if given:
+            raise NidarError(
+                f"--kitti reads the frame's own cloud, image and calibration: drop {', '.join(given)}"
+            )
         if not args.frame:
             raise NidarError("--kitti needs --frame")
         return kitti_inputs(args.kitti, args.frame)
+    if args.frame:
+        raise NidarError("--frame needs --kitti (the KITTI folder of the frame)")
+    if args.lidar and not args.calib:
+        raise NidarError("--lidar applies to --calib (a render calib.json)")
     if not (args.points and args.calib and args.image):
         raise NidarError("give --points, --calib and --image (or --kitti DIR --frame ID)")
     return read_inputs(args.points, args.calib, args.image, lidar=args.lidar)
@@ -135,9 +146,13 @@ def _assign(args) -> None:
     from ..io.atomic import check_output_folder
 
     formats = _formats(args.formats)
+    read = [args.points, args.calib, *args.image, args.kitti, args.weights, args.profile]
+    publish = dict(overwrite=args.overwrite, marker="points.npz", inputs=read)
+    if args.out:  # before the inputs are read; the default OUT is named after them
+        check_output_folder(args.out, **publish)
     inputs = _inputs(args)
     out = args.out or os.path.join("out", "assign", inputs.name)
-    check_output_folder(out, overwrite=args.overwrite, marker="points.npz")
+    check_output_folder(out, **publish)
     profile, unknown = _profile(args, inputs)
     points = assign_cloud(
         inputs,

@@ -109,9 +109,10 @@ def build_parser():
     return p
 
 
-def _check_target(path: str, overwrite: bool) -> None:
-    from ..io.atomic import check_output_folder
+def _check_target(path: str, overwrite: bool, inputs: list) -> None:
+    from ..io.atomic import check_output_folder, check_outside_inputs
 
+    check_outside_inputs(path, inputs)
     if os.path.isdir(path):
         raise NidarError(f"{path} is a folder; give a file name for the profile")
     check_output_folder(os.path.dirname(os.path.abspath(path)), overwrite=True)
@@ -138,8 +139,9 @@ def _calibrate(args, argv) -> None:
     from ..datasets.scans import load_scans
     from ..nidar.pipeline import NidarModel
 
-    if args.incidence and args.form not in ("gbm", "physical"):
-        raise NidarError(f"--incidence needs --form gbm or physical (got --form {args.form})")
+    if args.incidence is not None and args.form not in ("gbm", "physical"):
+        flag = "--incidence" if args.incidence else "--no-incidence"
+        raise NidarError(f"{flag} needs --form gbm or physical (got --form {args.form})")
     if args.max_frames is not None and args.max_frames < 1:
         raise NidarError(f"--max-frames must be at least 1 (got {args.max_frames})")
     incidence = args.form in ("gbm", "physical") and (
@@ -152,7 +154,7 @@ def _calibrate(args, argv) -> None:
         )
     if args.no_geometry and args.form != "gbm":
         raise NidarError(f"--no-geometry needs --form gbm (got --form {args.form})")
-    _check_target(args.out, args.overwrite)
+    _check_target(args.out, args.overwrite, [*args.scans, args.weights])
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
     scans = load_scans(

@@ -36,7 +36,8 @@ def build_parser():
     p.add_argument(
         "--split",
         default="0.8,0.1,0.1",
-        help="train,val,test fractions of the scenes; scenes are split whole (default 0.8,0.1,0.1)",
+        help="train,val,test fractions of the scenes, summing to 1; scenes are split whole "
+        "(default 0.8,0.1,0.1)",
     )
     p.add_argument(
         "--seed",
@@ -71,14 +72,31 @@ def build_parser():
     return p
 
 
+#: Options of --scenes (rendered scenes): given with --kitti they would have no effect.
+_SCENE_OPTIONS = {
+    "--split": "split",
+    "--seed": "seed",
+    "--spp": "spp",
+    "--lidar": "lidar",
+    "--intensity-scale": "intensity_scale",
+    "-D": "params",
+    "--workers": "workers",
+    "--ray-address": "ray_address",
+}
+
+
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    p = build_parser()
+    args = p.parse_args(argv)
 
     def work():
         from ..frames import SPLITS
         from ..render_dataset import build_dataset
 
         if args.kitti:
+            given = [f for f, d in _SCENE_OPTIONS.items() if getattr(args, d) != p.get_default(d)]
+            if given:
+                raise NidarError(f"{', '.join(given)}: options of --scenes, not of --kitti")
             from ..datasets.kitti_frames import build_kitti_frames
 
             meta = build_kitti_frames(args.kitti, args.out, progress=show_progress(args))
@@ -91,6 +109,11 @@ def main(argv=None) -> int:
             fractions = tuple(float(x) for x in args.split.split(","))
         except ValueError:
             raise NidarError(f"--split: expected three numbers (got '{args.split}')") from None
+        legal = len(fractions) == 3 and all(0 <= f <= 1 for f in fractions)  # NaN: False
+        if not legal or abs(sum(fractions) - 1) > 1e-6:
+            raise NidarError(
+                f"--split: three fractions in [0, 1] summing to 1 expected (got '{args.split}')"
+            )
         meta = build_dataset(
             args.scenes,
             args.out,
@@ -114,6 +137,6 @@ def main(argv=None) -> int:
         work,
         on_interrupt="no dataset published; the completed renders are kept in "
         f"{args.out}/renders for the next run",
-        flags={"scene_dir": "--scenes", "fractions": "--split"},
+        flags={"scene_dir": "--scenes", "fractions": "--split", "lidar_id": "--lidar"},
         args=args,
     )

@@ -43,6 +43,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.output is not None and not args.plot:
             raise NidarError("-o/--output names the --plot file: give --plot NAME ... too")
         output = args.output or "spectra.png"
+        if args.plot and not output.lower().endswith(".png"):
+            raise NidarError(f"-o/--output: the plot is a PNG; name a .png file (got {output})")
         if args.plot and not os.path.isdir(os.path.dirname(os.path.abspath(output))):
             raise NidarError(f"output folder does not exist: {os.path.dirname(output)}")
         if args.list or not args.plot:

@@ -18,7 +18,9 @@ of their folder paths that tells all of them apart, joined with ``__`` (``a__000
 
 Bad input follows the package contract: every input is opened before any work (a missing,
 unreadable or non-image file, or an image that is not colour, is one ``error:`` line and status
-2, nothing written); ``--skip-bad`` skips such files with one ``warning:`` line each instead.
+2, nothing written); ``--skip-bad`` skips such files with one ``warning:`` line each instead,
+and also a file that fails to decode past its header (a truncated image). ``OUT`` must not be
+or hold an input.
 The outputs are written to a staging folder that replaces ``OUT`` only when every image
 succeeded.
 """
@@ -156,13 +158,21 @@ def output_names(paths: list[Path]) -> list[str]:
     return names
 
 
-def _read_rgb(path: Path) -> np.ndarray:
+def _read_rgb(path: Path, skip_bad: bool = False) -> np.ndarray | None:
+    """The image's pixels (H, W, 3) uint8; a file that fails to decode past its header (e.g.
+    truncated) is an error, or with ``skip_bad`` a warning and None."""
     from PIL import Image
 
     from ..io.atomic import reading
 
-    with reading(path) as p, Image.open(p) as im:
-        return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    try:
+        with reading(path) as p, Image.open(p) as im:
+            return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except NidarError as e:
+        if not skip_bad:
+            raise
+        warnings.warn(f"skipped {e}", stacklevel=2)
+        return None
 
 
 def _to_png8(nir_linear: np.ndarray) -> np.ndarray:
@@ -210,7 +220,8 @@ def _convert(args) -> None:
     from ..nidar.pipeline import NidarModel
     from ..progress import progress_bar
 
-    check_output_folder(args.out, overwrite=args.overwrite, marker=INDEX)
+    publish = dict(overwrite=args.overwrite, marker=INDEX, inputs=[*args.inputs, args.weights])
+    check_output_folder(args.out, **publish)
     reduced_size(1, 1, args.scale)
     if args.max_side < 16:
         raise NidarError(f"--max-side must be >= 16 (got {args.max_side})")
@@ -225,10 +236,12 @@ def _convert(args) -> None:
         + ("; float32 linear EXR (channel Y)" if args.exr else ""),
         "images": [],
     }
-    with staged_directory(args.out, overwrite=args.overwrite, marker=INDEX) as stage:
+    with staged_directory(args.out, **publish) as stage:
         bar = progress_bar(items, show=show_progress(args), desc="pseudo-NIR", unit="image")
         for it, name in zip(bar, names):
-            rgb = _read_rgb(it.path)
+            rgb = _read_rgb(it.path, args.skip_bad)
+            if rgb is None:
+                continue
             scale = min(args.scale, args.max_side / max(rgb.shape[:2]))
             nir = pseudo_nir_linear(model.stn, rgb, scale=scale)
             if not np.all(np.isfinite(nir)):
@@ -246,6 +259,8 @@ def _convert(args) -> None:
                     "inference_scale": round(scale, 6),
                 }
             )
+        if not index["images"]:
+            raise NidarError("no image to convert: every input was skipped")
         atomic_write_json(os.path.join(stage, INDEX), index)
     if not args.quiet:
-        print(f"wrote {len(items)} pseudo-NIR image(s) to {args.out}")
+        print(f"wrote {len(index['images'])} pseudo-NIR image(s) to {args.out}")

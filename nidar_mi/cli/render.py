@@ -16,7 +16,7 @@ import sys
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ..sequence import MAX_FRAMES
-from ._common import parse_defines, parser, run, seed_arg, show_progress
+from ._common import parse_defines, parser, run, scene_inputs, seed_arg, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -290,8 +290,11 @@ def main(argv=None) -> int:
     def work():
         from ..backend import set_variant
         from ..errors import NidarError
+        from ..io.atomic import check_outside_inputs
 
         sequence_only = (args.rate, args.frames, args.max_frames, args.max_disk)
+        inputs = [*scene_inputs(args.scene), args.trajectory, args.weights, args.profile]
+        check_outside_inputs(out, inputs)
         if args.trajectory is None and (
             any(v is not None for v in sequence_only)
             or args.sequence_formats

@@ -2,16 +2,23 @@
 
 Writes ``DIR/scene_<S>_<k>.xml`` for k = 0 .. N-1 (scenes already there are skipped, so a run
 resumes; a file holding a scene of another run is refused unless ``--overwrite``, a file edited
-by hand is kept) and ``DIR/index.json``. Every scene renders with ``python -m nidar_mi.render``.
+by hand is kept) and ``DIR/index.json``; a non-empty ``DIR`` without a scenegen ``index.json``
+is refused unless ``--overwrite``. Every scene renders with ``python -m nidar_mi.render``.
 ``--kind city`` / ``--kind suburb`` draw a grid of blocks (``--blocks NX,NY``) with a drive round
 it: ``DIR/scene_<S>_<k>_drive.tum`` (``--frames``, ``--rate``, ``--speed``;
-:mod:`nidar_mi.scenegen.drives`).
+:mod:`nidar_mi.scenegen.drives`); these options with another kind are refused.
 """
 
 from __future__ import annotations
 
+import json
+import math
+import os
+
+from ..errors import NidarError
 from ..scenegen.drives import DEFAULT_FRAMES
-from ..scenegen.generate import KINDS
+from ..scenegen.generate import INDEX_NAME, KINDS
+from ..scenegen.streets import CITY_KINDS
 from ._common import parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -51,27 +58,58 @@ def build_parser():
         "--overwrite",
         action="store_true",
         help="replace scene files of another run (another --kind or --materials) and files "
-        "edited by hand",
+        "edited by hand; write into a folder that holds other files (none of them is removed)",
     )
     p.add_argument(
         "--blocks", default=None, metavar="NX,NY", help="city/suburb: blocks along x and y (4,3)"
     )
     p.add_argument(
-        "--frames", type=int, default=DEFAULT_FRAMES, help="city/suburb: frames of the drive"
+        "--frames",
+        type=int,
+        default=None,
+        help=f"city/suburb: frames of the drive (default {DEFAULT_FRAMES})",
     )
-    p.add_argument("--rate", type=float, default=10.0, help="city/suburb: frame rate, Hz")
-    p.add_argument("--speed", type=float, default=10.0, help="city/suburb: cruising speed, m/s")
+    p.add_argument("--rate", type=float, default=None, help="city/suburb: frame rate, Hz (10)")
+    p.add_argument(
+        "--speed", type=float, default=None, help="city/suburb: cruising speed, m/s (10)"
+    )
     return p
+
+
+def _check_out(out: str, overwrite: bool) -> None:
+    """A non-empty ``-o`` folder that holds no scenegen output (its ``index.json``) is refused
+    without ``--overwrite`` (scenes are added to it; nothing in it is removed)."""
+    if overwrite or not os.path.isdir(out):
+        return
+    with os.scandir(out) as entries:
+        if not any(entries):
+            return
+    try:
+        with open(os.path.join(out, INDEX_NAME), encoding="utf-8") as f:
+            if json.load(f).get("generator") == "nidar_mi.scenegen":
+                return
+    except (OSError, ValueError, AttributeError):
+        pass
+    raise NidarError(
+        f"{out} is not empty and holds no scenegen output: choose another folder or pass "
+        "--overwrite"
+    )
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
 
     def work():
-        from ..errors import NidarError
         from ..scenegen.generate import generate
 
+        _check_out(args.out, args.overwrite)
         blocks = None
+        city = [f for f in ("blocks", "frames", "rate", "speed") if getattr(args, f) is not None]
+        if city and args.kind not in CITY_KINDS:
+            raise NidarError(
+                f"{', '.join('--' + f for f in city)}: options of --kind city or suburb "
+                f"(got {'--kind ' + args.kind if args.kind else 'no --kind'})"
+            )
         if args.blocks is not None:
             try:
                 blocks = tuple(int(v) for v in args.blocks.split(","))
@@ -81,9 +119,14 @@ def main(argv=None) -> int:
                 raise NidarError(
                     f"--blocks expects NX,NY with NX >= 2, NY >= 1 (got '{args.blocks}')"
                 )
-        if args.frames < 2 or not args.rate > 0 or not args.speed > 0:
-            raise NidarError("--frames must be >= 2, --rate and --speed > 0")
-        drive = {"frames": args.frames, "rate_hz": args.rate, "speed": args.speed}
+        drive = {
+            "frames": DEFAULT_FRAMES if args.frames is None else args.frames,
+            "rate_hz": 10.0 if args.rate is None else args.rate,
+            "speed": 10.0 if args.speed is None else args.speed,
+        }
+        finite = all(math.isfinite(drive[k]) and drive[k] > 0 for k in ("rate_hz", "speed"))
+        if drive["frames"] < 2 or not finite:
+            raise NidarError("--frames must be >= 2, --rate and --speed finite and > 0")
         index = generate(
             args.out,
             args.count,

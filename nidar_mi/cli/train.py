@@ -7,6 +7,7 @@
                              [--batch-size N] [--crop-size N] [--crop-width N]
                              [--scale S] [--threads N] [--all-frames] [--init-irnet W]
                              [--renders DATA] [--progress | --no-progress] [-q | -v]
+                             [--overwrite]
 
 Writes ``OUT/stn.safetensors``, ``OUT/irnet.safetensors``, ``OUT/config.json``,
 ``OUT/train_log.json``, resumable checkpoints under ``OUT/checkpoints`` and, once IRNet is
@@ -15,6 +16,11 @@ split (:func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`; ``--no-c
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). ``--all-frames`` (with ``--stage irnet``) trains
 IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.train`.
+
+An OUT where a stage of this command has trained already is refused unless ``--resume``
+(continue that run) or ``--overwrite`` (replace it: the earlier folder is moved aside, put back
+when the new run fails before its first checkpoint, removed otherwise). OUT must not hold an
+input (DATA, ``--config``, ``--stn-weights``, ...).
 
 A compact IRNet on real KITTI frames (quarter resolution, wide crops, one thread)::
 
@@ -27,6 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import shutil
 from pathlib import Path
 
 from ..errors import NidarError
@@ -78,6 +85,12 @@ def _parser() -> argparse.ArgumentParser:
         "S with their true maps (loss.lambda_r_true / lambda_s_true; their intensity is left out)",
     )
     p.add_argument("--resume", action="store_true", help="continue from the latest checkpoint")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier run in OUT (or other files there); it is removed only once "
+        "this run has saved its first checkpoint",
+    )
     p.add_argument(
         "--no-calibration", action="store_true", help="do not fit calibration.json after training"
     )
@@ -173,13 +186,23 @@ def main(argv: list[str] | None = None) -> int:
 
         cfg = build_config(args)
         out = args.out
+        if args.overwrite and args.resume:
+            raise NidarError("--overwrite replaces the run that --resume continues: give one")
+        inputs = [args.data, args.config, args.stn_weights, args.photos, args.init_irnet]
+        check_output_folder(
+            out, overwrite=args.overwrite, marker="config.json", inputs=[*inputs, args.renders]
+        )
+        if not (args.resume or args.overwrite):
+            _check_no_earlier_run(out, _stages(args))
+        aside = _move_aside(out) if args.overwrite else None
         fresh = not out.exists() or (out.is_dir() and not any(out.iterdir()))
-        check_output_folder(out, marker="config.json")
         try:
             _train(args, cfg)
         except BaseException:
-            left["text"] = _after_failure(out, fresh)
+            left["text"] = _after_failure(out, fresh, aside)
             raise
+        if aside is not None:
+            shutil.rmtree(aside, ignore_errors=True)
         logging.getLogger(__name__).info("weights written to %s", out)
 
     return run(
@@ -261,19 +284,56 @@ def _all_frames(data: Path) -> dict[str, list[Path]]:
     return {"train": [f for split in SPLITS for f in list_frames(data, split)], "val": []}
 
 
-def _after_failure(out: Path, fresh: bool) -> str:
+def _stages(args: argparse.Namespace) -> tuple[str, ...]:
+    """The stages this command trains."""
+    if args.stage != "all":
+        return (args.stage,)
+    return ("irnet",) if args.stn_weights is not None else ("stn", "irnet")
+
+
+def _check_no_earlier_run(out: Path, stages: tuple[str, ...]) -> None:
+    """Refuse an OUT where a stage this command trains has made progress already."""
+    from ..nidar.loop import read_train_log
+
+    if not (out / "config.json").is_file():
+        return
+    done = [s for s in stages if read_train_log(out).get(s, {}).get("steps")]
+    if done:
+        raise NidarError(
+            f"{out} holds an earlier {done[0]} run: pass --resume to continue it or --overwrite "
+            "to replace it (or choose another folder)"
+        )
+
+
+def _move_aside(out: Path) -> Path | None:
+    """``--overwrite``: move an existing OUT to a hidden sibling (restored if this run fails
+    before its first checkpoint, removed once it succeeds)."""
+    import secrets
+
+    if not out.exists():
+        return None
+    aside = out.with_name(f".{out.name}.old-{secrets.token_hex(4)}")
+    out.rename(aside)
+    return aside
+
+
+def _after_failure(out: Path, fresh: bool, aside: Path | None = None) -> str:
     """Clean up after a failed or interrupted run; says what is left.
 
     A run that started in a new (or empty) folder and saved no checkpoint leaves nothing; one
     that saved checkpoints keeps them for ``--resume``; an existing run's folder is left as
-    it is.
+    it is. With ``--overwrite`` the earlier folder (moved to ``aside``) is put back unless
+    this run saved a checkpoint, which then replaces it.
     """
-    import shutil
-
     checkpoints = out / "checkpoints"
     if checkpoints.is_dir() and any(checkpoints.iterdir()):
+        if aside is not None:
+            shutil.rmtree(aside, ignore_errors=True)
         return f"checkpoints kept in {checkpoints}: --resume continues"
     if fresh:
         shutil.rmtree(out, ignore_errors=True)
+        if aside is not None:
+            aside.rename(out)
+            return f"{out} left as it was before this run"
         return "nothing written"
     return f"{out} left as it was before this run"

@@ -146,10 +146,11 @@ def build_kitti_frames(
         NidarError: no frames, clashing folder names, or a malformed frame.
     """
     from ..frames import SPLITS, list_frames, write_frame
-    from ..io.atomic import atomic_write_json
+    from ..io.atomic import atomic_write_json, check_outside_inputs
     from ..progress import progress_bar
 
     dirs = [Path(d) for d in kitti_dirs]
+    check_outside_inputs(out_dir, dirs)
     names = [d.resolve().name for d in dirs]
     if len(set(names)) != len(names):
         raise NidarError(f"KITTI folders need distinct names (got {', '.join(map(str, dirs))})")
@@ -173,23 +174,31 @@ def build_kitti_frames(
         old_version, old_info = old.get("version"), old.get("frame_info", {})
     splits: dict[str, list[str]] = {s: [] for s in SPLITS}
     info: dict[str, dict] = {}
-    for kitti_dir, source, fid in progress_bar(
-        jobs, show=progress, desc="KITTI frames", unit="frame"
-    ):
-        name = frame_name(source, fid)
-        split = next((s for s, names in held.items() if name in names), "train")
-        target = out / split / f"{name}.npz"
-        fresh = (
-            old_version == KITTI_FRAMES_VERSION
-            and target.is_file()
-            and os.path.getmtime(target) >= _source_mtime(kitti_dir, fid)
-        )
-        prev = old_info.get(name) if fresh else None
-        if prev is None:
-            frame, prev = kitti_training_frame(load_frame(kitti_dir, fid))
-            write_frame(target, frame)
-        info[name] = prev
-        splits[split].append(name)
+    added: list[Path] = []  # frame files this build created: removed if it fails
+    try:
+        for kitti_dir, source, fid in progress_bar(
+            jobs, show=progress, desc="KITTI frames", unit="frame"
+        ):
+            name = frame_name(source, fid)
+            split = next((s for s, names in held.items() if name in names), "train")
+            target = out / split / f"{name}.npz"
+            fresh = (
+                old_version == KITTI_FRAMES_VERSION
+                and target.is_file()
+                and os.path.getmtime(target) >= _source_mtime(kitti_dir, fid)
+            )
+            prev = old_info.get(name) if fresh else None
+            if prev is None:
+                frame, prev = kitti_training_frame(load_frame(kitti_dir, fid))
+                if not target.exists():
+                    added.append(target)
+                write_frame(target, frame)
+            info[name] = prev
+            splits[split].append(name)
+    except BaseException:
+        for path in added:  # meta.json does not list them
+            path.unlink(missing_ok=True)
+        raise
     for split in SPLITS:  # frames an earlier build left in another split
         keep = set(splits[split])
         for path in list_frames(out, split):

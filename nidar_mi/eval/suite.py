@@ -102,11 +102,12 @@ def run(options: EvaluateOptions) -> dict:
 
     t0 = time.perf_counter()
     out = options.out
-    check_output_folder(out, overwrite=options.overwrite, marker="results.json")
+    publish = dict(overwrite=options.overwrite, marker="results.json", inputs=_inputs(options))
+    check_output_folder(out, **publish)
     meta = _check_inputs(options)
     _check_environment(options)
     model = _load_model(options, meta)
-    with staged_directory(out, overwrite=options.overwrite, marker="results.json") as stage:
+    with staged_directory(out, **publish) as stage:
         fig_dir = os.path.join(stage, "figures")
         os.makedirs(fig_dir)
         payload = _evaluate(options, meta, model, fig_dir)
@@ -120,6 +121,29 @@ def run(options: EvaluateOptions) -> dict:
     return payload
 
 
+def _inputs(options: EvaluateOptions) -> list[str | None]:
+    """Every file and folder the run reads (the output must not hold one); the cache too,
+    which a replaced output would take with it."""
+    o = options
+    extra = [o.cache or (cache_dir(o) if o.data else None)]
+    return [o.data, o.weights, o.scenes, o.heldout_materials, *o.kitti, o.photos, *extra]
+
+
+def _real_data(options: EvaluateOptions) -> bool:
+    """Whether ``kitti`` or ``photos`` hold anything to score (else both would be skipped)."""
+    from ..datasets.kitti import frame_ids
+    from ..datasets.rgbnir import list_pairs
+
+    if any(frame_ids(d) for d in options.kitti):
+        return True
+    if options.photos:
+        try:
+            return bool(list_pairs(options.photos))
+        except NidarError:
+            return False
+    return False
+
+
 def _check_inputs(options: EvaluateOptions) -> dict | None:
     """The dataset's meta (None without ``data``), after checking every input exists."""
     from ..frames import load_meta
@@ -127,6 +151,8 @@ def _check_inputs(options: EvaluateOptions) -> dict | None:
     o = options
     if not (o.data or o.kitti or o.photos):
         raise NidarError("nothing to evaluate: give `data`, `kitti` and/or `photos`")
+    if isinstance(o.figures, bool) or not isinstance(o.figures, int) or o.figures < 0:
+        raise NidarError(f"`figures` must be an integer >= 0 (got {o.figures})")
     if o.scenes and not os.path.isdir(o.scenes):
         raise NidarError(f"`scenes`: no such directory {o.scenes}")
     if o.heldout_materials and not os.path.isdir(o.heldout_materials):
@@ -135,6 +161,11 @@ def _check_inputs(options: EvaluateOptions) -> dict | None:
         for name in ("scenes", "ablation", "heldout_materials"):
             if getattr(o, name):
                 raise NidarError(f"`{name}` needs `data` (the training scenes)")
+        if not _real_data(o):
+            given = [f"`kitti` {d}" for d in o.kitti] + [f"`photos` {o.photos}"] * bool(o.photos)
+            raise NidarError(
+                f"nothing to evaluate: no KITTI frame or RGB/NIR photo pair in {', '.join(given)}"
+            )
         return None
     meta = load_meta(o.data)
     splits = meta.get("scenes", {})

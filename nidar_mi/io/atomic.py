@@ -26,7 +26,7 @@ import re
 import secrets
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -38,6 +38,7 @@ from ..errors import NidarError
 __all__ = [
     "atomic_path",
     "check_output_folder",
+    "check_outside_inputs",
     "staged_entries",
     "atomic_write_text",
     "atomic_write_json",
@@ -165,8 +166,41 @@ def reading(path: str | os.PathLike) -> Iterator[Path]:
         raise NidarError(f"cannot read {p}: {_one_line(e)}") from e
 
 
+def check_outside_inputs(
+    out: str | os.PathLike, inputs: Iterable[str | os.PathLike | None] = ()
+) -> None:
+    """Refuse an output path that is one of the inputs or holds one (a folder above it).
+
+    Replacing such an output would delete the input, ``overwrite`` or not. Paths are compared
+    once symbolic links are resolved; an output inside an input folder is allowed.
+
+    Args:
+        out: the output file or folder.
+        inputs: the files and folders the command reads (None entries and paths that do not
+            exist, e.g. a profile given by name, are ignored: nothing of them can be lost).
+
+    Raises:
+        NidarError: ``out`` is, or holds, an input (one line naming both).
+    """
+    target = Path(out).resolve()
+    for item in inputs:
+        if item is None or not os.fspath(item) or not os.path.lexists(item):
+            continue
+        path = Path(item).resolve()
+        if path == target:
+            raise NidarError(f"cannot write {out}: it is the input {item}; choose another output")
+        if target in path.parents:
+            raise NidarError(
+                f"cannot write {out}: it holds the input {item}; choose another output"
+            )
+
+
 def check_output_folder(
-    out_dir: str | os.PathLike, *, overwrite: bool = False, marker: str | None = None
+    out_dir: str | os.PathLike,
+    *,
+    overwrite: bool = False,
+    marker: str | None = None,
+    inputs: Iterable[str | os.PathLike | None] = (),
 ) -> Path:
     """Check, before any work, that a command can publish its output folder ``out_dir``.
 
@@ -175,16 +209,19 @@ def check_output_folder(
         overwrite: a non-empty folder may be replaced.
         marker: name of a file marking an earlier output of the same kind (replaced without
             ``overwrite``); see :func:`staged_directory`.
+        inputs: the files and folders the command reads; ``out_dir`` must not be or hold one
+            (:func:`check_outside_inputs`).
 
     Returns:
         ``out_dir`` as an absolute path.
 
     Raises:
-        NidarError: ``out_dir`` is a file; it is a non-empty folder that is not an earlier
-            output without ``overwrite``; or the nearest existing folder above it is not a
-            writable folder (checked by creating and removing an empty folder there; one line
-            naming the path).
+        NidarError: ``out_dir`` is or holds an input; it is a file; it is a non-empty folder
+            that is not an earlier output without ``overwrite``; or the nearest existing folder
+            above it is not a writable folder (checked by creating and removing an empty folder
+            there; one line naming the path).
     """
+    check_outside_inputs(out_dir, inputs)
     target = Path(out_dir).absolute()
     if target.exists() and not target.is_dir():
         raise NidarError(f"cannot write {target}: it exists and is not a folder")
@@ -207,7 +244,11 @@ def check_output_folder(
 
 @contextmanager
 def staged_directory(
-    out_dir: str | os.PathLike, *, overwrite: bool = False, marker: str | None = None
+    out_dir: str | os.PathLike,
+    *,
+    overwrite: bool = False,
+    marker: str | None = None,
+    inputs: Iterable[str | os.PathLike | None] = (),
 ) -> Iterator[Path]:
     """Yield a hidden staging folder that replaces ``out_dir`` whole when the block succeeds.
 
@@ -223,15 +264,16 @@ def staged_directory(
             before anything is written.
         marker: name of a file that marks ``out_dir`` as an earlier output of the same kind
             (e.g. ``manifest.json``); such a folder is replaced without ``overwrite``.
+        inputs: the files and folders the command reads (:func:`check_outside_inputs`).
 
     Yields:
         The staging folder to write into.
 
     Raises:
-        NidarError: ``out_dir`` is a file, is non-empty without ``overwrite``, or its parent
-            cannot be created or written.
+        NidarError: ``out_dir`` is or holds an input, is a file, is non-empty without
+            ``overwrite``, or its parent cannot be created or written.
     """
-    target = check_output_folder(out_dir, overwrite=overwrite, marker=marker)
+    target = check_output_folder(out_dir, overwrite=overwrite, marker=marker, inputs=inputs)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=target.parent))

@@ -363,3 +363,186 @@ def test_assign_inputs(inputs, fmt, call):
         assert np.all((got["intensity_nidar"] >= 0) & (got["intensity_nidar"] <= 1))
         ply = read_ply(out / "points.ply")
         assert np.isfinite(ply["intensity_nidar"]).all()
+
+
+# ------------------------------------------------------------------ outputs that hold inputs
+
+
+def _inputs_of(command: str, where: Path, synthetic_data) -> tuple[list, Path]:
+    """The argv of ``command`` with one input file or folder at ``where`` (``-o`` left out),
+    and that input."""
+    from nidar_mi.io.images import write_png
+    from tests.cli.conftest import TINY_SCENE
+
+    where.mkdir(parents=True)
+    image = where / "photo.png"
+    write_png(image, np.full((24, 32, 3), 128, np.uint8))
+    if command in ("render", "dataset"):
+        (where / "tiny.xml").write_text(TINY_SCENE)
+        if command == "render":
+            return [where / "tiny.xml", "-q"], where / "tiny.xml"
+        return ["--scenes", where, "-q"], where
+    if command == "train":
+        shutil.copytree(synthetic_data, where, dirs_exist_ok=True)
+        return [where, "--reduced", "-q"], where
+    return {
+        "pseudo_nir": ([image, "-q"], image),
+        "evaluate": (["--photos", where, "-q"], where),
+        "calibrate": ([where, "-q"], where),
+        "drive": (["--weights", where, "-q", "--blocks", "2,1"], where),
+        "assign": (
+            ["--points", where / "c.ply", "--image", image, "--calib", where / "c.yaml"],
+            image,
+        ),
+    }[command]
+
+
+@settings(SETTINGS, max_examples=40)
+@given(
+    command=st.sampled_from(
+        ["render", "dataset", "assign", "pseudo_nir", "evaluate", "train", "calibrate", "drive"]
+    ),
+    up=st.integers(0, 2),
+    overwrite=st.booleans(),
+)
+def test_outputs_never_hold_an_input(command, up, overwrite, call, synthetic_data):
+    """``-o`` equal to an input, or a folder above one, is refused with ``--overwrite`` or not,
+    before anything is read or written: every file stays as it was."""
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        argv, given_input = _inputs_of(command, root / "a" / "b", synthetic_data)
+        out = given_input
+        for _ in range(up):
+            out = out.parent
+        if command == "train":
+            argv = [argv[0], out, *argv[1:]]
+        else:
+            argv = [*argv, "-o", out]
+        before = _tree(root / "a")
+        status, _, err = call(command, [*argv] + ["--overwrite"] * overwrite)
+        assert not _check_contract(status, err, root / "a", before)
+        assert ("is the input" if out == given_input else "holds the input") in err, err
+        assert _tree(root / "a") == before
+
+
+# ------------------------------------------------------------------ options that interplay
+
+_DRIVE_VALUES = {
+    "--blocks": st.sampled_from(["2,1", "2,2", "1,1", "x"]),
+    "--frames": st.sampled_from(["2", "7", "1", "-3"]),
+    "--rate": st.sampled_from(["10", "0", "-1", "inf", "nan", "1e-3"]),
+    "--speed": st.sampled_from(["5", "0", "inf", "-inf", "nan", "1e9"]),
+}
+
+
+@settings(SETTINGS, max_examples=40)
+@given(
+    kind=st.sampled_from([None, "urban", "vegetated", "city", "suburb"]),
+    options=st.dictionaries(st.sampled_from(sorted(_DRIVE_VALUES)), st.none(), max_size=4).flatmap(
+        lambda d: st.fixed_dictionaries({k: _DRIVE_VALUES[k] for k in d})
+    ),
+)
+def test_scenegen_drive_options(kind, options, call):
+    """The drive options act with a city or suburb, are refused with any other kind, and a
+    value out of range (a rate or speed that is not finite and positive) is refused before
+    anything is written."""
+    legal = kind in ("city", "suburb") or not options
+    if kind in ("city", "suburb"):
+        blocks = options.get("--blocks", "4,3").split(",")
+        legal = (
+            blocks != ["x"]
+            and int(blocks[0]) >= 2
+            and int(options.get("--frames", "500")) >= 2
+            and all(0 < float(options.get(k, "10")) < math.inf for k in ("--rate", "--speed"))
+        )
+        if legal:
+            return  # generating a city is exercised in tests/scenegen
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "gen"
+        argv = ["--count", "1", "-o", out, "-q"] + (["--kind", kind] if kind else [])
+        argv += [a for kv in options.items() for a in kv]
+        status, _, err = call("scenegen", argv)
+        assert _check_contract(status, err, out, {}) == legal, err
+        if not legal:
+            assert not out.exists()
+            assert any(flag in err for flag in options), err
+
+
+@settings(SETTINGS, max_examples=30)
+@given(
+    modes=st.dictionaries(
+        st.sampled_from(["points", "kitti", "frame", "lidar"]), st.none(), max_size=4
+    ),
+)
+def test_assign_input_modes(modes, call, assign_inputs):
+    """``--points --image --calib`` and ``--kitti --frame`` exclude each other; ``--frame``
+    needs ``--kitti``, ``--lidar`` needs ``--calib``."""
+    argv = list(assign_inputs) if "points" in modes else []
+    if "kitti" in modes:
+        argv += ["--kitti", Path(assign_inputs[1]).parent]
+    argv += ["--frame", "000000"] * ("frame" in modes) + ["--lidar", "l"] * ("lidar" in modes)
+    kitti_ok = set(modes) == {"kitti", "frame"}
+    points_ok = "points" in modes and not ({"kitti", "frame"} & set(modes))
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "out"
+        status, _, err = call("assign", [*argv, "-o", out])
+        if points_ok and "lidar" not in modes:
+            assert _check_contract(status, err, out, {}), err
+            return
+        assert not _check_contract(status, err, out, {})
+        if not kitti_ok and not points_ok:  # the mode itself is refused, not a file
+            want = ("--kitti", "--frame", "--points", "--lidar")
+            assert any(f in err for f in want), err
+
+
+@settings(SETTINGS, max_examples=30)
+@given(
+    form=st.sampled_from(["gbm", "range_ring", "distance_quantile"]),
+    incidence=st.sampled_from([None, "--incidence", "--no-incidence"]),
+    no_geometry=st.booleans(),
+)
+def test_calibrate_form_options(form, incidence, no_geometry, call):
+    """``--incidence``/``--no-incidence`` and ``--no-geometry`` act with the gbm form only
+    (``--no-geometry`` also needs the incidence); otherwise refused before any scan is read."""
+    reads_incidence = form == "gbm" and incidence != "--no-incidence"
+    legal = (incidence is None or form == "gbm") and (not no_geometry or reads_incidence)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "p.json"
+        argv = [Path(tmp) / "no_scans", "-o", out, "--form", form, "-q"]
+        argv += [incidence] * bool(incidence) + ["--no-geometry"] * no_geometry
+        status, _, err = call("calibrate", argv)
+        assert not _check_contract(status, err, Path(tmp) / "x", {})  # no scans: refused anyway
+        assert not out.exists()
+        option_refused = "needs --form gbm" in err or "--no-geometry needs" in err
+        assert option_refused == (not legal), err
+
+
+@settings(SETTINGS, max_examples=30)
+@given(split=st.lists(_small(-1, 2), min_size=1, max_size=4))
+def test_dataset_split_fractions(split, call):
+    """``--split``: three fractions in [0, 1] that sum to 1, or one refusal naming it."""
+    text = ",".join(map(str, split))
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    legal = len(values) == 3 and all(0 <= v <= 1 for v in values) and abs(sum(values) - 1) <= 1e-6
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "data"
+        status, _, err = call("dataset", ["--scenes", tmp, "-o", out, "--split", text, "-q"])
+        assert not _check_contract(status, err, out, {})  # no scene there: refused anyway
+        assert ("--split" in err) == (not legal), err
+        assert not out.exists()
+
+
+@settings(SETTINGS, max_examples=20)
+@given(figures=st.integers(-5, 5))
+def test_evaluate_figures(figures, call):
+    """``--figures`` below 0 is refused before anything else is looked at."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "out"
+        argv = ["--photos", tmp, "--figures", str(figures), "-o", out, "-q"]
+        status, _, err = call("evaluate", argv)
+        assert not _check_contract(status, err, out, {})  # no photos there: refused anyway
+        assert ("--figures" in err) == (figures < 0), err
+        assert not out.exists()

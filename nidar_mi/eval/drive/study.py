@@ -399,7 +399,7 @@ def run_study(
     from .report import write_report
 
     cfg.check()
-    check_output_folder(out, overwrite=overwrite, marker=MARKER)
+    check_output_folder(out, overwrite=overwrite, marker=MARKER, inputs=[cfg.weights, cfg.sequence])
     os.makedirs(out, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
