@@ -273,7 +273,7 @@ def test_calibrate_incidence_needs_the_gbm_form(flag, tmp_path, call, one_error_
     kitti = make_kitti(tmp_path / "kitti", frames=1, cols=90)
     out = tmp_path / "p.json"
     status, _, err = call("calibrate", [kitti, "-o", out, "--form", "range_ring", flag])
-    one_error_line(status, err, f"{flag} needs --form gbm (got --form range_ring)")
+    one_error_line(status, err, f"{flag} needs --form gbm or physical (got --form range_ring)")
     assert not out.exists()
 
 
