@@ -76,7 +76,7 @@ def test_points_image_calib(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     # a cloud of an unknown sensor: the generic profile, named, with a warning on how to calibrate
-    assert "profile: generic-compensated (" in r.stderr
+    assert "profile: generic-compensated (" in r.stdout
     assert "warning: unknown sensor" in r.stderr and "python -m nidar_mi.calibrate" in r.stderr
     p = read_npz(out / "points.npz")
     assert sorted(os.listdir(out)) == ["points.las", "points.npz", "points.ply"]
@@ -123,7 +123,7 @@ def test_kitti_frame(tmp_path):
     r = run("nidar_mi.assign", *args, "-o", str(out), env=env)
     assert r.returncode == 0, r.stderr
     assert "fitting the kitti-hdl64e profile" in r.stderr
-    assert "profile: kitti-hdl64e (" in r.stderr and "unknown sensor" not in r.stderr
+    assert "profile: kitti-hdl64e (" in r.stdout and "unknown sensor" not in r.stderr
     p = read_npz(out / "points.npz")
     xyz, refl = read_kitti_bin(os.path.join(KITTI, "velodyne", "000000.bin"))
     np.testing.assert_array_equal(p["xyz"], xyz)

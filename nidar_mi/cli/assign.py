@@ -38,7 +38,6 @@ The work is :mod:`nidar_mi.cloud_intensity`'s; this module parses the command li
 from __future__ import annotations
 
 import os
-import sys
 
 from ..errors import NidarError
 from ._common import parser, run
@@ -162,7 +161,8 @@ def _assign(args) -> None:
         profile=profile,
     )
     written = write_points(out, points, formats, args.overwrite)
-    print(profile_line(profile, branch=args.branch), file=sys.stderr)
+    if not args.quiet:
+        print(profile_line(profile, branch=args.branch))
     if unknown:
         warn_unknown_sensor()
     n, seen = len(points["xyz"]), int(points["nidar_observed"].sum())

@@ -11,7 +11,6 @@ scene is rendered along a trajectory, one render folder per frame
 from __future__ import annotations
 
 import os
-import sys
 
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
@@ -256,7 +255,8 @@ def _render_options(args):
     if args.intensity == "nidar":
         from ..datasets.sensor_profiles import profile_line
 
-        print(profile_line(args.profile, branch=args.nidar_branch), file=sys.stderr)
+        if not args.quiet:
+            print(profile_line(args.profile, branch=args.nidar_branch))
     if args.profile is not None:
         if args.intensity != "nidar":
             raise NidarError("--profile applies to --intensity nidar")

@@ -58,10 +58,10 @@ def test_non_finite_points_are_dropped_with_a_count(tmp_path, call, assign_input
     argv = ["--points", path, *assign_inputs[2:], "-o", tmp_path / "out"]
     status, out, err = call("assign", argv)
     assert status == 0, err
-    lines = err.strip().splitlines()  # then the profile line and the unknown sensor's warning
+    lines = err.strip().splitlines()  # then the unknown sensor's warning
     assert lines[0] == f"warning: {path}: dropped 4 of {n} points with NaN or infinite values"
-    assert lines[1].startswith("profile: generic-compensated (")
-    assert lines[2].startswith("warning: unknown sensor") and len(lines) == 3
+    assert lines[1].startswith("warning: unknown sensor") and len(lines) == 2
+    assert out.startswith("profile: generic-compensated (")  # the profile used, on stdout
     keep = np.ones(n, bool)
     keep[[3, 7, 11, 20]] = False
     for fmt, p in _outputs(tmp_path / "out").items():
@@ -135,10 +135,10 @@ def test_the_renderers_own_files_and_columns(tmp_path, call, tiny_scene, variant
     assert status == 0, err
     argv = ["--points", render / "lidar/points.npz", "--calib", render / "cam/calib.json"]
     argv += ["--image", render / "cam/rgb.png", "-o", tmp_path / "out"]
-    status, _, err = call("assign", argv)
+    status, out, err = call("assign", argv)
     assert status == 0, err
     # the simulator's own cloud: its own profile, no warning of an unknown sensor
-    assert "profile: sim-905 (" in err and "unknown sensor" not in err
+    assert "profile: sim-905 (" in out and "unknown sensor" not in err
     src = read_npz(render / "lidar/points.npz")
     outs = _outputs(tmp_path / "out")
     for fmt, p in outs.items():
