@@ -11,6 +11,7 @@ from nidar_mi.scenegen.generate import generate_scene
 def test_module_runs_and_resumes(tmp_path):
     out = tmp_path / "gen"
     cmd = [sys.executable, "-m", "nidar_mi.scenegen", "--count", "2", "--seed", "6", "-o", str(out)]
+    cmd += ["--progress"]  # a pipe is not a terminal: bars only when asked for
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "2 scenes written, 0 already there" in r.stdout
