@@ -249,7 +249,9 @@ def test_the_command_line_becomes_evaluate_options():
     assert not opts.twin and not opts.progress and not opts.scans_scenes
     assert opts.command == "python -m nidar_mi.evaluate ..."
     opts = options(_parser().parse_args(["--data", "d", "-o", "o"]), "")
-    assert opts.twin and opts.progress and opts.scans_scenes and opts.figures == 3
+    assert opts.twin and opts.scans_scenes and opts.figures == 3
+    assert not opts.progress  # stderr is not a terminal here: no bars unless asked for
+    assert options(_parser().parse_args(["--data", "d", "-o", "o", "--progress"]), "").progress
 
 
 def test_the_library_names_parameters_and_the_command_flags(tmp_path, capsys):
