@@ -24,7 +24,7 @@ def test_keys_in_use_are_found_again():
     """The caches named before the shared helper keep their names (ablation runs, a render's
     record of its profile)."""
     from nidar_mi.eval.suite import _ablation_key
-    from nidar_mi.render_session import _profile_key
+    from nidar_mi.render_session import profile_key
 
     meta = {"request": {"scene": "a.xml", "spp": 4}, "frames": 3, "intensity_scale": 1.5}
     assert _ablation_key(meta, "/nonexistent/stn.pt") == "d99ad2ac5bf0f3df"
@@ -36,5 +36,5 @@ def test_keys_in_use_are_found_again():
             mapping = {"edges": [0.0, 10.0], "gain": [1.0, 0.5]}
             return {"name": "sim-905", "form": "range_ring", "mapping": mapping, "version": 1}
 
-    assert _profile_key(Profile()) == "sim-905@3330e7ee029d1c91"
-    assert _profile_key(None) is None
+    assert profile_key(Profile()) == "sim-905@3330e7ee029d1c91"
+    assert profile_key(None) is None
