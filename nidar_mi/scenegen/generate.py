@@ -369,12 +369,15 @@ def generate(
     bar = progress_bar(total=count, show=progress, desc="scenegen", unit="scene")
     written = skipped = 0
     try:
-        # the files already there first: one of another run is refused before anything is written
+        # the files already there first: one of another run is refused before anything is
+        # written; those to skip or keep are remembered (without their text)
         there = {}
         for k in range(count):
             if os.path.exists(os.path.join(out_dir, f"{scene_id(seed, k)}.xml")):
-                there[k] = _plan(folder, seed, k, options, overwrite)
-                bar.update(1)
+                scene = _plan(folder, seed, k, options, overwrite)
+                if scene.action != "write":
+                    there[k] = scene
+                    bar.update(1)
         for k in range(count):
             scene = there.pop(k, None)
             if scene is None:
