@@ -8,6 +8,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STREET = os.path.join(REPO, "scenes", "street.xml")
@@ -249,3 +251,17 @@ def test_kitti_sequence_intensity_is_that_of_each_frames_bin(tmp_path, trajector
             assert exported.max() <= 1.0 and exported.max() > raw.max()
         else:
             np.testing.assert_array_equal(exported, raw)
+
+
+@settings(deadline=None, max_examples=50)
+@given(frames=st.integers(1, 10**12), max_frames=st.integers(1, 10**12))
+def test_the_frame_bound_refuses_exactly_the_frames_above_it(trajectory, frames, max_frames):
+    from nidar_mi.errors import NidarError
+    from nidar_mi.sequence import SequenceOptions, check_sequence
+
+    options = SequenceOptions(STREET, trajectory, frames=frames, max_frames=max_frames)
+    if frames <= max_frames:
+        check_sequence(options)
+        return
+    with pytest.raises(NidarError, match=rf"`frames` {frames} is more than the limit of "):
+        check_sequence(options)

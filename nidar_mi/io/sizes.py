@@ -16,14 +16,16 @@ __all__ = ["check_disk", "format_size", "free_space", "parse_size"]
 
 
 def parse_size(text: str) -> int:
-    """Bytes from ``'512M'``, ``'16G'``, ``'1.5T'`` or a plain number of bytes.
+    """Bytes from ``'512M'``, ``'16G'``, ``'1.5T'`` (K, M, G, T, P: powers of 1024) or a plain
+    number of bytes.
 
     Raises:
         ValueError: not a positive size.
     """
     t = str(text).strip().upper().removesuffix("B").removesuffix("I")
-    scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}.get(t[-1:], 1)
-    number = t[:-1] if t[-1:] in "KMGT" and t else t
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40, "P": 1 << 50}
+    scale = units.get(t[-1:], 1)
+    number = t[:-1] if t[-1:] in units and t else t
     try:
         value = float(number) * scale
     except ValueError:
