@@ -80,6 +80,10 @@ class CameraRender:
             wavelengths were asked for.
         reflectance: (H,W) float32 monostatic ρ(λ)·T² per pixel centre at ``wavelength``
             (module docstring), or None when not rendered.
+        albedo: (H,W,3) float32 linear sRGB of the surfaces' diffuse reflectance (their
+            shading-free colour, :func:`_albedo`), or None when not rendered.
+        surface_reflectance: (H,W) float32 the surfaces' diffuse reflectance at ``wavelength``
+            (no viewing-direction effect), or None when not rendered.
     """
 
     name: str
@@ -92,6 +96,8 @@ class CameraRender:
     timings: dict[str, float] = field(default_factory=dict)
     other_nir: dict[float, np.ndarray] = field(default_factory=dict)
     reflectance: np.ndarray | None = None
+    albedo: np.ndarray | None = None
+    surface_reflectance: np.ndarray | None = None
 
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -203,6 +209,51 @@ def _reflectance(scene, camera, W: int, H: int, wavelength: float) -> np.ndarray
     rho, _, _ = monostatic_reflectance(beams, wl)
     out = (rho * beams.two_way_transmittance).numpy().astype(np.float32).reshape(H, W)
     return np.where(np.isfinite(out), np.maximum(out, 0.0), 0.0).astype(np.float32)
+
+
+def _surface_reflectance(scene, camera, W: int, H: int, wavelengths) -> np.ndarray:
+    """(H, W, n) float32 diffuse reflectance of the surface through each pixel centre, 0 on the sky.
+
+    The BSDF's ``eval_diffuse_reflectance`` at each of the ``n`` wavelengths (nm): the albedo of
+    a diffuse surface, the pigment layer of a plastic, 0 for a smooth metal or glass. Unlike
+    :func:`_reflectance` it does not depend on the viewing direction: it is the surface's own
+    reflectance. Values clipped to [0, 1]; non-finite ones (a material without data at a
+    wavelength) are 0. The surface is the one the LiDAR's return model sees through glass
+    (:func:`~nidar_mi.lidar.raycast.cast`).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from .lidar.raycast import cast
+
+    idx = dr.arange(mi.UInt32, W * H)
+    px = (mi.Float(idx % W) + 0.5) / W
+    py = (mi.Float(idx // W) + 0.5) / H
+    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(px, py), mi.Point2f(0.5))
+    beams = cast(scene, mi.Ray3f(ray.o, dr.normalize(ray.d)), mi.Float(550.0))
+    si, hit = beams.si, beams.hit
+    bsdf = si.bsdf(beams.ray)
+    out = np.zeros((W * H, len(wavelengths)), np.float32)
+    for k, wl in enumerate(wavelengths):
+        si.wavelengths = mi.UnpolarizedSpectrum(float(wl))
+        rho = dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit)[0], 0.0).numpy()
+        out[:, k] = np.where(np.isfinite(rho), np.clip(rho, 0.0, 1.0), 0.0)
+    return out.reshape(H, W, len(wavelengths))
+
+
+def _albedo(scene, camera, W: int, H: int, wavelength: float) -> tuple[np.ndarray, np.ndarray]:
+    """The surfaces' own colour and reflectance at λ (:func:`_surface_reflectance`).
+
+    Returns:
+        ((H, W, 3) float32 linear sRGB under D65 of the diffuse reflectance, unclipped
+        (:func:`~nidar_mi.materials.visible_albedo.srgb_weights`); (H, W) float32 diffuse
+        reflectance at ``wavelength``).
+    """
+    from .materials.visible_albedo import ALBEDO_WAVELENGTHS_NM, srgb_weights
+
+    rho = _surface_reflectance(scene, camera, W, H, [*ALBEDO_WAVELENGTHS_NM, wavelength])
+    rgb = rho[..., :-1].astype(np.float64) @ srgb_weights()
+    return rgb.astype(np.float32), rho[..., -1]
 
 
 #: NIR twins of cameras, by variant, lens, film, band and spp (a few at most): a sequence moves
@@ -354,8 +405,9 @@ def render_camera(
     seed: int = 0,
     other_wavelengths=(),
     nir: bool = True,
+    albedo: bool = True,
 ) -> CameraRender:
-    """Render RGB, NIR band, depth and reflectance at λ of one camera of a loaded scene.
+    """Render RGB, NIR band, depth, reflectance at λ and albedo of one camera of a loaded scene.
 
     Args:
         loaded: a :class:`nidar_mi.scene.LoadedScene`.
@@ -365,6 +417,8 @@ def render_camera(
         seed: sampler seed, in [0, 2**32).
         other_wavelengths: further NIR band centres in nm (``CameraRender.other_nir``).
         nir: render the NIR bands (False: ``nir`` is all zeros; NIDAR needs only RGB).
+        albedo: also give the surfaces' albedo colour and their reflectance at λ (the true maps
+            that training frames carry; False: both None).
     """
     import mitsuba as mi
 
@@ -402,6 +456,11 @@ def render_camera(
     t0 = time.perf_counter()
     reflectance = _reflectance(scene, camera, W, H, wavelength)
     timings["reflectance"] = time.perf_counter() - t0
+    colour = surface = None
+    if albedo:
+        t0 = time.perf_counter()
+        colour, surface = _albedo(scene, camera, W, H, wavelength)
+        timings["albedo"] = time.perf_counter() - t0
     images = [("rgb", rgb), ("nir", nir)] + [(f"nir {wl:g} nm", b) for wl, b in bands.items()]
     for name, img in images:
         if not np.all(np.isfinite(img)):
@@ -424,4 +483,6 @@ def render_camera(
         timings=timings,
         other_nir=bands,
         reflectance=reflectance,
+        albedo=colour,
+        surface_reflectance=surface,
     )

@@ -89,6 +89,18 @@ FRAME_KEYS: dict[str, FrameKey] = {
         "true shading π·nir/R_true (the irradiance at λ for a Lambertian surface), 0 where "
         f"R_true < {R_TRUE_MIN:g}",
     ),
+    "R_surface": FrameKey(
+        np.float32,
+        ("H", "W"),
+        "the surface's own diffuse reflectance at λ per pixel (no viewing-direction effect: "
+        "gloss, opposition surge), 0 on the sky",
+    ),
+    "A_true": FrameKey(
+        np.float32,
+        ("H", "W", 3),
+        "the surface's visible albedo colour per pixel: linear sRGB under D65 of its diffuse "
+        "reflectance (shading-free), 0 on the sky",
+    ),
     "points_xyz": FrameKey(
         np.float32, ("N", 3), "the LiDAR returns the camera sees (unoccluded), LiDAR frame, m"
     ),

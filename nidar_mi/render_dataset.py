@@ -140,6 +140,7 @@ def frames_of_render(render_dir: str, lidar_id: str | None = None):
             with np.errstate(divide="ignore", invalid="ignore"):
                 s_true = np.where(r_true >= R_TRUE_MIN, np.pi * nir / r_true, 0.0)
             frame["R_true"], frame["S_true"] = r_true, s_true.astype(np.float32)
+            frame["A_true"], frame["R_surface"] = cam.albedo(), cam.surface_reflectance()
         yield cam.name, frame, r.parameters
 
 

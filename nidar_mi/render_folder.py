@@ -5,7 +5,8 @@ One module owns the layout (the table of files is in the README, "Rendering")::
     OUT/manifest.json                           the request, versions, resolved parameters, timings
     OUT/<lidar_id>/points.{npz,ply,las,bin,pcd} valid returns (schema: nidar_mi.io.points)
     OUT/<lidar_id>/range_image.exr, range.png, intensity.png
-    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, reflectance.exr, calib.json
+    OUT/<camera_id>/rgb.{png,exr}, nir.{png,exr}, depth.exr, reflectance.exr, albedo.exr,
+        surface_reflectance.exr, calib.json
     OUT/<camera_id>/nir_<λ>nm.{png,exr}          further NIR bands (LiDARs at other wavelengths)
 
 Writers take the in-memory results (:class:`~nidar_mi.lidar.scan.ScanResult`,
@@ -54,8 +55,8 @@ BIN_INTENSITY = ("unit", "raw")
 #: The manifest's file name; its presence marks a folder as a render folder.
 MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
-#: without ``reflectance.exr``) are rendered again.
-LAYOUT_VERSION = 2
+#: without ``reflectance.exr`` or ``albedo.exr``) are rendered again.
+LAYOUT_VERSION = 3
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -197,8 +198,9 @@ POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "bin": 16}
 DESKEW_BYTES = 12
 #: Bytes per beam of ``range_image.exr`` (4 float32 channels, uncompressed).
 RANGE_IMAGE_BYTES = 16
-#: Bytes per pixel of a camera: rgb.exr, nir.exr, depth.exr, reflectance.exr, rgb.png, nir.png.
-PIXEL_BYTES = 28
+#: Bytes per pixel of a camera: rgb.exr, nir.exr, depth.exr, reflectance.exr, albedo.exr,
+#: surface_reflectance.exr, rgb.png, nir.png.
+PIXEL_BYTES = 44
 #: Bytes per pixel of each further NIR band (its .exr and .png).
 BAND_PIXEL_BYTES = 5
 #: A manifest's entry and calib.json, per sensor, bytes (a LiDAR's laser table is most of it).
@@ -381,6 +383,14 @@ def write_camera(
     }
     if render.reflectance is not None:
         outputs["reflectance.exr"] = lambda p: images.write_exr(p, {"Y": render.reflectance})
+    if render.albedo is not None:
+        a = render.albedo
+        outputs["albedo.exr"] = lambda p: images.write_exr(
+            p, {"R": a[..., 0], "G": a[..., 1], "B": a[..., 2]}
+        )
+    if render.surface_reflectance is not None:
+        rs = render.surface_reflectance
+        outputs["surface_reflectance.exr"] = lambda p: images.write_exr(p, {"Y": rs})
     nir_images = {f"{render.wavelength:g}": "nir.exr"}
     for wl, band in render.other_nir.items():
         name = nir_file(wl)
@@ -467,6 +477,27 @@ class RenderedCamera:
         from .io.images import read_exr
 
         return _single_channel(read_exr(os.path.join(self.folder, "reflectance.exr")))
+
+    def albedo(self) -> np.ndarray:
+        """(H, W, 3) float32 linear sRGB of the surfaces' diffuse reflectance (albedo.exr).
+
+        Raises:
+            NidarError: the folder has no albedo.exr.
+        """
+        from .io.images import read_exr
+
+        channels = read_exr(os.path.join(self.folder, "albedo.exr"))
+        return np.stack([channels[c] for c in "RGB"], -1).astype(np.float32)
+
+    def surface_reflectance(self) -> np.ndarray:
+        """(H, W) float32 the surfaces' diffuse reflectance at λ (surface_reflectance.exr).
+
+        Raises:
+            NidarError: the folder has no surface_reflectance.exr.
+        """
+        from .io.images import read_exr
+
+        return _single_channel(read_exr(os.path.join(self.folder, "surface_reflectance.exr")))
 
 
 @dataclass

@@ -611,6 +611,7 @@ def _shoot_frame(shot: _FrameShot) -> dict:
             other_wavelengths=wavelengths[1:],
             spp=session.options.spp,
             seed=shot.seed(session.options.seed or 0),
+            albedo=False,
         )
         render_s = time.perf_counter() - ts
         entry = {

@@ -1,4 +1,5 @@
-"""Camera renders: NIR band normalisation, Lambertian radiance, depth, intrinsics, RGB-emitter warning."""
+"""Camera renders: NIR band normalisation, Lambertian radiance, depth, intrinsics, RGB-emitter
+warning, reflectance and albedo maps."""
 
 import warnings
 
@@ -17,12 +18,12 @@ CAM = """
 """
 
 
-def _render(write_scene, body, wl=905.0, spp=4, tx=5, tz=1):
+def _render(write_scene, body, wl=905.0, spp=4, tx=5, tz=1, albedo=True):
     from nidar_mi.camera import render_camera
     from nidar_mi.scene import load_scene
 
     L = load_scene(write_scene(CAM.format(wl=wl, tx=tx, tz=tz) + body))
-    return render_camera(L, L.cameras[0], wavelength=wl, spp=spp, seed=1)
+    return render_camera(L, L.cameras[0], wavelength=wl, spp=spp, seed=1, albedo=albedo)
 
 
 @pytest.mark.parametrize("wl", [905.0, 1550.0])
@@ -104,3 +105,44 @@ def test_reflectance_behind_glass_carries_the_two_way_transmittance(variant, wri
     R = 0.04
     T = 1 - 2 * R / (1 + R)  # thin slab, multiple reflections
     np.testing.assert_allclose(centre, 0.5 * T**2, rtol=2e-3)  # rays within 2.5 deg of normal
+
+
+def test_albedo_is_the_colour_of_the_surface_spectrum(variant, write_scene):
+    """The albedo colour of a Lambertian plane is the D65 linear sRGB of its spectrum
+    (colour-science's integration, :func:`spectrum_to_linear_srgb`), its surface reflectance ρ(λ)
+    whatever the viewing angle; a rough plastic's albedo is its pigment layer, not its gloss."""
+    from nidar_mi.materials.spectra import Spectrum
+    from nidar_mi.materials.srgb import spectrum_to_linear_srgb
+
+    spectrum = "400:0.1, 500:0.2, 550:0.6, 650:0.3, 905:0.5, 1600:0.8"
+    body = f"""
+    <emitter type="constant"><spectrum name="radiance" value="300:2, 1700:2"/></emitter>
+    <shape type="rectangle"><transform name="to_world"><scale value="1000"/></transform>
+        <bsdf type="diffuse"><spectrum name="reflectance" value="{spectrum}"/></bsdf></shape>
+    """
+    wl, values = zip(*[map(float, p.split(":")) for p in spectrum.split(", ")])
+    expected = spectrum_to_linear_srgb(Spectrum(np.array(wl), np.array(values)))
+    r = _render(write_scene, body, wl=905.0, tx=3, tz=0)
+    ground = r.depth > 0
+    assert r.albedo.shape == (*r.depth.shape, 3) and r.albedo.dtype == np.float32
+    np.testing.assert_allclose(
+        r.albedo[ground], np.broadcast_to(expected, (ground.sum(), 3)), atol=2e-3
+    )
+    np.testing.assert_allclose(r.surface_reflectance[ground], 0.5, rtol=1e-5)
+    assert (r.albedo[~ground] == 0).all() and (r.surface_reflectance[~ground] == 0).all()
+
+    plastic = """
+    <emitter type="constant"><spectrum name="radiance" value="300:2, 1700:2"/></emitter>
+    <shape type="rectangle"><transform name="to_world"><scale value="20"/><rotate y="1" angle="-90"/>
+        <translate x="4"/></transform><bsdf type="roughplastic"><float name="alpha" value="0.1"/>
+        <spectrum name="diffuse_reflectance" value="0.3"/></bsdf></shape>
+    """
+    r = _render(write_scene, plastic, tx=5, tz=1)
+    np.testing.assert_allclose(r.surface_reflectance, 0.3, rtol=1e-5)
+    assert r.reflectance[7:9, 11:13].min() > 1.0  # monostatically the gloss dominates
+    np.testing.assert_allclose(r.albedo, 0.3, atol=2e-3)
+
+
+def test_albedo_can_be_left_out(variant, write_scene):
+    r = _render(write_scene, '<shape type="sphere"><bsdf type="diffuse"/></shape>', albedo=False)
+    assert r.albedo is None and r.surface_reflectance is None

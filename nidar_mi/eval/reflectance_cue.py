@@ -94,8 +94,24 @@ def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
     return maps
 
 
+def _truth_maps(path: Path) -> dict[str, np.ndarray]:
+    """The frame's true maps that rank a cue from below (ceilings), where it carries them."""
+    from ..frames import frame_has
+
+    if not frame_has(path, ("A_true",)):
+        return {}
+    from ..materials.visible_albedo import colour_reflectance_map
+
+    a_true = load_frame(path, ("A_true",))["A_true"]
+    return {"true albedo colour -> rho (earthlib map)": colour_reflectance_map(905.0)(a_true)}
+
+
 def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str, float]]:
     """Spearman of each source's value against ρ at the returns (module docstring).
+
+    Two truths: the frame's sparse ``reflectance`` (ρ = π·f_r(ω, ω) along each beam: gloss,
+    opposition surge and incidence included) and, on frames that carry it, ``R_surface`` at the
+    same pixels (the surface's own diffuse reflectance at λ, what a per-surface cue can know).
 
     Args:
         frames: rendered frame files.
@@ -103,24 +119,36 @@ def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str
         stn: the STN whose pseudo-NIR is scored as a source (None: not scored).
 
     Returns:
-        ``{source: {"per_frame": mean Spearman, "pooled": Spearman over all returns}}``.
+        ``{source: {"per_frame": mean Spearman, "pooled": Spearman over all returns}}`` against
+        ρ, plus ``"surface_per_frame"`` and ``"surface_pooled"`` against ``R_surface`` when
+        every frame has it. Sources: ``luminance``, ``pseudo_nir``, ``R:<name>``, and on frames
+        with ``A_true`` the earthlib colour map of the true albedo (a ceiling).
     """
-    per: dict[str, list[float]] = {}
+    from ..frames import frame_has
+
+    surface = all(frame_has(p, ("R_surface",)) for p in frames)
+    truths = ("reflectance", "R_surface") if surface else ("reflectance",)
+    per: dict[tuple[str, str], list[float]] = {}
     pooled: dict[str, list[np.ndarray]] = {}
-    rho_all = []
+    truth_all: dict[str, list[np.ndarray]] = {t: [] for t in truths}
     for path in frames:
-        f = load_frame(path, ("rgb", "reflectance", "mask"))
+        f = load_frame(path, ("rgb", "mask", *truths))
         m = f["mask"]
-        rho = f["reflectance"][m].astype(np.float64)
-        rho_all.append(rho)
-        for name, v in _maps(models, f["rgb"], stn).items():
-            per.setdefault(name, []).append(_spearman(v[m], rho))
+        maps = _maps(models, f["rgb"], stn) | _truth_maps(path)
+        for t in truths:
+            truth = f[t][m].astype(np.float64)
+            truth_all[t].append(truth)
+            for name, v in maps.items():
+                per.setdefault((name, t), []).append(_spearman(v[m], truth))
+        for name, v in maps.items():
             pooled.setdefault(name, []).append(v[m].astype(np.float64))
-    rho = np.concatenate(rho_all)
-    return {
-        k: {"per_frame": _nanmean(per[k]), "pooled": _spearman(np.concatenate(v), rho)}
-        for k, v in pooled.items()
-    }
+    out = {}
+    for name, values in pooled.items():
+        v = np.concatenate(values)
+        for t, prefix in zip(truths, ("", "surface_")):
+            out.setdefault(name, {})[f"{prefix}per_frame"] = _nanmean(per[(name, t)])
+            out[name][f"{prefix}pooled"] = _spearman(v, np.concatenate(truth_all[t]))
+    return out
 
 
 def _returns_with_r(frames: list[Path], stn, irnet, grey: bool) -> dict[str, np.ndarray]:
@@ -207,11 +235,14 @@ def main(argv=None) -> int:
         train = _frames_of(args.train, ("train",))
         result["gain"] = {n: image_gain(train, test, *m) for n, m in models.items()}
     for k, v in result["cue"].items():
-        print(f"cue  {k:32s} per-frame {v['per_frame']:+.3f}  pooled {v['pooled']:+.3f}")
+        line = f"cue  {k:40s} vs rho: per-frame {v['per_frame']:+.3f}  pooled {v['pooled']:+.3f}"
+        if "surface_pooled" in v:
+            line += f"  vs R_surface: {v['surface_per_frame']:+.3f} / {v['surface_pooled']:+.3f}"
+        print(line)
     for k, v in result.get("gain", {}).items():
         g, i = v["gain"], v["image"]
         print(
-            f"gain {k:32s} image {i['per_frame']:+.3f}/{i['pooled']:+.3f}  "
+            f"gain {k:40s} image {i['per_frame']:+.3f}/{i['pooled']:+.3f}  "
             f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
         )
     if args.out:

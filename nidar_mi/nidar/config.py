@@ -133,6 +133,10 @@ class IRNetConfig:
     stride 16)."""
 
 
+#: What the supervised reflectance term compares R with (``LossConfig.r_target``).
+R_TARGETS = ("monostatic", "surface", "colour")
+
+
 @dataclass
 class LossConfig:
     """Weights and constants of the STN and IRNet objectives."""
@@ -167,6 +171,13 @@ class LossConfig:
     """Weight of the supervised reflectance term ``mean |R - R_true|`` over the pixels with a
     surface (``R_true >= 1e-3``): rendered frames only, which know the true reflectance at the
     LiDAR wavelength (package addition; :func:`~nidar_mi.nidar.losses.reflectance_supervision_loss`)."""
+    r_target: str = "monostatic"
+    """What ``lambda_r_true`` supervises R with, on rendered frames (:data:`R_TARGETS`):
+    ``"monostatic"`` the frame's ``R_true`` (π·f_r(ω, ω) along the camera ray: gloss, opposition
+    surge and incidence included); ``"surface"`` its ``R_surface`` (the surface's own diffuse
+    reflectance at λ); ``"colour"`` the ρ(λ) its visible albedo colour ``A_true`` predicts
+    (:func:`~nidar_mi.materials.visible_albedo.colour_reflectance_map`, fitted on the earthlib
+    library): a target the image fixes once the shading is removed (package addition)."""
     lambda_s_true: float = 0.0
     """Weight of the supervised shading term, scale-invariant in log space (the network
     input's exposure normalisation leaves the scale of ``S`` free): rendered frames only
@@ -301,6 +312,11 @@ class TrainConfig:
             )
         if self.stn.num_outputs < 1 or self.stn.num_outputs > self.stn.levels:
             raise NidarError("stn.num_outputs must lie in [1, stn.levels]")
+        if self.loss.r_target not in R_TARGETS:
+            raise NidarError(
+                f"unknown loss.r_target {self.loss.r_target!r}; choose one of "
+                + ", ".join(R_TARGETS)
+            )
         if self.irnet.output_stride not in (2, 4, 8, 16, 32):
             raise NidarError("irnet.output_stride must be 2, 4, 8, 16 or 32")
         for name, value in (

@@ -156,6 +156,34 @@ class STNDataset(FrameDataset):
         return {"rgb": self._apply(rgb, window, flip), "nir": self._apply(nir, window, flip)}
 
 
+#: Frame keys each ``r_target`` reads beside ``R_true`` (:class:`~nidar_mi.nidar.config.LossConfig`).
+_R_TARGET_KEYS = {"monostatic": (), "surface": ("R_surface",), "colour": ("A_true",)}
+
+
+def reflectance_target(arrays: dict, r_target: str, wavelength_nm: float) -> np.ndarray:
+    """(H, W) float32 target of the supervised reflectance term, 0 where ``R_true`` has no surface.
+
+    Args:
+        arrays: a rendered frame's ``R_true`` and the key ``r_target`` reads (``R_surface``
+            or ``A_true``).
+        r_target: ``"monostatic"``, ``"surface"`` or ``"colour"``
+            (:attr:`~nidar_mi.nidar.config.LossConfig.r_target`).
+        wavelength_nm: the LiDAR wavelength of ``"colour"``'s map.
+    """
+    r_true = arrays["R_true"]
+    if r_target == "monostatic":
+        return r_true
+    if r_target == "surface":
+        target = arrays["R_surface"]
+    else:
+        from ..materials.visible_albedo import colour_reflectance_map
+
+        target = colour_reflectance_map(wavelength_nm)(arrays["A_true"])
+    from ..frames import R_TRUE_MIN
+
+    return np.where(r_true >= R_TRUE_MIN, np.maximum(target, R_TRUE_MIN), 0.0).astype(np.float32)
+
+
 class IRNetDataset(FrameDataset):
     """Network input and sparse intensity supervision for IRNet.
 
@@ -204,8 +232,12 @@ class IRNetDataset(FrameDataset):
         missing_targets_zero: bool = False,
         supervise_intensity: bool = True,
         colour: str | None = None,
+        r_target: str = "monostatic",
+        wavelength_nm: float = 905.0,
     ) -> None:
         super().__init__(frames, crop_size, seed, train)
+        self.r_target = r_target
+        self.wavelength_nm = float(wavelength_nm)
         self.colour = colour
         self.missing_targets_zero = bool(missing_targets_zero)
         self.supervise_intensity = bool(supervise_intensity)
@@ -234,8 +266,10 @@ class IRNetDataset(FrameDataset):
 
             zero_targets = self.missing_targets_zero and not frame_has(path, ("R_true",))
             if not zero_targets:
-                keys = (*keys, "R_true", "S_true")
+                keys = (*keys, "R_true", "S_true", *_R_TARGET_KEYS[self.r_target])
         arrays = load_frame(path, keys)
+        if not zero_targets and self.intrinsic_targets:
+            arrays["R_true"] = reflectance_target(arrays, self.r_target, self.wavelength_nm)
         if zero_targets:
             zeros = np.zeros(arrays["mask"].shape, np.float32)
             arrays["R_true"], arrays["S_true"] = zeros, zeros

@@ -226,11 +226,11 @@ def train_irnet(
                 "rendered frames mixed in supervise the decomposition only: set "
                 "loss.lambda_r_true and/or loss.lambda_s_true above 0"
             )
-        _check_intrinsic_frames(renders)
+        _check_intrinsic_frames(renders, cfg.loss.r_target)
         _check_render_sizes(renders, cfg)
         inputs["renders"] = sorted(str(f) for f in renders)
     elif cfg.intrinsic_supervision:
-        _check_intrinsic_frames(split_frames["train"] + split_frames["val"])
+        _check_intrinsic_frames(split_frames["train"] + split_frames["val"], cfg.loss.r_target)
     init_state = None
     if init_weights is not None:
         init_state = _init_state(cfg, Path(init_weights))
@@ -286,6 +286,8 @@ def train_irnet(
             scale=cfg.scale,
             intrinsic_targets=cfg.intrinsic_supervision,
             missing_targets_zero=bool(renders),
+            r_target=cfg.loss.r_target,
+            wavelength_nm=float(meta.get("wavelength_nm") or 905.0),
             colour=cfg.irnet.input if INPUT_CHANNELS[cfg.irnet.input] == 4 else None,
         )
         train_set = IRNetDataset(
@@ -484,16 +486,24 @@ def _stored_config(path: Path, kind: str, config_cls):
         raise NidarError(f"{path}: invalid network configuration") from None
 
 
-def _check_intrinsic_frames(frames: list[Path]) -> None:
-    """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not)."""
+def _check_intrinsic_frames(frames: list[Path], r_target: str = "monostatic") -> None:
+    """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not), and
+    the map ``r_target`` reads (``R_surface`` or ``A_true``: frames rendered by this version)."""
     from ..frames import frame_has
+    from .data import _R_TARGET_KEYS
 
+    extra = _R_TARGET_KEYS[r_target]
     for path in frames:
         if not frame_has(path, ("R_true", "S_true")):
             raise NidarError(
                 f"loss.lambda_r_true / lambda_s_true need rendered frames with R_true and "
                 f"S_true; {path} has none (real frames carry no true reflectance: mix rendered "
                 f"frames in with `render_frames`)"
+            )
+        if extra and not frame_has(path, extra):
+            raise NidarError(
+                f"loss.r_target {r_target!r} needs rendered frames with {extra[0]}; {path} has "
+                "none (render the dataset again with this version)"
             )
 
 

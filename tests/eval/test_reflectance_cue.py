@@ -40,9 +40,25 @@ def test_scores_of_every_source(data):
     irnet = build_irnet(IRNetConfig(variant="unet", width=4, unet_depth=2)).eval()
     frames = list_frames(data, "test")
     cue = score_cues(frames, {"m": (stn, irnet)}, stn)
-    assert set(cue) == {"luminance", "pseudo_nir", "R:m"}
+    ceiling = "true albedo colour -> rho (earthlib map)"
+    assert set(cue) == {"luminance", "pseudo_nir", "R:m", ceiling}
     for v in cue.values():
-        assert -1.0 <= v["pooled"] <= 1.0 and -1.0 <= v["per_frame"] <= 1.0
+        assert set(v) == {"per_frame", "pooled", "surface_per_frame", "surface_pooled"}
+        assert all(-1.0 <= x <= 1.0 for x in v.values())
+    # the synthetic frames have no gloss: ρ at the returns is the surface's own reflectance, and
+    # the ceiling is the Spearman of the colour map of the albedo with it, pooled
+    from scipy.stats import spearmanr
+
+    from nidar_mi.materials.visible_albedo import colour_reflectance_map
+
+    colours, rho = [], []
+    for f in frames:
+        a = load_frame(f, ("A_true", "mask", "reflectance"))
+        colours.append(colour_reflectance_map(905.0)(a["A_true"][a["mask"]]))
+        rho.append(a["reflectance"][a["mask"]])
+    expected = spearmanr(np.concatenate(colours), np.concatenate(rho)).statistic
+    assert cue[ceiling]["pooled"] == pytest.approx(expected, abs=1e-9)
+    assert cue[ceiling]["surface_pooled"] == pytest.approx(expected, abs=1e-9)
     gain = image_gain(list_frames(data, "train"), frames, stn, irnet)
     assert set(gain) == {"image", "grey", "gain"}
     for key in ("per_frame", "pooled"):  # NaN where an untrained R gives a flat profile

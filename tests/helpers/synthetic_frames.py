@@ -6,7 +6,8 @@ encoded as 8-bit sRGB, the NIR image ``rho * shading``, and the LiDAR intensity
 ``intensity_scale * rho * shading`` on every third row of the lower two thirds of the image
 (a scan pattern only partly overlapping the camera's view; each such row is one ring, and each
 return lies on the surface at the pixel's ``depth``). ``R_true = rho`` and ``S_true = π ·
-shading`` (so that ``S_true = π · nir / R_true``, as for rendered frames). The format is the one
+shading`` (so that ``S_true = π · nir / R_true``, as for rendered frames), ``R_surface = rho`` and
+``A_true`` the albedo (no gloss: the surface and monostatic reflectances agree). The format is the one
 :mod:`nidar_mi.nidar.data` reads; the content only has to be learnable, not realistic.
 """
 
@@ -82,6 +83,8 @@ def synthetic_frame(
         "T_cam_lidar": t,
         "R_true": rho[labels].astype(np.float32),
         "S_true": (np.pi * shading).astype(np.float32),
+        "R_surface": rho[labels].astype(np.float32),
+        "A_true": albedo[labels].astype(np.float32),
         "points_xyz": xyz.astype(np.float32),
         "points_intensity": intensity[rows, cols],
         "points_ring": ring.astype(np.int16),

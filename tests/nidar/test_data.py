@@ -27,7 +27,13 @@ def test_synthetic_frames_follow_the_format(data_dir):
     assert len(list_frames(data_dir, "val")) == 2 and len(list_frames(data_dir, "test")) == 1
     f = load_frame(frames[0])
     n = int(f["mask"].sum())
-    shapes = {"rgb": (48, 64, 3), "K": (3, 3), "T_cam_lidar": (4, 4), "points_xyz": (n, 3)}
+    shapes = {
+        "rgb": (48, 64, 3),
+        "A_true": (48, 64, 3),
+        "K": (3, 3),
+        "T_cam_lidar": (4, 4),
+        "points_xyz": (n, 3),
+    }
     shapes |= {"points_intensity": (n,), "points_ring": (n,)}
     assert set(f) == set(FRAME_KEYS) == set(FRAME_SOURCES[meta["source"]])
     for key, (dtype, _, _) in FRAME_KEYS.items():
@@ -125,6 +131,25 @@ def test_irnet_dataset_keeps_input_and_supervision_aligned(tmp_path, data_dir):
         np.testing.assert_allclose(
             (item["R_true"] * item["S_true"]).numpy(), np.pi * item["x"].numpy(), rtol=1e-5
         )
+
+
+def test_reflectance_targets_read_the_surface_or_its_colour(data_dir):
+    """``r_target``: the monostatic ``R_true``, the surface's ``R_surface``, or the earthlib
+    colour map of the albedo ``A_true``, all under the same crop and flip."""
+    from nidar_mi.materials.visible_albedo import colour_reflectance_map
+
+    frames = list_frames(data_dir, "train")
+    arrays = load_frame(frames[0], ("A_true", "R_surface"))
+    items = {}
+    for target in ("monostatic", "surface", "colour"):
+        ds = IRNetDataset(
+            frames, 255.0, (48, 64), train=False, intrinsic_targets=True, r_target=target
+        )
+        items[target] = ds[0]["R_true"].numpy()[0]
+    np.testing.assert_allclose(items["surface"], arrays["R_surface"], rtol=1e-6)
+    np.testing.assert_allclose(items["monostatic"], arrays["R_surface"], rtol=1e-6)  # no gloss
+    expected = np.maximum(colour_reflectance_map(905.0)(arrays["A_true"]), 1e-3)
+    np.testing.assert_allclose(items["colour"], expected, rtol=1e-6)
 
 
 def test_crop_larger_than_frame_is_a_user_error(data_dir):

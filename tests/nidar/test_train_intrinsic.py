@@ -73,6 +73,26 @@ def test_frames_without_true_maps_are_refused(data_dir, tmp_path):
         train_irnet(_cfg(lambda_r_true=1.0), real, tmp_path / "out", progress=False)
 
 
+def test_a_reflectance_target_the_frames_lack_is_refused(data_dir, tmp_path):
+    old = tmp_path / "old"
+    for split in ("train", "val", "test"):
+        (old / split).mkdir(parents=True)
+        for f in list_frames(data_dir, split):
+            with np.load(f) as npz:
+                keep = {k: npz[k] for k in npz.files if k != "A_true"}
+            np.savez(old / split / f.name, **keep)
+    (old / "meta.json").write_text((data_dir / "meta.json").read_text())
+    with pytest.raises(
+        NidarError, match="loss.r_target 'colour' needs rendered frames with A_true"
+    ):
+        train_irnet(
+            _cfg(lambda_r_true=1.0, r_target="colour"), old, tmp_path / "out", progress=False
+        )
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(NidarError, match="unknown loss.r_target 'albedo'"):
+        _cfg(lambda_r_true=1.0, r_target="albedo").validate()
+
+
 def test_negative_weight_is_a_config_error():
     with pytest.raises(NidarError, match="lambda_s_true"):
         _cfg(lambda_s_true=-0.1).validate()

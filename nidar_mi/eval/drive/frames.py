@@ -183,6 +183,7 @@ def _render(scene_path, poses, folder, todo, rgb_twin, cameras, params, spp, see
                 spp=spp,
                 seed=seed + k,
                 nir=False,
+                albedo=False,
             )
             T_cam_lidar = np.linalg.inv(r.T_world_cam) @ poses[k]
             with atomic_path(_frame_path(folder, k, "cam_")) as tmp, open(tmp, "wb") as f:
