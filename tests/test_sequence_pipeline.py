@@ -13,6 +13,8 @@ import time
 import numpy as np
 import pytest
 
+from tests.helpers.signals import default_sigint
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STREET = os.path.join(REPO, "scenes", "street.xml")
 SMALL = {"width": "32", "height": "18", "cols": "256"}
@@ -192,6 +194,7 @@ def test_a_signal_stops_a_long_camera_render_quickly(tmp_path, sig, status):
         cwd=REPO,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_sigint,
     )
     try:
         _wait_for_render(tmp_path)

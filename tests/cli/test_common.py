@@ -23,6 +23,7 @@ from nidar_mi.cli._common import (
     run,
 )
 from nidar_mi.errors import NidarError
+from tests.helpers.signals import default_sigint
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -100,10 +101,6 @@ def test_command_list_and_versions():
     assert r.returncode == 0 and "python -m nidar_mi.render" in r.stdout
 
 
-def _default_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 @pytest.mark.parametrize(
     "sig, status, word",
     [
@@ -124,7 +121,7 @@ def test_signal_during_render_leaves_nothing(tmp_path, sig, status, word):
         text=True,
         # a test run started as a background job of a non-interactive shell ignores SIGINT, and
         # children inherit that: give the command the default disposition a terminal gives it
-        preexec_fn=_default_sigint,
+        preexec_fn=default_sigint,
     )
     deadline = time.monotonic() + 120
     while not any(p.name.startswith(".street.partial-") for p in tmp_path.iterdir()):

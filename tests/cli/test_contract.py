@@ -16,6 +16,7 @@ import pytest
 
 from nidar_mi.cli import COMMANDS
 from nidar_mi.cli._common import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
+from tests.helpers.signals import default_sigint
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -268,6 +269,7 @@ def test_sigterm_during_a_dataset_build(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_sigint,
     )
     _wait_for(lambda: (data / "renders").is_dir(), proc, "the first render")
     proc.send_signal(signal.SIGTERM)
