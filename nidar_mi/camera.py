@@ -233,12 +233,23 @@ def _surface_reflectance(scene, camera, W: int, H: int, wavelengths) -> np.ndarr
     beams = cast(scene, mi.Ray3f(ray.o, dr.normalize(ray.d)), mi.Float(550.0))
     si, hit = beams.si, beams.hit
     bsdf = si.bsdf(beams.ray)
-    out = np.zeros((W * H, len(wavelengths)), np.float32)
-    for k, wl in enumerate(wavelengths):
-        si.wavelengths = mi.UnpolarizedSpectrum(float(wl))
-        rho = dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit)[0], 0.0).numpy()
-        out[:, k] = np.where(np.isfinite(rho), np.clip(rho, 0.0, 1.0), 0.0)
-    return out.reshape(H, W, len(wavelengths))
+    dr.eval(si, hit, bsdf)
+    # a spectral variant carries 4 wavelengths per lane: 4 at a time, the wavelengths as data
+    # (opaque), so one kernel serves every group
+    lanes = 4
+    wl = np.asarray(wavelengths, np.float64)
+    padded = np.concatenate((wl, np.full(-len(wl) % lanes, wl[-1])))
+    out = np.zeros((W * H, len(padded)), np.float32)
+    for k in range(0, len(padded), lanes):
+        group = [dr.opaque(mi.Float, float(x)) for x in padded[k : k + lanes]]
+        si.wavelengths = mi.UnpolarizedSpectrum(*group)
+        rho = bsdf.eval_diffuse_reflectance(si, hit)
+        values = [dr.select(hit, rho[j], 0.0) for j in range(lanes)]
+        dr.eval(*values)  # one kernel for the group
+        for j, v in enumerate(values):
+            v = v.numpy()
+            out[:, k + j] = np.where(np.isfinite(v), np.clip(v, 0.0, 1.0), 0.0)
+    return out[:, : len(wl)].reshape(H, W, len(wl))
 
 
 def _albedo(scene, camera, W: int, H: int, wavelength: float) -> tuple[np.ndarray, np.ndarray]:

@@ -48,6 +48,8 @@ def test_every_file_is_written(street_out):
         "cam_front/nir.exr",
         "cam_front/depth.exr",
         "cam_front/reflectance.exr",
+        "cam_front/albedo.exr",
+        "cam_front/surface_reflectance.exr",
         "cam_front/calib.json",
     }
     found = {str(p.relative_to(street_out)) for p in street_out.rglob("*") if p.is_file()}

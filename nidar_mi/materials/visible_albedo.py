@@ -3,7 +3,8 @@
 A camera sees ``albedo × shading``; once the shading is removed, the albedo's colour is what an
 image can tell about a surface. Two pieces turn that colour into a LiDAR reflectance cue:
 
-* :func:`srgb_weights` — ``(41, 3)`` weights ``W`` such that ``rho(λ_k) @ W`` is the linear
+* :func:`srgb_weights` — ``(41, 3)`` weights (shipped in ``data/albedo_srgb_weights.csv``,
+  written by :func:`write_srgb_weights`) ``W`` such that ``rho(λ_k) @ W`` is the linear
   sRGB (D65 white, unclipped) of a reflectance sampled at :data:`ALBEDO_WAVELENGTHS_NM`
   (380–780 nm every 10 nm) and read linearly between the samples, exactly as
   :func:`nidar_mi.materials.srgb.spectrum_to_linear_srgb` reads a spectrum (CIE 1931 2°, D65,
@@ -22,6 +23,7 @@ unlike ρ(λ) itself, which the visible image does not fix.
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,17 +34,24 @@ __all__ = [
     "ALBEDO_WAVELENGTHS_NM",
     "ColourReflectanceMap",
     "colour_reflectance_map",
+    "compute_srgb_weights",
     "srgb_weights",
+    "write_srgb_weights",
 ]
 
 #: Wavelengths (nm) at which the albedo is sampled for its colour.
 ALBEDO_WAVELENGTHS_NM = np.arange(380.0, 781.0, 10.0)
 
 
-@functools.lru_cache(maxsize=1)
-def srgb_weights() -> np.ndarray:
+#: :func:`compute_srgb_weights`, as shipped (read without importing colour-science, which takes
+#: seconds; ``tests/materials/test_visible_albedo.py`` checks the file against the computation).
+WEIGHTS_FILE = os.path.join(os.path.dirname(__file__), "data", "albedo_srgb_weights.csv")
+
+
+def compute_srgb_weights() -> np.ndarray:
     """(41, 3) float64 ``W``: linear sRGB = ``rho_k @ W`` for ρ sampled at
-    :data:`ALBEDO_WAVELENGTHS_NM` (linear between samples, zero outside 375–785 nm's hats)."""
+    :data:`ALBEDO_WAVELENGTHS_NM` (read linearly between the samples): the colour-science sRGB
+    of each sample's hat function (module docstring)."""
     from .spectra import Spectrum
     from .srgb import _colour, spectrum_to_xyz
 
@@ -57,6 +66,35 @@ def srgb_weights() -> np.ndarray:
         xyz = spectrum_to_xyz(Spectrum(grid, hat))
         rows.append(colour.XYZ_to_sRGB(xyz, apply_cctf_encoding=False))
     return np.asarray(rows, dtype=np.float64)
+
+
+@functools.lru_cache(maxsize=1)
+def srgb_weights() -> np.ndarray:
+    """(41, 3) float64: :func:`compute_srgb_weights` as shipped in :data:`WEIGHTS_FILE`.
+
+    Raises:
+        NidarError: the file is missing or not a (41, 3) table of the wavelengths.
+    """
+    try:
+        table = np.loadtxt(WEIGHTS_FILE, delimiter=",", skiprows=1, ndmin=2)
+    except (OSError, ValueError) as e:
+        raise NidarError(f"cannot read the albedo colour weights {WEIGHTS_FILE}: {e}") from e
+    if table.shape != (len(ALBEDO_WAVELENGTHS_NM), 4) or not np.array_equal(
+        table[:, 0], ALBEDO_WAVELENGTHS_NM
+    ):
+        raise NidarError(f"{WEIGHTS_FILE}: expected wavelength,R,G,B rows at 380-780 nm")
+    return table[:, 1:]
+
+
+def write_srgb_weights(path: str = WEIGHTS_FILE) -> None:
+    """Write :func:`compute_srgb_weights` as ``wavelength_nm,R,G,B`` rows (full precision)."""
+    w = compute_srgb_weights()
+    lines = ["wavelength_nm,R,G,B"] + [
+        f"{x:g}," + ",".join(repr(float(v)) for v in row)
+        for x, row in zip(ALBEDO_WAVELENGTHS_NM, w)
+    ]
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
 
 
 @dataclass(frozen=True)

@@ -63,3 +63,9 @@ def test_bad_inputs_of_the_map():
         colour_reflectance_map(300.0)
     with pytest.raises(NidarError, match="`rgb` must end in 3 colour channels"):
         colour_reflectance_map(905.0)(np.zeros((4, 2)))
+
+
+def test_the_shipped_weights_are_the_computed_ones():
+    from nidar_mi.materials.visible_albedo import compute_srgb_weights
+
+    np.testing.assert_array_equal(srgb_weights(), compute_srgb_weights())
