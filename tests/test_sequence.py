@@ -149,7 +149,7 @@ def test_memory_limit_refuses_with_one_line(tmp_path):
     assert "lidar 'lidar_top': the scan needs about" in r.stderr and "--max-memory" in r.stderr
     assert not out.exists() and not [p for p in tmp_path.iterdir() if ".partial-" in p.name]
     r = run_cli(STREET, "-o", str(out), "--max-memory", "lots", *SMALL)
-    assert r.returncode == 2 and "not a memory size" in r.stderr
+    assert r.returncode == 2 and "not a size in bytes" in r.stderr
 
 
 @pytest.fixture(scope="module")

@@ -29,9 +29,9 @@ def parse_size(text: str) -> int:
     try:
         value = float(number) * scale
     except ValueError:
-        raise ValueError(f"not a memory size: '{text}' (e.g. 512M, 16G)") from None
+        raise ValueError(f"not a size in bytes: '{text}' (e.g. 512M, 16G)") from None
     if not value > 0 or value != value or value == float("inf"):
-        raise ValueError(f"not a positive memory size: '{text}'")
+        raise ValueError(f"not a positive size in bytes: '{text}'")
     return int(value)
 
 
