@@ -4,9 +4,15 @@ On rendered frames (:mod:`nidar_mi.dataset`, ``source`` ``render``) two numbers 
 
 * **cue**: Spearman of the value at the LiDAR returns against the true reflectance ρ(λ) there
   (the frame's sparse ``reflectance`` map, on its ``mask`` pixels): per frame (mean) and over
-  every return of every frame (pooled). Sources: the camera's luminance (Rec. 709 of the linear
-  RGB), the STN's pseudo-NIR, and the R map of each NIDAR weights folder, all at the frame's
-  own resolution (``scale`` 1).
+  every return of every frame (pooled). That ρ is π·f_r(ω, ω) along the beam, so the gloss of
+  paint, the opposition surge of rough asphalt and concrete and the incidence are in it; frames
+  rendered with the albedo maps also carry ``R_surface``, the surface's own diffuse reflectance
+  at λ, and every cue is scored against it too (``surface_per_frame``, ``surface_pooled``): what
+  a per-surface cue can know. Sources: the camera's luminance (Rec. 709 of the linear RGB), the
+  STN's pseudo-NIR, the R map of each NIDAR weights folder, all at the frame's own resolution
+  (``scale`` 1), and on frames with ``A_true`` the earthlib colour map of the true albedo colour
+  (:func:`~nidar_mi.materials.visible_albedo.colour_reflectance_map`: what the visible colour
+  could tell with the shading perfectly removed).
 * **image gain** (NIDAR weights only): a ``gbm`` profile of R and the incidence ``|cos θ|``
   (the form of ``sim-905``; the incidence estimated from each scan's points,
   :func:`nidar_mi.geometry.incidence_cosine`) is fitted on the returns of the training frames;

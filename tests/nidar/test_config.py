@@ -93,12 +93,21 @@ def test_shipped_config_json_loads():
     cfg = TrainConfig.from_dict(record["train"])
     cfg.validate()
     written = json.loads(json.dumps(cfg.to_dict()))
-    # settings added after the shipped model was trained take their defaults
-    default = TrainConfig().to_dict()
-    assert {k: v for k, v in written.items() if k in record["train"]} == record["train"]
-    assert {k: v for k, v in written.items() if k not in record["train"]} == {
-        k: default[k] for k in written if k not in record["train"]
-    }
+    default = json.loads(json.dumps(TrainConfig().to_dict()))
+
+    def check(written, recorded, default):
+        # the recorded settings are kept; settings added after the shipped model was trained
+        # (at any depth) take their defaults
+        for k, v in written.items():
+            if k not in recorded:
+                assert v == default[k], k
+            elif isinstance(v, dict):
+                check(v, recorded[k], default[k])
+            else:
+                assert v == recorded[k], k
+        assert set(recorded) <= set(written)
+
+    check(written, record["train"], default)
 
 
 @pytest.mark.parametrize(
