@@ -222,9 +222,10 @@ def _cell(runs, column: int, signed: bool = False) -> str:
     return f"{a.mean():{fmt}}" + (f" ± {a.std():.3f}" if a.size > 1 else "")
 
 
-def _per_seed(runs) -> str:
-    """The seeds' (raw, binned) pairs, e.g. ``+0.010/+0.020; ...``."""
-    return "; ".join(f"{r:+.3f}/{b:+.3f}" for r, b in runs)
+def _per_seed(runs, signed: bool = False) -> str:
+    """The seeds' (raw, binned) pairs, e.g. ``0.510/0.320; ...`` (``+0.010/+0.020`` signed)."""
+    fmt = "+.3f" if signed else ".3f"
+    return "; ".join(f"{r:{fmt}}/{b:{fmt}}" for r, b in runs)
 
 
 def table(groups: dict[str, list], values: Values, ks, seeds: int, extra_ks=None) -> Iterator[str]:
@@ -247,9 +248,7 @@ def table(groups: dict[str, list], values: Values, ks, seeds: int, extra_ks=None
             yield f"| {VALUE_SOURCES[source]} | {RECIPE} | {kk} | {row} |"
         if "nidar" in runs and "geometry" in runs:
             gain = [(a[0] - b[0], a[1] - b[1]) for a, b in zip(runs["nidar"], runs["geometry"])]
-            row = (
-                f"{_cell(gain, 0, True)} | {_cell(gain, 1, True)} | {len(gain)} | {_per_seed(gain)}"
-            )
+            row = f"{_cell(gain, 0, True)} | {_cell(gain, 1, True)} | {len(gain)} | {_per_seed(gain, True)}"
             yield f"| **image gain** (NIDAR R − geometry only) | {RECIPE} | {kk} | {row} |"
 
 
