@@ -1,18 +1,34 @@
-"""How the score of a calibrated sensor profile grows with the frames it is fitted on.
+"""How the score of a calibrated sensor profile grows with the frames it is fitted on, and what
+the camera image adds on drives the fit never saw.
 
-``python benchmarks/calibrate_frames.py [--data DIR] [--ks 1,3,10,all] [--seeds 3] [--weights DIR]``
+``python benchmarks/calibrate_frames.py [--data DIR] [--ks 1,3,10,all] [--seeds 3]
+[--sources nidar,geometry,luminance,stn] [--extra-ks KS] [--weights DIR]``
 
 Leave-one-drive-out over the real KITTI frames under ``--data`` (default: the data root,
 ``../shared/data``): the groups are ``kitti_raw_0926`` (one drive), each drive of
 ``kitti_more`` (``rDDDD_*``: drive DDDD), its object frames (``obj*``), its odometry frames
 (``o04_*``), and ``kitti`` (scattered frames). For every held-out group and every K, a profile
-of the ``kitti-hdl64e`` recipe (``gbm`` of the R branch with the incidence,
+of the ``kitti-hdl64e`` recipe (``gbm`` of the per-return value with the incidence,
 :func:`nidar_mi.datasets.profile_fitting.fit_values_profile`) is fitted on K frames drawn at
 random (seeded) from the other groups, and scored on every frame of the held-out group, which no
 fit ever saw: Spearman's ρ against the stored reflectance and the range-binned Spearman
 (:func:`nidar_mi.eval.scan_metrics.binned_spearman`), the mean over the group's frames. K = 0
 rows are the generic profiles (closed forms, no fit). A row gives the mean over the groups (each
 group counts once) and the spread over the seeds (standard deviation of that mean).
+
+The per-return value comes from one of these sources (:data:`VALUE_SOURCES`), each sampled at
+the returns the same way (:func:`sample_scan_maps`); every source of a row sees the same groups,
+the same K frames of each seed and the same recipe:
+
+* ``nidar``: NIDAR's R map of the camera image;
+* ``geometry``: R of a uniform grey image of the same size (8-bit level
+  :data:`~nidar_mi.eval.reflectance_cue.GREY_LEVEL`): the profile keeps the range, incidence
+  and ring, but no image information;
+* ``luminance``: Rec. 709 luminance of the image's linear RGB
+  (:func:`nidar_mi.eval.reflectance_cue.luminance`);
+* ``stn``: the STN's pseudo-NIR.
+
+The image gain of a K is NIDAR R minus geometry only, per seed (paired draws).
 
 Prints a Markdown table; nothing is written. KITTI is non-commercial data: only numbers are
 reported.
@@ -23,23 +39,39 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from nidar_mi.datasets.paths import data_root
-from nidar_mi.datasets.profile_fitting import fit_values_profile, scan_values
-from nidar_mi.datasets.scans import load_scans
+from nidar_mi.datasets.profile_fitting import fit_values_profile
+from nidar_mi.datasets.scans import ScanFrame, load_scans
 from nidar_mi.datasets.sensor_profiles import (
     GENERIC_COMPENSATED_PROFILE,
     GENERIC_RAW_PROFILE,
     generic_profile,
 )
 from nidar_mi.eval.metrics import spearman
+from nidar_mi.eval.reflectance_cue import GREY_LEVEL, luminance
 from nidar_mi.eval.scan_metrics import binned_spearman
 from nidar_mi.nidar.pipeline import NidarModel
 
-SOURCES = ("kitti_raw_0926", "kitti_more", "kitti")
+#: The KITTI folders of the data root that are read.
+FOLDERS = ("kitti_raw_0926", "kitti_more", "kitti")
+#: Value source -> its label in the table (module docstring).
+VALUE_SOURCES = {
+    "nidar": "NIDAR R",
+    "geometry": "geometry only (R of a grey image)",
+    "luminance": "luminance",
+    "stn": "STN pseudo-NIR",
+}
+#: The sources that are R maps: fitted at every K (the others at ``--extra-ks`` only).
+R_SOURCES = ("nidar", "geometry")
+#: The recipe's label.
+RECIPE = "gbm + incidence (kitti-hdl64e recipe)"
+
+Values = dict[str, dict[str, np.ndarray]]  # source -> frame name -> (N,) values
 
 
 def group_of(name: str) -> str:
@@ -52,89 +84,222 @@ def group_of(name: str) -> str:
     return "obj" if fid.startswith("obj") else fid.split("_", 1)[0]
 
 
-def score(profile, scans, values) -> tuple[float, float]:
-    """Mean Spearman and range-binned Spearman of ``profile`` over ``scans``."""
+def sample_scan_maps(scan: ScanFrame, maps: Sequence[dict[str, np.ndarray]]) -> Values:
+    """Per-camera maps sampled at a scan's returns, as the profile fit samples NIDAR's maps
+    (:func:`nidar_mi.datasets.profile_fitting.scan_branches`: no second occlusion test).
+
+    Args:
+        scan: the scan (C cameras).
+        maps: per camera, name -> (H, W) map at that camera's image size (any unit).
+
+    Returns:
+        name -> (N,) float64 values at the returns, NaN where no camera gives one.
+    """
+    from nidar_mi.geometry import sample_cameras
+
+    out = {}
+    for name in maps[0]:
+        values, seen, _ = sample_cameras(
+            scan.xyz, scan.cameras, [m[name] for m in maps], occlusion=False
+        )
+        out[name] = np.where(seen, values, np.nan).astype(np.float64)
+    return out
+
+
+def image_maps(model: NidarModel, rgb: np.ndarray, sources: Sequence[str], grey: dict) -> dict:
+    """Each source's (H, W) float32 map of one (H, W, 3) uint8 image (module docstring).
+
+    ``grey`` caches R of the grey image by image shape (the same for every image of a size).
+    """
+    out = {}
+    if "nidar" in sources or "stn" in sources:
+        pred = model.predict_image(rgb)
+        out |= {"nidar": pred["R"], "stn": pred["pseudo_nir"]}
+    if "geometry" in sources:
+        if rgb.shape not in grey:
+            grey[rgb.shape] = model.predict_image(np.full_like(rgb, GREY_LEVEL))["R"]
+        out["geometry"] = grey[rgb.shape]
+    if "luminance" in sources:
+        out["luminance"] = luminance(rgb)
+    return {s: out[s] for s in sources}
+
+
+def source_values(model: NidarModel, scans: Sequence[ScanFrame], sources: Sequence[str]) -> Values:
+    """Every source's values at every scan's returns: source -> frame name -> (N,) float64."""
+    grey: dict = {}
+    out: Values = {s: {} for s in sources}
+    for scan in scans:
+        maps = [image_maps(model, im, sources, grey) for im in scan.images]
+        for s, v in sample_scan_maps(scan, maps).items():
+            out[s][scan.name] = v
+    return out
+
+
+def score(profile, scans: Sequence[ScanFrame], values: dict[str, np.ndarray]) -> tuple:
+    """Mean Spearman and range-binned Spearman of ``profile`` over ``scans`` (``values``:
+    frame name -> (N,) values; returns without a finite value are left out)."""
     rho, rho_bin = [], []
     for s in scans:
         v = values[s.name]
         ok = np.isfinite(v)
         cos = s.cos_incidence[ok] if profile.uses_incidence else None
+        d = s.range_m[ok]
         pred = profile(
             v[ok],
-            s.range_m[ok],
+            d,
             ring=s.ring[ok] if np.all(s.ring >= 0) else None,
             elevation_deg=s.elevation_deg[ok],
             cos_incidence=cos,
         )
         rho.append(spearman(pred, s.intensity[ok]))
-        rho_bin.append(binned_spearman(pred, s.intensity[ok], s.range_m[ok]))
+        rho_bin.append(binned_spearman(pred, s.intensity[ok], d))
     return float(np.nanmean(rho)), float(np.nanmean(rho_bin))
 
 
-def fitted(train, values, seed: int):
+def fitted(train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int, source: str):
+    """The recipe's profile of ``source``'s values fitted on ``train``."""
     return fit_values_profile(
         train,
         lambda s: values[s.name],
-        name=f"k{len(train)}-s{seed}",
+        name=f"{source}-k{len(train)}-s{seed}",
         sensor="KITTI HDL-64E",
-        input="nidar:R",
+        input=f"bench:{source}",
         incidence=True,
         seed=seed,
     )
 
 
-def rows(groups, values, ks, seeds):
-    """Yield ``(label, K, [(spearman, binned) per seed])`` (means over the held-out groups)."""
+def draw(pool: Sequence[ScanFrame], k: int | None, seed: int) -> list[ScanFrame]:
+    """K frames of ``pool`` drawn at random with ``seed`` (None: the whole pool)."""
+    if k is None:
+        return list(pool)
+    rng = np.random.default_rng(seed)
+    return [pool[i] for i in rng.permutation(len(pool))[:k]]
+
+
+def splits(groups: dict[str, list], k: int | None, seed: int) -> Iterator[tuple[str, list]]:
+    """``(held-out group, the K fit frames)`` for every group; the fit frames are drawn from the
+    other groups only."""
     names = sorted(groups)
-    for gen in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):
-        prof = generic_profile(gen)
-        per = [score(prof, groups[g], values) for g in names]
-        yield gen, 0, [tuple(np.mean(per, axis=0))]
-    for k in ks:
-        runs = []
-        for seed in range(1 if k is None else seeds):
-            per = []
-            for g in names:
-                pool = [s for h in names if h != g for s in groups[h]]
-                rng = np.random.default_rng(seed)
-                pick = pool if k is None else [pool[i] for i in rng.permutation(len(pool))[:k]]
-                per.append(score(fitted(pick, values, seed), groups[g], values))
-            runs.append(tuple(np.mean(per, axis=0)))
-        yield "gbm + incidence (kitti-hdl64e recipe)", ("all" if k is None else k), runs
+    for g in names:
+        pool = [s for h in names if h != g for s in groups[h]]
+        yield g, draw(pool, k, seed)
 
 
-def _cell(runs, column: int) -> str:
+def generic_rows(groups: dict[str, list], values: Values) -> Iterator[tuple]:
+    """``(source, profile label, 0, [(spearman, binned)])`` of the generic profiles, for the
+    sources that are R maps (the closed forms read a reflectance in [0, 1])."""
+    names = sorted(groups)
+    for source, vals in values.items():
+        if source not in R_SOURCES:
+            continue
+        for gen in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):
+            prof = generic_profile(gen)
+            per = [score(prof, groups[g], vals) for g in names]
+            yield source, gen, 0, [tuple(np.mean(per, axis=0))]
+
+
+def fitted_runs(groups: dict[str, list], values: Values, k: int | None, seeds: int) -> dict:
+    """source -> [(spearman, binned) per seed], means over the held-out groups, for one K.
+
+    Every source is fitted on the same draws (one draw per held-out group and seed).
+    """
+    runs: dict[str, list] = {s: [] for s in values}
+    for seed in range(1 if k is None else seeds):
+        per: dict[str, list] = {s: [] for s in values}
+        for g, pick in splits(groups, k, seed):
+            for source, vals in values.items():
+                per[source].append(score(fitted(pick, vals, seed, source), groups[g], vals))
+        for source in values:
+            runs[source].append(tuple(np.mean(per[source], axis=0)))
+    return runs
+
+
+def _cell(runs, column: int, signed: bool = False) -> str:
     """``mean ± sd`` over the seeds (the mean alone for one run)."""
     a = np.asarray(runs)[:, column]
-    return f"{a.mean():.3f}" + (f" ± {a.std():.3f}" if a.size > 1 else "")
+    fmt = "+.3f" if signed else ".3f"
+    return f"{a.mean():{fmt}}" + (f" ± {a.std():.3f}" if a.size > 1 else "")
 
 
-def main(argv=None) -> int:
+def _per_seed(runs, signed: bool = False) -> str:
+    """The seeds' (raw, binned) pairs, e.g. ``0.510/0.320; ...`` (``+0.010/+0.020`` signed)."""
+    fmt = "+.3f" if signed else ".3f"
+    return "; ".join(f"{r:{fmt}}/{b:{fmt}}" for r, b in runs)
+
+
+def table(groups: dict[str, list], values: Values, ks, seeds: int, extra_ks=None) -> Iterator[str]:
+    """The Markdown table's rows, as they finish (the gain row after each K's source rows).
+
+    ``extra_ks``: the K (None: the whole pool) at which the sources other than
+    :data:`R_SOURCES` are fitted (default: every K).
+    """
+    yield "| values | profile | K frames | Spearman | range-binned Spearman | seeds | per seed |"
+    yield "| --- | --- | --- | --- | --- | --- | --- |"
+    for source, label, k, runs in generic_rows(groups, values):
+        yield f"| {VALUE_SOURCES[source]} | {label} | {k} | {_cell(runs, 0)} | {_cell(runs, 1)} | 1 | |"
+    for k in ks:
+        extra = extra_ks is None or k in extra_ks
+        vals = {s: v for s, v in values.items() if extra or s in R_SOURCES}
+        runs = fitted_runs(groups, vals, k, seeds)
+        kk = "all" if k is None else k
+        for source, r in runs.items():
+            row = f"{_cell(r, 0)} | {_cell(r, 1)} | {len(r)} | {_per_seed(r)}"
+            yield f"| {VALUE_SOURCES[source]} | {RECIPE} | {kk} | {row} |"
+        if "nidar" in runs and "geometry" in runs:
+            gain = [(a[0] - b[0], a[1] - b[1]) for a, b in zip(runs["nidar"], runs["geometry"])]
+            row = f"{_cell(gain, 0, True)} | {_cell(gain, 1, True)} | {len(gain)} | {_per_seed(gain, True)}"
+            yield f"| **image gain** (NIDAR R − geometry only) | {RECIPE} | {kk} | {row} |"
+
+
+def _parse(argv):
     ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     ap.add_argument("--data", default=None, help="folder holding the KITTI folders")
     ap.add_argument("--ks", default="1,3,10,all", help="frame counts (all: the whole pool)")
     ap.add_argument("--seeds", type=int, default=3, help="random draws of the K frames")
+    ap.add_argument(
+        "--sources", default=",".join(VALUE_SOURCES), help="value sources (module docstring)"
+    )
+    ap.add_argument(
+        "--extra-ks",
+        default=None,
+        help="K at which luminance and STN pseudo-NIR are fitted (default: every K of --ks)",
+    )
     ap.add_argument("--weights", default=None, help="NIDAR weights (default: the shipped)")
     args = ap.parse_args(argv)
+    args.sources = [s.strip() for s in args.sources.split(",") if s.strip()]
+    bad = [s for s in args.sources if s not in VALUE_SOURCES]
+    if bad or not args.sources:
+        ap.error(f"--sources: one or more of {', '.join(VALUE_SOURCES)} (got {bad or 'none'})")
+    args.ks = _ks(args.ks)
+    args.extra_ks = None if args.extra_ks is None else _ks(args.extra_ks)
+    return args
+
+
+def _ks(text: str) -> list[int | None]:
+    """``"1,3,all"`` -> ``[1, 3, None]``."""
+    return [None if k.strip() == "all" else int(k) for k in text.split(",")]
+
+
+def main(argv=None) -> int:
+    args = _parse(argv)
     t0 = time.perf_counter()
     root = Path(args.data) if args.data else data_root()
-    dirs = [root / s for s in SOURCES if (root / s / "velodyne").is_dir()]
+    dirs = [root / s for s in FOLDERS if (root / s / "velodyne").is_dir()]
     if not dirs:
         print(f"no KITTI folders under {root}", file=sys.stderr)
         return 2
     scans = load_scans(dirs, progress=False)
     model = NidarModel.load(args.weights, device="cpu")
-    values = {s.name: scan_values(model, s, "R") for s in scans}
+    values = source_values(model, scans, args.sources)
     groups: dict[str, list] = {}
     for s in scans:
         groups.setdefault(group_of(s.name), []).append(s)
-    ks = [None if k == "all" else int(k) for k in args.ks.split(",")]
     sizes = ", ".join(f"{g} {len(v)}" for g, v in sorted(groups.items()))
-    print(f"{len(scans)} frames in {len(groups)} held-out groups ({sizes})\n")
-    print("| profile | K frames | Spearman | range-binned Spearman | seeds |")
-    print("| --- | --- | --- | --- | --- |")
-    for label, k, runs in rows(groups, values, ks, args.seeds):
-        print(f"| {label} | {k} | {_cell(runs, 0)} | {_cell(runs, 1)} | {len(runs)} |", flush=True)
+    print(f"{len(scans)} frames in {len(groups)} held-out groups ({sizes})")
+    print(f"values ready after {time.perf_counter() - t0:.0f} s\n", flush=True)
+    for line in table(groups, values, args.ks, args.seeds, args.extra_ks):
+        print(line, flush=True)
     print(f"\nwall time {time.perf_counter() - t0:.0f} s")
     return 0
 
