@@ -407,6 +407,34 @@ def _render(scene, sensor, integrator, spp: int, seed: int, what: str) -> np.nda
     return (total / spp).astype(np.float32)
 
 
+def _warn_rgb_emitters(loaded) -> None:
+    """Warn once per scene and emitter whose radiance is RGB or a float (nothing past 830 nm)."""
+    for name in loaded.rgb_only_emitters():
+        key = f"{loaded.path}:{name}"
+        if key not in _warned:
+            _warned.add(key)
+            warnings.warn(
+                f"emitter '{name}' has an RGB/float radiance: it carries no meaningful energy "
+                "past 830 nm, so the NIR image misses its light (use a spectrum)",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+
+
+def _zero_non_finite(camera_id: str, images) -> None:
+    """Set the non-finite values of ``(name, image)`` pairs to 0 in place, with a warning each."""
+    for name, img in images:
+        if not np.all(np.isfinite(img)):
+            bad = int((~np.isfinite(img)).sum())
+            warnings.warn(
+                f"camera '{camera_id}': {bad} non-finite {name} values set to 0 "
+                "(a material without data at these wavelengths?)",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            img[~np.isfinite(img)] = 0.0
+
+
 def render_camera(
     loaded,
     camera,
@@ -434,16 +462,7 @@ def render_camera(
     import mitsuba as mi
 
     scene = loaded.scene
-    for name in loaded.rgb_only_emitters():
-        key = f"{loaded.path}:{name}"
-        if key not in _warned:
-            _warned.add(key)
-            warnings.warn(
-                f"emitter '{name}' has an RGB/float radiance: it carries no meaningful energy "
-                "past 830 nm, so the NIR image misses its light (use a spectrum)",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+    _warn_rgb_emitters(loaded)
     timings = {}
     integrator = scene.integrator() or mi.load_dict(
         {"type": "path", "max_depth": DEFAULT_MAX_DEPTH}
@@ -473,16 +492,7 @@ def render_camera(
         colour, surface = _albedo(scene, camera, W, H, wavelength)
         timings["albedo"] = time.perf_counter() - t0
     images = [("rgb", rgb), ("nir", nir)] + [(f"nir {wl:g} nm", b) for wl, b in bands.items()]
-    for name, img in images:
-        if not np.all(np.isfinite(img)):
-            bad = int((~np.isfinite(img)).sum())
-            warnings.warn(
-                f"camera '{camera.id()}': {bad} non-finite {name} values set to 0 "
-                "(a material without data at these wavelengths?)",
-                RuntimeWarning,
-                stacklevel=2,
-            )
-            img[~np.isfinite(img)] = 0.0
+    _zero_non_finite(camera.id(), images)
     return CameraRender(
         name=camera.id(),
         rgb=rgb,
