@@ -159,24 +159,29 @@ def _stn_forward(
 
 
 @torch.no_grad()
-def pseudo_nir(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
+def pseudo_nir(
+    stn: STN, rgb: np.ndarray | torch.Tensor, *, scale: float = 1.0, as_tensors: bool = False
+) -> np.ndarray | torch.Tensor:
     """Pseudo-NIR image of an 8-bit sRGB camera image, in the network domain.
 
     Args:
         stn: trained STN.
-        rgb: ``(H, W, 3)`` uint8 sRGB.
+        rgb: ``(H, W, 3)`` uint8 sRGB, a NumPy array or a tensor.
         scale: inference resolution relative to the image, in (0, 1] (module docstring).
+        as_tensors: return a tensor on the STN's device instead of a NumPy array.
 
     Returns:
         ``(H, W)`` float32 pseudo-NIR in the exposure-normalised domain (mean ~0.5).
     """
-    return _pseudo_nir(stn, rgb, float(scale), 0.0)
+    p = _pseudo_nir(stn, rgb, float(scale), 0.0)
+    return p if as_tensors else p.cpu().numpy()
 
 
 @torch.no_grad()
-def _pseudo_nir(stn: STN, rgb: np.ndarray, scale: float, chroma_sigma: float) -> np.ndarray:
+def _pseudo_nir(stn: STN, rgb, scale: float, chroma_sigma: float) -> torch.Tensor:
+    """``(H, W)`` float32 pseudo-NIR on the STN's device."""
     x = prepare_rgb_tensor(rgb, _device(stn))[None]
-    return _stn_forward(stn, x, scale, chroma_sigma)[0, 0].float().cpu().numpy()
+    return _stn_forward(stn, x, scale, chroma_sigma)[0, 0].float()
 
 
 def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
@@ -196,7 +201,7 @@ def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.nd
     Returns:
         ``(H, W)`` float32, linear, >= 0.
     """
-    p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX)
+    p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX).cpu().numpy()
     linear = srgb8_to_linear(torch.from_numpy(np.ascontiguousarray(rgb)))
     mean = float(linear.mean(dtype=torch.float64))
     ratio = EXPOSURE_TARGET_MEAN / (mean + 1e-3)  # the factor prepare_rgb applied
