@@ -40,7 +40,7 @@ from .preprocess import (
     EXPOSURE_TARGET_MEAN,
     colour_from_prepared,
     prepare_rgb_tensor,
-    srgb8_to_linear,
+    srgb8_mean,
 )
 from .stn import STN
 from .stn_lowres import LowResSTN
@@ -202,8 +202,7 @@ def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.nd
         ``(H, W)`` float32, linear, >= 0.
     """
     p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX).cpu().numpy()
-    linear = srgb8_to_linear(torch.from_numpy(np.ascontiguousarray(rgb)))
-    mean = float(linear.mean(dtype=torch.float64))
+    mean = float(srgb8_mean(torch.from_numpy(np.ascontiguousarray(rgb))))
     ratio = EXPOSURE_TARGET_MEAN / (mean + 1e-3)  # the factor prepare_rgb applied
     return np.maximum(p / np.float32(ratio), 0.0).astype(np.float32)
 

@@ -29,6 +29,7 @@ __all__ = [
     "EXPOSURE_TARGET_MEAN",
     "EXPOSURE_CLAMP_MAX",
     "srgb8_to_linear",
+    "srgb8_mean",
     "exposure_ratio",
     "normalize_exposure",
     "prepare_rgb",
@@ -67,27 +68,37 @@ def srgb8_to_linear(rgb: torch.Tensor) -> torch.Tensor:
     """Decode 8-bit sRGB (IEC 61966-2-1) on the tensor's device: a 256-entry table look-up.
 
     Args:
-        rgb: uint8 tensor of any shape.
+        rgb: uint8 tensor of any shape and layout.
 
     Returns:
-        float32 tensor of the same shape and device, linear values in [0, 1]; equal to
-        ``srgb_to_linear(rgb.astype(float32) / 255)``.
+        Contiguous float32 tensor of the same shape and device, linear values in [0, 1]; equal
+        to ``srgb_to_linear(rgb.astype(float32) / 255)``.
     """
-    return _srgb8_lut(rgb.device)[rgb.long()]
+    codes = rgb.to(torch.int32, memory_format=torch.contiguous_format)
+    return _srgb8_lut(rgb.device).index_select(0, codes.view(-1)).view(codes.shape)
 
 
-def exposure_ratio(image: torch.Tensor, target_mean: float = EXPOSURE_TARGET_MEAN) -> torch.Tensor:
-    """0-d float32 tensor ``target_mean / (mean + 1e-3)`` of an image (mean in float64), on its
-    device (no host synchronisation)."""
-    mean = image.mean(dtype=torch.float64).to(torch.float32)
-    one = torch.ones((), dtype=torch.float32, device=image.device)
+def srgb8_mean(rgb: torch.Tensor) -> torch.Tensor:
+    """0-d float64 tensor: the mean linear value of 8-bit sRGB codes (:func:`srgb8_to_linear`),
+    from their histogram (exact products, 256 terms summed), on the tensor's device."""
+    counts = torch.bincount(rgb.reshape(-1), minlength=256).to(torch.float64)
+    return (counts * _srgb8_lut(rgb.device).to(torch.float64)).sum() / rgb.numel()
+
+
+def exposure_ratio(mean: torch.Tensor, target_mean: float = EXPOSURE_TARGET_MEAN) -> torch.Tensor:
+    """0-d float32 tensor ``target_mean / (mean + 1e-3)`` (in float32, as the images), from an
+    image's 0-d mean, on its device (no host synchronisation)."""
+    mean = mean.to(torch.float32)
+    one = torch.ones((), dtype=torch.float32, device=mean.device)
     return (one * target_mean) / (mean + one * _EPS)
 
 
-def _normalize(image: torch.Tensor, target_mean: float, clamp_max: float) -> torch.Tensor:
-    """``clip(image * exposure_ratio(image), 0, clamp_max)`` in float32 on the image's device."""
+def _normalize(
+    image: torch.Tensor, mean: torch.Tensor, target_mean: float, clamp_max: float
+) -> torch.Tensor:
+    """``clip(image * exposure_ratio(mean), 0, clamp_max)`` in float32 on the image's device."""
     image = image.to(torch.float32)
-    return (image * exposure_ratio(image, target_mean)).clamp_(0.0, clamp_max)
+    return (image * exposure_ratio(mean, target_mean)).clamp_(0.0, clamp_max)
 
 
 def normalize_exposure(
@@ -109,7 +120,8 @@ def normalize_exposure(
     image = np.asarray(image, dtype=np.float32)
     if not np.all(np.isfinite(image)):
         raise NidarError("image to normalise contains NaN or infinite values")
-    return _normalize(torch.from_numpy(image), target_mean, clamp_max).numpy()
+    t = torch.from_numpy(image)
+    return _normalize(t, t.mean(dtype=torch.float64), target_mean, clamp_max).numpy()
 
 
 def prepare_rgb_tensor(rgb: np.ndarray | torch.Tensor, device=None) -> torch.Tensor:
@@ -134,8 +146,8 @@ def prepare_rgb_tensor(rgb: np.ndarray | torch.Tensor, device=None) -> torch.Ten
             f"RGB image must be an (H, W, 3) uint8 tensor, got {rgb.dtype} {rgb.shape}"
         )
     rgb = rgb.to(device) if device is not None else rgb
-    linear = srgb8_to_linear(rgb.permute(2, 0, 1).contiguous())
-    return _normalize(linear, EXPOSURE_TARGET_MEAN, EXPOSURE_CLAMP_MAX)
+    linear = srgb8_to_linear(rgb.permute(2, 0, 1))
+    return _normalize(linear, srgb8_mean(rgb), EXPOSURE_TARGET_MEAN, EXPOSURE_CLAMP_MAX)
 
 
 def prepare_rgb(rgb: np.ndarray) -> np.ndarray:
