@@ -202,7 +202,7 @@ def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.nd
         ``(H, W)`` float32, linear, >= 0.
     """
     p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX).cpu().numpy()
-    mean = float(srgb8_mean(torch.from_numpy(np.ascontiguousarray(rgb))))
+    mean = float(srgb8_mean(torch.tensor(np.asarray(rgb))))
     ratio = EXPOSURE_TARGET_MEAN / (mean + 1e-3)  # the factor prepare_rgb applied
     return np.maximum(p / np.float32(ratio), 0.0).astype(np.float32)
 

@@ -120,7 +120,7 @@ def normalize_exposure(
     image = np.asarray(image, dtype=np.float32)
     if not np.all(np.isfinite(image)):
         raise NidarError("image to normalise contains NaN or infinite values")
-    t = torch.from_numpy(image)
+    t = _from_numpy(image)
     return _normalize(t, t.mean(dtype=torch.float64), target_mean, clamp_max).numpy()
 
 
@@ -140,7 +140,7 @@ def prepare_rgb_tensor(rgb: np.ndarray | torch.Tensor, device=None) -> torch.Ten
     """
     if not isinstance(rgb, torch.Tensor):
         _check_rgb(rgb)
-        rgb = torch.from_numpy(np.ascontiguousarray(rgb))
+        rgb = _from_numpy(rgb)
     elif rgb.dtype != torch.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
         raise NidarError(
             f"RGB image must be an (H, W, 3) uint8 tensor, got {rgb.dtype} {rgb.shape}"
@@ -188,7 +188,7 @@ def chromaticity(x: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
         of red, green and blue, the same under any brightness of its light (a black pixel gives 0).
     """
     if isinstance(x, np.ndarray):
-        return chromaticity(torch.from_numpy(x)).numpy()
+        return chromaticity(_from_numpy(x)).numpy()
     x = x.to(torch.float32)
     return x / (x.sum(0, keepdim=True) + CHROMA_EPS)
 
@@ -222,6 +222,14 @@ def colour_input(rgb: np.ndarray, mode: str) -> np.ndarray:
         ``(3, H, W)`` float32.
     """
     return colour_from_prepared(prepare_rgb_tensor(rgb), mode).numpy()
+
+
+def _from_numpy(a: np.ndarray) -> torch.Tensor:
+    """A CPU tensor sharing ``a``'s memory, or of a contiguous copy when ``a`` is read-only or
+    strided (torch does not take read-only arrays)."""
+    if not (a.flags.writeable and a.flags.c_contiguous):
+        a = np.array(a, order="C")
+    return torch.from_numpy(a)
 
 
 def _check_rgb(rgb: np.ndarray) -> None:
