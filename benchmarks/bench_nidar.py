@@ -8,8 +8,9 @@ configuration, size and device, ``repeats`` rounds that run every cell in turn, 
 the same machine load; medians of the wall time and of the process CPU time):
 
 * ``pseudo_nir``: 8-bit sRGB -> linear exposure-normalised RGB -> STN -> pseudo-NIR
-  (:func:`nidar_mi.nidar.infer.pseudo_nir`);
-* ``irnet``: pseudo-NIR -> R, S, Î (:func:`nidar_mi.nidar.infer.run_irnet`);
+  (:func:`nidar_mi.nidar.infer.pseudo_nir`, on the device: the image is uploaded as 8 bits);
+* ``irnet``: pseudo-NIR -> R, S, Î (:func:`nidar_mi.nidar.infer.run_irnet`; the maps stay on
+  the device);
 * ``assign``: :meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps,
   timed in its three stages (``assign`` is their sum): ``sampling`` (the point cloud projected
   into the camera, the occlusion test against the cloud's own z-buffer and bilinear sampling of
@@ -116,25 +117,25 @@ def _parse_config(name: str) -> dict:
     return cfg
 
 
-def _time(fn) -> tuple[float, float, object]:
-    """Wall and process CPU seconds of one call, and its result."""
+def _time(fn, sync=None) -> tuple[float, float, object]:
+    """Wall and process CPU seconds of one call (until ``sync()`` returns, when given: a CUDA
+    device's work is asynchronous), and its result."""
     t0, c0 = time.perf_counter(), time.process_time()
     out = fn()
+    if sync is not None:
+        sync()
     return time.perf_counter() - t0, time.process_time() - c0, out
 
 
 def _assign_stages(model, xyz, cam, maps, out: dict):
     """:meth:`NidarModel.point_intensity` of the default profile, stage by stage, timed into
-    ``out``; returns the number of observed points."""
-    from nidar_mi.geometry import incidence_cosine, sample_cameras, sample_cameras_on
-    from nidar_mi.nidar.pipeline import _assignment_device
+    ``out``; ``maps`` on the networks' device. Returns the number of observed points."""
+    from nidar_mi.geometry import incidence_cosine
+    from nidar_mi.nidar.pipeline import _assignment_device, _sample
 
     device = _assignment_device(model)
-    if device is None:
-        sample = lambda: sample_cameras(xyz, [cam], [maps["R"]])  # noqa: E731
-    else:
-        sample = lambda: sample_cameras_on(device, xyz, [cam], [maps["R"]])  # noqa: E731
-    wall, cpu, (values, observed, _) = _time(sample)
+    sample = lambda: _sample(device, xyz, [cam], [maps], "R")  # noqa: E731
+    wall, cpu, (values, observed, _, _) = _time(sample)
     out["sampling"] = (wall, cpu)
     observed = observed & np.isfinite(values)
     p = xyz[observed]
@@ -216,7 +217,7 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
 
     from nidar_mi.nidar.fold import prepare_for_inference
     from nidar_mi.nidar.infer import pseudo_nir, run_irnet
-    from nidar_mi.nidar.preprocess import colour_input
+    from nidar_mi.nidar.preprocess import colour_from_prepared, prepare_rgb_tensor
 
     cfg = _parse_config(name)
     stn, irnet = base.stn, base.irnet
@@ -226,6 +227,7 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
         stn = prepare_for_inference(stn, torch.rand(1, 3, s, s, device=device), **opts)
         x = torch.rand(1, irnet.in_channels, s, s, device=device)
         irnet = prepare_for_inference(irnet, x, **opts)
+    sync = torch.cuda.synchronize if torch.device(device).type == "cuda" else None
     cells = []
     for width, height in sizes:
         rgb = street_image(width, height)
@@ -233,13 +235,15 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
 
         def steps(stn=stn, irnet=irnet, rgb=rgb, cam=cam, scale=cfg["scale"]):
             out = {}
-            wall, cpu, p = _time(lambda: pseudo_nir(stn, rgb, scale=scale))
+            run = lambda: pseudo_nir(stn, rgb, scale=scale, as_tensors=True)  # noqa: E731
+            wall, cpu, p = _time(run, sync)
             out["pseudo_nir"] = (wall, cpu)
-            x = torch.from_numpy(p)[None, None]
+            x = p[None, None]
             if irnet.in_channels == 4:  # colour channels stacked before the pseudo-NIR
-                colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
-                x = torch.cat((colour, x), 1)
-            wall, cpu, maps = _time(lambda: run_irnet(irnet, x, scale=scale))
+                prepared = prepare_rgb_tensor(rgb, device)
+                x = torch.cat((colour_from_prepared(prepared, irnet.input_mode)[None], x), 1)
+            run = lambda: run_irnet(irnet, x, scale=scale, as_tensors=True)  # noqa: E731
+            wall, cpu, maps = _time(run, sync)
             out["irnet"] = (wall, cpu)
             return out, _assign_stages(base, xyz, cam, maps, out)
 

@@ -20,13 +20,22 @@ if "NIDAR_MI_CACHE" not in os.environ:
     os.environ["NIDAR_MI_CACHE"] = _CACHE
     atexit.register(shutil.rmtree, _CACHE, True)
 
+#: The Mitsuba variant of the test session: NIDAR_MI_TEST_VARIANT, else the CPU one. Commands the
+#: tests start as child processes choose the same one (NIDAR_VARIANT, read by default_variant).
+TEST_VARIANT = os.environ.get("NIDAR_MI_TEST_VARIANT") or "llvm_ad_spectral"
+os.environ["NIDAR_VARIANT"] = TEST_VARIANT
+
 
 @pytest.fixture(scope="session")
 def variant() -> str:
-    """Activate the CPU spectral variant once per session."""
+    """Activate the session's variant (NIDAR_MI_TEST_VARIANT, default llvm_ad_spectral) once."""
     from nidar_mi.backend import set_variant
+    from nidar_mi.errors import NidarError
 
-    return set_variant("llvm_ad_spectral")
+    try:
+        return set_variant(TEST_VARIANT)
+    except NidarError as e:
+        pytest.exit(f"NIDAR_MI_TEST_VARIANT={TEST_VARIANT}: {e}", returncode=4)
 
 
 @pytest.fixture()

@@ -149,9 +149,9 @@ def test_range_image_and_camera_outputs(street_out):
     assert inside.sum() > 100 and agree.mean() > 0.8
 
 
-def test_manifest(street_out):
+def test_manifest(street_out, variant):
     m = json.loads((street_out / "manifest.json").read_text())
-    assert m["variant"] == "llvm_ad_spectral" and m["seed"] == 3
+    assert m["variant"] == variant and m["seed"] == 3
     lid = m["lidars"]["lidar_top"]
     assert lid["parameters"]["preset"] == "hdl64e" and lid["parameters"]["rings"] == 64
     assert lid["parameters"]["horizontal_resolution"] == 256

@@ -26,7 +26,7 @@ from .fusion import FUSION_RULES
 from .projection import _points
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_REL_TOL, DEFAULT_ZBUFFER_CELL
 
-__all__ = ["sample_cameras_on"]
+__all__ = ["sample_cameras_on", "to_host"]
 
 
 def _project(p, cam: CameraModel):
@@ -166,8 +166,9 @@ def sample_cameras_on(
     depth_images: Sequence[Any] | None = None,
     occlusion: bool = True,
     fusion: str = "nearest_center",
+    as_tensors: bool = False,
     **visibility: Any,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[Any, Any, Any]:
     """:func:`~nidar_mi.geometry.fusion.sample_cameras` computed on a torch ``device``.
 
     Args:
@@ -175,11 +176,14 @@ def sample_cameras_on(
         points, cameras, images, depth_images, occlusion, fusion: as
             :func:`~nidar_mi.geometry.fusion.sample_cameras`; images may be torch tensors
             (on any device) or arrays.
+        as_tensors: return the three results as tensors on ``device`` (nothing comes back to
+            the host; :func:`to_host` brings them back in one transfer).
         **visibility: ``depth_kind``, ``rel_tol``, ``abs_tol``, ``zbuffer_cell`` as there.
 
     Returns:
         ``(values, observed, camera_index)`` as NumPy arrays: (N,) float32, (N,) bool,
-        (N,) int64 (module docstring on equality with the reference).
+        (N,) int64 (module docstring on equality with the reference); tensors of those dtypes
+        with ``as_tensors``.
 
     Raises:
         NidarError: as :func:`~nidar_mi.geometry.fusion.sample_cameras`.
@@ -210,7 +214,42 @@ def sample_cameras_on(
         per_camera.append(_sample_camera(p, cam, img, dimg, occlusion, opts))
     vals, score, dep = (torch.stack(a) for a in zip(*per_camera, strict=True))
     values, observed, index = _fuse(vals, score, dep, fusion)
-    return values.cpu().numpy(), observed.cpu().numpy(), index.cpu().numpy()
+    if as_tensors:
+        return values, observed, index
+    return to_host(values, observed, index)
+
+
+def to_host(*tensors: Any) -> list[np.ndarray]:
+    """(N,) tensors of one device as NumPy arrays of their dtypes, in one transfer.
+
+    The tensors are stacked as float64 on their device (exact for float32, bool and integers
+    below 2**53) and copied to the host once.
+
+    Args:
+        *tensors: (N,) tensors of the same length and device.
+
+    Returns:
+        One array per tensor, of its dtype.
+    """
+    import torch
+
+    if not tensors:
+        return []
+    host = torch.stack([t.to(torch.float64) for t in tensors]).cpu().numpy()
+    dtypes = _numpy_dtypes()
+    return [row.astype(dtypes[t.dtype]) for row, t in zip(host, tensors, strict=True)]
+
+
+def _numpy_dtypes() -> dict:
+    import torch
+
+    return {
+        torch.float32: np.float32,
+        torch.float64: np.float64,
+        torch.bool: np.bool_,
+        torch.int64: np.int64,
+        torch.int32: np.int32,
+    }
 
 
 def _check(cameras, images, depth_images, fusion: str) -> Sequence[Any]:

@@ -36,7 +36,12 @@ import torch.nn.functional as F
 
 from ..errors import NidarError
 from .irnet import IRNet
-from .preprocess import EXPOSURE_TARGET_MEAN, colour_input, prepare_rgb
+from .preprocess import (
+    EXPOSURE_TARGET_MEAN,
+    colour_from_prepared,
+    prepare_rgb_tensor,
+    srgb8_mean,
+)
 from .stn import STN
 from .stn_lowres import LowResSTN
 
@@ -154,24 +159,29 @@ def _stn_forward(
 
 
 @torch.no_grad()
-def pseudo_nir(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
+def pseudo_nir(
+    stn: STN, rgb: np.ndarray | torch.Tensor, *, scale: float = 1.0, as_tensors: bool = False
+) -> np.ndarray | torch.Tensor:
     """Pseudo-NIR image of an 8-bit sRGB camera image, in the network domain.
 
     Args:
         stn: trained STN.
-        rgb: ``(H, W, 3)`` uint8 sRGB.
+        rgb: ``(H, W, 3)`` uint8 sRGB, a NumPy array or a tensor.
         scale: inference resolution relative to the image, in (0, 1] (module docstring).
+        as_tensors: return a tensor on the STN's device instead of a NumPy array.
 
     Returns:
         ``(H, W)`` float32 pseudo-NIR in the exposure-normalised domain (mean ~0.5).
     """
-    return _pseudo_nir(stn, rgb, float(scale), 0.0)
+    p = _pseudo_nir(stn, rgb, float(scale), 0.0)
+    return p if as_tensors else p.cpu().numpy()
 
 
 @torch.no_grad()
-def _pseudo_nir(stn: STN, rgb: np.ndarray, scale: float, chroma_sigma: float) -> np.ndarray:
-    x = torch.from_numpy(prepare_rgb(rgb))[None]
-    return _stn_forward(stn, x, scale, chroma_sigma)[0, 0].float().cpu().numpy()
+def _pseudo_nir(stn: STN, rgb, scale: float, chroma_sigma: float) -> torch.Tensor:
+    """``(H, W)`` float32 pseudo-NIR on the STN's device."""
+    x = prepare_rgb_tensor(rgb, _device(stn))[None]
+    return _stn_forward(stn, x, scale, chroma_sigma)[0, 0].float()
 
 
 def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
@@ -191,16 +201,21 @@ def pseudo_nir_linear(stn: STN, rgb: np.ndarray, *, scale: float = 1.0) -> np.nd
     Returns:
         ``(H, W)`` float32, linear, >= 0.
     """
-    from ..io.images import srgb_to_linear
-
-    p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX)
-    mean = float(srgb_to_linear(rgb.astype(np.float32) / np.float32(255.0)).mean(dtype=np.float64))
+    p = _pseudo_nir(stn, rgb, float(scale), CHROMA_SIGMA_PX).cpu().numpy()
+    mean = float(srgb8_mean(torch.tensor(np.asarray(rgb))))
     ratio = EXPOSURE_TARGET_MEAN / (mean + 1e-3)  # the factor prepare_rgb applied
     return np.maximum(p / np.float32(ratio), 0.0).astype(np.float32)
 
 
+def _host(maps: dict[str, torch.Tensor]) -> dict[str, np.ndarray]:
+    """Tensors as float32 NumPy arrays on the host."""
+    return {key: v.float().cpu().numpy() for key, v in maps.items()}
+
+
 @torch.no_grad()
-def run_irnet(irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0) -> dict[str, np.ndarray]:
+def run_irnet(
+    irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0, as_tensors: bool = False
+) -> dict[str, np.ndarray] | dict[str, torch.Tensor]:
     """IRNet's maps of one prepared input.
 
     Args:
@@ -209,6 +224,7 @@ def run_irnet(irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0) -> dict[str,
             prepared RGB (``C = 3``, :func:`~nidar_mi.nidar.preprocess.prepare_rgb`) or both
             (``C = 4``: RGB, then pseudo-NIR).
         scale: inference resolution relative to the input, in (0, 1].
+        as_tensors: return tensors on the network's device instead of NumPy arrays.
 
     Returns:
         ``(H, W)`` float32 ``R``, ``S`` and ``I_hat``.
@@ -216,43 +232,52 @@ def run_irnet(irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0) -> dict[str,
     h, w = x.shape[-2:]
     small = reduced_size(h, w, float(scale))
     out = _run(irnet, _resize(x, small, "area"))
-    return {
-        key: _resize(out[key][..., : small[0], : small[1]], (h, w), "bilinear")[0, 0]
-        .float()
-        .cpu()
-        .numpy()
+    maps = {
+        key: _resize(out[key][..., : small[0], : small[1]], (h, w), "bilinear")[0, 0].float()
         for key in ("R", "S", "I_hat")
     }
+    return maps if as_tensors else _host(maps)
 
 
 @torch.no_grad()
 def predict(
-    stn: STN | None, irnet: IRNet, rgb: np.ndarray, *, scale: float = 1.0
-) -> dict[str, np.ndarray]:
-    """Run NIDAR's learned stages on one camera image.
+    stn: STN | None,
+    irnet: IRNet,
+    rgb: np.ndarray | torch.Tensor,
+    *,
+    scale: float = 1.0,
+    as_tensors: bool = False,
+) -> dict[str, np.ndarray] | dict[str, torch.Tensor]:
+    """Run NIDAR's learned stages on one camera image, on the networks' device.
+
+    The 8-bit image goes to the device once; its preparation
+    (:func:`~nidar_mi.nidar.preprocess.prepare_rgb_tensor`), both networks and the resizing run
+    there. With ``as_tensors`` the maps stay there; else they come back once, as arrays.
 
     Args:
         stn: trained STN; may be None when ``irnet`` takes RGB input.
         irnet: trained IRNet.
-        rgb: ``(H, W, 3)`` uint8 sRGB.
+        rgb: ``(H, W, 3)`` uint8 sRGB, a NumPy array or a tensor.
         scale: inference resolution relative to the image, in (0, 1] (module docstring).
+        as_tensors: return ``(H, W)`` float32 tensors on the networks' device.
 
     Returns:
-        ``(H, W)`` float32 arrays: ``pseudo_nir`` (only when ``stn`` is given), ``R``
+        ``(H, W)`` float32 maps: ``pseudo_nir`` (only when ``stn`` is given), ``R``
         (reflectance-related, in (0, 1)), ``S`` (shading) and ``I_hat`` (dense intensity in
         units of the training data's ``intensity_scale``).
     """
     if irnet.in_channels in (1, 4) and stn is None:
         raise NidarError("this IRNet takes pseudo-NIR input: an STN is required")
-    x_rgb = torch.from_numpy(prepare_rgb(rgb))[None]
-    result: dict[str, np.ndarray] = {}
+    x_rgb = prepare_rgb_tensor(rgb, _device(irnet))[None]
+    result: dict[str, torch.Tensor] = {}
     x = x_rgb
     if stn is not None:
         p = _stn_forward(stn, x_rgb, float(scale))
-        result["pseudo_nir"] = p[0, 0].float().cpu().numpy()
+        result["pseudo_nir"] = p[0, 0].float()
         if irnet.in_channels == 1:
             x = p
         elif irnet.in_channels == 4:
-            colour = torch.from_numpy(colour_input(rgb, irnet.input_mode))[None]
+            colour = colour_from_prepared(x_rgb[0], irnet.input_mode)[None]
             x = torch.cat((colour.to(p.device), p), 1)
-    return result | run_irnet(irnet, x, scale=scale)
+    result |= run_irnet(irnet, x, scale=scale, as_tensors=True)
+    return result if as_tensors else _host(result)

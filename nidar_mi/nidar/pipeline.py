@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..geometry import CameraModel, incidence_cosine, sample_cameras, sample_cameras_on
+from ..geometry.device_fusion import to_host
 from ..profiles import DistanceQuantileMap, SensorProfile, load_profile
 
 __all__ = [
@@ -107,6 +108,9 @@ class NidarModel:
         self._calibration: SensorProfile | None = None
         self.weights_dir = weights_dir
         self.scale = 1.0
+        #: torch device of the point assignment; None: the networks' device when it is not the
+        #: CPU, else the NumPy reference (:func:`_assignment_device`).
+        self.assignment_device = None
         self._default_profile: SensorProfile | None | bool = False  # False: not read yet
 
     @property
@@ -209,13 +213,15 @@ class NidarModel:
         return model
 
     def predict_image(
-        self, rgb: np.ndarray, *, scale: float | None = None
-    ) -> dict[str, np.ndarray]:
+        self, rgb: np.ndarray, *, scale: float | None = None, as_tensors: bool = False
+    ) -> dict:
         """Dense maps of one (H, W, 3) uint8 sRGB image: pseudo_nir, R, S, I_hat (H, W) float32.
 
         Args:
             rgb: the camera image.
             scale: inference resolution relative to the image (None: the model's default).
+            as_tensors: keep the maps on the networks' device, as tensors
+                (:func:`nidar_mi.nidar.infer.predict`); else NumPy arrays.
         """
         from .infer import predict
 
@@ -223,7 +229,8 @@ class NidarModel:
         if rgb.ndim != 3 or rgb.shape[2] < 3 or rgb.dtype != np.uint8:
             raise NidarError(f"expected an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
         s = self.scale if scale is None else float(scale)
-        return predict(self.stn, self.irnet, np.ascontiguousarray(rgb[..., :3]), scale=s)
+        rgb = np.ascontiguousarray(rgb[..., :3])
+        return predict(self.stn, self.irnet, rgb, scale=s, as_tensors=as_tensors)
 
     def point_intensity(
         self,
@@ -281,17 +288,12 @@ class NidarModel:
             raise NidarError(f"{np.asarray(ring).size} rings for {len(xyz)} points")
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
-        maps = list(maps) if maps is not None else [self.predict_image(im) for im in images]
-        branch_maps = [m[branch] for m in maps]
         device = _assignment_device(self)
-        if device is None:
-            values, observed, cam_idx = sample_cameras(
-                xyz, cameras, branch_maps, depth_images=depth_images, occlusion=occlusion
-            )
-        else:
-            values, observed, cam_idx = sample_cameras_on(
-                device, xyz, cameras, branch_maps, depth_images=depth_images, occlusion=occlusion
-            )
+        if maps is None:
+            maps = [self.predict_image(im, as_tensors=device is not None) for im in images]
+        values, observed, cam_idx, r_vals = _sample(
+            device, xyz, cameras, maps, branch, depth_images=depth_images, occlusion=occlusion
+        )
         observed = observed & np.isfinite(values)
         if profile is None:  # the dense head, raw
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)
@@ -299,18 +301,43 @@ class NidarModel:
             out = _profile_intensity(profile, xyz, values, observed, ring, cos_incidence)
         raw = np.where(observed, values, 0.0).astype(np.float32)
         refl = raw
-        if branch != "R":
-            r_vals = sample_cameras(
-                xyz, cameras, [m["R"] for m in maps], depth_images=depth_images, occlusion=occlusion
-            )[0]
+        if r_vals is not None:
             refl = np.where(observed & np.isfinite(r_vals), r_vals, 0.0).astype(np.float32)
         return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1), refl)
 
 
+def _sample(device, xyz, cameras, maps, branch: str, **opts):
+    """``(values, observed, camera_index, R or None)`` (N,) arrays of ``branch``'s maps at the
+    points, and of R when the branch is another; on ``device`` in torch (the maps' tensors used
+    where they are, the results brought back in one transfer), or with the NumPy reference when
+    ``device`` is None."""
+    keys = [branch] if branch == "R" else [branch, "R"]
+    if device is None:
+        sampled = [sample_cameras(xyz, cameras, [_array(m[k]) for m in maps], **opts) for k in keys]
+        out = list(sampled[0])
+        return (*out, sampled[1][0] if len(sampled) > 1 else None)
+    sampled = [
+        sample_cameras_on(device, xyz, cameras, [m[k] for m in maps], as_tensors=True, **opts)
+        for k in keys
+    ]
+    host = to_host(*sampled[0], *(s[0] for s in sampled[1:]))
+    return (*host[:3], host[3] if len(host) > 3 else None)
+
+
+def _array(a) -> np.ndarray:
+    """A map as a NumPy array (a tensor copied to the host)."""
+    return a.detach().cpu().numpy() if hasattr(a, "detach") else np.asarray(a)
+
+
 def _assignment_device(model: NidarModel):
-    """The torch device the point assignment runs on: the networks' when it is not the CPU
+    """The torch device the point assignment runs on: :attr:`NidarModel.assignment_device` when
+    set, else the networks' when it is not the CPU
     (:func:`nidar_mi.geometry.device_fusion.sample_cameras_on`), else None (the NumPy
     reference, :func:`nidar_mi.geometry.fusion.sample_cameras`)."""
+    if model.assignment_device is not None:
+        import torch
+
+        return torch.device(model.assignment_device)
     device = next(model.irnet.parameters()).device
     return None if device.type == "cpu" else device
 

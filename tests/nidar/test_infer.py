@@ -64,3 +64,16 @@ def test_predict_keeps_the_training_mode_and_needs_an_stn(nets):
     irnet.eval()
     with pytest.raises(NidarError, match="STN is required"):
         predict(None, irnet, _rgb(16, 16))
+
+
+def test_predict_as_tensors_keeps_the_maps_on_the_device(nets):
+    """``as_tensors``: the same maps as tensors on the networks' device; the image may be a
+    uint8 tensor too."""
+    stn, irnet = nets
+    rgb = _rgb(13, 27, seed=2)
+    arrays = predict(stn, irnet, rgb, scale=0.5)
+    tensors = predict(stn, irnet, torch.from_numpy(rgb), scale=0.5, as_tensors=True)
+    assert set(tensors) == set(arrays)
+    for key, t in tensors.items():
+        assert isinstance(t, torch.Tensor) and t.device == next(irnet.parameters()).device
+        np.testing.assert_array_equal(t.numpy(), arrays[key])

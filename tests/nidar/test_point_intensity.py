@@ -167,3 +167,49 @@ def test_the_device_path_gives_the_reference_intensities(monkeypatch):
     np.testing.assert_array_equal(got.camera_index, ref.camera_index)
     np.testing.assert_allclose(got.raw_R, ref.raw_R, rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.intensity, ref.intensity, rtol=0, atol=1e-6)
+
+
+def _synthetic_view():
+    """The shipped model, a synthetic frame's camera, image and returns (tests/helpers)."""
+    from nidar_mi.geometry import CameraModel
+    from tests.helpers.synthetic_frames import synthetic_frame
+
+    f = synthetic_frame(np.random.default_rng(7), height=48, width=64)
+    cam = CameraModel(K=f["K"], width=64, height=48, T_cam_lidar=f["T_cam_lidar"])
+    return NidarModel.load(device="cpu"), cam, f["rgb"], f["points_xyz"].astype(np.float64)
+
+
+@pytest.mark.parametrize("branch", ["R", "I_hat"])
+def test_the_device_path_from_the_image_equals_the_numpy_path(branch):
+    """From the 8-bit image on: preparation, networks and assignment in torch on the device
+    (here the CPU), the maps never leaving it, give the NumPy path's per-point values."""
+    model, cam, rgb, xyz = _synthetic_view()
+    ref = model.point_intensity(xyz, [cam], [rgb], branch=branch)
+    model.assignment_device = "cpu"
+    got = model.point_intensity(xyz, [cam], [rgb], branch=branch)
+    assert ref.observed.sum() > 100
+    np.testing.assert_array_equal(got.observed, ref.observed)
+    np.testing.assert_array_equal(got.camera_index, ref.camera_index)
+    for key in ("intensity", "raw_R", "reflectance"):
+        np.testing.assert_allclose(getattr(got, key), getattr(ref, key), rtol=0, atol=1e-6)
+
+
+def test_the_device_path_copies_to_the_host_once(monkeypatch):
+    """On the device path, nothing of the maps comes back to the host: one transfer brings the
+    per-point values, flags and camera indices (counted as calls of Tensor.cpu and .numpy)."""
+    import torch
+
+    model, cam, rgb, xyz = _synthetic_view()
+    model.assignment_device = "cpu"
+    model.point_intensity(xyz, [cam], [rgb])  # warm-up: the sRGB table, the profile
+    calls = {"cpu": 0, "numpy": 0}
+    for name in calls:
+        original = getattr(torch.Tensor, name)
+
+        def counted(self, *a, _name=name, _original=original, **k):
+            calls[_name] += 1
+            return _original(self, *a, **k)
+
+        monkeypatch.setattr(torch.Tensor, name, counted)
+    res = model.point_intensity(xyz, [cam], [rgb])
+    assert res.observed.any() and calls == {"cpu": 1, "numpy": 1}

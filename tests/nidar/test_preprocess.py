@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from nidar_mi.errors import NidarError
-from nidar_mi.nidar.preprocess import normalize_exposure, prepare_nir, prepare_rgb
+from nidar_mi.nidar.preprocess import (
+    colour_from_prepared,
+    colour_input,
+    normalize_exposure,
+    prepare_nir,
+    prepare_rgb,
+    prepare_rgb_tensor,
+    srgb8_to_linear,
+)
 
 
 def test_prepare_rgb_decodes_srgb_then_normalises():
@@ -41,3 +50,53 @@ def test_prepare_nir_shape_and_errors():
         prepare_rgb(np.ones((3, 4), np.uint8))
     with pytest.raises(NidarError, match="NaN"):
         normalize_exposure(np.array([1.0, np.nan]))
+
+
+def _srgb_decode(c: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 decoding in float64, written out."""
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _prepared_by_formula(rgb: np.ndarray) -> np.ndarray:
+    """(3, H, W) float64: decoded, scaled to mean 0.5 (+1e-3 in the denominator), clipped."""
+    lin = _srgb_decode(rgb.astype(np.float64) / 255.0)
+    return np.clip(lin * 0.5 / (lin.mean() + 1e-3), 0.0, 5.0).transpose(2, 0, 1)
+
+
+def test_the_sRGB_table_is_the_standard_decoding():
+    codes = torch.arange(256, dtype=torch.uint8)
+    got = srgb8_to_linear(codes).numpy()
+    assert got.dtype == np.float32
+    np.testing.assert_allclose(got, _srgb_decode(np.arange(256) / 255.0), rtol=0, atol=1e-7)
+
+
+def test_torch_preparation_equals_the_formula():
+    """The device preparation (here on the CPU) of an 8-bit image against the formula in
+    float64: linear RGB, exposure-normalised, chromaticity; within 1e-6 (float32 rounding)."""
+    rng = np.random.default_rng(4)
+    rgb = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    rgb[:5, :5] = 255  # some pixels clipped at 5 after normalisation
+    rgb[-3:] = 0
+    want = _prepared_by_formula(rgb)
+    x = prepare_rgb_tensor(torch.from_numpy(rgb), "cpu")
+    assert x.shape == (3, 37, 53) and x.dtype == torch.float32
+    np.testing.assert_allclose(x.numpy(), want, rtol=1e-6, atol=1e-6)
+    chroma = colour_from_prepared(x, "chroma+pseudo_nir").numpy()
+    np.testing.assert_allclose(chroma, want / (want.sum(0) + 1e-2), rtol=0, atol=1e-6)
+    # the NumPy entry points are the same computation
+    np.testing.assert_array_equal(prepare_rgb(rgb), x.numpy())
+    np.testing.assert_array_equal(colour_input(rgb, "chroma+pseudo_nir"), chroma)
+    np.testing.assert_array_equal(colour_input(rgb, "rgb+pseudo_nir"), x.numpy())
+    nir = rng.uniform(0, 3, (9, 11))
+    np.testing.assert_allclose(
+        prepare_nir(nir)[0], np.clip(nir * 0.5 / (nir.mean() + 1e-3), 0, 5), rtol=1e-6, atol=1e-6
+    )
+
+
+def test_tensor_preparation_refuses_other_images():
+    with pytest.raises(NidarError, match="uint8 tensor"):
+        prepare_rgb_tensor(torch.zeros(4, 5, 3))
+    with pytest.raises(NidarError, match="uint8 tensor"):
+        prepare_rgb_tensor(torch.zeros(3, 4, 5, dtype=torch.uint8))
+    with pytest.raises(NidarError, match="no colour channels"):
+        colour_from_prepared(torch.zeros(3, 2, 2), "pseudo_nir")
