@@ -17,12 +17,14 @@ from nidar_mi.nidar.stn_lowres import LowResSTN
 
 def blockiness(img: np.ndarray, period: int = 16) -> float:
     """Mean absolute step across the ``period``-px grid lines over the mean step elsewhere
-    (both directions): ~1 for a smooth image, > 1 with blocks on that grid."""
+    (both directions): ~1 for a smooth image, > 1 with blocks on that grid, inf for an image flat
+    between the grid lines."""
     out = []
     for x in (np.asarray(img, np.float64), np.asarray(img, np.float64).T):
         d = np.abs(np.diff(x, axis=1))
         on = np.arange(d.shape[1]) % period == period - 1
-        out.append(d[:, on].mean() / d[:, ~on].mean())
+        off = d[:, ~on].mean()
+        out.append(d[:, on].mean() / off if off > 0 else np.inf)
     return float(np.mean(out))
 
 
