@@ -36,7 +36,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from ..errors import NidarError
-from ..frames import list_frames, load_frame
+from ..frames import list_frames, load_frame, load_meta
 from ..io.images import REC709_LUMA, srgb_to_linear
 
 __all__ = ["GREY_LEVEL", "frame_returns", "image_gain", "luminance", "main", "score_cues"]
@@ -100,8 +100,9 @@ def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
     return maps
 
 
-def _truth_maps(path: Path) -> dict[str, np.ndarray]:
-    """The frame's true maps that rank a cue from below (ceilings), where it carries them."""
+def _truth_maps(path: Path, wavelength_nm: float) -> dict[str, np.ndarray]:
+    """Ceilings a cue could reach, from the frame's true maps where it carries them: the ρ(λ)
+    its true albedo colour predicts through the earthlib map."""
     from ..frames import frame_has
 
     if not frame_has(path, ("A_true",)):
@@ -109,10 +110,14 @@ def _truth_maps(path: Path) -> dict[str, np.ndarray]:
     from ..materials.visible_albedo import colour_reflectance_map
 
     a_true = load_frame(path, ("A_true",))["A_true"]
-    return {"true albedo colour -> rho (earthlib map)": colour_reflectance_map(905.0)(a_true)}
+    return {
+        "true albedo colour -> rho (earthlib map)": colour_reflectance_map(wavelength_nm)(a_true)
+    }
 
 
-def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str, float]]:
+def score_cues(
+    frames: list[Path], models: dict, stn=None, wavelength_nm: float = 905.0
+) -> dict[str, dict[str, float]]:
     """Spearman of each source's value against ρ at the returns (module docstring).
 
     Two truths: the frame's sparse ``reflectance`` (ρ = π·f_r(ω, ω) along each beam: gloss,
@@ -123,6 +128,7 @@ def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str
         frames: rendered frame files.
         models: ``{name: (stn or None, irnet)}``.
         stn: the STN whose pseudo-NIR is scored as a source (None: not scored).
+        wavelength_nm: the frames' LiDAR wavelength (the colour map's λ).
 
     Returns:
         ``{source: {"per_frame": mean Spearman, "pooled": Spearman over all returns}}`` against
@@ -140,7 +146,7 @@ def score_cues(frames: list[Path], models: dict, stn=None) -> dict[str, dict[str
     for path in frames:
         f = load_frame(path, ("rgb", "mask", *truths))
         m = f["mask"]
-        maps = _maps(models, f["rgb"], stn) | _truth_maps(path)
+        maps = _maps(models, f["rgb"], stn) | _truth_maps(path, wavelength_nm)
         for t in truths:
             truth = f[t][m].astype(np.float64)
             truth_all[t].append(truth)
@@ -236,7 +242,8 @@ def main(argv=None) -> int:
         models[name] = (stn, irnet)
     test = _frames_of(args.test)
     stn = load_stn(args.stn, "cpu") if args.stn else None
-    result: dict = {"test_frames": len(test), "cue": score_cues(test, models, stn)}
+    wavelength = float(load_meta(args.test).get("wavelength_nm") or 905.0)
+    result: dict = {"test_frames": len(test), "cue": score_cues(test, models, stn, wavelength)}
     if args.train and not args.no_gain:
         train = _frames_of(args.train, ("train",))
         result["gain"] = {n: image_gain(train, test, *m) for n, m in models.items()}
