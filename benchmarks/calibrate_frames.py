@@ -2,7 +2,7 @@
 the camera image adds on drives the fit never saw.
 
 ``python benchmarks/calibrate_frames.py [--data DIR] [--ks 1,3,10,all] [--seeds 3]
-[--sources nidar,geometry,luminance,stn] [--extra-ks KS] [--weights DIR]``
+[--sources nidar,geometry,luminance,linnir,stn,lin9,colour_gbm] [--extra-ks KS] [--weights DIR]``
 
 Leave-one-drive-out over the real KITTI frames under ``--data`` (default: the data root,
 ``../shared/data``): the groups are ``kitti_raw_0926`` (one drive), each drive of
@@ -26,9 +26,27 @@ the same K frames of each seed and the same recipe:
   and ring, but no image information;
 * ``luminance``: Rec. 709 luminance of the image's linear RGB
   (:func:`nidar_mi.eval.reflectance_cue.luminance`);
+* ``linnir``: baseline (i), the 4-parameter linear RGB -> NIR map
+  (:class:`~nidar_mi.eval.baselines.LinearNIR`) fitted once on the non-test RGB/NIR photo pairs
+  of ``<data>/rgbnir`` (:func:`nidar_mi.eval.real.fit_linear_nir`), applied to the image;
 * ``stn``: the STN's pseudo-NIR.
 
-The image gain of a K is NIDAR R minus geometry only, per seed (paired draws).
+Two more rows are predictors of their own, fitted on the same K frames of each seed and scored
+on the same held-out returns, with no profile; their value is the (N, 3) colour at the return
+(8-bit sRGB / 255, :func:`nidar_mi.eval.loo.colour_at_returns`):
+
+* ``lin9``: baseline (h), least squares of the stored reflectance on ``r, g, b, r/Σ, g/Σ, b/Σ,
+  log d, d/50, 1`` (:func:`nidar_mi.eval.loo.linear_colour_distance_method`);
+* ``colour_gbm``: a diagnostic, the recipe's ``gbm`` with the full colour in place of one value:
+  the features are the linear R, G, B at the return, its range, elevation (the recipe's stand-in
+  for the ring) and incidence cosine, with the recipe's LightGBM settings (the defaults of
+  :class:`~nidar_mi.profiles.gbm.GbmFitOptions`; non-decreasing in the incidence, free in the
+  colour). What any map of the pixel's colour could add to the geometry, bounded by this
+  regression's reach.
+
+The image gain of a K is NIDAR R minus geometry only, per seed (paired draws); the colour gain
+is the colour gbm minus geometry only. The draws depend on the held-out group, K and the seed
+only (:func:`splits`), never on the sources requested, so rows of separate runs pair.
 
 Prints a Markdown table; nothing is written. KITTI is non-commercial data: only numbers are
 reported.
@@ -39,7 +57,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +70,7 @@ from nidar_mi.datasets.sensor_profiles import (
     GENERIC_RAW_PROFILE,
     generic_profile,
 )
+from nidar_mi.eval.loo import colour_at_returns, linear_colour_distance_method
 from nidar_mi.eval.metrics import spearman
 from nidar_mi.eval.reflectance_cue import GREY_LEVEL, luminance
 from nidar_mi.eval.scan_metrics import binned_spearman
@@ -64,14 +83,32 @@ VALUE_SOURCES = {
     "nidar": "NIDAR R",
     "geometry": "geometry only (R of a grey image)",
     "luminance": "luminance",
+    "linnir": "(i) linear RGB→NIR",
     "stn": "STN pseudo-NIR",
+    "lin9": "(h) linear colour + distance",
+    "colour_gbm": "colour gbm (diagnostic)",
 }
 #: The sources that are R maps: fitted at every K (the others at ``--extra-ks`` only).
 R_SOURCES = ("nidar", "geometry")
+#: The sources whose value is the (N, 3) colour at the return: predictors of their own.
+COLOUR_SOURCES = ("lin9", "colour_gbm")
 #: The recipe's label.
 RECIPE = "gbm + incidence (kitti-hdl64e recipe)"
+#: The profile column of the predictors of their own.
+PREDICTORS = {
+    "lin9": "least squares, 9 parameters (no profile)",
+    "colour_gbm": "gbm of linear RGB, range, elevation, incidence (recipe's settings)",
+}
+#: The gain rows: (source, minus source, label).
+GAINS = (
+    ("nidar", "geometry", "**image gain** (NIDAR R − geometry only)"),
+    ("colour_gbm", "geometry", "**colour gain** (colour gbm − geometry only)"),
+)
+#: The colour gbm's features, in column order.
+COLOUR_GBM_FEATURES = ("r_lin", "g_lin", "b_lin", "range_m", "elevation_deg", "cos_incidence")
 
-Values = dict[str, dict[str, np.ndarray]]  # source -> frame name -> (N,) values
+Values = dict[str, dict[str, np.ndarray]]  # source -> frame name -> (N,) or (N, 3) values
+Predictor = Callable[[ScanFrame, np.ndarray, np.ndarray], np.ndarray]
 
 
 def group_of(name: str) -> str:
@@ -106,10 +143,14 @@ def sample_scan_maps(scan: ScanFrame, maps: Sequence[dict[str, np.ndarray]]) -> 
     return out
 
 
-def image_maps(model: NidarModel, rgb: np.ndarray, sources: Sequence[str], grey: dict) -> dict:
-    """Each source's (H, W) float32 map of one (H, W, 3) uint8 image (module docstring).
+def image_maps(
+    model: NidarModel, rgb: np.ndarray, sources: Sequence[str], grey: dict, linear_nir=None
+) -> dict:
+    """Each value source's (H, W) float32 map of one (H, W, 3) uint8 image (module docstring;
+    the colour sources have none).
 
-    ``grey`` caches R of the grey image by image shape (the same for every image of a size).
+    ``grey`` caches R of the grey image by image shape (the same for every image of a size);
+    ``linear_nir``: the fitted :class:`~nidar_mi.eval.baselines.LinearNIR` (for ``linnir``).
     """
     out = {}
     if "nidar" in sources or "stn" in sources:
@@ -121,44 +162,75 @@ def image_maps(model: NidarModel, rgb: np.ndarray, sources: Sequence[str], grey:
         out["geometry"] = grey[rgb.shape]
     if "luminance" in sources:
         out["luminance"] = luminance(rgb)
-    return {s: out[s] for s in sources}
+    if "linnir" in sources:
+        out["linnir"] = linear_nir(rgb)
+    return {s: out[s] for s in sources if s not in COLOUR_SOURCES}
 
 
-def source_values(model: NidarModel, scans: Sequence[ScanFrame], sources: Sequence[str]) -> Values:
-    """Every source's values at every scan's returns: source -> frame name -> (N,) float64."""
+def source_values(
+    model: NidarModel, scans: Sequence[ScanFrame], sources: Sequence[str], linear_nir=None
+) -> Values:
+    """Every source's values at every scan's returns: source -> frame name -> (N,) float64, or
+    (N, 3) colours for :data:`COLOUR_SOURCES` (NaN where no camera gives one)."""
     grey: dict = {}
     out: Values = {s: {} for s in sources}
+    colour = [s for s in sources if s in COLOUR_SOURCES]
     for scan in scans:
-        maps = [image_maps(model, im, sources, grey) for im in scan.images]
-        for s, v in sample_scan_maps(scan, maps).items():
-            out[s][scan.name] = v
+        maps = [image_maps(model, im, sources, grey, linear_nir) for im in scan.images]
+        if maps[0]:
+            for s, v in sample_scan_maps(scan, maps).items():
+                out[s][scan.name] = v
+        if colour:
+            rgb = colour_at_returns(scan)
+            for s in colour:
+                out[s][scan.name] = rgb
     return out
 
 
-def score(profile, scans: Sequence[ScanFrame], values: dict[str, np.ndarray]) -> tuple:
-    """Mean Spearman and range-binned Spearman of ``profile`` over ``scans`` (``values``:
-    frame name -> (N,) values; returns without a finite value are left out)."""
-    rho, rho_bin = [], []
-    for s in scans:
-        v = values[s.name]
-        ok = np.isfinite(v)
-        cos = s.cos_incidence[ok] if profile.uses_incidence else None
-        d = s.range_m[ok]
-        pred = profile(
+def _seen(v: np.ndarray) -> np.ndarray:
+    """(N,) bool: the returns with a finite value (every channel of a colour)."""
+    ok = np.isfinite(v)
+    return ok if ok.ndim == 1 else ok.all(axis=1)
+
+
+def profile_predictor(profile) -> Predictor:
+    """``predict(scan, values, ok)``: ``profile`` at the ``ok`` returns of ``scan``."""
+
+    def predict(s: ScanFrame, v: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        return profile(
             v[ok],
-            d,
+            s.range_m[ok],
             ring=s.ring[ok] if np.all(s.ring >= 0) else None,
             elevation_deg=s.elevation_deg[ok],
-            cos_incidence=cos,
+            cos_incidence=s.cos_incidence[ok] if profile.uses_incidence else None,
         )
+
+    return predict
+
+
+def score(predict: Predictor, scans: Sequence[ScanFrame], values: dict[str, np.ndarray]) -> tuple:
+    """Mean Spearman and range-binned Spearman of ``predict`` (:data:`Predictor`) over ``scans``
+    (``values``: frame name -> values; returns without a finite value are left out)."""
+    rho, rho_bin = [], []
+    for s in scans:
+        ok = _seen(values[s.name])
+        pred = predict(s, values[s.name], ok)
         rho.append(spearman(pred, s.intensity[ok]))
-        rho_bin.append(binned_spearman(pred, s.intensity[ok], d))
+        rho_bin.append(binned_spearman(pred, s.intensity[ok], s.range_m[ok]))
     return float(np.nanmean(rho)), float(np.nanmean(rho_bin))
 
 
-def fitted(train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int, source: str):
-    """The recipe's profile of ``source``'s values fitted on ``train``."""
-    return fit_values_profile(
+def fitted(
+    train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int, source: str
+) -> Predictor:
+    """``source``'s predictor fitted on ``train``: the recipe's profile of its values, or the
+    predictor of its own of a colour source (module docstring)."""
+    if source == "lin9":
+        predict = linear_colour_distance_method(lambda s: values[s.name]).fit(train)
+        return lambda s, v, ok: predict(s)[ok]
+    if source == "colour_gbm":
+        return fit_colour_gbm(train, values, seed)
+    profile = fit_values_profile(
         train,
         lambda s: values[s.name],
         name=f"{source}-k{len(train)}-s{seed}",
@@ -167,6 +239,50 @@ def fitted(train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int,
         incidence=True,
         seed=seed,
     )
+    return profile_predictor(profile)
+
+
+def colour_design(scan: ScanFrame, colour: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(n, 6) float64 features :data:`COLOUR_GBM_FEATURES` of the ``ok`` returns of ``scan``
+    (``colour``: (N, 3) 8-bit sRGB / 255, linearised here)."""
+    from nidar_mi.io.images import srgb_to_linear
+
+    lin = srgb_to_linear(np.clip(colour[ok], 0.0, 1.0))
+    geo = [scan.range_m[ok], scan.elevation_deg[ok], scan.cos_incidence[ok]]
+    return np.column_stack([lin, *geo]).astype(np.float64)
+
+
+def fit_colour_gbm(
+    train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int
+) -> Predictor:
+    """The colour gbm diagnostic (module docstring) fitted on ``train``: LightGBM with the
+    parameters, rounds and subsample bound of the recipe's ``gbm`` form."""
+    from nidar_mi.profiles.gbm import GbmFitOptions, _lgb, _params
+
+    o = GbmFitOptions(seed=seed)
+    oks = [_seen(values[s.name]) for s in train]
+    x = np.concatenate([colour_design(s, values[s.name], m) for s, m in zip(train, oks)])
+    y = np.concatenate([s.intensity[m] for s, m in zip(train, oks)]).astype(np.float64)
+    if y.size > o.max_samples:
+        keep = np.sort(np.random.default_rng(o.seed).choice(y.size, o.max_samples, replace=False))
+        x, y = x[keep], y[keep]
+    params = _params(
+        COLOUR_GBM_FEATURES,
+        o.monotone,
+        leaves=o.leaves,
+        learning_rate=o.learning_rate,
+        min_leaf=o.min_leaf,
+        seed=o.seed,
+    )
+    lgb = _lgb()
+    data = lgb.Dataset(x, label=y, feature_name=list(COLOUR_GBM_FEATURES), params={"verbose": -1})
+    booster = lgb.train(params, data, num_boost_round=o.trees)
+
+    def predict(s: ScanFrame, v: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        out = booster.predict(colour_design(s, v, ok), num_threads=1)
+        return np.clip(np.asarray(out, dtype=np.float64), 0.0, 1.0)
+
+    return predict
 
 
 def draw(pool: Sequence[ScanFrame], k: int | None, seed: int) -> list[ScanFrame]:
@@ -194,7 +310,7 @@ def generic_rows(groups: dict[str, list], values: Values) -> Iterator[tuple]:
         if source not in R_SOURCES:
             continue
         for gen in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):
-            prof = generic_profile(gen)
+            prof = profile_predictor(generic_profile(gen))
             per = [score(prof, groups[g], vals) for g in names]
             yield source, gen, 0, [tuple(np.mean(per, axis=0))]
 
@@ -229,7 +345,7 @@ def _per_seed(runs, signed: bool = False) -> str:
 
 
 def table(groups: dict[str, list], values: Values, ks, seeds: int, extra_ks=None) -> Iterator[str]:
-    """The Markdown table's rows, as they finish (the gain row after each K's source rows).
+    """The Markdown table's rows, as they finish (the gain rows after each K's source rows).
 
     ``extra_ks``: the K (None: the whole pool) at which the sources other than
     :data:`R_SOURCES` are fitted (default: every K).
@@ -245,11 +361,12 @@ def table(groups: dict[str, list], values: Values, ks, seeds: int, extra_ks=None
         kk = "all" if k is None else k
         for source, r in runs.items():
             row = f"{_cell(r, 0)} | {_cell(r, 1)} | {len(r)} | {_per_seed(r)}"
-            yield f"| {VALUE_SOURCES[source]} | {RECIPE} | {kk} | {row} |"
-        if "nidar" in runs and "geometry" in runs:
-            gain = [(a[0] - b[0], a[1] - b[1]) for a, b in zip(runs["nidar"], runs["geometry"])]
-            row = f"{_cell(gain, 0, True)} | {_cell(gain, 1, True)} | {len(gain)} | {_per_seed(gain, True)}"
-            yield f"| **image gain** (NIDAR R − geometry only) | {RECIPE} | {kk} | {row} |"
+            yield f"| {VALUE_SOURCES[source]} | {PREDICTORS.get(source, RECIPE)} | {kk} | {row} |"
+        for plus, minus, label in GAINS:
+            if plus in runs and minus in runs:
+                gain = [(a[0] - b[0], a[1] - b[1]) for a, b in zip(runs[plus], runs[minus])]
+                row = f"{_cell(gain, 0, True)} | {_cell(gain, 1, True)} | {len(gain)} | {_per_seed(gain, True)}"
+                yield f"| {label} | {PREDICTORS.get(plus, RECIPE)} | {kk} | {row} |"
 
 
 def _parse(argv):
@@ -263,7 +380,8 @@ def _parse(argv):
     ap.add_argument(
         "--extra-ks",
         default=None,
-        help="K at which luminance and STN pseudo-NIR are fitted (default: every K of --ks)",
+        help="K at which the sources other than nidar and geometry are fitted "
+        "(default: every K of --ks)",
     )
     ap.add_argument("--weights", default=None, help="NIDAR weights (default: the shipped)")
     args = ap.parse_args(argv)
@@ -291,7 +409,12 @@ def main(argv=None) -> int:
         return 2
     scans = load_scans(dirs, progress=False)
     model = NidarModel.load(args.weights, device="cpu")
-    values = source_values(model, scans, args.sources)
+    linear_nir = None
+    if "linnir" in args.sources:
+        from nidar_mi.eval.real import fit_linear_nir
+
+        linear_nir, _ = fit_linear_nir(root / "rgbnir")
+    values = source_values(model, scans, args.sources, linear_nir)
     groups: dict[str, list] = {}
     for s in scans:
         groups.setdefault(group_of(s.name), []).append(s)

@@ -64,19 +64,30 @@ def test_sources_sample_the_maps_at_the_returns_and_grey_is_the_constant_image()
     rgb = _image(0)
     scans = [_scan("kitti__a", rgb), _scan("kitti__b", _image(1))]
     model = _FakeModel()
-    values = bench.source_values(model, scans, list(bench.VALUE_SOURCES))
+    from nidar_mi.eval.baselines import LinearNIR
+    from nidar_mi.io.images import srgb_to_linear
+
+    blue = LinearNIR(weights=np.array([0.0, 0.0, 1.0, 0.0]))  # the linear blue channel
+    values = bench.source_values(model, scans, list(bench.VALUE_SOURCES), linear_nir=blue)
     v = np.arange(2, H - 2)
     u = v + 3
     from nidar_mi.eval.reflectance_cue import GREY_LEVEL, luminance
 
     a = {s: values[s]["kitti__a"] for s in bench.VALUE_SOURCES}
+    n = len(v) + 1
+    for s in bench.VALUE_SOURCES:  # one value per return, a colour for the colour sources
+        assert a[s].shape == ((n, 3) if s in bench.COLOUR_SOURCES else (n,))
     # returns at pixel centres read the pixel; the one behind the camera has no value
     np.testing.assert_allclose(a["nidar"][:-1], rgb[v, u, 0] / 255.0, atol=1e-6)
     np.testing.assert_allclose(a["stn"][:-1], rgb[v, u, 1] / 255.0, atol=1e-6)
     np.testing.assert_allclose(a["luminance"][:-1], luminance(rgb)[v, u], atol=1e-6)
     np.testing.assert_allclose(a["geometry"][:-1], GREY_LEVEL / 255.0, atol=1e-6)
+    want_nir = srgb_to_linear(rgb[v, u, 2].astype(np.float32) / 255.0)
+    np.testing.assert_allclose(a["linnir"][:-1], want_nir, atol=1e-6)
+    for s in bench.COLOUR_SOURCES:
+        np.testing.assert_allclose(a[s][:-1], rgb[v, u] / 255.0, atol=1e-6)
     for s in bench.VALUE_SOURCES:
-        assert np.isnan(a[s][-1])
+        assert np.all(np.isnan(a[s][-1]))
     # the grey image is predicted once per image size, and it is uniform at GREY_LEVEL
     greys = [c for c in model.calls if c[1] == c[2]]
     assert greys == [((H, W, 3), GREY_LEVEL, GREY_LEVEL)]
@@ -149,3 +160,86 @@ def test_every_source_is_fitted_on_the_same_draws_and_the_gain_is_their_differen
         "+0.100/+0.150; +0.100/+0.150",
     ]
     assert _cells(rows[-1])[3:6] == ["+0.100", "+0.150", "1"]
+
+
+def _cloud(name: str, seed: int, n: int = 3000):
+    """A scan of ``n`` returns at random directions and ranges (no camera), with the (N, 3)
+    colour at each (the last 10 returns unseen: NaN) and its incidence cosine set."""
+    from nidar_mi.datasets.scans import ScanFrame
+
+    rng = np.random.default_rng(seed)
+    d = rng.uniform(3.0, 60.0, n)
+    el = np.radians(rng.uniform(-20.0, 2.0, n))
+    az = rng.uniform(-0.7, 0.7, n)
+    xyz = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1) * d[:, None]
+    colour = rng.uniform(0.0, 1.0, (n, 3))
+    colour[-10:] = np.nan
+    scan = ScanFrame(name, xyz, np.zeros(n), np.full(n, -1, np.int16), cameras=[])
+    scan.__dict__["cos_incidence"] = rng.uniform(0.05, 1.0, n)
+    return scan, colour
+
+
+def test_linear_colour_distance_recovers_a_linear_law_exactly():
+    from nidar_mi.eval.baselines import colour_distance_features
+
+    w = np.array([0.2, 0.1, -0.05, 0.1, 0.05, 0.0, 0.03, -0.1, 0.2])
+    scans, values = [], {}
+    for i in range(4):
+        scan, colour = _cloud(f"kitti__{i}", i)
+        ok = bench._seen(colour)
+        scan.intensity[ok] = colour_distance_features(colour[ok], scan.range_m[ok]) @ w
+        assert 0.0 < scan.intensity[ok].min() and scan.intensity[ok].max() < 1.0
+        scans.append(scan)
+        values[scan.name] = colour
+    predict = bench.fitted(scans[:3], values, 0, "lin9")
+    held = scans[3]
+    ok = bench._seen(values[held.name])
+    pred = predict(held, values[held.name], ok)
+    assert pred.shape == (ok.sum(),) == (len(ok) - 10,)
+    np.testing.assert_allclose(pred, held.intensity[ok], atol=1e-9)
+    assert bench.score(predict, [held], values) == (1.0, 1.0)
+
+
+def test_colour_gbm_reads_the_colour_with_the_recipes_settings():
+    from nidar_mi.io.images import srgb_to_linear
+
+    scans, values = [], {}
+    for i in range(3):
+        scan, colour = _cloud(f"kitti__{i}", 10 + i)
+        lin = srgb_to_linear(np.nan_to_num(colour))
+        # the red channel ranks the intensity; range and incidence shade it
+        scan.intensity[:] = 0.6 * lin[:, 0] * scan.cos_incidence + 0.2 * np.exp(-scan.range_m / 40)
+        scans.append(scan)
+        values[scan.name] = colour
+    predict = bench.fitted(scans[:2], values, 0, "colour_gbm")
+    held = scans[2]
+    ok = bench._seen(values[held.name])
+    pred = predict(held, values[held.name], ok)
+    assert pred.shape == (ok.sum(),) and np.all((0.0 <= pred) & (pred <= 1.0))
+    rho, _ = bench.score(predict, [held], values)
+    assert rho > 0.9
+    x = bench.colour_design(held, values[held.name], ok)
+    assert x.shape == (ok.sum(), len(bench.COLOUR_GBM_FEATURES))
+    np.testing.assert_allclose(x[:, 0], srgb_to_linear(values[held.name][ok, 0]))
+    np.testing.assert_allclose(
+        x[:, 3:], np.c_[held.range_m, held.elevation_deg, held.cos_incidence][ok]
+    )
+    # the same draws and seed give the same model
+    again = bench.fitted(scans[:2], values, 0, "colour_gbm")
+    np.testing.assert_array_equal(again(held, values[held.name], ok), pred)
+
+
+def test_the_colour_gain_row_pairs_the_colour_gbm_with_geometry_only(monkeypatch):
+    groups = {g: [f"{g}{i}" for i in range(4)] for g in "ab"}
+    values = {s: {} for s in ("geometry", "lin9", "colour_gbm")}
+    scores = {"geometry": (0.5, 0.25), "lin9": (0.3, 0.1), "colour_gbm": (0.56, 0.33)}
+    monkeypatch.setattr(bench, "fitted", lambda train, vals, seed, source: source)
+    monkeypatch.setattr(bench, "score", lambda p, scans, vals: scores.get(p, (0.2, 0.2)))
+    rows = [_cells(ln) for ln in bench.table(groups, values, [3], 2) if "| 3 |" in ln]
+    assert [r[:2] for r in rows] == [
+        ["geometry only (R of a grey image)", bench.RECIPE],
+        ["(h) linear colour + distance", bench.PREDICTORS["lin9"]],
+        ["colour gbm (diagnostic)", bench.PREDICTORS["colour_gbm"]],
+        ["**colour gain** (colour gbm − geometry only)", bench.PREDICTORS["colour_gbm"]],
+    ]
+    assert rows[-1][3:6] == ["+0.060 ± 0.000", "+0.080 ± 0.000", "2"]
