@@ -257,7 +257,7 @@ def fit_colour_gbm(
 ) -> Predictor:
     """The colour gbm diagnostic (module docstring) fitted on ``train``: LightGBM with the
     parameters, rounds and subsample bound of the recipe's ``gbm`` form."""
-    from nidar_mi.profiles.gbm import GbmFitOptions, _lgb, _params
+    from nidar_mi.profiles.gbm import GbmFitOptions, train_booster
 
     o = GbmFitOptions(seed=seed)
     oks = [_seen(values[s.name]) for s in train]
@@ -266,17 +266,7 @@ def fit_colour_gbm(
     if y.size > o.max_samples:
         keep = np.sort(np.random.default_rng(o.seed).choice(y.size, o.max_samples, replace=False))
         x, y = x[keep], y[keep]
-    params = _params(
-        COLOUR_GBM_FEATURES,
-        o.monotone,
-        leaves=o.leaves,
-        learning_rate=o.learning_rate,
-        min_leaf=o.min_leaf,
-        seed=o.seed,
-    )
-    lgb = _lgb()
-    data = lgb.Dataset(x, label=y, feature_name=list(COLOUR_GBM_FEATURES), params={"verbose": -1})
-    booster = lgb.train(params, data, num_boost_round=o.trees)
+    booster = train_booster(x, y, COLOUR_GBM_FEATURES, o)
 
     def predict(s: ScanFrame, v: np.ndarray, ok: np.ndarray) -> np.ndarray:
         out = booster.predict(colour_design(s, v, ok), num_threads=1)

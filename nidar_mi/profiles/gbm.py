@@ -402,11 +402,19 @@ def _training_intensities(intensity: Any, n: int, min_leaf: int) -> np.ndarray:
     return y
 
 
-def _train(
-    x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: GbmFitOptions
-) -> tuple[str, dict[str, Any]]:
-    """LightGBM on the design matrix ``x`` (N, F): its text model and the parameters recorded
-    in the profile file."""
+def train_booster(x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: GbmFitOptions):
+    """A LightGBM regression of ``y`` on ``x`` with the ``gbm`` form's settings.
+
+    Args:
+        x: (N, F) float64 design matrix, one column per name in ``feats``.
+        y: (N,) targets.
+        feats: the F feature names; ``"v"`` (when ``o.monotone``) and the incidence are
+            constrained non-decreasing.
+        o: the fit's options (leaves, learning rate, leaf size, rounds, seed).
+
+    Returns:
+        The trained ``lightgbm.Booster`` (single-threaded, deterministic).
+    """
     params = _params(
         feats,
         o.monotone,
@@ -417,9 +425,21 @@ def _train(
     )
     lgb = _lgb()
     data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
-    booster = lgb.train(params, data, num_boost_round=int(o.trees))
+    return lgb.train(params, data, num_boost_round=int(o.trees))
+
+
+def _train(
+    x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: GbmFitOptions
+) -> tuple[str, dict[str, Any]]:
+    """LightGBM on the design matrix ``x`` (N, F): its text model and the parameters recorded
+    in the profile file."""
+    booster = train_booster(x, y, feats, o)
     record = {
-        k: params[k] for k in ("num_leaves", "learning_rate", "min_data_in_leaf", "max_bin", "seed")
+        "num_leaves": int(o.leaves),
+        "learning_rate": float(o.learning_rate),
+        "min_data_in_leaf": int(o.min_leaf),
+        "max_bin": 255,
+        "seed": int(o.seed),
     } | {"trees": int(booster.num_trees()), "samples": int(y.size)}
     return booster.model_to_string(), record
 
