@@ -28,7 +28,7 @@ import numpy as np
 from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
-from .projection import _points, bilinear_sample, in_image, project
+from .projection import _points, bilinear_sample, project_in_image
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
 
 __all__ = ["FUSION_RULES", "sample_cameras"]
@@ -49,18 +49,18 @@ def _sample_camera(
     """One camera's ``(value, centre score, depth)`` per point; NaN / inf where unseen."""
     n = p.shape[0]
     value, score, dep = np.full(n, np.nan), np.full(n, np.inf), np.full(n, np.inf)
-    uv, depth, in_front = project(p, cam)
+    index, uv, depth = project_in_image(p, cam)  # only the points that land in the image
     if occlusion:
         seen = visible_mask(uv, depth, cam, depth_image=depth_image, **visibility)
-    else:
-        seen = in_front & in_image(uv, cam)
-    sample = bilinear_sample(img, uv[seen])
-    ok = np.flatnonzero(seen)[np.isfinite(sample)]
-    value[ok] = sample[np.isfinite(sample)]
-    du = (uv[ok, 0] - (cam.width - 1) / 2.0) / (cam.width / 2.0)
-    dv = (uv[ok, 1] - (cam.height - 1) / 2.0) / (cam.height / 2.0)
-    score[ok] = np.hypot(du, dv)
-    dep[ok] = depth[ok]
+        index, uv, depth = index[seen], uv[seen], depth[seen]
+    sample = bilinear_sample(img, uv)
+    ok = np.isfinite(sample)
+    index, uv = index[ok], uv[ok]
+    value[index] = sample[ok]
+    du = (uv[:, 0] - (cam.width - 1) / 2.0) / (cam.width / 2.0)
+    dv = (uv[:, 1] - (cam.height - 1) / 2.0) / (cam.height / 2.0)
+    score[index] = np.hypot(du, dv)
+    dep[index] = depth[ok]
     return value, score, dep
 
 
@@ -70,7 +70,10 @@ def _fuse(
     """Fuse (C, N) per-camera samples into ``(values, observed, camera_index)``."""
     n = vals.shape[1]
     observed = np.isfinite(vals).any(axis=0)
-    pick = np.argmin(dep if fusion == "min_depth" else score, axis=0)
+    if len(vals) == 1:
+        pick = np.zeros(n, dtype=np.int64)
+    else:
+        pick = np.argmin(dep if fusion == "min_depth" else score, axis=0)
     if fusion == "mean":
         fused = np.nanmean(vals[:, observed], axis=0)  # each column has a finite value
     else:
