@@ -89,20 +89,28 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
         raise NidarError(f"normals need at least 3 neighbours per point (got k={k})")
     if len(p) < 3:
         raise NidarError(f"normals need at least 3 points (got {len(p)})")
+    return _plane_normals(p, k)[0]
+
+
+def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`estimate_normals` of checked (N, 3) points (N >= 3, ``k >= 3``): ``(normals,
+    flat)``, (N, 3) float64 and (N,) bool, True where the normal is zero (no plane)."""
     k = min(int(k), len(p))
     p = np.ascontiguousarray(p)
     tree = _tree(p)
     normals = np.empty((3, len(p)))
+    flat = np.empty(len(p), dtype=bool)
     for start in range(0, len(p), CHUNK):
         idx = _neighbours(tree, p[start : start + CHUNK], k)
         cov, scale = _covariances(p, idx)
         second, smallest = _plane_eigen(cov)
-        flat = ~(second > DEGENERATE * scale)  # a point or a line: no plane
-        smallest[:, flat] = 0.0
+        no_plane = ~(second > DEGENERATE * scale)  # a point or a line
+        smallest[:, no_plane] = 0.0
         normals[:, start : start + CHUNK] = smallest
+        flat[start : start + CHUNK] = ~smallest.any(axis=0)
     flip = (normals[0] * p[:, 0] + normals[1] * p[:, 1] + normals[2] * p[:, 2]) > 0
     normals[:, flip] *= -1.0
-    return np.ascontiguousarray(normals.T)
+    return np.ascontiguousarray(normals.T), flat
 
 
 def _tree(p: np.ndarray):
@@ -263,26 +271,31 @@ def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:
     where there is no plane, with one warning per cause."""
     if int(k) < 3:
         raise NidarError(f"normals need at least 3 neighbours per point (got k={k})")
-    far = np.abs(p).max(axis=1, initial=0.0) > MAX_COORDINATE
-    near = np.flatnonzero(~far)
-    n = np.zeros_like(p)
-    if far.any():
+    if not p.size or np.abs(p).max() <= MAX_COORDINATE:  # the usual case: no copies
+        far = np.zeros(len(p), dtype=bool)
+    else:
+        far = np.abs(p).max(axis=1) > MAX_COORDINATE
         warnings.warn(
             f"{int(far.sum())} point(s) beyond {MAX_COORDINATE:g} m: incidence taken as head-on",
             stacklevel=3,
         )
-    if 0 < len(near) < 3:
+    near = len(p) - int(far.sum())
+    if 0 < near < 3:
         warnings.warn(
-            f"{len(near)} point(s): too few for a surface normal, incidence taken as head-on",
+            f"{near} point(s): too few for a surface normal, incidence taken as head-on",
             stacklevel=3,
         )
-    elif len(near):
-        n[near] = estimate_normals(p[near], k)
-        flat = int(np.sum(~np.any(n[near], axis=1)))
-        if flat:
-            warnings.warn(
-                f"{flat} of {len(near)} points have neighbours that coincide or lie on one line "
-                "(no plane): incidence taken as head-on",
-                stacklevel=3,
-            )
+    if near < 3:
+        return np.zeros_like(p)
+    if far.any():
+        n = np.zeros_like(p)
+        n[~far], flat = _plane_normals(p[~far], k)
+    else:
+        n, flat = _plane_normals(p, k)
+    if flat.any():
+        warnings.warn(
+            f"{int(flat.sum())} of {near} points have neighbours that coincide or lie on one line "
+            "(no plane): incidence taken as head-on",
+            stacklevel=3,
+        )
     return n
