@@ -45,10 +45,9 @@ def _sample_camera(
     *,
     occlusion: bool,
     visibility: dict[str, Any],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One camera's ``(value, centre score, depth)`` per point; NaN / inf where unseen."""
-    n = p.shape[0]
-    value, score, dep = np.full(n, np.nan), np.full(n, np.inf), np.full(n, np.inf)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One camera's samples of the points it sees: ``(index, value, centre score, depth)``,
+    (M,) arrays, ``index`` ascending into ``p``."""
     index, uv, depth = project_in_image(p, cam)  # only the points that land in the image
     if occlusion:
         seen = visible_mask(uv, depth, cam, depth_image=depth_image, **visibility)
@@ -56,12 +55,31 @@ def _sample_camera(
     sample = bilinear_sample(img, uv)
     ok = np.isfinite(sample)
     index, uv = index[ok], uv[ok]
-    value[index] = sample[ok]
     du = (uv[:, 0] - (cam.width - 1) / 2.0) / (cam.width / 2.0)
     dv = (uv[:, 1] - (cam.height - 1) / 2.0) / (cam.height / 2.0)
-    score[index] = np.hypot(du, dv)
-    dep[index] = depth[ok]
-    return value, score, dep
+    return index, sample[ok], np.hypot(du, dv), depth[ok]
+
+
+def _one_camera(n: int, index: np.ndarray, value: np.ndarray):
+    """:func:`_fuse`'s result for a single camera's samples (``index``, ``value``) of ``n``
+    points, without (1, n) arrays: the value where it sees a point."""
+    values = np.zeros(n, dtype=np.float32)
+    values[index] = value
+    observed = np.zeros(n, dtype=bool)
+    observed[index] = True
+    camera_index = np.full(n, -1, dtype=np.int64)
+    camera_index[index] = 0
+    return values, observed, camera_index
+
+
+def _stacked(n: int, per_camera: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(C, n) values, centre scores and depths of the cameras' samples; NaN / inf where a
+    camera does not see a point."""
+    vals, score, dep = np.full((3, len(per_camera), n), np.inf)
+    vals[:] = np.nan
+    for c, (index, value, sc, depth) in enumerate(per_camera):
+        vals[c, index], score[c, index], dep[c, index] = value, sc, depth
+    return vals, score, dep
 
 
 def _fuse(
@@ -70,10 +88,7 @@ def _fuse(
     """Fuse (C, N) per-camera samples into ``(values, observed, camera_index)``."""
     n = vals.shape[1]
     observed = np.isfinite(vals).any(axis=0)
-    if len(vals) == 1:
-        pick = np.zeros(n, dtype=np.int64)
-    else:
-        pick = np.argmin(dep if fusion == "min_depth" else score, axis=0)
+    pick = np.argmin(dep if fusion == "min_depth" else score, axis=0)
     if fusion == "mean":
         fused = np.nanmean(vals[:, observed], axis=0)  # each column has a finite value
     else:
@@ -159,5 +174,6 @@ def sample_cameras(
         per_camera.append(
             _sample_camera(p, cam, img, dimg, occlusion=occlusion, visibility=visibility)
         )
-    vals, score, dep = (np.stack(a) for a in zip(*per_camera, strict=True))
-    return _fuse(vals, score, dep, fusion)
+    if len(per_camera) == 1:  # every fusion rule gives the camera's own samples
+        return _one_camera(len(p), *per_camera[0][:2])
+    return _fuse(*_stacked(len(p), per_camera), fusion)

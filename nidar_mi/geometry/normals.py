@@ -262,8 +262,10 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
 
 def _unit_scale(v: np.ndarray) -> np.ndarray:
     """Rows divided by their largest absolute component (zero rows stay zero)."""
-    m = np.abs(v).max(axis=1, keepdims=True, initial=0.0)
-    return v / np.where(m > 0, m, 1.0)
+    a = np.abs(v)
+    m = np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])  # the rows' maxima, column-wise
+    m[m <= 0] = 1.0
+    return v / m[:, None]
 
 
 def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:

@@ -73,17 +73,21 @@ def project_in_image(
         ``(index, uv, depth)``: (M,) int64 indices of those points into ``points_lidar``
         (ascending), their (M, 2) float64 pixel coordinates and (M,) camera-forward depths, m.
     """
-    x, y, depth = _camera_coordinates(_points(points_lidar), cam)
+    p = _points(points_lidar)
+    depth = _camera_coordinates(p, cam, axes=(2,))[0]
     front = np.flatnonzero(depth > min_depth)
     depth = depth[front]
-    uv = _pixels(x[front], y[front], depth, cam)
+    x, y = _camera_coordinates(p[front], cam, axes=(0, 1))
+    uv = _pixels(x, y, depth, cam)
     inside = in_image(uv, cam)
     return front[inside], uv[inside], depth[inside]
 
 
-def _camera_coordinates(p: np.ndarray, cam: CameraModel) -> tuple[np.ndarray, ...]:
-    """``(x, y, z)``: (N,) OpenCV camera coordinates (x right, y down, z forward), m, of
-    (N, 3) LiDAR-frame points, m.
+def _camera_coordinates(
+    p: np.ndarray, cam: CameraModel, axes: tuple[int, ...] = (0, 1, 2)
+) -> tuple[np.ndarray, ...]:
+    """(N,) OpenCV camera coordinates (x right, y down, z forward: axes 0, 1, 2), m, of (N, 3)
+    LiDAR-frame points, m: those of ``axes``, in that order.
 
     Each is a 3-term dot product summed as ``(a0·b0 + a2·b2) + a1·b1``: the order in which
     NumPy's ``einsum`` (this module's former code) adds them, so the values are unchanged;
@@ -93,7 +97,7 @@ def _camera_coordinates(p: np.ndarray, cam: CameraModel) -> tuple[np.ndarray, ..
     T = cam.T_cam_lidar
     rot = cam.R_opencv_cam @ T[:3, :3]
     shift = cam.R_opencv_cam @ T[:3, 3]
-    return tuple(_dot3(p[:, 0], p[:, 1], p[:, 2], rot[k]) + shift[k] for k in range(3))
+    return tuple(_dot3(p[:, 0], p[:, 1], p[:, 2], rot[k]) + shift[k] for k in axes)
 
 
 def _pixels(x: np.ndarray, y: np.ndarray, z: np.ndarray, cam: CameraModel) -> np.ndarray:
