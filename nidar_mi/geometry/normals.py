@@ -23,11 +23,12 @@ a warning, and take no part in the others' neighbourhoods.
 Memory is bounded: neighbours are searched in chunks of :data:`CHUNK` points (an exact k-d
 tree search, pykdtree's: the same neighbourhoods as any exact search, except which of several
 points at exactly the k-th distance is taken), their scatter matrices summed in blocks of
-:data:`BLOCK`. A 1242 × 375 camera's ~17 000 returns take ~25 ms on 2 cores (docs/BENCHMARKS.md).
+:data:`BLOCK` (timings: the ``normals`` stage of docs/BENCHMARKS.md's NIDAR section).
 """
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -40,6 +41,7 @@ __all__ = [
     "DEFAULT_NEIGHBOURS",
     "DEGENERATE",
     "MAX_COORDINATE",
+    "WORKERS",
     "estimate_normals",
     "incidence_cosine",
 ]
@@ -53,6 +55,8 @@ CHUNK = 100_000
 BLOCK = 2048
 #: Largest coordinate magnitude :func:`estimate_normals` accepts, m.
 MAX_COORDINATE = 1e7
+#: Threads that fit the planes (at most 4; the scans of one camera take a few ms per thread).
+WORKERS = max(1, min(4, os.cpu_count() or 1))
 #: Relative second principal spread below which a neighbourhood has no plane (a point or a line).
 DEGENERATE = 1e-12
 
@@ -94,23 +98,40 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
 
 def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`estimate_normals` of checked (N, 3) points (N >= 3, ``k >= 3``): ``(normals,
-    flat)``, (N, 3) float64 and (N,) bool, True where the normal is zero (no plane)."""
+    flat)``, (N, 3) float64 and (N,) bool, True where the normal is zero (no plane).
+
+    The plane fits of a chunk's neighbourhoods run on :data:`WORKERS` threads, each on its own
+    share (NumPy releases the GIL; each neighbourhood's result is the same however they are
+    split)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     k = min(int(k), len(p))
     p = np.ascontiguousarray(p)
     tree = _tree(p)
     normals = np.empty((3, len(p)))
     flat = np.empty(len(p), dtype=bool)
-    for start in range(0, len(p), CHUNK):
-        idx = _neighbours(tree, p[start : start + CHUNK], k)
-        cov, scale = _covariances(p, idx)
-        second, smallest = _plane_eigen(cov)
-        no_plane = ~(second > DEGENERATE * scale)  # a point or a line
-        smallest[:, no_plane] = 0.0
-        normals[:, start : start + CHUNK] = smallest
-        flat[start : start + CHUNK] = ~smallest.any(axis=0)
+    with ThreadPoolExecutor(WORKERS) as pool:
+        for start in range(0, len(p), CHUNK):
+            idx = _neighbours(tree, p[start : start + CHUNK], k)
+            cuts = np.linspace(0, len(idx), min(WORKERS, -(-len(idx) // BLOCK)) + 1).astype(int)
+            parts = [idx[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+            fits = pool.map(lambda part: _planes(p, part), parts)
+            vec, no_plane = (np.concatenate(a, axis=-1) for a in zip(*fits, strict=True))
+            normals[:, start : start + CHUNK] = vec
+            flat[start : start + CHUNK] = no_plane
     flip = (normals[0] * p[:, 0] + normals[1] * p[:, 1] + normals[2] * p[:, 2]) > 0
     normals[:, flip] *= -1.0
     return np.ascontiguousarray(normals.T), flat
+
+
+def _planes(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plane fits of (n, k) neighbourhoods (indices into (N, 3) points ``p``): ``(normal,
+    flat)``, (3, n) unit normals (any sign; zero where ``flat``) and (n,) bool, True where the
+    neighbours coincide or lie on one line (or the normal is zero)."""
+    cov, scale = _covariances(p, idx)
+    second, smallest = _plane_eigen(cov)
+    smallest[:, ~(second > DEGENERATE * scale)] = 0.0  # a point or a line: no plane
+    return smallest, ~smallest.any(axis=0)
 
 
 def _tree(p: np.ndarray):
