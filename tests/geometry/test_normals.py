@@ -198,3 +198,13 @@ def test_the_fast_path_equals_a_textbook_reference_on_a_street_scan():
     assert untied.mean() > 0.99
     ref = _reference_cosine(p, k)
     np.testing.assert_allclose(incidence_cosine(p)[untied], ref[untied], rtol=0, atol=1e-9)
+
+
+def test_the_plane_fits_do_not_depend_on_their_split(monkeypatch):
+    """One thread or several, large blocks or small ones: the same normals, bit for bit."""
+    p = _street_scan(cols=512)
+    monkeypatch.setattr(normals_mod, "WORKERS", 1)
+    one = estimate_normals(p)
+    monkeypatch.setattr(normals_mod, "WORKERS", 3)
+    monkeypatch.setattr(normals_mod, "BLOCK", 301)
+    np.testing.assert_array_equal(estimate_normals(p), one)
