@@ -28,7 +28,7 @@ import numpy as np
 from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
-from .projection import _points, bilinear_sample, in_image, project
+from .projection import _points, bilinear_sample, project_in_image
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
 
 __all__ = ["FUSION_RULES", "sample_cameras"]
@@ -45,23 +45,41 @@ def _sample_camera(
     *,
     occlusion: bool,
     visibility: dict[str, Any],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One camera's ``(value, centre score, depth)`` per point; NaN / inf where unseen."""
-    n = p.shape[0]
-    value, score, dep = np.full(n, np.nan), np.full(n, np.inf), np.full(n, np.inf)
-    uv, depth, in_front = project(p, cam)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One camera's samples of the points it sees: ``(index, value, centre score, depth)``,
+    (M,) arrays, ``index`` ascending into ``p``."""
+    index, uv, depth = project_in_image(p, cam)  # only the points that land in the image
     if occlusion:
         seen = visible_mask(uv, depth, cam, depth_image=depth_image, **visibility)
-    else:
-        seen = in_front & in_image(uv, cam)
-    sample = bilinear_sample(img, uv[seen])
-    ok = np.flatnonzero(seen)[np.isfinite(sample)]
-    value[ok] = sample[np.isfinite(sample)]
-    du = (uv[ok, 0] - (cam.width - 1) / 2.0) / (cam.width / 2.0)
-    dv = (uv[ok, 1] - (cam.height - 1) / 2.0) / (cam.height / 2.0)
-    score[ok] = np.hypot(du, dv)
-    dep[ok] = depth[ok]
-    return value, score, dep
+        index, uv, depth = index[seen], uv[seen], depth[seen]
+    sample = bilinear_sample(img, uv)
+    ok = np.isfinite(sample)
+    index, uv = index[ok], uv[ok]
+    du = (uv[:, 0] - (cam.width - 1) / 2.0) / (cam.width / 2.0)
+    dv = (uv[:, 1] - (cam.height - 1) / 2.0) / (cam.height / 2.0)
+    return index, sample[ok], np.hypot(du, dv), depth[ok]
+
+
+def _one_camera(n: int, index: np.ndarray, value: np.ndarray):
+    """:func:`_fuse`'s result for a single camera's samples (``index``, ``value``) of ``n``
+    points, without (1, n) arrays: the value where it sees a point."""
+    values = np.zeros(n, dtype=np.float32)
+    values[index] = value
+    observed = np.zeros(n, dtype=bool)
+    observed[index] = True
+    camera_index = np.full(n, -1, dtype=np.int64)
+    camera_index[index] = 0
+    return values, observed, camera_index
+
+
+def _stacked(n: int, per_camera: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(C, n) values, centre scores and depths of the cameras' samples; NaN / inf where a
+    camera does not see a point."""
+    vals, score, dep = np.full((3, len(per_camera), n), np.inf)
+    vals[:] = np.nan
+    for c, (index, value, sc, depth) in enumerate(per_camera):
+        vals[c, index], score[c, index], dep[c, index] = value, sc, depth
+    return vals, score, dep
 
 
 def _fuse(
@@ -156,5 +174,6 @@ def sample_cameras(
         per_camera.append(
             _sample_camera(p, cam, img, dimg, occlusion=occlusion, visibility=visibility)
         )
-    vals, score, dep = (np.stack(a) for a in zip(*per_camera, strict=True))
-    return _fuse(vals, score, dep, fusion)
+    if len(per_camera) == 1:  # every fusion rule gives the camera's own samples
+        return _one_camera(len(p), *per_camera[0][:2])
+    return _fuse(*_stacked(len(p), per_camera), fusion)

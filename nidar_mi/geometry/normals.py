@@ -20,11 +20,15 @@ squared distance from the origin) :func:`incidence_cosine` takes the ray as head
 normal. Points beyond :data:`MAX_COORDINATE` (no LiDAR return lies there) are head-on too, with
 a warning, and take no part in the others' neighbourhoods.
 
-Memory is bounded: neighbours are gathered in chunks of :data:`CHUNK` points.
+Memory is bounded: neighbours are searched in chunks of :data:`CHUNK` points (an exact k-d
+tree search, pykdtree's: the same neighbourhoods as any exact search, except which of several
+points at exactly the k-th distance is taken), their scatter matrices summed in blocks of
+:data:`BLOCK` (timings: the ``normals`` stage of docs/BENCHMARKS.md's NIDAR section).
 """
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -32,20 +36,27 @@ import numpy as np
 from ..errors import NidarError
 
 __all__ = [
+    "BLOCK",
     "CHUNK",
     "DEFAULT_NEIGHBOURS",
     "DEGENERATE",
     "MAX_COORDINATE",
+    "WORKERS",
     "estimate_normals",
     "incidence_cosine",
 ]
 
 #: Neighbours per plane fit (the point itself included).
 DEFAULT_NEIGHBOURS = 20
-#: Points whose neighbourhoods are processed at once (bounds memory to ~CHUNK·k·72 bytes).
+#: Points whose neighbours are searched at once (bounds memory to ~CHUNK·k·16 bytes).
 CHUNK = 100_000
+#: Neighbourhoods whose scatter matrices are summed at once (their coordinates, BLOCK·k·24
+#: bytes, stay in cache).
+BLOCK = 2048
 #: Largest coordinate magnitude :func:`estimate_normals` accepts, m.
 MAX_COORDINATE = 1e7
+#: Threads that fit the planes (at most 4; the scans of one camera take a few ms per thread).
+WORKERS = max(1, min(4, os.cpu_count() or 1))
 #: Relative second principal spread below which a neighbourhood has no plane (a point or a line).
 DEGENERATE = 1e-12
 
@@ -77,45 +88,97 @@ def estimate_normals(xyz, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
         NidarError: not (N, 3), non-finite or beyond :data:`MAX_COORDINATE`, fewer than 3
             points, or ``k < 3``.
     """
-    from scipy.spatial import cKDTree
-
     p = _points(xyz)
     if int(k) < 3:
         raise NidarError(f"normals need at least 3 neighbours per point (got k={k})")
     if len(p) < 3:
         raise NidarError(f"normals need at least 3 points (got {len(p)})")
+    return _plane_normals(p, k)[0]
+
+
+def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`estimate_normals` of checked (N, 3) points (N >= 3, ``k >= 3``): ``(normals,
+    flat)``, (N, 3) float64 and (N,) bool, True where the normal is zero (no plane).
+
+    The plane fits of a chunk's neighbourhoods run on :data:`WORKERS` threads, each on its own
+    share (NumPy releases the GIL; each neighbourhood's result is the same however they are
+    split)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     k = min(int(k), len(p))
-    tree = cKDTree(p)
-    normals = np.empty_like(p)
-    for start in range(0, len(p), CHUNK):
-        _, idx = tree.query(p[start : start + CHUNK], k=k, workers=-1)
-        cov, scale = _covariances(p, idx)
-        second, smallest = _plane_eigen(cov)
-        flat = ~(second > DEGENERATE * scale)  # a point or a line: no plane
-        normals[start : start + CHUNK] = np.where(flat[:, None], 0.0, smallest)
-    flip = np.einsum("ni,ni->n", normals, p) > 0
-    normals[flip] *= -1.0
-    return normals
+    p = np.ascontiguousarray(p)
+    tree = _tree(p)
+    normals = np.empty((3, len(p)))
+    flat = np.empty(len(p), dtype=bool)
+    with ThreadPoolExecutor(WORKERS) as pool:
+        for start in range(0, len(p), CHUNK):
+            idx = _neighbours(tree, p[start : start + CHUNK], k)
+            cuts = np.linspace(0, len(idx), min(WORKERS, -(-len(idx) // BLOCK)) + 1).astype(int)
+            parts = [idx[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+            fits = pool.map(lambda part: _planes(p, part), parts)
+            vec, no_plane = (np.concatenate(a, axis=-1) for a in zip(*fits, strict=True))
+            normals[:, start : start + CHUNK] = vec
+            flat[start : start + CHUNK] = no_plane
+    flip = (normals[0] * p[:, 0] + normals[1] * p[:, 1] + normals[2] * p[:, 2]) > 0
+    normals[:, flip] *= -1.0
+    return np.ascontiguousarray(normals.T), flat
+
+
+def _planes(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plane fits of (n, k) neighbourhoods (indices into (N, 3) points ``p``): ``(normal,
+    flat)``, (3, n) unit normals (any sign; zero where ``flat``) and (n,) bool, True where the
+    neighbours coincide or lie on one line (or the normal is zero)."""
+    cov, scale = _covariances(p, idx)
+    second, smallest = _plane_eigen(cov)
+    smallest[:, ~(second > DEGENERATE * scale)] = 0.0  # a point or a line: no plane
+    return smallest, ~smallest.any(axis=0)
+
+
+def _tree(p: np.ndarray):
+    """A k-d tree of (N, 3) C-contiguous float64 points (pykdtree's, leaves of 16 points)."""
+    from pykdtree.kdtree import KDTree
+
+    return KDTree(p, leafsize=16)
+
+
+def _neighbours(tree, q: np.ndarray, k: int) -> np.ndarray:
+    """(n, k) int64 indices of the ``k`` nearest points of ``tree`` to each of the (n, 3)
+    C-contiguous query points ``q``, nearest first (exact Euclidean search; among points at
+    equal distance the tree's order decides)."""
+    _, idx = tree.query(q, k=k)
+    return idx.astype(np.int64, copy=False).reshape(len(q), k)
 
 
 def _covariances(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Scatter matrices of neighbourhoods.
+    """Scatter matrices of neighbourhoods, in blocks of :data:`BLOCK` neighbourhoods.
+
+    The coordinates of a block are gathered neighbour-major, ``(3, k, m)``, so that the sums
+    over the neighbours add whole rows (contiguous, no strided reductions) and the block
+    stays in cache.
 
     Args:
         p: (N, 3) points, m.
         idx: (n, k) indices into ``p``: each row a neighbourhood.
 
     Returns:
-        ``(cov, scale)``: (n, 6) entries ``xx, yy, zz, xy, xz, yz`` of the neighbourhoods'
+        ``(cov, scale)``: (6, n) entries ``xx, yy, zz, xy, xz, yz`` of the neighbourhoods'
         scatter matrices about their means, m², and (n,) the sums of their squared distances
         from the origin (k × the mean), m².
     """
-    x = np.ascontiguousarray(p.T)[:, idx]  # (3, n, k)
-    scale = np.einsum("cnk,cnk->n", x, x)
-    x -= x.mean(axis=2, keepdims=True)
-    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-    cov = np.stack([np.einsum("nk,nk->n", x[a], x[b]) for a, b in pairs], axis=1)
+    n, k = idx.shape
+    coords = np.ascontiguousarray(p.T)  # (3, N)
+    cov, scale = np.empty((6, n)), np.empty(n)
+    for s in range(0, n, BLOCK):
+        x = np.take(coords, np.ascontiguousarray(idx[s : s + BLOCK].T), axis=1)  # (3, k, m)
+        scale[s : s + BLOCK] = np.einsum("ckm,ckm->m", x, x)
+        x -= x.sum(axis=1, keepdims=True) / k
+        for j, (a, b) in enumerate(_PAIRS):
+            cov[j, s : s + BLOCK] = np.einsum("km,km->m", x[a], x[b])
     return cov, scale
+
+
+#: Entries of a symmetric 3×3 matrix in the order ``xx, yy, zz, xy, xz, yz``.
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
 def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -128,15 +191,15 @@ def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     to 2e-12.
 
     Args:
-        cov: (n, 6) entries ``xx, yy, zz, xy, xz, yz``.
+        cov: (6, n) entries ``xx, yy, zz, xy, xz, yz``.
 
     Returns:
-        ``(second, smallest)``: (n,) the middle eigenvalue (same units as ``cov``) and (n, 3)
+        ``(second, smallest)``: (n,) the middle eigenvalue (same units as ``cov``) and (3, n)
         the unit eigenvector of the smallest one (any sign; zero for a zero matrix).
     """
-    s = np.abs(cov).max(axis=1)
-    s = np.where(s > 0, s, 1.0)
-    a00, a11, a22, a01, a02, a12 = (cov / s[:, None]).T
+    s = np.abs(cov).max(axis=0)
+    s[s <= 0] = 1.0
+    a00, a11, a22, a01, a02, a12 = cov / s
     q = (a00 + a11 + a22) / 3.0
     off = a01 * a01 + a02 * a02 + a12 * a12
     p2 = ((a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * off) / 6.0
@@ -152,21 +215,29 @@ def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         f = _det(m00, m11, m22, a01, a02, a12)
         low = low - np.divide(f, slope, out=np.zeros_like(f), where=slope != 0)
     second = (3.0 * q - top - low) * s
-    rows = np.stack([a00 - low, a01, a02, a01, a11 - low, a12, a02, a12, a22 - low], axis=1)
-    rows = rows.reshape(-1, 3, 3)
-    cross = np.stack(
-        [
-            np.cross(rows[:, 0], rows[:, 1]),
-            np.cross(rows[:, 0], rows[:, 2]),
-            np.cross(rows[:, 1], rows[:, 2]),
-        ],
-        axis=1,
-    )  # (n, 3 pairs, 3)
-    length2 = np.einsum("npi,npi->np", cross, cross)
-    best = length2.argmax(axis=1)
-    vec = cross[np.arange(len(cov)), best]
-    length = np.sqrt(length2[np.arange(len(cov)), best])
-    return second, vec / np.where(length > 0, length, 1.0)[:, None]
+    return second, _null_vector(a00 - low, a11 - low, a22 - low, a01, a02, a12)
+
+
+def _null_vector(m00, m11, m22, m01, m02, m12) -> np.ndarray:
+    """(3, n) unit vectors orthogonal to the rows of the (nearly) singular symmetric matrices
+    given by their (n,) entries: the longest of the three rows' cross products (the first of
+    equal ones), normalised; zero where all three vanish."""
+    r0, r1, r2 = (m00, m01, m02), (m01, m11, m12), (m02, m12, m22)
+    crosses = [_cross(r0, r1), _cross(r0, r2), _cross(r1, r2)]
+    length2 = [c[0] * c[0] + c[1] * c[1] + c[2] * c[2] for c in crosses]
+    first = (length2[0] >= length2[1]) & (length2[0] >= length2[2])
+    second = ~first & (length2[1] >= length2[2])
+    vec = np.where(first, crosses[0], np.where(second, crosses[1], crosses[2]))
+    length = np.sqrt(np.where(first, length2[0], np.where(second, length2[1], length2[2])))
+    length[length <= 0] = 1.0
+    return vec / length
+
+
+def _cross(a, b) -> np.ndarray:
+    """(3, n) cross products of two vectors given as triples of (n,) components."""
+    return np.stack(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def _det(m00, m11, m22, m01, m02, m12):
@@ -212,8 +283,10 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
 
 def _unit_scale(v: np.ndarray) -> np.ndarray:
     """Rows divided by their largest absolute component (zero rows stay zero)."""
-    m = np.abs(v).max(axis=1, keepdims=True, initial=0.0)
-    return v / np.where(m > 0, m, 1.0)
+    a = np.abs(v)
+    m = np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])  # the rows' maxima, column-wise
+    m[m <= 0] = 1.0
+    return v / m[:, None]
 
 
 def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:
@@ -221,26 +294,31 @@ def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:
     where there is no plane, with one warning per cause."""
     if int(k) < 3:
         raise NidarError(f"normals need at least 3 neighbours per point (got k={k})")
-    far = np.abs(p).max(axis=1, initial=0.0) > MAX_COORDINATE
-    near = np.flatnonzero(~far)
-    n = np.zeros_like(p)
-    if far.any():
+    if not p.size or np.abs(p).max() <= MAX_COORDINATE:  # the usual case: no copies
+        far = np.zeros(len(p), dtype=bool)
+    else:
+        far = np.abs(p).max(axis=1) > MAX_COORDINATE
         warnings.warn(
             f"{int(far.sum())} point(s) beyond {MAX_COORDINATE:g} m: incidence taken as head-on",
             stacklevel=3,
         )
-    if 0 < len(near) < 3:
+    near = len(p) - int(far.sum())
+    if 0 < near < 3:
         warnings.warn(
-            f"{len(near)} point(s): too few for a surface normal, incidence taken as head-on",
+            f"{near} point(s): too few for a surface normal, incidence taken as head-on",
             stacklevel=3,
         )
-    elif len(near):
-        n[near] = estimate_normals(p[near], k)
-        flat = int(np.sum(~np.any(n[near], axis=1)))
-        if flat:
-            warnings.warn(
-                f"{flat} of {len(near)} points have neighbours that coincide or lie on one line "
-                "(no plane): incidence taken as head-on",
-                stacklevel=3,
-            )
+    if near < 3:
+        return np.zeros_like(p)
+    if far.any():
+        n = np.zeros_like(p)
+        n[~far], flat = _plane_normals(p[~far], k)
+    else:
+        n, flat = _plane_normals(p, k)
+    if flat.any():
+        warnings.warn(
+            f"{int(flat.sum())} of {near} points have neighbours that coincide or lie on one line "
+            "(no plane): incidence taken as head-on",
+            stacklevel=3,
+        )
     return n

@@ -16,7 +16,7 @@ from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
 
-__all__ = ["bilinear_sample", "in_image", "project", "unproject"]
+__all__ = ["bilinear_sample", "in_image", "project", "project_in_image", "unproject"]
 
 
 def _points(points: Any, name: str = "points") -> np.ndarray:
@@ -50,16 +50,69 @@ def project(
         (see :func:`in_image`).
     """
     p = _points(points_lidar)
-    T = cam.T_cam_lidar
-    rot = cam.R_opencv_cam @ T[:3, :3]
-    # einsum, not `@`: a (N, 3) x (3, 3) product through BLAS is ~10x slower on a busy machine
-    p_cv = np.einsum("ij,kj->ik", p, rot) + cam.R_opencv_cam @ T[:3, 3]
-    depth = p_cv[:, 2]
+    x, y, depth = _camera_coordinates(p, cam)
     in_front = depth > min_depth
     uv = np.full((p.shape[0], 2), np.nan)
-    z = depth[in_front, None]
-    uv[in_front] = np.einsum("ij,kj->ik", p_cv[in_front] / z, cam.K[:2])
+    uv[in_front] = _pixels(x[in_front], y[in_front], depth[in_front], cam)
     return uv, depth, in_front
+
+
+def project_in_image(
+    points_lidar: Any, cam: CameraModel, *, min_depth: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The points that land in a camera's image, projected: :func:`project` restricted to the
+    points in front of the camera and inside its image (:func:`in_image`), with the same
+    values, without (N, 2) arrays for the rest.
+
+    Args:
+        points_lidar: (N, 3) points in the LiDAR frame, metres.
+        cam: the camera.
+        min_depth: points with camera depth ``<= min_depth`` (m) count as behind the camera.
+
+    Returns:
+        ``(index, uv, depth)``: (M,) int64 indices of those points into ``points_lidar``
+        (ascending), their (M, 2) float64 pixel coordinates and (M,) camera-forward depths, m.
+    """
+    p = _points(points_lidar)
+    depth = _camera_coordinates(p, cam, axes=(2,))[0]
+    front = np.flatnonzero(depth > min_depth)
+    depth = depth[front]
+    x, y = _camera_coordinates(p[front], cam, axes=(0, 1))
+    uv = _pixels(x, y, depth, cam)
+    inside = in_image(uv, cam)
+    return front[inside], uv[inside], depth[inside]
+
+
+def _camera_coordinates(
+    p: np.ndarray, cam: CameraModel, axes: tuple[int, ...] = (0, 1, 2)
+) -> tuple[np.ndarray, ...]:
+    """(N,) OpenCV camera coordinates (x right, y down, z forward: axes 0, 1, 2), m, of (N, 3)
+    LiDAR-frame points, m: those of ``axes``, in that order.
+
+    Each is a 3-term dot product summed as ``(a0·b0 + a2·b2) + a1·b1``: the order in which
+    NumPy's ``einsum`` (this module's former code) adds them, so the values are unchanged;
+    per component, not as one (N, 3) x (3, 3) product (3x faster than ``einsum``, and BLAS is
+    ~10x slower on a busy machine).
+    """
+    T = cam.T_cam_lidar
+    rot = cam.R_opencv_cam @ T[:3, :3]
+    shift = cam.R_opencv_cam @ T[:3, 3]
+    return tuple(_dot3(p[:, 0], p[:, 1], p[:, 2], rot[k]) + shift[k] for k in axes)
+
+
+def _pixels(x: np.ndarray, y: np.ndarray, z: np.ndarray, cam: CameraModel) -> np.ndarray:
+    """(M, 2) pixel coordinates of (M,) OpenCV camera coordinates in front of the camera
+    (``z > 0``), m: ``K[:2] · (x/z, y/z, z/z)``."""
+    xn, yn, one = x / z, y / z, z / z
+    uv = np.empty((len(z), 2))
+    uv[:, 0] = _dot3(xn, yn, one, cam.K[0])
+    uv[:, 1] = _dot3(xn, yn, one, cam.K[1])
+    return uv
+
+
+def _dot3(a0: np.ndarray, a1: np.ndarray, a2: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(a0·b[0] + a2·b[2]) + a1·b[1]`` for (M,) arrays ``a`` and a 3-vector ``b``."""
+    return (a0 * b[0] + a2 * b[2]) + a1 * b[1]
 
 
 def unproject(uv: Any, depth: Any, cam: CameraModel) -> np.ndarray:
@@ -131,8 +184,9 @@ def bilinear_sample(img: Any, uv: Any, *, fill: float = np.nan) -> np.ndarray:
     c1 = np.minimum(c0 + 1, W - 1)
     r1 = np.minimum(r0 + 1, H - 1)
     fu, fv = u - c0, v - r0
-    im = img.astype(np.float64, copy=False)
-    top = (1.0 - fu) * im[r0, c0] + fu * im[r0, c1]
-    bottom = (1.0 - fu) * im[r1, c0] + fu * im[r1, c1]
+    # corners in the image's dtype, promoted by the float64 weights (no copy of the image)
+    img = img if img.dtype.itemsize <= 8 else img.astype(np.float64)
+    top = (1.0 - fu) * img[r0, c0] + fu * img[r0, c1]
+    bottom = (1.0 - fu) * img[r1, c0] + fu * img[r1, c1]
     out[ok] = (1.0 - fv) * top + fv * bottom
     return out

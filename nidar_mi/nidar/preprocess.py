@@ -74,8 +74,14 @@ def srgb8_to_linear(rgb: torch.Tensor) -> torch.Tensor:
         Contiguous float32 tensor of the same shape and device, linear values in [0, 1]; equal
         to ``srgb_to_linear(rgb.astype(float32) / 255)``.
     """
+    return _look_up(_srgb8_lut(rgb.device), rgb)
+
+
+def _look_up(table: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
+    """``table[rgb]``: a (256,) table indexed by uint8 codes of any shape and layout, as a
+    contiguous tensor of their shape on their device."""
     codes = rgb.to(torch.int32, memory_format=torch.contiguous_format)
-    return _srgb8_lut(rgb.device).index_select(0, codes.view(-1)).view(codes.shape)
+    return table.index_select(0, codes.view(-1)).view(codes.shape)
 
 
 def srgb8_mean(rgb: torch.Tensor) -> torch.Tensor:
@@ -146,8 +152,12 @@ def prepare_rgb_tensor(rgb: np.ndarray | torch.Tensor, device=None) -> torch.Ten
             f"RGB image must be an (H, W, 3) uint8 tensor, got {rgb.dtype} {rgb.shape}"
         )
     rgb = rgb.to(device) if device is not None else rgb
-    linear = srgb8_to_linear(rgb.permute(2, 0, 1))
-    return _normalize(linear, srgb8_mean(rgb), EXPOSURE_TARGET_MEAN, EXPOSURE_CLAMP_MAX)
+    # decoding, scaling and clipping act on each code alone: applied to the 256-entry table,
+    # then one look-up per pixel (the same values as on the decoded image, in one pass)
+    table = _normalize(
+        _srgb8_lut(rgb.device), srgb8_mean(rgb), EXPOSURE_TARGET_MEAN, EXPOSURE_CLAMP_MAX
+    )
+    return _look_up(table, rgb.permute(2, 0, 1))
 
 
 def prepare_rgb(rgb: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ import pytest
 
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry import CameraModel, bilinear_sample, in_image, project, unproject
+from nidar_mi.geometry.projection import project_in_image
 
 K = np.array([[500.0, 0.0, 319.5], [0.0, 480.0, 239.5], [0.0, 0.0, 1.0]])
 W, H = 640, 480
@@ -32,6 +33,25 @@ def test_project_unproject_round_trip(convention, random_rigid):
     np.testing.assert_allclose(uv2, uv, rtol=0, atol=1e-8)
     np.testing.assert_allclose(depth2, depth, rtol=1e-12)
     np.testing.assert_allclose(unproject(uv2, depth2, cam), pts, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("convention", ["opencv", "waymo"])
+def test_project_in_image_is_project_restricted_to_the_image(convention, random_rigid):
+    """The in-image points, their pixels and depths equal project()'s, bit for bit, and the
+    (N, 3) x (3, 3) products equal the one-matrix computation within rounding."""
+    rng = np.random.default_rng(3)
+    cam = CameraModel(K, W, H, random_rigid(rng), convention)
+    pts = rng.normal(0.0, 30.0, (20_000, 3)) * rng.choice([1e-3, 1.0, 1e3], (20_000, 1))
+    uv, depth, in_front = project(pts, cam)
+    index, uv_in, depth_in = project_in_image(pts, cam)
+    keep = np.flatnonzero(in_front & in_image(uv, cam))
+    assert len(keep) > 100
+    np.testing.assert_array_equal(index, keep)
+    np.testing.assert_array_equal(uv_in, uv[keep])
+    np.testing.assert_array_equal(depth_in, depth[keep])
+    rot = cam.R_opencv_cam @ cam.T_cam_lidar[:3, :3]
+    p_cv = pts @ rot.T + cam.R_opencv_cam @ cam.T_cam_lidar[:3, 3]
+    np.testing.assert_allclose(depth, p_cv[:, 2], rtol=1e-12, atol=1e-9)
 
 
 def test_project_waymo_matches_paper_equation(random_rigid):

@@ -93,6 +93,20 @@ def test_torch_preparation_equals_the_formula():
     )
 
 
+def test_preparation_by_table_equals_decoding_then_normalising():
+    """The prepared image (the normalisation applied to the 256-entry table, one look-up per
+    pixel) equals, bit for bit, decoding every pixel and then scaling and clipping them."""
+    from nidar_mi.nidar.preprocess import _normalize, srgb8_mean
+
+    rng = np.random.default_rng(7)
+    for shape in ((37, 53, 3), (120, 331, 3)):
+        rgb = torch.from_numpy(rng.integers(0, 256, shape, dtype=np.uint8))
+        rgb[:4, :4] = 255
+        decoded = srgb8_to_linear(rgb.permute(2, 0, 1))
+        want = _normalize(decoded, srgb8_mean(rgb), 0.5, 5.0)
+        assert torch.equal(prepare_rgb_tensor(rgb), want)
+
+
 def test_tensor_preparation_refuses_other_images():
     with pytest.raises(NidarError, match="uint8 tensor"):
         prepare_rgb_tensor(torch.zeros(4, 5, 3))

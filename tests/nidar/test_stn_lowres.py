@@ -15,6 +15,21 @@ from nidar_mi.nidar.photo_data import PhotoCropDataset
 from nidar_mi.nidar.stn_lowres import LowResSTN
 
 
+@pytest.mark.parametrize("channels_last", [False, True])
+def test_apply_equals_the_channel_sum(channels_last):
+    """``apply`` equals ``(w[:, :3] * rgb).sum(1) + w[:, 3]`` bit for bit, for coefficients in
+    either memory format (a channels-last network returns channels-last ones)."""
+    gen = torch.Generator().manual_seed(2)
+    rgb = torch.rand(2, 3, 37, 61, generator=gen) * 5
+    coef = torch.randn(2, 4, 37, 61, generator=gen) * 4
+    if channels_last:
+        coef = coef.contiguous(memory_format=torch.channels_last)
+    want = (coef[:, :3] * rgb).sum(1, keepdim=True) + coef[:, 3:4]
+    got = LowResSTN.apply(rgb, coef)
+    assert got.shape == (2, 1, 37, 61)
+    assert torch.equal(got, want)
+
+
 def test_untrained_network_is_the_channel_mean():
     net = LowResSTN(width=4, depth=2, down=2).eval()
     torch.nn.init.zeros_(net.unet.head.weight)  # coefficients = the head bias everywhere
