@@ -402,9 +402,28 @@ def _render(scene, sensor, integrator, spp: int, seed: int, what: str) -> np.nda
                 return img
             total = img * np.float64(n) if total is None else total + img * np.float64(n)
     except RuntimeError as e:  # Mitsuba's own message, e.g. an invalid film
+        stop = _interruption(e)
+        if stop is not None:  # Ctrl-C or SIGTERM that arrived inside Dr.Jit's custom operation
+            raise stop from None
         first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
         raise NidarError(f"{what}: Mitsuba could not render it ({first})") from None
     return (total / spp).astype(np.float32)
+
+
+def _interruption(exc: BaseException | None) -> KeyboardInterrupt | None:
+    """The :class:`KeyboardInterrupt` (Ctrl-C, or SIGTERM's ``Terminated``) that ``exc`` wraps.
+
+    A signal handler that raises while Python code of a ``drjit.custom`` operation runs (Mitsuba's
+    ``mi.render`` is one) has its exception chained under Dr.Jit's ``RuntimeError``; the render
+    must stop as interrupted, not report a failed render. None when the chain holds none.
+    """
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def _warn_rgb_emitters(loaded) -> None:

@@ -146,3 +146,28 @@ def test_albedo_is_the_colour_of_the_surface_spectrum(variant, write_scene):
 def test_albedo_can_be_left_out(variant, write_scene):
     r = _render(write_scene, '<shape type="sphere"><bsdf type="diffuse"/></shape>', albedo=False)
     assert r.albedo is None and r.surface_reflectance is None
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, "terminated"])
+def test_a_signal_inside_a_custom_operation_stops_the_render(
+    variant, write_scene, monkeypatch, stop
+):
+    """Ctrl-C or SIGTERM raised while Mitsuba runs Python inside ``drjit.custom`` reaches the
+    caller as the interruption (exit 130/143), not as "Mitsuba could not render it" (exit 2)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from nidar_mi.cli._common import Terminated
+
+    exc = Terminated if stop == "terminated" else KeyboardInterrupt
+
+    class Interrupted(dr.CustomOp):
+        def eval(self, x):
+            raise exc()
+
+    def render(*args, **kwargs):
+        return dr.custom(Interrupted, mi.Float(1.0))
+
+    monkeypatch.setattr(mi, "render", render)
+    with pytest.raises(exc):
+        _render(write_scene, '<shape type="sphere"><bsdf type="diffuse"/></shape>', albedo=False)
