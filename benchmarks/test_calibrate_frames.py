@@ -179,18 +179,29 @@ def _cloud(name: str, seed: int, n: int = 3000):
     return scan, colour
 
 
+def _clouds_with(law, count: int, seed: int):
+    """``count`` synthetic scans (:func:`_cloud`, seeds ``seed``, ``seed + 1``, ...) whose
+    intensity ``law(scan, colour)`` sets, and their colours by scan name."""
+    scans, values = [], {}
+    for i in range(count):
+        scan, colour = _cloud(f"kitti__{i}", seed + i)
+        law(scan, colour)
+        scans.append(scan)
+        values[scan.name] = colour
+    return scans, values
+
+
 def test_linear_colour_distance_recovers_a_linear_law_exactly():
     from nidar_mi.eval.baselines import colour_distance_features
 
     w = np.array([0.2, 0.1, -0.05, 0.1, 0.05, 0.0, 0.03, -0.1, 0.2])
-    scans, values = [], {}
-    for i in range(4):
-        scan, colour = _cloud(f"kitti__{i}", i)
+
+    def law(scan, colour):
         ok = bench._seen(colour)
         scan.intensity[ok] = colour_distance_features(colour[ok], scan.range_m[ok]) @ w
         assert 0.0 < scan.intensity[ok].min() and scan.intensity[ok].max() < 1.0
-        scans.append(scan)
-        values[scan.name] = colour
+
+    scans, values = _clouds_with(law, count=4, seed=0)
     predict = bench.fitted(scans[:3], values, 0, "lin9")
     held = scans[3]
     ok = bench._seen(values[held.name])
@@ -203,14 +214,11 @@ def test_linear_colour_distance_recovers_a_linear_law_exactly():
 def test_colour_gbm_reads_the_colour_with_the_recipes_settings():
     from nidar_mi.io.images import srgb_to_linear
 
-    scans, values = [], {}
-    for i in range(3):
-        scan, colour = _cloud(f"kitti__{i}", 10 + i)
+    def law(scan, colour):  # the red channel ranks the intensity; range and incidence shade it
         lin = srgb_to_linear(np.nan_to_num(colour))
-        # the red channel ranks the intensity; range and incidence shade it
         scan.intensity[:] = 0.6 * lin[:, 0] * scan.cos_incidence + 0.2 * np.exp(-scan.range_m / 40)
-        scans.append(scan)
-        values[scan.name] = colour
+
+    scans, values = _clouds_with(law, count=3, seed=10)
     predict = bench.fitted(scans[:2], values, 0, "colour_gbm")
     held = scans[2]
     ok = bench._seen(values[held.name])
