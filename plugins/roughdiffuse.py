@@ -99,6 +99,11 @@ class RoughDiffuse(mi.BSDF):
         ok = active & (pdf > 0)
         return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
 
+    def eval_diffuse_reflectance(self, si, active=True):
+        """The facets' albedo ``reflectance``: the surface's own reflectance, without the
+        viewing-direction effects (Oren-Nayar, opposition surge) of :meth:`eval`."""
+        return self.m_reflectance.eval(si, active)
+
     def traverse(self, callback):
         callback.put("reflectance", self.m_reflectance, mi.ParamFlags.Differentiable)
 

@@ -171,3 +171,26 @@ def test_a_signal_inside_a_custom_operation_stops_the_render(
     monkeypatch.setattr(mi, "render", render)
     with pytest.raises(exc):
         _render(write_scene, '<shape type="sphere"><bsdf type="diffuse"/></shape>', albedo=False)
+
+
+def test_a_library_material_with_another_spectrum_has_that_albedo(variant, write_scene):
+    """A ``nidar_material`` given another reflectance (``scenegen --spectra earthlib``) renders
+    with it: its surface reflectance at λ is that spectrum's value, its albedo that spectrum's
+    sRGB colour, for a rough-diffuse road surface as for a Lambertian one."""
+    from nidar_mi.materials.spectra import Spectrum
+    from nidar_mi.materials.srgb import spectrum_to_linear_srgb
+
+    spectrum = "360:0.05, 450:0.08, 550:0.3, 650:0.2, 905:0.62, 1700:0.4"
+    body = f"""
+    <emitter type="constant"><spectrum name="radiance" value="300:2, 1700:2"/></emitter>
+    <shape type="rectangle"><transform name="to_world"><scale value="1000"/></transform>
+        <bsdf type="nidar_material"><string name="name" value="concrete"/>
+        <spectrum name="reflectance" value="{spectrum}"/></bsdf></shape>
+    """
+    r = _render(write_scene, body, wl=905.0, tx=3, tz=0)
+    ground = r.depth > 0
+    np.testing.assert_allclose(r.surface_reflectance[ground], 0.62, rtol=1e-5)
+    expected = spectrum_to_linear_srgb(Spectrum.parse_xml_value(spectrum))
+    np.testing.assert_allclose(
+        r.albedo[ground], np.broadcast_to(expected, (ground.sum(), 3)), atol=2e-3
+    )

@@ -55,6 +55,14 @@ def build_parser():
         "(overcast a quarter of the time, sun 6-80 deg; the shapes stay those of default)",
     )
     p.add_argument(
+        "--spectra",
+        choices=("library", "earthlib"),
+        default="library",
+        help="library: each material's own spectrum (default); earthlib: 3/4 of the diffuse, "
+        "road and paint materials of each scene take a random measured earthlib spectrum from a "
+        "class no held-out material comes from (training scenes with thousands of spectra)",
+    )
+    p.add_argument(
         "--overwrite",
         action="store_true",
         help="replace scene files of another run (another --kind or --materials) and files "
@@ -138,6 +146,7 @@ def main(argv=None) -> int:
             overwrite=args.overwrite,
             materials=args.materials,
             lighting=args.lighting,
+            spectra=args.spectra,
         )
         if not args.quiet:
             stats = index["run"]

@@ -41,6 +41,7 @@ __all__ = [
     "earthlib_dir",
     "load_earthlib",
     "earthlib_spectrum",
+    "earthlib_row_spectrum",
     "earthlib_notes",
     "extend_below",
 ]
@@ -188,9 +189,22 @@ def earthlib_spectrum(
         NidarError: earthlib is missing or has no unique spectrum of that name.
     """
     lib = load_earthlib()
-    row = lib.data[lib.index(level_2, level_3, name)].astype(np.float64)
-    ok = np.isfinite(row)
-    values = extend_below(lib.wavelengths_nm[ok], row[ok], grid_nm)
+    return earthlib_row_spectrum(lib.index(level_2, level_3, name), grid_nm)
+
+
+def earthlib_row_spectrum(row: int, grid_nm: np.ndarray = GRID_NM) -> Spectrum:
+    """Spectrum ``row`` of the library (:func:`load_earthlib`) on ``grid_nm``, processed as
+    :func:`earthlib_spectrum`.
+
+    Raises:
+        NidarError: earthlib is missing, or the row has fewer than 2 finite values.
+    """
+    lib = load_earthlib()
+    data = lib.data[row].astype(np.float64)
+    ok = np.isfinite(data)
+    if ok.sum() < 2:
+        raise NidarError(f"earthlib spectrum {row} has fewer than 2 finite values")
+    values = extend_below(lib.wavelengths_nm[ok], data[ok], grid_nm)
     return Spectrum(grid_nm, np.clip(values, 0.0, 1.0))
 
 

@@ -28,17 +28,32 @@ Overrides (``overrides={"roughness": 0.3}``): ``roughness`` (GGX alpha, plastic 
 dielectric), ``int_ior`` (plastic / dielectric), ``lobe_width`` (degrees) and
 ``diffuse_fraction`` (retroreflector), ``sigma`` (degrees, in [0, 90)),
 ``opposition_amplitude`` (in [0, 1]) and ``opposition_width`` (degrees, in (0, 90]) (rough_diffuse).
+
+``reflectance=Spectrum(...)`` replaces the material's reflectance spectrum (the pigment layer of a
+plastic) while keeping its kind and other parameters: a diffuse, plastic, retroreflector or
+rough_diffuse material with another surface's spectrum (values in [0, 1], on 360-1700 nm). Its
+RGB twin is the linear sRGB of that spectrum.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 
+import numpy as np
+
 from ..errors import NidarError
 from .library import get_material, linear_rgb
-from .spectra import Spectrum
+from .spectra import WL_MAX_NM, WL_MIN_NM, Spectrum
+from .srgb import spectrum_to_linear_srgb
 
-__all__ = ["OVERRIDES", "bsdf_dict", "rgb_dict", "spectrum_dict"]
+__all__ = [
+    "OVERRIDES",
+    "REFLECTANCE_KINDS",
+    "bsdf_dict",
+    "check_reflectance",
+    "rgb_dict",
+    "spectrum_dict",
+]
 
 #: Overridable parameters per kind -> (parameter in Material.params, low, high, low included).
 #: Intervals are ``(low, high]`` when the low end is excluded, else ``[low, high]``; ``sigma``
@@ -63,6 +78,8 @@ OVERRIDES: dict[str, dict[str, tuple[str, float, float, bool]]] = {
 }
 #: Overrides whose high end is excluded.
 _OPEN_HIGH = frozenset({"sigma"})
+#: Kinds whose reflectance spectrum ``bsdf_dict(..., reflectance=...)`` replaces.
+REFLECTANCE_KINDS = frozenset({"diffuse", "plastic", "retroreflector", "rough_diffuse"})
 
 
 def spectrum_dict(spectrum: Spectrum) -> dict:
@@ -97,8 +114,29 @@ def _resolve(kind: str, params: Mapping, overrides: Mapping[str, float] | None) 
     return out
 
 
+def check_reflectance(spectrum: Spectrum, what: str = "reflectance") -> Spectrum:
+    """``spectrum`` if it is a reflectance the library can render: finite, in [0, 1], spanning
+    the library's 360-1700 nm.
+
+    Raises:
+        NidarError: it is not.
+    """
+    wl, v = np.asarray(spectrum.wavelengths_nm), np.asarray(spectrum.values)
+    if not np.all(np.isfinite(v)) or v.min() < 0.0 or v.max() > 1.0:
+        raise NidarError(f"{what} must be finite and in [0, 1]")
+    if wl[0] > WL_MIN_NM or wl[-1] < WL_MAX_NM:
+        raise NidarError(
+            f"{what} must span {WL_MIN_NM:g}-{WL_MAX_NM:g} nm (got {wl[0]:g}-{wl[-1]:g} nm)"
+        )
+    return spectrum
+
+
 def bsdf_dict(
-    name: str, *, rgb_twin: bool = False, overrides: Mapping[str, float] | None = None
+    name: str,
+    *,
+    rgb_twin: bool = False,
+    overrides: Mapping[str, float] | None = None,
+    reflectance: Spectrum | None = None,
 ) -> dict:
     """Mitsuba BSDF dict of a named material for the active spectral variant.
 
@@ -106,16 +144,28 @@ def bsdf_dict(
         name: material name (see :func:`nidar_mi.materials.list_materials`).
         rgb_twin: replace the material's spectra by its linear sRGB appearance.
         overrides: parameter overrides, see the module docstring.
+        reflectance: another reflectance spectrum for the material (a kind of
+            :data:`REFLECTANCE_KINDS`; see the module docstring), or None for its own.
 
     Returns:
         A dict for ``mi.load_dict`` (plain Python values; no Mitsuba import needed).
 
     Raises:
-        NidarError: unknown material or bad override.
+        NidarError: unknown material, bad override, or a reflectance the material's kind does
+            not take or that is not in [0, 1] over 360-1700 nm.
     """
     m = get_material(name)
     p = _resolve(m.kind, m.params, overrides)
-    rgb = rgb_dict(linear_rgb(name)) if rgb_twin else None
+    if reflectance is None:
+        rgb = rgb_dict(linear_rgb(name)) if rgb_twin else None
+    else:
+        if m.kind not in REFLECTANCE_KINDS:
+            raise NidarError(
+                f"material '{name}' ({m.kind}) takes no reflectance spectrum; kinds that do: "
+                + ", ".join(sorted(REFLECTANCE_KINDS))
+            )
+        p["reflectance"] = check_reflectance(reflectance, f"reflectance of '{name}'")
+        rgb = rgb_dict(spectrum_to_linear_srgb(reflectance)) if rgb_twin else None
 
     if m.kind == "diffuse":
         return {"type": "diffuse", "reflectance": rgb or spectrum_dict(p["reflectance"])}

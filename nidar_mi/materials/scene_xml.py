@@ -5,7 +5,13 @@ A scene names library materials as::
     <bsdf type="nidar_material" id="road">
         <string name="name" value="asphalt_old"/>
         <float name="roughness" value="0.3"/>      <!-- optional overrides, see mitsuba_dict -->
+        <spectrum name="reflectance" value="360:0.1, ..., 1700:0.4"/>  <!-- optional -->
     </bsdf>
+
+The optional ``reflectance`` spectrum (wavelength:value pairs in nm covering 360-1700 nm, values
+in [0, 1]) replaces the material's own, keeping its kind and other parameters
+(:func:`nidar_mi.materials.bsdf_dict`); the generated scenes of ``scenegen --spectra earthlib``
+use it.
 
 :func:`expand_scene_xml` replaces each such element (at any depth, e.g. inside ``twosided``)
 by the BSDF of :func:`nidar_mi.materials.bsdf_dict`, keeping its ``id`` and any other attribute.
@@ -79,6 +85,7 @@ def _material_element(el: ET.Element, rgb_twin: bool) -> ET.Element:
     """The expanded BSDF element for one ``nidar_material`` element."""
     name = None
     overrides: dict[str, float] = {}
+    reflectance = None
     for child in el:
         if not isinstance(child.tag, str):  # comment
             continue
@@ -89,16 +96,23 @@ def _material_element(el: ET.Element, rgb_twin: bool) -> ET.Element:
             if value.startswith("$"):
                 raise NidarError(f"nidar_material parameter '{key}' must be a literal, got {value}")
             overrides[key] = float(value)
+        elif child.tag == "spectrum" and key == "reflectance" and value is not None:
+            try:
+                reflectance = Spectrum.parse_xml_value(value)
+            except ValueError as e:
+                raise NidarError(f"nidar_material{_where(el)}: bad reflectance: {e}") from None
         else:
             raise NidarError(
                 f"nidar_material: unexpected <{child.tag} name={key!r}>; it takes "
-                '<string name="name"> and numeric overrides only'
+                '<string name="name">, numeric overrides and <spectrum name="reflectance">'
             )
     if not name:
         raise NidarError(f'nidar_material{_where(el)} lacks <string name="name" value="..."/>')
     if name.startswith("$"):
         raise NidarError(f"nidar_material name must be a literal material name, got {name}")
-    new = dict_to_element(bsdf_dict(name, rgb_twin=rgb_twin, overrides=overrides))
+    new = dict_to_element(
+        bsdf_dict(name, rgb_twin=rgb_twin, overrides=overrides, reflectance=reflectance)
+    )
     for attr, value in el.attrib.items():
         if attr != "type":
             new.set(attr, value)

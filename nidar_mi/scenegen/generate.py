@@ -29,6 +29,7 @@ from .layout import sample_layout
 from .lighting import relight
 from .objects import material_set
 from .primitives import Layout
+from .spectra import draw_spectra
 from .xml import scene_xml
 
 __all__ = [
@@ -66,6 +67,7 @@ def generate_scene(
     blocks: tuple[int, int] | None = None,
     materials: str = "all",
     lighting: str = "default",
+    spectra: str = "library",
 ) -> tuple[Layout, str]:
     """Layout and XML text of scene ``k`` of run ``seed`` (pure; nothing is written).
 
@@ -79,6 +81,13 @@ def generate_scene(
             has one).
         lighting: lighting regime (:data:`nidar_mi.scenegen.lighting.LIGHTING_REGIMES`):
             ``default`` (the layout's sun and sky) or ``varied`` (redrawn, overcast included).
+        spectra: spectral regime (:data:`nidar_mi.scenegen.spectra.SPECTRA_REGIMES`):
+            ``library`` (each material's own spectrum) or ``earthlib`` (measured spectra drawn
+            per scene for most diffuse, road and paint materials).
+
+    Returns:
+        The layout and the XML text (the drawn spectra: :func:`draw_spectra` of the layout's
+        materials).
     """
     with material_set(materials):
         if kind in CITY_KINDS:
@@ -86,11 +95,13 @@ def generate_scene(
         else:
             layout = sample_layout(scene_rng(seed, k), kind)
     layout = relight(layout, seed, k, lighting)
+    drawn = draw_spectra(layout.materials(), seed, k, spectra)
     name = scene_id(seed, k)
     text = scene_xml(
         layout,
         name=name,
         description=f"Drawn from SeedSequence({seed}, spawn_key=({k},)); kind {layout.kind}.",
+        spectra=drawn,
     )
     return layout, text
 
@@ -102,11 +113,20 @@ def layout_hash(layout: Layout) -> str:
 
 
 def index_entry(
-    seed: int, k: int, layout: Layout, text: str, materials: str = "all", lighting: str = "default"
+    seed: int,
+    k: int,
+    layout: Layout,
+    text: str,
+    materials: str = "all",
+    lighting: str = "default",
+    spectra: dict | None = None,
 ) -> dict:
-    """The ``index.json`` record of one scene (rig matrices as nested lists)."""
+    """The ``index.json`` record of one scene (rig matrices as nested lists); ``spectra``: the
+    drawn spectra (:func:`draw_spectra`), recorded by their sources."""
     rig = layout.rig
     extra = {} if lighting == "default" else {"lighting": lighting}
+    if spectra:
+        extra |= {"spectra": {m: s.source for m, s in sorted(spectra.items())}}
     return extra | {
         "material_set": materials,
         "id": scene_id(seed, k),
@@ -264,9 +284,11 @@ def _plan(folder: _Folder, seed: int, k: int, options: dict, overwrite: bool) ->
             run (without ``overwrite``).
     """
     layout, text = generate_scene(
-        seed, k, options["kind"], options["blocks"], options["materials"], options["lighting"]
-    )
-    entry = index_entry(seed, k, layout, text, options["materials"], options["lighting"])
+        seed, k, options["kind"], options["blocks"], options["materials"], options["lighting"],
+        options["spectra"],
+    )  # fmt: skip
+    drawn = draw_spectra(layout.materials(), seed, k, options["spectra"])
+    entry = index_entry(seed, k, layout, text, options["materials"], options["lighting"], drawn)
     other = folder.hashes.get(entry["layout_sha256"], entry["id"])
     if other != entry["id"]:
         raise NidarError(f"{entry['id']} repeats the layout of {other}")
@@ -319,6 +341,7 @@ def generate(
     drive: dict | None = None,
     materials: str = "all",
     lighting: str = "default",
+    spectra: str = "library",
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -342,6 +365,7 @@ def generate(
             ``speed``) for ``city`` and ``suburb`` scenes.
         materials: material set of every scene (:func:`generate_scene`).
         lighting: lighting regime of every scene (:func:`generate_scene`).
+        spectra: spectral regime of every scene (:func:`generate_scene`).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -364,6 +388,7 @@ def generate(
         "blocks": blocks,
         "materials": materials,
         "lighting": lighting,
+        "spectra": spectra,
         "drive": drive,
     }
     bar = progress_bar(total=count, show=progress, desc="scenegen", unit="scene")

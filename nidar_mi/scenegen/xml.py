@@ -150,13 +150,18 @@ def _light(layout: Layout) -> list[str]:
     ]
 
 
-def scene_xml(layout: Layout, *, name: str = "scene", description: str = "") -> str:
+def scene_xml(
+    layout: Layout, *, name: str = "scene", description: str = "", spectra: dict | None = None
+) -> str:
     """The scene file of ``layout``.
 
     Args:
         layout: the layout to write.
         name: scene name for the header comment.
         description: extra header line (e.g. the seeds it was drawn from).
+        spectra: material name -> :class:`~nidar_mi.scenegen.spectra.SurfaceSpectrum` for the
+            materials that take another spectrum (:func:`~nidar_mi.scenegen.spectra.draw_spectra`),
+            written as the ``reflectance`` of their ``nidar_material`` with its source.
 
     Returns:
         The XML text (UTF-8, ``\\n`` line ends, trailing newline).
@@ -191,10 +196,18 @@ def scene_xml(layout: Layout, *, name: str = "scene", description: str = "") -> 
         *_light(layout),
         "",
     ]
+    spectra = spectra or {}
     for m in layout.materials():
-        lines.append(
-            f'    <bsdf type="nidar_material" id="mat_{m}"><string name="name" value="{m}"/></bsdf>'
-        )
+        head = f'    <bsdf type="nidar_material" id="mat_{m}"><string name="name" value="{m}"/>'
+        if m not in spectra:
+            lines.append(head + "</bsdf>")
+            continue
+        source, spectrum = spectra[m]
+        lines += [
+            f"    <!-- mat_{m}: the spectrum of {source} -->",
+            head,
+            f'        <spectrum name="reflectance" value="{spectrum.xml_value()}"/></bsdf>',
+        ]
     lines.append("")
     lines += [_shape(s) for s in layout.shapes]
     lines.append("</scene>")

@@ -145,3 +145,47 @@ def test_expanded_xml_evaluates_like_the_library(variant):
     si.wavelengths = mi.UnpolarizedSpectrum(wls)
     rho = np.array(bsdf.eval(mi.BSDFContext(), si, si.wi)).ravel() * np.pi
     np.testing.assert_allclose(rho, reflectance("grass", wls), rtol=1e-5)
+
+
+_OWN = "360:0.05, 500:0.1, 600:0.4, 905:0.7, 1700:0.3"
+
+
+def test_a_material_takes_another_reflectance_and_keeps_its_kind():
+    """``<spectrum name="reflectance">`` in a ``nidar_material`` replaces the spectrum only: the
+    road keeps its rough-diffuse facets and surge, the paint its clear coat; the RGB twin is the
+    sRGB of the new spectrum."""
+    body = (
+        '<bsdf type="nidar_material" id="{id}"><string name="name" value="{name}"/>'
+        f'<spectrum name="reflectance" value="{_OWN}"/></bsdf>'
+    )
+    scene = body.format(id="road", name="asphalt_old") + body.format(id="car", name="car_paint_red")
+    out = ET.fromstring(expand_scene_xml(f'<scene version="3.0.0">{scene}</scene>'))
+    road, car = out.find("bsdf[@id='road']"), out.find("bsdf[@id='car']")
+    assert road.get("type") == "roughdiffuse" and road.find("float[@name='sigma']") is not None
+    assert car.get("type") == "roughplastic" and car.find("float[@name='alpha']") is not None
+    for el, name in ((road, "reflectance"), (car, "diffuse_reflectance")):
+        s = Spectrum.parse_xml_value(el.find(f"spectrum[@name='{name}']").get("value"))
+        np.testing.assert_allclose(s([500.0, 905.0, 1700.0]), [0.1, 0.7, 0.3], rtol=1e-6)
+    twin = ET.fromstring(expand_scene_xml(f'<scene version="3.0.0">{scene}</scene>', rgb_twin=True))
+    rgb = twin.find("bsdf[@id='road']/rgb[@name='reflectance']").get("value")
+    expected = spectrum_to_linear_srgb(Spectrum.parse_xml_value(_OWN))
+    np.testing.assert_allclose([float(v) for v in rgb.split(",")], expected, rtol=1e-6)
+    assert not np.allclose(expected, linear_rgb("asphalt_old"), atol=0.01)
+
+
+@pytest.mark.parametrize(
+    "name, value, match",
+    [
+        ("iron", _OWN, "takes no reflectance"),
+        ("concrete", "360:0.1, 905:1.2, 1700:0.3", r"in \[0, 1\]"),
+        ("concrete", "400:0.1, 1700:0.3", "must span 360-1700 nm"),
+        ("concrete", "400-0.1", "bad reflectance"),
+    ],
+)
+def test_a_bad_reflectance_is_a_user_error(name, value, match):
+    body = (
+        f'<bsdf type="nidar_material"><string name="name" value="{name}"/>'
+        f'<spectrum name="reflectance" value="{value}"/></bsdf>'
+    )
+    with pytest.raises(NidarError, match=match):
+        expand_scene_xml(f'<scene version="3.0.0">{body}</scene>')
