@@ -34,6 +34,17 @@ def test_kind_option(tmp_path, capsys):
     assert capsys.readouterr().out == ""
 
 
+def test_spectra_option_and_a_run_of_another_regime_is_refused(tmp_path, capsys):
+    args = ["--count", "1", "--seed", "3", "--kind", "urban", "-o", str(tmp_path), "-q"]
+    assert main([*args, "--spectra", "earthlib"]) == 0
+    entry = json.loads((tmp_path / "index.json").read_text())["scenes"][0]
+    text = (tmp_path / "scene_3_0.xml").read_text()
+    assert entry["spectra"] and text == generate_scene(3, 0, "urban", spectra="earthlib")[1]
+    assert main(args) == 2  # the library regime would replace that scene: refused
+    assert "holds scene 0 of another run" in capsys.readouterr().err
+    assert (tmp_path / "scene_3_0.xml").read_text() == text
+
+
 def test_bad_count_is_one_line_exit_2(tmp_path, capsys):
     assert main(["--count", "0", "-o", str(tmp_path / "gen")]) == 2
     err = capsys.readouterr().err
