@@ -302,9 +302,10 @@ def _plan(folder: _Folder, seed: int, k: int, options: dict, overwrite: bool) ->
         return _Scene(k, entry, path, "skip", mount=mount)
     old = folder.old.get(entry["id"])
     if old is not None and old.get("sha256") == on_disk and not old.get("edited"):
+        regime = ", spectra earthlib" if old.get("spectra") else ""
         raise NidarError(
             f"{path} holds scene {k} of another run (kind {old.get('kind')}, materials "
-            f"{old.get('material_set', 'all')}): choose another folder or pass `overwrite`"
+            f"{old.get('material_set', 'all')}{regime}): choose another folder or pass `overwrite`"
         )
     # edited by hand (or of unknown origin): kept, marked edited
     return _Scene(k, (old or entry) | {"sha256": on_disk, "edited": True}, path, "keep")

@@ -41,7 +41,9 @@ def test_spectra_option_and_a_run_of_another_regime_is_refused(tmp_path, capsys)
     text = (tmp_path / "scene_3_0.xml").read_text()
     assert entry["spectra"] and text == generate_scene(3, 0, "urban", spectra="earthlib")[1]
     assert main(args) == 2  # the library regime would replace that scene: refused
-    assert "holds scene 0 of another run" in capsys.readouterr().err
+    assert "holds scene 0 of another run (kind urban, materials all, spectra earthlib)" in (
+        capsys.readouterr().err
+    )
     assert (tmp_path / "scene_3_0.xml").read_text() == text
 
 
