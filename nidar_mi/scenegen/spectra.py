@@ -10,12 +10,20 @@ canopies do not crowd out the small classes. The material keeps its kind and oth
 (a road stays a rough diffuse surface with its opposition surge), so only the spectrum changes:
 the camera colour, the NIR image and the surfaces' reflectance maps of a frame follow it.
 
+``earthlib-family`` keeps what a surface is: a material takes a spectrum of its own family
+(:data:`FAMILIES`: a grass or a tree crown another vegetation canopy, a soil or gravel another
+soil or gravel, wood or bark another wood, bark or dead vegetation, a shingle another roofing, a
+road or concrete another pavement), with the same probability and the class drawn uniformly within
+the family; materials of no family (paints, metals, glass, sheeting, the modelled plastics and
+fabric) keep their own.
+
 The pool leaves out every class that holds the spectrum of a held-out material
 (:data:`nidar_mi.scenegen.objects.HELDOUT_MATERIALS`: road, sidewalk, tile, paint, litter,
 dirt, sand) and earthlib's two glass spectra, so a network trained on these scenes has seen no
 spectrum of the families it is tested on. The draw is deterministic per seed and scene, from a
-stream of its own, ``SeedSequence(seed, spawn_key=(k, 2))``: the shapes, the light and the
-materials' kinds stay those of the ``library`` regime.
+stream of its own, ``SeedSequence(seed, spawn_key=(k, 2))`` (``(k, 3)`` for
+``earthlib-family``): the shapes, the light and the materials' kinds stay those of the
+``library`` regime.
 
 Training scenes with thousands of spectra teach a network the relation between the visible
 colour and the reflectance at the LiDAR wavelength, where the library's two dozen spectra only
@@ -37,6 +45,7 @@ from ..materials.spectra import Spectrum
 from .objects import HELDOUT_MATERIALS
 
 __all__ = [
+    "FAMILIES",
     "REPLACED_FRACTION",
     "SPECTRA_REGIMES",
     "draw_spectra",
@@ -45,7 +54,31 @@ __all__ = [
 ]
 
 #: The spectral regimes of :func:`draw_spectra`.
-SPECTRA_REGIMES = ("library", "earthlib")
+SPECTRA_REGIMES = ("library", "earthlib", "earthlib-family")
+_VEGETATION = (("vegetation", "canopy"),)
+_GROUND = (("bare", "soil"), ("bare", "gravel"), ("built", "gravel"))
+_WOOD = (("npv", "wood"), ("npv", "bark"), ("npv", "npv"))
+_ROOFING = (("built", "comp_shingle"), ("built", "wood_shingle"), ("built", "concrete_tile"))
+_PAVEMENT = (
+    ("built", "asphalt"),
+    ("built", "parking_lot"),
+    ("built", "driveway"),
+    ("built", "bridge"),
+)
+#: ``earthlib-family``: the earthlib classes each training material draws from (all in
+#: :func:`pool_classes`; a road and concrete, whose own classes hold held-out spectra, draw from
+#: the other pavements).
+FAMILIES: dict[str, tuple[tuple[str, str], ...]] = {
+    "grass": _VEGETATION,
+    "tree_canopy": _VEGETATION,
+    "soil_dry": _GROUND,
+    "gravel": _GROUND,
+    "wood_pallet": _WOOD,
+    "bark": _WOOD,
+    "shingle": _ROOFING,
+    "asphalt_new": _PAVEMENT,
+    "concrete": _PAVEMENT,
+}
 #: Share of a scene's replaceable materials that take an earthlib spectrum.
 REPLACED_FRACTION = 0.75
 #: Kinds whose spectrum is replaced (retroreflective sheeting keeps its own).
@@ -108,15 +141,22 @@ def draw_spectra(
     if regime == "library":
         return {}
     lib = load_earthlib()
-    classes = pool_classes()
-    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k, 2)))
+    pool = dict(pool_classes())
+    family = regime == "earthlib-family"
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k, 3 if family else 2)))
     out = {}
     for name in materials:
         # three draws per material whatever it is, so one material's kind never shifts the others'
-        replace, c, j = rng.uniform(), rng.integers(len(classes)), rng.uniform()
-        if get_material(name).kind not in _REPLACED_KINDS or replace >= REPLACED_FRACTION:
+        if family:
+            classes = FAMILIES.get(name, ())
+            replace, c, j = rng.uniform(), rng.uniform(), rng.uniform()
+            c = int(c * len(classes))
+        else:
+            classes = tuple(pool) if get_material(name).kind in _REPLACED_KINDS else ()
+            replace, c, j = rng.uniform(), rng.integers(len(pool)), rng.uniform()
+        if not classes or replace >= REPLACED_FRACTION:
             continue
-        rows = classes[int(c)][1]
+        rows = pool[classes[min(int(c), len(classes) - 1)]]
         row = rows[min(int(j * len(rows)), len(rows) - 1)]
         source = f"earthlib:{lib.level_2[row]}/{lib.level_3[row]}/{lib.names[row]}"
         out[name] = SurfaceSpectrum(source, earthlib_row_spectrum(row))

@@ -16,7 +16,7 @@ from nidar_mi.materials.earthlib_data import earthlib_row_spectrum, load_earthli
 from nidar_mi.materials.spectra import Spectrum
 from nidar_mi.scenegen.generate import generate, generate_scene
 from nidar_mi.scenegen.objects import HELDOUT_MATERIALS
-from nidar_mi.scenegen.spectra import REPLACED_FRACTION, draw_spectra, pool_classes
+from nidar_mi.scenegen.spectra import FAMILIES, REPLACED_FRACTION, draw_spectra, pool_classes
 
 
 def test_the_pool_holds_no_spectrum_of_a_held_out_family():
@@ -91,3 +91,24 @@ def test_the_index_records_each_drawn_spectrum(tmp_path):
         assert entry["spectra"]
         for m, source in entry["spectra"].items():
             assert f"<!-- mat_{m}: the spectrum of {source} -->" in text
+
+
+def test_earthlib_family_keeps_what_each_surface_is():
+    """``earthlib-family``: a material of :data:`FAMILIES` takes a spectrum of one of its own
+    family's classes, about 3/4 of the time; every other material keeps its own."""
+    pool = dict(pool_classes())
+    assert all(c in pool for classes in FAMILIES.values() for c in classes)
+    n = hits = 0
+    for k in range(40):
+        materials = generate_scene(9, k, materials="train")[0].materials()
+        drawn = draw_spectra(materials, 9, k, "earthlib-family")
+        for m in materials:
+            if m not in FAMILIES:
+                assert m not in drawn
+                continue
+            n, hits = n + 1, hits + (m in drawn)
+            if m in drawn:
+                level_2, level_3, _ = drawn[m].source.split(":", 1)[1].split("/", 2)
+                assert (level_2, level_3) in FAMILIES[m]
+    p = REPLACED_FRACTION
+    assert n > 50 and abs(hits / n - p) < 4 * math.sqrt(p * (1 - p) / n)
