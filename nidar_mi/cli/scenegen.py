@@ -60,7 +60,7 @@ def build_parser():
         default="library",
         help="library: each material's own spectrum (default); earthlib: 3/4 of the diffuse, "
         "road and paint materials of each scene take a random measured earthlib spectrum from a "
-        "class no held-out material comes from (training scenes with thousands of spectra); "
+        "class no held-out material comes from (training scenes of many spectra); "
         "earthlib-family: the same within each material's family (a grass another canopy, a "
         "road another pavement; paints keep theirs)",
     )

@@ -25,7 +25,7 @@ stream of its own, ``SeedSequence(seed, spawn_key=(k, 2))`` (``(k, 3)`` for
 ``earthlib-family``): the shapes, the light and the materials' kinds stay those of the
 ``library`` regime.
 
-Training scenes with thousands of spectra teach a network the relation between the visible
+Training scenes with many measured spectra teach a network the relation between the visible
 colour and the reflectance at the LiDAR wavelength, where the library's two dozen spectra only
 let it learn those two dozen.
 """
