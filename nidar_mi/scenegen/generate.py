@@ -82,13 +82,21 @@ def generate_scene(
         lighting: lighting regime (:data:`nidar_mi.scenegen.lighting.LIGHTING_REGIMES`):
             ``default`` (the layout's sun and sky) or ``varied`` (redrawn, overcast included).
         spectra: spectral regime (:data:`nidar_mi.scenegen.spectra.SPECTRA_REGIMES`):
-            ``library`` (each material's own spectrum) or ``earthlib`` (measured spectra drawn
-            per scene for most diffuse, road and paint materials).
+            ``library`` (each material's own spectrum), ``earthlib`` (measured spectra drawn
+            per scene for most diffuse, road and paint materials) or ``earthlib-family`` (drawn
+            within each material's family).
 
     Returns:
-        The layout and the XML text (the drawn spectra: :func:`draw_spectra` of the layout's
-        materials).
+        The layout and the XML text.
     """
+    layout, text, _ = _draw_scene(seed, k, kind, blocks, materials, lighting, spectra)
+    return layout, text
+
+
+def _draw_scene(
+    seed: int, k: int, kind, blocks, materials: str, lighting: str, spectra: str
+) -> tuple[Layout, str, dict]:
+    """:func:`generate_scene` plus the drawn spectra (material name -> ``SurfaceSpectrum``)."""
     with material_set(materials):
         if kind in CITY_KINDS:
             layout = sample_city(scene_rng(seed, k), kind, blocks or DEFAULT_BLOCKS)[0]
@@ -103,7 +111,7 @@ def generate_scene(
         description=f"Drawn from SeedSequence({seed}, spawn_key=({k},)); kind {layout.kind}.",
         spectra=drawn,
     )
-    return layout, text
+    return layout, text, drawn
 
 
 def layout_hash(layout: Layout) -> str:
@@ -283,11 +291,10 @@ def _plan(folder: _Folder, seed: int, k: int, options: dict, overwrite: bool) ->
         NidarError: its layout repeats one in the folder, or its file holds the scene of another
             run (without ``overwrite``).
     """
-    layout, text = generate_scene(
+    layout, text, drawn = _draw_scene(
         seed, k, options["kind"], options["blocks"], options["materials"], options["lighting"],
         options["spectra"],
     )  # fmt: skip
-    drawn = draw_spectra(layout.materials(), seed, k, options["spectra"])
     entry = index_entry(seed, k, layout, text, options["materials"], options["lighting"], drawn)
     other = folder.hashes.get(entry["layout_sha256"], entry["id"])
     if other != entry["id"]:
