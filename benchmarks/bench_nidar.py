@@ -3,7 +3,7 @@
 ``python benchmarks/bench_nidar.py [--threads 2] [--repeats 5] [--sizes 1242x375,1600x900]
 [--weights DIR] [--configs before,fold,fold+cl,fold+cl+half] [--devices auto] [--json out.json]``
 
-Per frame, image size and device, the stages are timed separately (after one warm-up call per
+Per frame, image size and device, the stages are timed separately, and the whole frame (after one warm-up call per
 configuration, size and device, ``repeats`` rounds that run every cell in turn, so that all see
 the same machine load; medians of the wall time and of the process CPU time):
 
@@ -11,6 +11,10 @@ the same machine load; medians of the wall time and of the process CPU time):
   (:func:`nidar_mi.nidar.infer.pseudo_nir`, on the device: the image is uploaded as 8 bits);
 * ``irnet``: pseudo-NIR -> R, S, Î (:func:`nidar_mi.nidar.infer.run_irnet`; the maps stay on
   the device);
+* ``end_to_end``: :meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` on the image
+  and the cloud, as ``assign`` and ``render --intensity nidar`` run it: the networks compute
+  only the maps it samples, and on the CPU they run beside the assignment's geometry
+  (locating the points in the camera, their incidence); the figure a frame costs;
 * ``assign``: :meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps,
   timed in its three stages (``assign`` is their sum): ``sampling`` (the point cloud projected
   into the camera, the occlusion test against the cloud's own z-buffer and bilinear sampling of
@@ -217,6 +221,7 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
 
     from nidar_mi.nidar.fold import prepare_for_inference
     from nidar_mi.nidar.infer import pseudo_nir, run_irnet
+    from nidar_mi.nidar.pipeline import NidarModel
     from nidar_mi.nidar.preprocess import colour_from_prepared, prepare_rgb_tensor
 
     cfg = _parse_config(name)
@@ -233,7 +238,12 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
         rgb = street_image(width, height)
         cam = kitti_like_camera(width, height)
 
-        def steps(stn=stn, irnet=irnet, rgb=rgb, cam=cam, scale=cfg["scale"]):
+        # the configuration's networks as a model (its profile read once, as a command does)
+        model = NidarModel(stn, irnet, base.config, base._calibration_map, base.weights_dir)
+        model.scale = cfg["scale"]
+        model.default_profile()
+
+        def steps(stn=stn, irnet=irnet, rgb=rgb, cam=cam, scale=cfg["scale"], model=model):
             out = {}
             run = lambda: pseudo_nir(stn, rgb, scale=scale, as_tensors=True)  # noqa: E731
             wall, cpu, p = _time(run, sync)
@@ -245,7 +255,10 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
             run = lambda: run_irnet(irnet, x, scale=scale, as_tensors=True)  # noqa: E731
             wall, cpu, maps = _time(run, sync)
             out["irnet"] = (wall, cpu)
-            return out, _assign_stages(base, xyz, cam, maps, out)
+            observed = _assign_stages(base, xyz, cam, maps, out)
+            run = lambda: model.point_intensity(xyz, [cam], [rgb])  # noqa: E731
+            out["end_to_end"] = _time(run, sync)[:2]
+            return out, observed
 
         size = f"{width}x{height}"
         cells.append({"config": name, "size": size, "device": device, "run": steps, "t": []})
@@ -259,6 +272,8 @@ def _summary(cell: dict, points: int) -> dict:
     cpu = {k: float(statistics.median(r[k][1] for r in t)) for k in STEPS}
     wall["assign"] = float(statistics.median(sum(r[k][0] for k in ASSIGN) for r in t))
     cpu["assign"] = float(statistics.median(sum(r[k][1] for k in ASSIGN) for r in t))
+    wall["end_to_end"] = float(statistics.median(r["end_to_end"][0] for r in t))
+    cpu["end_to_end"] = float(statistics.median(r["end_to_end"][1] for r in t))
     return {
         "config": cell["config"],
         "size": cell["size"],
@@ -286,15 +301,17 @@ def markdown(result: dict) -> str:
     """The results as a Markdown table (seconds per frame)."""
     lines = [
         "| configuration | size | device | pseudo-NIR (s) | IRNet (s) | sampling (s) | normals (s) "
-        "| profile (s) | assignment (s) | total (s) | total CPU (s) |",
-        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| profile (s) | assignment (s) | stages' sum (s) | stages' CPU (s) "
+        "| end to end (s) | end to end CPU (s) |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in result["results"]:
         s, c = r["seconds"], r["cpu_seconds"]
         stages = " | ".join(f"{s[k]:.4f}" for k in (*STEPS, "assign"))
         lines.append(
             f"| {r['config']} | {r['size']} | {r['device']} | {stages} | "
-            f"**{r['total_s']:.3f}** | {sum(c[k] for k in STEPS):.3f} |"
+            f"{r['total_s']:.3f} | {sum(c[k] for k in STEPS):.3f} | "
+            f"**{s['end_to_end']:.3f}** | {c['end_to_end']:.3f} |"
         )
     return "\n".join(lines)
 

@@ -10,7 +10,8 @@
   camera sees: project, :func:`visible_mask`, splat to a sparse pixel map, nearest return
   wins) and :func:`splat_points` (its maps alone).
 * :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
-  cameras, fused by a rule).
+  cameras, fused by a rule) and :func:`locate_in_cameras` (its geometric half: which points
+  each camera sees, and where, before any image exists).
 * :mod:`~nidar_mi.geometry.device_fusion`: :func:`sample_cameras_on` (the same in torch on a
   device, a GPU's or the CPU).
 * :mod:`~nidar_mi.geometry.normals`: :func:`estimate_normals` (plane fits to each point's
@@ -24,7 +25,7 @@ Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are 
 from .camera_model import CONVENTIONS, R_OPENCV_FROM_WAYMO, CameraModel
 from .camera_returns import CameraReturns, camera_returns, splat_points
 from .device_fusion import sample_cameras_on
-from .fusion import FUSION_RULES, sample_cameras
+from .fusion import FUSION_RULES, Sightings, locate_in_cameras, sample_cameras
 from .normals import estimate_normals, incidence_cosine
 from .projection import bilinear_sample, in_image, project, unproject
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_REL_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
@@ -38,11 +39,13 @@ __all__ = [
     "R_OPENCV_FROM_WAYMO",
     "CameraModel",
     "CameraReturns",
+    "Sightings",
     "bilinear_sample",
     "camera_returns",
     "estimate_normals",
     "in_image",
     "incidence_cosine",
+    "locate_in_cameras",
     "project",
     "sample_cameras",
     "sample_cameras_on",

@@ -21,6 +21,7 @@ Ties go to the lowest camera index.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,27 +32,54 @@ from .camera_model import CameraModel
 from .projection import _points, bilinear_sample, project_in_image
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
 
-__all__ = ["FUSION_RULES", "sample_cameras"]
+__all__ = ["FUSION_RULES", "Sightings", "locate_in_cameras", "sample_cameras"]
 
 FUSION_RULES = ("nearest_center", "mean", "min_depth")
 """Rules :func:`sample_cameras` can fuse several cameras' samples with."""
 
 
-def _sample_camera(
-    p: np.ndarray,
-    cam: CameraModel,
-    img: np.ndarray,
-    depth_image: Any,
-    *,
-    occlusion: bool,
-    visibility: dict[str, Any],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One camera's samples of the points it sees: ``(index, value, centre score, depth)``,
-    (M,) arrays, ``index`` ascending into ``p``."""
+@dataclass(frozen=True)
+class Sightings:
+    """Where the cameras see a cloud's points, before any image is sampled
+    (:func:`locate_in_cameras`).
+
+    Attributes:
+        n: number of points of the cloud.
+        per_camera: for each camera, ``(index, uv, depth)``: (M,) int64 ascending indices of
+            the points it sees (in front, inside the image, not occluded when the occlusion
+            test was on), their (M, 2) pixel coordinates and (M,) depths, m.
+    """
+
+    n: int
+    per_camera: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]
+
+    @property
+    def seen(self) -> np.ndarray:
+        """(N,) bool: some camera sees the point (an image finite there gives it a value)."""
+        out = np.zeros(self.n, dtype=bool)
+        for index, _, _ in self.per_camera:
+            out[index] = True
+        return out
+
+
+def _locate_camera(
+    p: np.ndarray, cam: CameraModel, depth_image: Any, *, occlusion: bool, visibility: dict
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(index, uv, depth)`` of the points one camera sees (:class:`Sightings`)."""
     index, uv, depth = project_in_image(p, cam)  # only the points that land in the image
     if occlusion:
         seen = visible_mask(uv, depth, cam, depth_image=depth_image, **visibility)
         index, uv, depth = index[seen], uv[seen], depth[seen]
+    return index, uv, depth
+
+
+def _sample_camera(
+    cam: CameraModel, img: np.ndarray, located: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One camera's samples of the points it sees: ``(index, value, centre score, depth)``,
+    (M,) arrays, ``index`` ascending into the cloud; points where the image is not finite are
+    dropped."""
+    index, uv, depth = located
     sample = bilinear_sample(img, uv)
     ok = np.isfinite(sample)
     index, uv = index[ok], uv[ok]
@@ -99,6 +127,57 @@ def _fuse(
     return values, observed, camera_index
 
 
+def locate_in_cameras(
+    points: Any,
+    cameras: Sequence[CameraModel],
+    *,
+    depth_images: Sequence[Any] | None = None,
+    occlusion: bool = True,
+    depth_kind: str = "z",
+    rel_tol: float | None = None,
+    abs_tol: float = DEFAULT_ABS_TOL,
+    zbuffer_cell: int = DEFAULT_ZBUFFER_CELL,
+) -> Sightings:
+    """Which points each camera sees, and where: the geometric half of :func:`sample_cameras`,
+    which needs no image (so it can run while the images are still being computed).
+
+    Args:
+        points: (N, 3) points in the LiDAR frame, metres.
+        cameras: C cameras (a single :class:`CameraModel` is taken as one camera).
+        depth_images, occlusion, depth_kind, rel_tol, abs_tol, zbuffer_cell: as for
+            :func:`sample_cameras`.
+
+    Returns:
+        The :class:`Sightings`, to pass to :func:`sample_cameras` as ``sightings``.
+
+    Raises:
+        NidarError: no cameras, points not (N, 3) or not finite, or depth images that do not
+            match the cameras in number.
+    """
+    if isinstance(cameras, CameraModel):
+        cameras = [cameras]
+    if len(cameras) == 0:
+        raise NidarError("sample_cameras: no cameras given")
+    if depth_images is None:
+        depth_images = [None] * len(cameras)
+    elif len(depth_images) != len(cameras):
+        raise NidarError(
+            f"sample_cameras: {len(cameras)} cameras but {len(depth_images)} depth images"
+        )
+    p = _points(points)
+    visibility = {
+        "depth_kind": depth_kind,
+        "rel_tol": rel_tol,
+        "abs_tol": abs_tol,
+        "zbuffer_cell": zbuffer_cell,
+    }
+    per_camera = tuple(
+        _locate_camera(p, cam, dimg, occlusion=occlusion, visibility=visibility)
+        for cam, dimg in zip(cameras, depth_images, strict=True)
+    )
+    return Sightings(len(p), per_camera)
+
+
 def sample_cameras(
     points: Any,
     cameras: Sequence[CameraModel],
@@ -111,6 +190,7 @@ def sample_cameras(
     rel_tol: float | None = None,
     abs_tol: float = DEFAULT_ABS_TOL,
     zbuffer_cell: int = DEFAULT_ZBUFFER_CELL,
+    sightings: Sightings | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Give each point a value sampled from the camera images that see it.
 
@@ -133,6 +213,8 @@ def sample_cameras(
             :data:`~nidar_mi.geometry.visibility.DEFAULT_REL_TOL`.
         abs_tol: absolute occlusion tolerance in metres.
         zbuffer_cell: z-buffer cell in pixels when a camera has no depth image.
+        sightings: :func:`locate_in_cameras` of these points and cameras, computed before
+            (the arguments above that it took are then not used again); None: located here.
 
     Returns:
         ``(values, observed, camera_index)``: (N,) float32 values (0 where no camera sees
@@ -141,7 +223,7 @@ def sample_cameras(
 
     Raises:
         NidarError: no cameras, an unknown fusion rule, or images / depth images that do not
-            match the cameras in number or size.
+            match the cameras in number or size; ``sightings`` of another cloud or camera count.
     """
     if isinstance(cameras, CameraModel):
         cameras = [cameras]
@@ -151,29 +233,29 @@ def sample_cameras(
         raise NidarError(f"sample_cameras: fusion must be one of {FUSION_RULES}, not {fusion!r}")
     if len(images) != len(cameras):
         raise NidarError(f"sample_cameras: {len(cameras)} cameras but {len(images)} images")
-    if depth_images is None:
-        depth_images = [None] * len(cameras)
-    elif len(depth_images) != len(cameras):
-        raise NidarError(
-            f"sample_cameras: {len(cameras)} cameras but {len(depth_images)} depth images"
-        )
-    p = _points(points)
-    visibility = {
-        "depth_kind": depth_kind,
-        "rel_tol": rel_tol,
-        "abs_tol": abs_tol,
-        "zbuffer_cell": zbuffer_cell,
-    }
-    per_camera = []
-    for k, (cam, img, dimg) in enumerate(zip(cameras, images, depth_images, strict=True)):
-        img = np.asarray(img)
+    images = [np.asarray(img) for img in images]
+    for k, (cam, img) in enumerate(zip(cameras, images, strict=True)):
         if img.shape != (cam.height, cam.width):
             raise NidarError(
                 f"sample_cameras: image {k} is {img.shape}, camera {k} is {(cam.height, cam.width)}"
             )
-        per_camera.append(
-            _sample_camera(p, cam, img, dimg, occlusion=occlusion, visibility=visibility)
+    if sightings is None:
+        sightings = locate_in_cameras(
+            points,
+            cameras,
+            depth_images=depth_images,
+            occlusion=occlusion,
+            depth_kind=depth_kind,
+            rel_tol=rel_tol,
+            abs_tol=abs_tol,
+            zbuffer_cell=zbuffer_cell,
         )
+    elif len(sightings.per_camera) != len(cameras) or sightings.n != len(np.asarray(points)):
+        raise NidarError("sample_cameras: sightings of another cloud or other cameras")
+    per_camera = [
+        _sample_camera(cam, img, located)
+        for cam, img, located in zip(cameras, images, sightings.per_camera, strict=True)
+    ]
     if len(per_camera) == 1:  # every fusion rule gives the camera's own samples
-        return _one_camera(len(p), *per_camera[0][:2])
-    return _fuse(*_stacked(len(p), per_camera), fusion)
+        return _one_camera(sightings.n, *per_camera[0][:2])
+    return _fuse(*_stacked(sightings.n, per_camera), fusion)

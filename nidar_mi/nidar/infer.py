@@ -47,6 +47,8 @@ from .stn_lowres import LowResSTN
 
 __all__ = [
     "CHROMA_SIGMA_PX",
+    "IRNET_MAPS",
+    "OUTPUTS",
     "pad_to_multiple",
     "smooth_chroma",
     "predict",
@@ -74,6 +76,11 @@ def reduced_size(h: int, w: int, scale: float) -> tuple[int, int]:
         raise NidarError(f"inference scale must lie in (0, 1], got {scale}")
     return max(1, round(scale * h)), max(1, round(scale * w))
 
+
+#: The maps IRNet gives.
+IRNET_MAPS = ("R", "S", "I_hat")
+#: The maps :func:`predict` can give.
+OUTPUTS = ("pseudo_nir", *IRNET_MAPS)
 
 #: Standard deviation (px) of the Gaussian low-pass on the colour differences of the pseudo-NIR
 #: image (module docstring).
@@ -130,15 +137,21 @@ def _resize(x: torch.Tensor, size: tuple[int, int], mode: str) -> torch.Tensor:
 
 
 def _stn_forward(
-    stn: STN, x: torch.Tensor, scale: float, chroma_sigma: float = 0.0
+    stn: STN,
+    x: torch.Tensor,
+    scale: float,
+    chroma_sigma: float = 0.0,
+    small: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Full-size ``(1, 1, H, W)`` pseudo-NIR of prepared RGB ``x`` (``(1, 3, H, W)``); the
     weights are applied to ``x`` with its colour differences low-passed by ``chroma_sigma`` px
-    (:func:`smooth_chroma`; 0: ``x`` as it is)."""
+    (:func:`smooth_chroma`; 0: ``x`` as it is). ``small``: ``x`` already area-resized to the
+    reduced size of ``scale`` (computed here when None)."""
     h, w = x.shape[-2:]
     if scale == 1.0 and chroma_sigma <= 0:
         return _run(stn, x)[..., :h, :w]
-    small = _resize(x, reduced_size(h, w, scale), "area")
+    if small is None:
+        small = _resize(x, reduced_size(h, w, scale), "area")
     was_training = stn.training
     stn.eval()
     try:
@@ -149,7 +162,9 @@ def _stn_forward(
             coef = stn.coefficients(xs)
             rows = -(-small.shape[-2] // stn.down)
             cols = -(-small.shape[-1] // stn.down)
-            coef = _resize(coef[..., :rows, :cols], (h, w), "bilinear")
+            # resized channels-first: each weight map contiguous (2x faster than channels-last
+            # on a CPU; the same values to float32 rounding, docs/BENCHMARKS.md)
+            coef = _resize(coef[..., :rows, :cols].contiguous(), (h, w), "bilinear")
             return LowResSTN.apply(smooth_chroma(x.to(coef.device), chroma_sigma), coef)
         weights = stn.channel_weights(xs)[0][..., : small.shape[-2], : small.shape[-1]]
     finally:
@@ -214,7 +229,12 @@ def _host(maps: dict[str, torch.Tensor]) -> dict[str, np.ndarray]:
 
 @torch.no_grad()
 def run_irnet(
-    irnet: IRNet, x: torch.Tensor, *, scale: float = 1.0, as_tensors: bool = False
+    irnet: IRNet,
+    x: torch.Tensor,
+    *,
+    scale: float = 1.0,
+    as_tensors: bool = False,
+    outputs: tuple[str, ...] = IRNET_MAPS,
 ) -> dict[str, np.ndarray] | dict[str, torch.Tensor]:
     """IRNet's maps of one prepared input.
 
@@ -225,18 +245,28 @@ def run_irnet(
             (``C = 4``: RGB, then pseudo-NIR).
         scale: inference resolution relative to the input, in (0, 1].
         as_tensors: return tensors on the network's device instead of NumPy arrays.
+        outputs: the maps to return, any of :data:`IRNET_MAPS`.
 
     Returns:
-        ``(H, W)`` float32 ``R``, ``S`` and ``I_hat``.
+        ``(H, W)`` float32 maps: ``R``, ``S`` and ``I_hat`` (those in ``outputs``).
     """
     h, w = x.shape[-2:]
-    small = reduced_size(h, w, float(scale))
-    out = _run(irnet, _resize(x, small, "area"))
-    maps = {
-        key: _resize(out[key][..., : small[0], : small[1]], (h, w), "bilinear")[0, 0].float()
-        for key in ("R", "S", "I_hat")
-    }
+    maps = _irnet_maps(irnet, _resize(x, reduced_size(h, w, float(scale)), "area"), (h, w), outputs)
     return maps if as_tensors else _host(maps)
+
+
+def _irnet_maps(
+    irnet: IRNet, small: torch.Tensor, size: tuple[int, int], outputs
+) -> dict[str, torch.Tensor]:
+    """IRNet on its reduced-size input ``small`` (``(1, C, h, w)``); the maps named in
+    ``outputs`` resized bilinearly to ``size``, float32 ``(H, W)`` tensors on its device."""
+    out = _run(irnet, small)
+    h, w = small.shape[-2:]
+    return {
+        key: _resize(out[key][..., :h, :w], size, "bilinear")[0, 0].float()
+        for key in IRNET_MAPS
+        if key in outputs
+    }
 
 
 @torch.no_grad()
@@ -247,12 +277,16 @@ def predict(
     *,
     scale: float = 1.0,
     as_tensors: bool = False,
+    outputs: tuple[str, ...] = OUTPUTS,
 ) -> dict[str, np.ndarray] | dict[str, torch.Tensor]:
     """Run NIDAR's learned stages on one camera image, on the networks' device.
 
     The 8-bit image goes to the device once; its preparation
     (:func:`~nidar_mi.nidar.preprocess.prepare_rgb_tensor`), both networks and the resizing run
-    there. With ``as_tensors`` the maps stay there; else they come back once, as arrays.
+    there. With ``as_tensors`` the maps stay there; else they come back once, as arrays. The
+    image is area-resized to the inference size once: the STN's context and IRNet's colour
+    channels both take it (area averaging acts on each channel alone, so this equals resizing
+    IRNet's whole input); only the maps asked for are resized back to the full size.
 
     Args:
         stn: trained STN; may be None when ``irnet`` takes RGB input.
@@ -260,24 +294,38 @@ def predict(
         rgb: ``(H, W, 3)`` uint8 sRGB, a NumPy array or a tensor.
         scale: inference resolution relative to the image, in (0, 1] (module docstring).
         as_tensors: return ``(H, W)`` float32 tensors on the networks' device.
+        outputs: the maps to return, any of :data:`OUTPUTS` (``pseudo_nir`` only with an STN).
 
     Returns:
         ``(H, W)`` float32 maps: ``pseudo_nir`` (only when ``stn`` is given), ``R``
         (reflectance-related, in (0, 1)), ``S`` (shading) and ``I_hat`` (dense intensity in
-        units of the training data's ``intensity_scale``).
+        units of the training data's ``intensity_scale``); those in ``outputs``.
     """
+    unknown = [key for key in outputs if key not in OUTPUTS]
+    if unknown:
+        raise NidarError(f"unknown NIDAR map(s) {unknown}: choose from {', '.join(OUTPUTS)}")
     if irnet.in_channels in (1, 4) and stn is None:
         raise NidarError("this IRNet takes pseudo-NIR input: an STN is required")
     x_rgb = prepare_rgb_tensor(rgb, _device(irnet))[None]
+    h, w = x_rgb.shape[-2:]
+    size = reduced_size(h, w, float(scale))
+    small_rgb = _resize(x_rgb, size, "area")
     result: dict[str, torch.Tensor] = {}
-    x = x_rgb
-    if stn is not None:
-        p = _stn_forward(stn, x_rgb, float(scale))
-        result["pseudo_nir"] = p[0, 0].float()
+    small = small_rgb
+    if stn is not None and (irnet.in_channels in (1, 4) or "pseudo_nir" in outputs):
+        p = _stn_forward(stn, x_rgb, float(scale), small=small_rgb)
+        if "pseudo_nir" in outputs:
+            result["pseudo_nir"] = p[0, 0].float()
         if irnet.in_channels == 1:
-            x = p
+            small = _resize(p, size, "area")
         elif irnet.in_channels == 4:
-            colour = colour_from_prepared(x_rgb[0], irnet.input_mode)[None]
-            x = torch.cat((colour.to(p.device), p), 1)
-    result |= run_irnet(irnet, x, scale=scale, as_tensors=True)
+            if irnet.input_mode == "rgb+pseudo_nir":
+                colour = small_rgb
+            else:
+                colour = _resize(
+                    colour_from_prepared(x_rgb[0], irnet.input_mode)[None], size, "area"
+                )
+            small = torch.cat((colour.to(p.device), _resize(p, size, "area")), 1)
+    if any(key in IRNET_MAPS for key in outputs):
+        result |= _irnet_maps(irnet, small, (h, w), outputs)
     return result if as_tensors else _host(result)

@@ -25,7 +25,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ..geometry import CameraModel, incidence_cosine, sample_cameras, sample_cameras_on
+from ..geometry import (
+    CameraModel,
+    incidence_cosine,
+    locate_in_cameras,
+    sample_cameras,
+    sample_cameras_on,
+)
 from ..geometry.device_fusion import to_host
 from ..profiles import DistanceQuantileMap, SensorProfile, load_profile
 
@@ -213,7 +219,12 @@ class NidarModel:
         return model
 
     def predict_image(
-        self, rgb: np.ndarray, *, scale: float | None = None, as_tensors: bool = False
+        self,
+        rgb: np.ndarray,
+        *,
+        scale: float | None = None,
+        as_tensors: bool = False,
+        outputs: tuple[str, ...] | None = None,
     ) -> dict:
         """Dense maps of one (H, W, 3) uint8 sRGB image: pseudo_nir, R, S, I_hat (H, W) float32.
 
@@ -222,15 +233,19 @@ class NidarModel:
             scale: inference resolution relative to the image (None: the model's default).
             as_tensors: keep the maps on the networks' device, as tensors
                 (:func:`nidar_mi.nidar.infer.predict`); else NumPy arrays.
+            outputs: the maps to compute, any of :data:`nidar_mi.nidar.infer.OUTPUTS`; None:
+                all four.
         """
-        from .infer import predict
+        from .infer import OUTPUTS, predict
 
         rgb = np.asarray(rgb)
         if rgb.ndim != 3 or rgb.shape[2] < 3 or rgb.dtype != np.uint8:
             raise NidarError(f"expected an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
         s = self.scale if scale is None else float(scale)
         rgb = np.ascontiguousarray(rgb[..., :3])
-        return predict(self.stn, self.irnet, rgb, scale=s, as_tensors=as_tensors)
+        return predict(
+            self.stn, self.irnet, rgb, scale=s, as_tensors=as_tensors, outputs=outputs or OUTPUTS
+        )
 
     def point_intensity(
         self,
@@ -289,21 +304,61 @@ class NidarModel:
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
         device = _assignment_device(self)
-        if maps is None:
-            maps = [self.predict_image(im, as_tensors=device is not None) for im in images]
-        values, observed, cam_idx, r_vals = _sample(
-            device, xyz, cameras, maps, branch, depth_images=depth_images, occlusion=occlusion
-        )
+        keys = tuple(dict.fromkeys((branch, "R")))  # the maps sampled below
+        opts = {"depth_images": depth_images, "occlusion": occlusion}
+        seen_cos = None
+        if device is not None:  # networks and assignment on the device, in turn
+            if maps is None:
+                maps = [self.predict_image(im, as_tensors=True, outputs=keys) for im in images]
+        else:  # the NumPy assignment: its geometry runs beside the networks
+            wants_cos = profile is not None and profile.uses_incidence and cos_incidence is None
+            maps, sightings, seen_cos = self._maps_beside_geometry(
+                xyz, cameras, images, maps, keys, opts, wants_cos
+            )
+            opts = {"sightings": sightings}
+        values, observed, cam_idx, r_vals = _sample(device, xyz, cameras, maps, branch, **opts)
         observed = observed & np.isfinite(values)
         if profile is None:  # the dense head, raw
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)
         else:
-            out = _profile_intensity(profile, xyz, values, observed, ring, cos_incidence)
+            out = _profile_intensity(
+                profile, xyz, values, observed, ring, cos_incidence, seen_cos=seen_cos
+            )
         raw = np.where(observed, values, 0.0).astype(np.float32)
         refl = raw
         if r_vals is not None:
             refl = np.where(observed & np.isfinite(r_vals), r_vals, 0.0).astype(np.float32)
         return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1), refl)
+
+    def _maps_beside_geometry(self, xyz, cameras, images, maps, keys, opts, wants_cos):
+        """``(maps, sightings, seen_cos)``: the networks' ``keys`` maps of ``images`` (on a
+        second thread; ``maps`` when given), while this thread locates the points in the
+        cameras (:func:`~nidar_mi.geometry.locate_in_cameras` with ``opts``) and, when
+        ``wants_cos``, estimates the incidence at the points they see: ``seen_cos`` is then
+        ``(seen, cos)``, (N,) bool and the cosines of ``xyz[seen]``, else None. Both halves
+        release the GIL for most of their work, so on a CPU of two or more cores they overlap
+        (docs/BENCHMARKS.md); the results are those of running them in turn."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(1) as pool:
+            pending = None
+            if maps is None:
+                pending = pool.submit(
+                    lambda: [self.predict_image(im, outputs=keys) for im in images]
+                )
+            try:
+                sightings = locate_in_cameras(xyz, cameras, **opts)
+                seen_cos = None
+                if wants_cos:
+                    seen = sightings.seen
+                    seen_cos = (seen, incidence_cosine(xyz[seen]))
+            except BaseException:
+                if pending is not None:
+                    pending.cancel()  # leaving the pool waits for a running one
+                raise
+            if pending is not None:
+                maps = pending.result()
+        return maps, sightings, seen_cos
 
 
 def _sample(device, xyz, cameras, maps, branch: str, **opts):
@@ -349,9 +404,11 @@ def _profile_intensity(
     observed: np.ndarray,
     ring: np.ndarray | None,
     cos_incidence: np.ndarray | None,
+    seen_cos: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """(N,) float32 intensity of the observed points through ``profile``, 0 elsewhere: their
-    range, elevation, ring and incidence (given, or estimated from the observed points)."""
+    range, elevation, ring and incidence (given, or estimated from the observed points: taken
+    from ``seen_cos``, ``(seen, cos)``, when its points are exactly the observed ones)."""
     out = np.zeros(len(xyz), dtype=np.float32)
     if not observed.any():
         return out
@@ -360,7 +417,9 @@ def _profile_intensity(
     el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
     cos = None
     if profile.uses_incidence:
-        if cos_incidence is None:
+        if cos_incidence is None and seen_cos is not None and np.array_equal(seen_cos[0], observed):
+            cos = seen_cos[1]
+        elif cos_incidence is None:
             cos = incidence_cosine(p)
         else:
             cos = np.asarray(cos_incidence, dtype=np.float64).reshape(-1)

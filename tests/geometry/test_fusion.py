@@ -146,3 +146,26 @@ def test_occlusion_on_an_analytic_street(rigid):
     assert none > 0.025
     assert with_depth < 0.01 and with_zbuf < 0.01
     assert n_depth > 0.97 * n_none and n_zbuf > 0.97 * n_none
+
+
+def test_located_sightings_sample_as_sample_cameras_does(rot, rigid, wall_scene):
+    """The geometric half computed first (:func:`locate_in_cameras`, no image needed) and then
+    sampled gives what sample_cameras gives in one call, for two cameras with occlusion; the
+    points it reports as seen are those a finite image gives a value to."""
+    from nidar_mi.geometry import locate_in_cameras
+
+    pts, _ = wall_scene
+    cam0, cam1 = _two_cameras(rot, rigid)
+    rng = np.random.default_rng(3)
+    images = [rng.uniform(0, 1, (H, W)), rng.uniform(0, 1, (H, W))]
+    for fusion in ("nearest_center", "mean", "min_depth"):
+        ref = sample_cameras(pts, [cam0, cam1], images, fusion=fusion)
+        sightings = locate_in_cameras(pts, [cam0, cam1])
+        got = sample_cameras(pts, [cam0, cam1], images, fusion=fusion, sightings=sightings)
+        for a, b in zip(got, ref, strict=True):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(sightings.seen, ref[1])
+    with pytest.raises(NidarError, match="sightings of another"):
+        sample_cameras(pts[:5], [cam0, cam1], images, sightings=sightings)
+    with pytest.raises(NidarError, match="sightings of another"):
+        sample_cameras(pts, [cam0], images[:1], sightings=sightings)

@@ -77,3 +77,30 @@ def test_predict_as_tensors_keeps_the_maps_on_the_device(nets):
     for key, t in tensors.items():
         assert isinstance(t, torch.Tensor) and t.device == next(irnet.parameters()).device
         np.testing.assert_array_equal(t.numpy(), arrays[key])
+
+
+@pytest.mark.parametrize("mode", ["rgb+pseudo_nir", "chroma+pseudo_nir"])
+@pytest.mark.parametrize("scale", [1.0, 0.5, 0.25])
+def test_predict_gives_the_maps_asked_for_as_the_stages_in_turn_do(mode, scale):
+    """``predict`` resizes the image to the inference size once and computes only the maps
+    asked for; each equals, bit for bit, the stages run one after the other by definition:
+    the full-size pseudo-NIR, stacked after the colour channels, area-resized as one input
+    (:func:`run_irnet`)."""
+    from nidar_mi.nidar.infer import pseudo_nir, run_irnet
+    from nidar_mi.nidar.preprocess import colour_input
+    from nidar_mi.nidar.stn_lowres import LowResSTN
+
+    torch.manual_seed(1)
+    stn = LowResSTN(width=4, depth=2, down=2).eval()
+    irnet = IRNet("unet", 4, width=4, unet_depth=2, input_mode=mode).eval()
+    rgb = _rgb(45, 70, seed=3)
+    p = pseudo_nir(stn, rgb, scale=scale)
+    x = torch.from_numpy(np.concatenate([colour_input(rgb, mode), p[None]]))[None]
+    ref = run_irnet(irnet, x, scale=scale) | {"pseudo_nir": p}
+    for outputs in (("R",), ("I_hat", "R"), ("pseudo_nir",), ("pseudo_nir", "R", "S", "I_hat")):
+        got = predict(stn, irnet, rgb, scale=scale, outputs=outputs)
+        assert set(got) == set(outputs)
+        for key in outputs:
+            np.testing.assert_array_equal(got[key], ref[key])
+    with pytest.raises(NidarError, match="unknown NIDAR map"):
+        predict(stn, irnet, rgb, outputs=("albedo",))

@@ -213,3 +213,43 @@ def test_the_device_path_copies_to_the_host_once(monkeypatch):
         monkeypatch.setattr(torch.Tensor, name, counted)
     res = model.point_intensity(xyz, [cam], [rgb])
     assert res.observed.any() and calls == {"cpu": 1, "numpy": 1}
+
+
+@pytest.mark.parametrize("branch", ["R", "I_hat"])
+def test_the_overlapped_assignment_equals_the_stages_in_turn(branch):
+    """On the CPU the networks run on a second thread while the points are located in the
+    camera and their incidence estimated; the result is, bit for bit, the stages in turn: the
+    maps first, then sampling, then the incidence of the observed points."""
+    from nidar_mi.geometry import incidence_cosine
+
+    model, cam, rgb, xyz = _synthetic_view()
+    got = model.point_intensity(xyz, [cam], [rgb], branch=branch)
+    maps = model.predict_image(rgb)
+    ref_maps = model.point_intensity(xyz, [cam], [None], maps=[maps], branch=branch)
+    o = ref_maps.observed
+    assert o.sum() > 100
+    cos = np.zeros(len(xyz))
+    cos[o] = incidence_cosine(xyz[o])
+    ref = model.point_intensity(xyz, [cam], [None], maps=[maps], branch=branch, cos_incidence=cos)
+    for r in (ref_maps, ref):
+        for key in ("intensity", "observed", "raw_R", "camera_index", "reflectance"):
+            np.testing.assert_array_equal(getattr(got, key), getattr(r, key))
+
+
+def test_points_on_pixels_without_a_value_leave_the_incidence_of_the_others():
+    """Where the map is not finite the points go unobserved; the incidence of the others is
+    then estimated from the observed points alone, as the profile was fitted (not from every
+    point the camera sees)."""
+    from nidar_mi.geometry import incidence_cosine
+
+    model, cam, rgb, xyz = _synthetic_view()
+    maps = model.predict_image(rgb)
+    maps["R"][:, :20] = np.nan
+    got = model.point_intensity(xyz, [cam], [None], maps=[maps])
+    all_seen = model.point_intensity(xyz, [cam], [None], maps=[model.predict_image(rgb)])
+    o = got.observed
+    assert 50 < o.sum() < all_seen.observed.sum()
+    cos = np.zeros(len(xyz))
+    cos[o] = incidence_cosine(xyz[o])
+    ref = model.point_intensity(xyz, [cam], [None], maps=[maps], cos_incidence=cos)
+    np.testing.assert_array_equal(got.intensity, ref.intensity)
