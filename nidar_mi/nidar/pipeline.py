@@ -263,6 +263,11 @@ class NidarModel:
     ) -> PointIntensity:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
 
+        On the CPU the networks run on a second thread while the points are located in the
+        cameras and their incidence estimated (the result is that of the stages in turn); on two
+        cores one torch thread (``torch.set_num_threads(1)``) makes the faster frame
+        (docs/BENCHMARKS.md).
+
         ``branch="R"`` (default, the paper's NIDAR-Full): the reflectance branch through the
         weights' own profile (:meth:`default_profile`: ``profiles/sim-905.json`` when the
         folder has one, else ``calibration.json``'s distance encoding and quantile map).
