@@ -308,20 +308,11 @@ class NidarModel:
             raise NidarError(f"{np.asarray(ring).size} rings for {len(xyz)} points")
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
-        device = _assignment_device(self)
-        keys = tuple(dict.fromkeys((branch, "R")))  # the maps sampled below
+        wants_cos = profile is not None and profile.uses_incidence and cos_incidence is None
         opts = {"depth_images": depth_images, "occlusion": occlusion}
-        seen_cos = None
-        if device is not None:  # networks and assignment on the device, in turn
-            if maps is None:
-                maps = [self.predict_image(im, as_tensors=True, outputs=keys) for im in images]
-        else:  # the NumPy assignment: its geometry runs beside the networks
-            wants_cos = profile is not None and profile.uses_incidence and cos_incidence is None
-            maps, sightings, seen_cos = self._maps_beside_geometry(
-                xyz, cameras, images, maps, keys, opts, wants_cos
-            )
-            opts = {"sightings": sightings}
-        values, observed, cam_idx, r_vals = _sample(device, xyz, cameras, maps, branch, **opts)
+        values, observed, cam_idx, r_vals, seen_cos = self._sampled_maps(
+            xyz, cameras, images, maps, branch, opts, wants_cos
+        )
         observed = observed & np.isfinite(values)
         if profile is None:  # the dense head, raw
             out = np.where(observed, np.clip(values, 0.0, 1.0), 0.0).astype(np.float32)
@@ -334,6 +325,25 @@ class NidarModel:
         if r_vals is not None:
             refl = np.where(observed & np.isfinite(r_vals), r_vals, 0.0).astype(np.float32)
         return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1), refl)
+
+    def _sampled_maps(self, xyz, cameras, images, maps, branch, opts, wants_cos):
+        """``(values, observed, camera_index, R or None, seen_cos)``: :func:`_sample` of the
+        networks' maps of ``images`` (``maps`` when given) at the points; on the assignment's
+        device the networks and the assignment in turn, else the NumPy assignment with its
+        geometry beside the networks (:meth:`_maps_beside_geometry`; ``seen_cos`` as there,
+        else None)."""
+        device = _assignment_device(self)
+        keys = tuple(dict.fromkeys((branch, "R")))  # the maps sampled
+        seen_cos = None
+        if device is not None:
+            if maps is None:
+                maps = [self.predict_image(im, as_tensors=True, outputs=keys) for im in images]
+        else:
+            maps, sightings, seen_cos = self._maps_beside_geometry(
+                xyz, cameras, images, maps, keys, opts, wants_cos
+            )
+            opts = {"sightings": sightings}
+        return *_sample(device, xyz, cameras, maps, branch, **opts), seen_cos
 
     def _maps_beside_geometry(self, xyz, cameras, images, maps, keys, opts, wants_cos):
         """``(maps, sightings, seen_cos)``: the networks' ``keys`` maps of ``images`` (on a
