@@ -154,23 +154,34 @@ def locate_in_cameras(
         NidarError: no cameras, points not (N, 3) or not finite, or depth images that do not
             match the cameras in number.
     """
-    if isinstance(cameras, CameraModel):
-        cameras = [cameras]
-    if len(cameras) == 0:
-        raise NidarError("sample_cameras: no cameras given")
-    if depth_images is None:
-        depth_images = [None] * len(cameras)
-    elif len(depth_images) != len(cameras):
-        raise NidarError(
-            f"sample_cameras: {len(cameras)} cameras but {len(depth_images)} depth images"
-        )
-    p = _points(points)
     visibility = {
         "depth_kind": depth_kind,
         "rel_tol": rel_tol,
         "abs_tol": abs_tol,
         "zbuffer_cell": zbuffer_cell,
     }
+    return _locate(points, cameras, depth_images, occlusion, visibility, "locate_in_cameras")
+
+
+def _locate(
+    points: Any,
+    cameras: Sequence[CameraModel],
+    depth_images: Sequence[Any] | None,
+    occlusion: bool,
+    visibility: dict[str, Any],
+    caller: str,
+) -> Sightings:
+    """:func:`locate_in_cameras`, its errors prefixed with the public function's name
+    ``caller``."""
+    if isinstance(cameras, CameraModel):
+        cameras = [cameras]
+    if len(cameras) == 0:
+        raise NidarError(f"{caller}: no cameras given")
+    if depth_images is None:
+        depth_images = [None] * len(cameras)
+    elif len(depth_images) != len(cameras):
+        raise NidarError(f"{caller}: {len(cameras)} cameras but {len(depth_images)} depth images")
+    p = _points(points)
     per_camera = tuple(
         _locate_camera(p, cam, dimg, occlusion=occlusion, visibility=visibility)
         for cam, dimg in zip(cameras, depth_images, strict=True)
@@ -240,16 +251,13 @@ def sample_cameras(
                 f"sample_cameras: image {k} is {img.shape}, camera {k} is {(cam.height, cam.width)}"
             )
     if sightings is None:
-        sightings = locate_in_cameras(
-            points,
-            cameras,
-            depth_images=depth_images,
-            occlusion=occlusion,
-            depth_kind=depth_kind,
-            rel_tol=rel_tol,
-            abs_tol=abs_tol,
-            zbuffer_cell=zbuffer_cell,
-        )
+        visibility = {
+            "depth_kind": depth_kind,
+            "rel_tol": rel_tol,
+            "abs_tol": abs_tol,
+            "zbuffer_cell": zbuffer_cell,
+        }
+        sightings = _locate(points, cameras, depth_images, occlusion, visibility, "sample_cameras")
     elif len(sightings.per_camera) != len(cameras) or sightings.n != len(np.asarray(points)):
         raise NidarError("sample_cameras: sightings of another cloud or other cameras")
     per_camera = [

@@ -249,7 +249,9 @@ def _det(m00, m11, m22, m01, m02, m12):
     )
 
 
-def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarray:
+def incidence_cosine(
+    xyz, normals=None, k: int = DEFAULT_NEIGHBOURS, *, notes: list[str] | None = None
+) -> np.ndarray:
     """``|cos θ|`` between each ray from the origin and the surface normal at its point.
 
     Args:
@@ -257,6 +259,9 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
         normals: optional (N, 3) normals (e.g. a simulator's exact ones, any length); estimated
             from the cloud with :func:`estimate_normals` when None.
         k: neighbours per plane fit when estimating.
+        notes: a list that receives the messages of the estimate's warnings (points too far,
+            too few, or without a plane) instead of their being warned, for a caller that may
+            discard the result; None: warned.
 
     Returns:
         (N,) float64 in [0, 1]; 1 for a ray along the normal, 0 for a grazing one. A point at the
@@ -269,7 +274,7 @@ def incidence_cosine(xyz, normals=None, k: int = DEFAULT_NEIGHBOURS) -> np.ndarr
     """
     p = _points(xyz, bounded=False)
     if normals is None:
-        n = _estimated_normals(p, k)
+        n = _estimated_normals(p, k, notes)
     else:
         n = np.asarray(normals, dtype=np.float64)
         if n.shape != p.shape or not np.all(np.isfinite(n)):
@@ -289,24 +294,30 @@ def _unit_scale(v: np.ndarray) -> np.ndarray:
     return v / m[:, None]
 
 
-def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:
+def _estimated_normals(p: np.ndarray, k: int, notes: list[str] | None = None) -> np.ndarray:
     """:func:`estimate_normals` of the points within :data:`MAX_COORDINATE`; zero rows (head-on)
-    where there is no plane, with one warning per cause."""
+    where there is no plane, with one warning per cause (its message appended to ``notes``
+    instead, when given)."""
+
+    def warn(message: str) -> None:
+        if notes is None:
+            warnings.warn(message, stacklevel=4)
+        else:
+            notes.append(message)
+
     if int(k) < 3:
         raise NidarError(f"normals need at least 3 neighbours per point (got k={k})")
     if not p.size or np.abs(p).max() <= MAX_COORDINATE:  # the usual case: no copies
         far = np.zeros(len(p), dtype=bool)
     else:
         far = np.abs(p).max(axis=1) > MAX_COORDINATE
-        warnings.warn(
+        warn(
             f"{int(far.sum())} point(s) beyond {MAX_COORDINATE:g} m: incidence taken as head-on",
-            stacklevel=3,
         )
     near = len(p) - int(far.sum())
     if 0 < near < 3:
-        warnings.warn(
+        warn(
             f"{near} point(s): too few for a surface normal, incidence taken as head-on",
-            stacklevel=3,
         )
     if near < 3:
         return np.zeros_like(p)
@@ -316,9 +327,8 @@ def _estimated_normals(p: np.ndarray, k: int) -> np.ndarray:
     else:
         n, flat = _plane_normals(p, k)
     if flat.any():
-        warnings.warn(
+        warn(
             f"{int(flat.sum())} of {near} points have neighbours that coincide or lie on one line "
             "(no plane): incidence taken as head-on",
-            stacklevel=3,
         )
     return n

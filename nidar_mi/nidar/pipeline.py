@@ -18,6 +18,7 @@ The package ships one in ``nidar_mi/nidar/weights``.
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -350,7 +351,8 @@ class NidarModel:
         second thread; ``maps`` when given), while this thread locates the points in the
         cameras (:func:`~nidar_mi.geometry.locate_in_cameras` with ``opts``) and, when
         ``wants_cos``, estimates the incidence at the points they see: ``seen_cos`` is then
-        ``(seen, cos)``, (N,) bool and the cosines of ``xyz[seen]``, else None. Both halves
+        ``(seen, cos, notes)``, (N,) bool, the cosines of ``xyz[seen]`` and the messages of
+        the estimate's warnings (warned only if the cosines are used), else None. Both halves
         release the GIL for most of their work, so on a CPU of two or more cores they overlap
         (docs/BENCHMARKS.md); the results are those of running them in turn."""
         from concurrent.futures import ThreadPoolExecutor
@@ -365,8 +367,8 @@ class NidarModel:
                 sightings = locate_in_cameras(xyz, cameras, **opts)
                 seen_cos = None
                 if wants_cos:
-                    seen = sightings.seen
-                    seen_cos = (seen, incidence_cosine(xyz[seen]))
+                    seen, notes = sightings.seen, []
+                    seen_cos = (seen, incidence_cosine(xyz[seen], notes=notes), notes)
             except BaseException:
                 if pending is not None:
                     pending.cancel()  # leaving the pool waits for a running one
@@ -419,11 +421,12 @@ def _profile_intensity(
     observed: np.ndarray,
     ring: np.ndarray | None,
     cos_incidence: np.ndarray | None,
-    seen_cos: tuple[np.ndarray, np.ndarray] | None = None,
+    seen_cos: tuple[np.ndarray, np.ndarray, list[str]] | None = None,
 ) -> np.ndarray:
     """(N,) float32 intensity of the observed points through ``profile``, 0 elsewhere: their
     range, elevation, ring and incidence (given, or estimated from the observed points: taken
-    from ``seen_cos``, ``(seen, cos)``, when its points are exactly the observed ones)."""
+    from ``seen_cos``, ``(seen, cos, notes)``, when its points are exactly the observed ones,
+    and its estimate's warnings, ``notes``, then warned)."""
     out = np.zeros(len(xyz), dtype=np.float32)
     if not observed.any():
         return out
@@ -434,6 +437,8 @@ def _profile_intensity(
     if profile.uses_incidence:
         if cos_incidence is None and seen_cos is not None and np.array_equal(seen_cos[0], observed):
             cos = seen_cos[1]
+            for message in seen_cos[2]:
+                warnings.warn(message, stacklevel=3)
         elif cos_incidence is None:
             cos = incidence_cosine(p)
         else:

@@ -84,8 +84,14 @@ def test_sample_cameras_rejects_mismatched_inputs():
         sample_cameras(np.zeros((4, 2)), [cam], [np.zeros((H, W))])
     with pytest.raises(NidarError, match="no cameras"):
         sample_cameras(pts, [], [])
-    with pytest.raises(NidarError, match="depth images"):
+    with pytest.raises(NidarError, match="^sample_cameras: 1 cameras but 2 depth images"):
         sample_cameras(pts, [cam], [np.zeros((H, W))], depth_images=[None, None])
+    from nidar_mi.geometry import locate_in_cameras
+
+    with pytest.raises(NidarError, match="^locate_in_cameras: 1 cameras but 2 depth images"):
+        locate_in_cameras(pts, [cam], depth_images=[None, None])
+    with pytest.raises(NidarError, match="^locate_in_cameras: no cameras"):
+        locate_in_cameras(pts, [])
 
 
 # --- what occlusion changes: an analytic street -----------------------------------------

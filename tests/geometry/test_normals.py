@@ -3,6 +3,8 @@ under a raised sensor."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -111,6 +113,12 @@ def test_coincident_neighbours_are_head_on_with_a_warning():
     np.testing.assert_array_equal(cos[200:], 1.0)
     np.testing.assert_allclose(cos[:200], 10.0 / np.linalg.norm(pts, axis=1), atol=1e-6)
     assert not np.any(estimate_normals(np.vstack([pts, dup]))[200:])
+    notes: list[str] = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # given notes, nothing is warned
+        quiet = incidence_cosine(np.vstack([pts, dup]), notes=notes)
+    np.testing.assert_array_equal(quiet, cos)
+    assert len(notes) == 1 and notes[0].startswith("25 of 225 points have neighbours")
 
 
 def test_noise_on_a_densely_sampled_wall():

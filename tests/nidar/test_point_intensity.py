@@ -92,6 +92,27 @@ def test_one_or_two_observed_points_are_assigned_head_on():
     np.testing.assert_allclose(res.intensity[:2], expect, atol=1e-6)
 
 
+def test_the_incidence_warns_once_for_the_points_it_is_used_on():
+    """The incidence estimated beside the networks (every point the camera sees) is discarded
+    when a map leaves some of them unobserved; its warning goes with it, and only that of the
+    estimate the profile reads (the observed points) is given."""
+    import warnings
+
+    model = NidarModel.load(device="cpu")
+    cam, _, _, maps = _wall_scene()
+    pts = np.array([[10.0, 0.2, 0.1], [12.0, -0.3, 0.0]])  # pixels (30.5, 23) and (32.75, 23.5)
+    for hole, expect in ((False, "2 point(s): too few"), (True, "1 point(s): too few")):
+        m = {k: v.copy() for k, v in maps.items()}
+        if hole:
+            m["R"][:, :32] = np.nan  # the first point's bilinear sample is not finite
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = model.point_intensity(pts, [cam], [None], maps=[m], occlusion=False)
+        assert res.observed.tolist() == [not hole, True]
+        messages = [str(w.message) for w in caught if "surface normal" in str(w.message)]
+        assert len(messages) == 1 and messages[0].startswith(expect), messages
+
+
 def test_a_default_profile_of_other_networks_is_ignored(tmp_path):
     """A weights folder whose profiles/sim-905.json was fitted for other networks (retrained
     into the same folder) warns and maps R through its calibration.json."""
