@@ -2,7 +2,8 @@
 the camera image adds on drives the fit never saw.
 
 ``python benchmarks/calibrate_frames.py [--data DIR] [--ks 1,3,10,all] [--seeds 3]
-[--sources nidar,geometry,luminance,linnir,stn,lin9,colour_gbm] [--extra-ks KS] [--weights DIR]``
+[--sources nidar,geometry,luminance,linnir,stn,lin9,colour_gbm,image_gbm] [--extra-ks KS]
+[--weights DIR]``
 
 Leave-one-drive-out over the real KITTI frames under ``--data`` (default: the data root,
 ``../shared/data``): the groups are ``kitti_raw_0926`` (one drive), each drive of
@@ -42,10 +43,17 @@ on the same held-out returns, with no profile; their value is the (N, 3) colour 
   for the ring) and incidence cosine, with the recipe's LightGBM settings (the defaults of
   :class:`~nidar_mi.profiles.gbm.GbmFitOptions`; non-decreasing in the incidence, free in the
   colour). What any map of the pixel's colour could add to the geometry, bounded by this
-  regression's reach.
+  regression's reach;
+* ``image_gbm``: a diagnostic, the same regression on every image feature at hand
+  (:data:`IMAGE_GBM_FEATURES`, :func:`image_features`): the linear colour at the return, its
+  mean over the :data:`CONTEXT_WINDOWS` pixel windows around it, the spread of the luminance
+  over the smaller one, and NIDAR's R, S and pseudo-NIR, beside range, elevation and incidence.
+  What the pixel, its neighbourhood and the networks' maps together could add to the geometry,
+  bounded by this regression's reach.
 
 The image gain of a K is NIDAR R minus geometry only, per seed (paired draws); the colour gain
-is the colour gbm minus geometry only. The draws depend on the held-out group, K and the seed
+is the colour gbm minus geometry only, the image-feature gain the image gbm minus geometry
+only. The draws depend on the held-out group, K and the seed
 only (:func:`splits`), never on the sources requested, so rows of separate runs pair.
 
 Prints a Markdown table; nothing is written. KITTI is non-commercial data: only numbers are
@@ -87,25 +95,45 @@ VALUE_SOURCES = {
     "stn": "STN pseudo-NIR",
     "lin9": "(h) linear colour + distance",
     "colour_gbm": "colour gbm (diagnostic)",
+    "image_gbm": "image gbm (diagnostic)",
 }
 #: The sources that are R maps: fitted at every K (the others at ``--extra-ks`` only).
 R_SOURCES = ("nidar", "geometry")
 #: The sources whose value is the (N, 3) colour at the return: predictors of their own.
 COLOUR_SOURCES = ("lin9", "colour_gbm")
+#: The sources whose value is the (N, F) image features at the return (:data:`IMAGE_FEATURES`).
+FEATURE_SOURCES = ("image_gbm",)
 #: The recipe's label.
 RECIPE = "gbm + incidence (kitti-hdl64e recipe)"
 #: The profile column of the predictors of their own.
 PREDICTORS = {
     "lin9": "least squares, 9 parameters (no profile)",
     "colour_gbm": "gbm of linear RGB, range, elevation, incidence (recipe's settings)",
+    "image_gbm": "gbm of colour, context, NIDAR maps, range, elevation, incidence (recipe's settings)",
 }
 #: The gain rows: (source, minus source, label).
 GAINS = (
     ("nidar", "geometry", "**image gain** (NIDAR R − geometry only)"),
     ("colour_gbm", "geometry", "**colour gain** (colour gbm − geometry only)"),
+    ("image_gbm", "geometry", "**image-feature gain** (image gbm − geometry only)"),
 )
 #: The colour gbm's features, in column order.
 COLOUR_GBM_FEATURES = ("r_lin", "g_lin", "b_lin", "range_m", "elevation_deg", "cos_incidence")
+#: Side lengths, pixels, of the square windows whose mean colour is the image gbm's context.
+CONTEXT_WINDOWS = (15, 61)
+#: The image gbm's image features at a return (:func:`image_features`), in column order.
+IMAGE_FEATURES = (
+    "r_lin",
+    "g_lin",
+    "b_lin",
+    *(f"{c}_mean{w}" for w in CONTEXT_WINDOWS for c in ("r", "g", "b")),
+    f"lum_sd{CONTEXT_WINDOWS[0]}",
+    "R",
+    "S",
+    "pseudo_nir",
+)
+#: The image gbm's features, in column order.
+IMAGE_GBM_FEATURES = (*IMAGE_FEATURES, "range_m", "elevation_deg", "cos_incidence")
 
 Values = dict[str, dict[str, np.ndarray]]  # source -> frame name -> (N,) or (N, 3) values
 Predictor = Callable[[ScanFrame, np.ndarray, np.ndarray], np.ndarray]
@@ -164,14 +192,38 @@ def image_maps(
         out["luminance"] = luminance(rgb)
     if "linnir" in sources:
         out["linnir"] = linear_nir(rgb)
-    return {s: out[s] for s in sources if s not in COLOUR_SOURCES}
+    return {s: out[s] for s in sources if s not in COLOUR_SOURCES + FEATURE_SOURCES}
+
+
+def image_features(model: NidarModel, rgb: np.ndarray) -> dict[str, np.ndarray]:
+    """The image gbm's (H, W) float32 feature maps (:data:`IMAGE_FEATURES`) of one (H, W, 3)
+    uint8 image: linear RGB; its means over square windows of :data:`CONTEXT_WINDOWS` pixels
+    (the image's edge pixels repeated beyond it); the standard deviation of the Rec. 709
+    luminance over the first window; NIDAR's R, S and pseudo-NIR."""
+    from scipy.ndimage import uniform_filter
+
+    from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
+
+    lin = srgb_to_linear(rgb.astype(np.float32) / np.float32(255.0)).astype(np.float32)
+    out = {f"{c}_lin": lin[..., i] for i, c in enumerate("rgb")}
+    for w in CONTEXT_WINDOWS:
+        for i, c in enumerate("rgb"):
+            out[f"{c}_mean{w}"] = uniform_filter(lin[..., i], w, mode="nearest")
+    lum = (lin @ np.asarray(REC709_LUMA, np.float32)).astype(np.float32)
+    w = CONTEXT_WINDOWS[0]
+    var = uniform_filter(lum * lum, w, mode="nearest") - uniform_filter(lum, w, mode="nearest") ** 2
+    out[f"lum_sd{w}"] = np.sqrt(np.maximum(var, 0.0))
+    pred = model.predict_image(rgb)
+    out |= {"R": pred["R"], "S": pred["S"], "pseudo_nir": pred["pseudo_nir"]}
+    return {k: np.asarray(out[k], np.float32) for k in IMAGE_FEATURES}
 
 
 def source_values(
     model: NidarModel, scans: Sequence[ScanFrame], sources: Sequence[str], linear_nir=None
 ) -> Values:
-    """Every source's values at every scan's returns: source -> frame name -> (N,) float64, or
-    (N, 3) colours for :data:`COLOUR_SOURCES` (NaN where no camera gives one)."""
+    """Every source's values at every scan's returns: source -> frame name -> (N,) float64,
+    (N, 3) colours for :data:`COLOUR_SOURCES`, or (N, F) features for :data:`FEATURE_SOURCES`
+    (NaN where no camera gives one)."""
     grey: dict = {}
     out: Values = {s: {} for s in sources}
     colour = [s for s in sources if s in COLOUR_SOURCES]
@@ -184,6 +236,9 @@ def source_values(
             rgb = colour_at_returns(scan)
             for s in colour:
                 out[s][scan.name] = rgb
+        if "image_gbm" in sources:
+            feats = sample_scan_maps(scan, [image_features(model, im) for im in scan.images])
+            out["image_gbm"][scan.name] = np.column_stack([feats[k] for k in IMAGE_FEATURES])
     return out
 
 
@@ -229,7 +284,9 @@ def fitted(
         predict = linear_colour_distance_method(lambda s: values[s.name]).fit(train)
         return lambda s, v, ok: predict(s)[ok]
     if source == "colour_gbm":
-        return fit_colour_gbm(train, values, seed)
+        return fit_design_gbm(train, values, seed, colour_design, COLOUR_GBM_FEATURES)
+    if source == "image_gbm":
+        return fit_design_gbm(train, values, seed, feature_design, IMAGE_GBM_FEATURES)
     profile = fit_values_profile(
         train,
         lambda s: values[s.name],
@@ -252,24 +309,36 @@ def colour_design(scan: ScanFrame, colour: np.ndarray, ok: np.ndarray) -> np.nda
     return np.column_stack([lin, *geo]).astype(np.float64)
 
 
-def fit_colour_gbm(
-    train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int
+def feature_design(scan: ScanFrame, features: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(n, F + 3) float64 features :data:`IMAGE_GBM_FEATURES` of the ``ok`` returns of ``scan``
+    (``features``: (N, F) :data:`IMAGE_FEATURES` at the returns)."""
+    geo = [scan.range_m[ok], scan.elevation_deg[ok], scan.cos_incidence[ok]]
+    return np.column_stack([features[ok], *geo]).astype(np.float64)
+
+
+def fit_design_gbm(
+    train: Sequence[ScanFrame],
+    values: dict[str, np.ndarray],
+    seed: int,
+    design: Callable[[ScanFrame, np.ndarray, np.ndarray], np.ndarray],
+    feats: tuple[str, ...],
 ) -> Predictor:
-    """The colour gbm diagnostic (module docstring) fitted on ``train``: LightGBM with the
-    parameters, rounds and subsample bound of the recipe's ``gbm`` form."""
+    """A gbm diagnostic (module docstring) fitted on ``train``: LightGBM on the ``design``
+    matrix of each frame's values (columns ``feats``) with the parameters, rounds and
+    subsample bound of the recipe's ``gbm`` form (non-decreasing in the incidence)."""
     from nidar_mi.profiles.gbm import GbmFitOptions, train_booster
 
     o = GbmFitOptions(seed=seed)
     oks = [_seen(values[s.name]) for s in train]
-    x = np.concatenate([colour_design(s, values[s.name], m) for s, m in zip(train, oks)])
+    x = np.concatenate([design(s, values[s.name], m) for s, m in zip(train, oks)])
     y = np.concatenate([s.intensity[m] for s, m in zip(train, oks)]).astype(np.float64)
     if y.size > o.max_samples:
         keep = np.sort(np.random.default_rng(o.seed).choice(y.size, o.max_samples, replace=False))
         x, y = x[keep], y[keep]
-    booster = train_booster(x, y, COLOUR_GBM_FEATURES, o)
+    booster = train_booster(x, y, feats, o)
 
     def predict(s: ScanFrame, v: np.ndarray, ok: np.ndarray) -> np.ndarray:
-        out = booster.predict(colour_design(s, v, ok), num_threads=1)
+        out = booster.predict(design(s, v, ok), num_threads=1)
         return np.clip(np.asarray(out, dtype=np.float64), 0.0, 1.0)
 
     return predict

@@ -76,7 +76,10 @@ def test_sources_sample_the_maps_at_the_returns_and_grey_is_the_constant_image()
     a = {s: values[s]["kitti__a"] for s in bench.VALUE_SOURCES}
     n = len(v) + 1
     for s in bench.VALUE_SOURCES:  # one value per return, a colour for the colour sources
-        assert a[s].shape == ((n, 3) if s in bench.COLOUR_SOURCES else (n,))
+        if s in bench.FEATURE_SOURCES:
+            assert a[s].shape == (n, len(bench.IMAGE_FEATURES))
+        else:
+            assert a[s].shape == ((n, 3) if s in bench.COLOUR_SOURCES else (n,))
     # returns at pixel centres read the pixel; the one behind the camera has no value
     np.testing.assert_allclose(a["nidar"][:-1], rgb[v, u, 0] / 255.0, atol=1e-6)
     np.testing.assert_allclose(a["stn"][:-1], rgb[v, u, 1] / 255.0, atol=1e-6)
@@ -86,6 +89,18 @@ def test_sources_sample_the_maps_at_the_returns_and_grey_is_the_constant_image()
     np.testing.assert_allclose(a["linnir"][:-1], want_nir, atol=1e-6)
     for s in bench.COLOUR_SOURCES:
         np.testing.assert_allclose(a[s][:-1], rgb[v, u] / 255.0, atol=1e-6)
+    feats = dict(zip(bench.IMAGE_FEATURES, a["image_gbm"][:-1].T, strict=True))
+    lin = srgb_to_linear(rgb.astype(np.float64) / 255.0)
+    np.testing.assert_allclose(feats["g_lin"], lin[v, u, 1], atol=1e-6)
+    np.testing.assert_allclose(feats["R"], rgb[v, u, 0] / 255.0, atol=1e-6)
+    np.testing.assert_allclose(feats["S"], rgb[v, u, 2] / 255.0, atol=1e-6)
+    np.testing.assert_allclose(feats["pseudo_nir"], rgb[v, u, 1] / 255.0, atol=1e-6)
+    w = bench.CONTEXT_WINDOWS[0]  # the window's mean, the image's edge repeated beyond it
+    pad = np.pad(lin, ((w // 2, w // 2), (w // 2, w // 2), (0, 0)), mode="edge")
+    box = np.array([pad[i : i + w, j : j + w].reshape(-1, 3) for i, j in zip(v, u)])
+    np.testing.assert_allclose(feats[f"b_mean{w}"], box[:, :, 2].mean(axis=1), atol=1e-5)
+    lum = box @ np.array([0.2126, 0.7152, 0.0722])
+    np.testing.assert_allclose(feats[f"lum_sd{w}"], lum.std(axis=1), atol=1e-4)
     for s in bench.VALUE_SOURCES:
         assert np.all(np.isnan(a[s][-1]))
     # the grey image is predicted once per image size, and it is uniform at GREY_LEVEL
@@ -235,6 +250,35 @@ def test_colour_gbm_reads_the_colour_with_the_recipes_settings():
     # the same draws and seed give the same model
     again = bench.fitted(scans[:2], values, 0, "colour_gbm")
     np.testing.assert_array_equal(again(held, values[held.name], ok), pred)
+
+
+def test_image_gbm_reads_every_feature_with_the_recipes_settings():
+    """A law that only the context and NIDAR's S set: the image gbm ranks it (the colour at the
+    return alone cannot), on a frame no fit saw."""
+    f = len(bench.IMAGE_FEATURES)
+    col = {k: i for i, k in enumerate(bench.IMAGE_FEATURES)}
+
+    def law(scan, colour):
+        rng = np.random.default_rng(len(scan.name) + int(scan.name[-1]))
+        feats = rng.uniform(0.0, 1.0, (len(colour), f))
+        feats[-10:] = np.nan
+        scan.__dict__["features"] = feats
+        x = np.nan_to_num(feats)
+        scan.intensity[:] = 0.5 * x[:, col["g_mean61"]] * scan.cos_incidence + 0.3 * x[:, col["S"]]
+
+    scans, _ = _clouds_with(law, count=3, seed=20)
+    values = {s.name: s.__dict__["features"] for s in scans}
+    predict = bench.fitted(scans[:2], values, 0, "image_gbm")
+    held = scans[2]
+    ok = bench._seen(values[held.name])
+    assert ok.sum() == len(ok) - 10
+    pred = predict(held, values[held.name], ok)
+    rho, _ = bench.score(predict, [held], values)
+    assert rho > 0.9 and np.all((0.0 <= pred) & (pred <= 1.0))
+    x = bench.feature_design(held, values[held.name], ok)
+    assert x.shape == (ok.sum(), len(bench.IMAGE_GBM_FEATURES))
+    np.testing.assert_array_equal(x[:, :f], values[held.name][ok])
+    np.testing.assert_array_equal(x[:, -1], held.cos_incidence[ok])
 
 
 def test_the_colour_gain_row_pairs_the_colour_gbm_with_geometry_only(monkeypatch):

@@ -20,15 +20,21 @@ On rendered frames (:mod:`nidar_mi.dataset`, ``source`` ``render``) two numbers 
   with R of the real camera image and once with R of a uniform grey image of the same size
   through the same profile. The gain is the difference: what the image contributes beyond the
   geometry.
+* **truth gain** (``--truth-gain KEY,...``): the image gain's ceiling. The same profile form
+  fitted with a rendered truth map at the returns in place of R (``R_surface``: a per-surface
+  cue without error; ``reflectance``: the monostatic ρ the intensity is made of), scored on the
+  test frames against the same form fitted on a constant value (the incidence alone): what no
+  cue of that kind can exceed under this protocol (the returns' nearest pixels, the sensor's
+  noise, ray drop and per-laser gains, the estimated incidence).
 
 ``python -m nidar_mi.eval.reflectance_cue --test DATA_TEST --train DATA_TRAIN
---weights NAME=DIR ... -o cue.json`` writes every number as JSON and prints a table.
+--weights NAME=DIR ... [--truth-gain R_surface,reflectance] -o cue.json`` writes every number as
+JSON and prints a table.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -36,14 +42,25 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from ..errors import NidarError
-from ..frames import list_frames, load_frame, load_meta
+from ..frames import frame_has, list_frames, load_frame, load_meta
 from ..io.images import REC709_LUMA, srgb_to_linear
 
-__all__ = ["GREY_LEVEL", "frame_returns", "image_gain", "luminance", "main", "score_cues"]
+__all__ = [
+    "GREY_LEVEL",
+    "TRUTH_KEYS",
+    "frame_returns",
+    "image_gain",
+    "luminance",
+    "main",
+    "score_cues",
+    "truth_gain",
+]
 
 #: 8-bit sRGB level of the uniform grey image of the image-gain test.
 GREY_LEVEL = 128
 _FRAME_KEYS = ("rgb", "reflectance", "mask", "K", "T_cam_lidar", "points_xyz", "points_intensity")
+#: The truth maps :func:`truth_gain` can put in R's place.
+TRUTH_KEYS = ("reflectance", "R_surface", "R_true")
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
@@ -168,13 +185,21 @@ def _returns_with_r(frames: list[Path], stn, irnet, grey: bool) -> dict[str, np.
     frame index of each return."""
     from ..nidar.infer import predict
 
+    def r_map(f: dict) -> np.ndarray:
+        rgb = np.full_like(f["rgb"], GREY_LEVEL) if grey else f["rgb"]
+        return predict(stn, irnet, rgb)["R"]
+
+    return _returns_with(frames, r_map, _FRAME_KEYS)
+
+
+def _returns_with(frames: list[Path], value_map, keys) -> dict[str, np.ndarray]:
+    """Returns of ``frames`` (loaded with ``keys``) with ``value_map(frame)``, an (H, W) map,
+    sampled at their nearest pixels as ``R``, and the frame index of each return."""
     parts: dict[str, list[np.ndarray]] = {}
     for k, path in enumerate(frames):
-        f = load_frame(path, _FRAME_KEYS)
+        f = load_frame(path, keys)
         ret = frame_returns(f)
-        rgb = np.full_like(f["rgb"], GREY_LEVEL) if grey else f["rgb"]
-        r = predict(stn, irnet, rgb)["R"]
-        ret["R"] = r[ret["rows"], ret["cols"]].astype(np.float64)
+        ret["R"] = value_map(f)[ret["rows"], ret["cols"]].astype(np.float64)
         ret["frame"] = np.full(len(ret["R"]), k)
         for key, v in ret.items():
             parts.setdefault(key, []).append(v)
@@ -210,6 +235,41 @@ def image_gain(train: list[Path], test: list[Path], stn, irnet) -> dict[str, dic
     return {"image": image, "grey": grey, "gain": gain}
 
 
+def truth_gain(train: list[Path], test: list[Path], key: str) -> dict[str, dict[str, float]]:
+    """The image gain's ceiling (module docstring): the ``gbm`` profile of :func:`image_gain`
+    fitted with the truth map ``key`` at the training returns in place of R, and fitted on a
+    constant value (the incidence alone); both scored on the test returns.
+
+    Returns:
+        ``{"truth": {...}, "geometry": {...}, "gain": {...}}``, each ``{"per_frame",
+        "pooled"}`` Spearman against the rendered intensity (the gain: truth minus geometry).
+
+    Raises:
+        NidarError: ``key`` not one of :data:`TRUTH_KEYS`, or a frame without it.
+    """
+    from ..profiles import fit
+
+    if key not in TRUTH_KEYS:
+        raise NidarError(f"truth gain: the truth is one of {', '.join(TRUTH_KEYS)}, not {key!r}")
+    missing = [p.name for p in (*train, *test) if not frame_has(p, (key,))]
+    if missing:
+        raise NidarError(f"truth gain: {len(missing)} frame(s) have no {key!r} (e.g. {missing[0]})")
+    keys = tuple(dict.fromkeys((*_FRAME_KEYS, key)))
+    fit_ = _returns_with(train, lambda f: f[key], keys)
+    ref = np.clip(fit_["intensity"], 0.0, 1.0)
+    scores = {}
+    for name, values in (("truth", fit_["R"]), ("geometry", np.zeros_like(fit_["R"]))):
+        profile = fit(
+            "gbm", values, fit_["range"], ref, cos_incidence=fit_["cos"], use_geometry=False
+        )
+        ret = _returns_with(test, lambda f: f[key], keys)
+        if name == "geometry":
+            ret["R"] = np.zeros_like(ret["R"])
+        scores[name] = _profile_scores(profile, ret)
+    scores["gain"] = {k: scores["truth"][k] - scores["geometry"][k] for k in scores["truth"]}
+    return scores
+
+
 def _parse(argv):
     p = argparse.ArgumentParser(prog="python -m nidar_mi.eval.reflectance_cue", description=__doc__)
     p.add_argument("--test", required=True, help="dataset of rendered test frames (every split)")
@@ -217,6 +277,13 @@ def _parse(argv):
     p.add_argument("--weights", action="append", default=[], metavar="NAME=DIR")
     p.add_argument("--stn", help="STN weights whose pseudo-NIR is scored (a .safetensors file)")
     p.add_argument("--no-gain", action="store_true", help="score the cues only")
+    p.add_argument(
+        "--truth-gain",
+        default="",
+        metavar="KEYS",
+        help=f"the image gain's ceiling with these truth maps in R's place ({', '.join(TRUTH_KEYS)}; "
+        "needs --train)",
+    )
     p.add_argument("-o", "--out", help="JSON file of every number")
     return p.parse_args(argv)
 
@@ -229,11 +296,24 @@ def _frames_of(data: str, splits=("train", "val", "test")) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    import torch
-
-    from ..nidar.model_io import load_pipeline, load_stn
+    from ..cli._common import run
 
     args = _parse(argv)
+    return run(lambda: _main(args))
+
+
+def _main(args) -> None:
+    import torch
+
+    from ..io.atomic import atomic_write_json
+    from ..nidar.model_io import load_pipeline, load_stn
+
+    truths = [k.strip() for k in args.truth_gain.split(",") if k.strip()]
+    bad = [k for k in truths if k not in TRUTH_KEYS]
+    if bad:
+        raise NidarError(f"--truth-gain: one or more of {', '.join(TRUTH_KEYS)} (got {bad[0]!r})")
+    if truths and (not args.train or args.no_gain):
+        raise NidarError("--truth-gain needs --train (the frames its profiles are fitted on)")
     torch.set_num_threads(1)
     models = {}
     for spec in args.weights:
@@ -247,6 +327,7 @@ def main(argv=None) -> int:
     if args.train and not args.no_gain:
         train = _frames_of(args.train, ("train",))
         result["gain"] = {n: image_gain(train, test, *m) for n, m in models.items()}
+        result["truth_gain"] = {k: truth_gain(train, test, k) for k in truths}
     for k, v in result["cue"].items():
         line = f"cue  {k:40s} vs rho: per-frame {v['per_frame']:+.3f}  pooled {v['pooled']:+.3f}"
         if "surface_pooled" in v:
@@ -258,9 +339,14 @@ def main(argv=None) -> int:
             f"gain {k:40s} image {i['per_frame']:+.3f}/{i['pooled']:+.3f}  "
             f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
         )
+    for k, v in result.get("truth_gain", {}).items():
+        g, t = v["gain"], v["truth"]
+        print(
+            f"truth gain {k:34s} truth {t['per_frame']:+.3f}/{t['pooled']:+.3f}  "
+            f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
+        )
     if args.out:
-        Path(args.out).write_text(json.dumps(result, indent=2))
-    return 0
+        atomic_write_json(args.out, result)
 
 
 if __name__ == "__main__":

@@ -63,3 +63,35 @@ def test_scores_of_every_source(data):
     assert set(gain) == {"image", "grey", "gain"}
     for key in ("per_frame", "pooled"):  # NaN where an untrained R gives a flat profile
         np.testing.assert_equal(gain["gain"][key], gain["image"][key] - gain["grey"][key])
+
+
+def test_the_truth_gain_is_the_ceiling_of_a_perfect_cue(tmp_path):
+    """With the true ρ in R's place the profile ranks the intensity (ρ times a shading the
+    profile cannot see) about as well as ρ itself does, and far better than the incidence
+    alone; the gain is the difference of the two. A map that is no truth is an error."""
+    from scipy.stats import spearmanr
+
+    from nidar_mi.errors import NidarError
+    from nidar_mi.eval.reflectance_cue import truth_gain
+
+    data = write_synthetic_dataset(
+        tmp_path, {"train": 3, "test": 2}, height=48, width=64, intensity_scale=1.0
+    )
+    train, test = list_frames(data, "train"), list_frames(data, "test")
+    got = truth_gain(train, test, "reflectance")
+    direct = []  # Spearman of ρ itself with the intensity, per test frame
+    for path in test:
+        f = load_frame(path, None)
+        ret = frame_returns(f)
+        rho = f["reflectance"][ret["rows"], ret["cols"]]
+        direct.append(spearmanr(rho, ret["intensity"]).statistic)
+    # the profile is a piecewise-constant map fitted on three frames that also reads the
+    # incidence, on which this intensity does not depend: within 0.1 of ρ's own rank; the
+    # incidence alone ranks it not at all
+    assert got["truth"]["per_frame"] == pytest.approx(np.mean(direct), abs=0.1)
+    assert abs(got["geometry"]["per_frame"]) < 0.15
+    assert got["gain"]["per_frame"] > 0.5
+    for key in ("per_frame", "pooled"):
+        assert got["gain"][key] == got["truth"][key] - got["geometry"][key]
+    with pytest.raises(NidarError, match="truth is one of"):
+        truth_gain(train, test, "rgb")
