@@ -49,12 +49,13 @@ on the same held-out returns, with no profile; their value is the (N, 3) colour 
   mean over the :data:`CONTEXT_WINDOWS` pixel windows around it, the spread of the luminance
   over the smaller one, and NIDAR's R, S and pseudo-NIR, beside range, elevation and incidence.
   What the pixel, its neighbourhood and the networks' maps together could add to the geometry,
-  bounded by this regression's reach.
+  bounded by this regression's reach. Not in the default ``--sources`` (it runs the networks a
+  second time on every image): ask for it by name.
 
 The image gain of a K is NIDAR R minus geometry only, per seed (paired draws); the colour gain
-is the colour gbm minus geometry only, the image-feature gain the image gbm minus geometry
-only. The draws depend on the held-out group, K and the seed
-only (:func:`splits`), never on the sources requested, so rows of separate runs pair.
+is the colour gbm minus geometry only, the image-feature gain the image gbm minus geometry only.
+The draws depend on the held-out group, K and the seed only (:func:`splits`), never on the
+sources requested, so rows of separate runs pair.
 
 Prints a Markdown table; nothing is written. KITTI is non-commercial data: only numbers are
 reported.
@@ -97,6 +98,8 @@ VALUE_SOURCES = {
     "colour_gbm": "colour gbm (diagnostic)",
     "image_gbm": "image gbm (diagnostic)",
 }
+#: The sources of a run that names none: all but the image gbm (module docstring).
+DEFAULT_SOURCES = tuple(s for s in VALUE_SOURCES if s != "image_gbm")
 #: The sources that are R maps: fitted at every K (the others at ``--extra-ks`` only).
 R_SOURCES = ("nidar", "geometry")
 #: The sources whose value is the (N, 3) colour at the return: predictors of their own.
@@ -109,7 +112,8 @@ RECIPE = "gbm + incidence (kitti-hdl64e recipe)"
 PREDICTORS = {
     "lin9": "least squares, 9 parameters (no profile)",
     "colour_gbm": "gbm of linear RGB, range, elevation, incidence (recipe's settings)",
-    "image_gbm": "gbm of colour, context, NIDAR maps, range, elevation, incidence (recipe's settings)",
+    "image_gbm": "gbm of colour, context, texture, NIDAR maps, range, elevation, incidence "
+    "(recipe's settings)",
 }
 #: The gain rows: (source, minus source, label).
 GAINS = (
@@ -135,7 +139,7 @@ IMAGE_FEATURES = (
 #: The image gbm's features, in column order.
 IMAGE_GBM_FEATURES = (*IMAGE_FEATURES, "range_m", "elevation_deg", "cos_incidence")
 
-Values = dict[str, dict[str, np.ndarray]]  # source -> frame name -> (N,) or (N, 3) values
+Values = dict[str, dict[str, np.ndarray]]  # source -> frame name -> (N,), (N, 3) or (N, F)
 Predictor = Callable[[ScanFrame, np.ndarray, np.ndarray], np.ndarray]
 
 
@@ -209,7 +213,7 @@ def image_features(model: NidarModel, rgb: np.ndarray) -> dict[str, np.ndarray]:
     for w in CONTEXT_WINDOWS:
         for i, c in enumerate("rgb"):
             out[f"{c}_mean{w}"] = uniform_filter(lin[..., i], w, mode="nearest")
-    lum = (lin @ np.asarray(REC709_LUMA, np.float32)).astype(np.float32)
+    lum = lin.astype(np.float64) @ np.asarray(REC709_LUMA, np.float64)  # no float32 cancellation
     w = CONTEXT_WINDOWS[0]
     var = uniform_filter(lum * lum, w, mode="nearest") - uniform_filter(lum, w, mode="nearest") ** 2
     out[f"lum_sd{w}"] = np.sqrt(np.maximum(var, 0.0))
@@ -279,7 +283,7 @@ def fitted(
     train: Sequence[ScanFrame], values: dict[str, np.ndarray], seed: int, source: str
 ) -> Predictor:
     """``source``'s predictor fitted on ``train``: the recipe's profile of its values, or the
-    predictor of its own of a colour source (module docstring)."""
+    predictor of its own of a colour or feature source (module docstring)."""
     if source == "lin9":
         predict = linear_colour_distance_method(lambda s: values[s.name]).fit(train)
         return lambda s, v, ok: predict(s)[ok]
@@ -434,7 +438,9 @@ def _parse(argv):
     ap.add_argument("--ks", default="1,3,10,all", help="frame counts (all: the whole pool)")
     ap.add_argument("--seeds", type=int, default=3, help="random draws of the K frames")
     ap.add_argument(
-        "--sources", default=",".join(VALUE_SOURCES), help="value sources (module docstring)"
+        "--sources",
+        default=",".join(DEFAULT_SOURCES),
+        help=f"value sources (module docstring; default {','.join(DEFAULT_SOURCES)})",
     )
     ap.add_argument(
         "--extra-ks",

@@ -252,9 +252,9 @@ def test_colour_gbm_reads_the_colour_with_the_recipes_settings():
     np.testing.assert_array_equal(again(held, values[held.name], ok), pred)
 
 
-def test_image_gbm_reads_every_feature_with_the_recipes_settings():
-    """A law that only the context and NIDAR's S set: the image gbm ranks it (the colour at the
-    return alone cannot), on a frame no fit saw."""
+def test_image_gbm_reads_every_feature():
+    """A law that only a context feature and NIDAR's S set: the image gbm ranks it on a frame no
+    fit saw; the colour gbm, which reads the colour at the return only, cannot."""
     f = len(bench.IMAGE_FEATURES)
     col = {k: i for i, k in enumerate(bench.IMAGE_FEATURES)}
 
@@ -279,12 +279,20 @@ def test_image_gbm_reads_every_feature_with_the_recipes_settings():
     assert x.shape == (ok.sum(), len(bench.IMAGE_GBM_FEATURES))
     np.testing.assert_array_equal(x[:, :f], values[held.name][ok])
     np.testing.assert_array_equal(x[:, -1], held.cos_incidence[ok])
+    colours = {n: v[:, :3] for n, v in values.items()}  # the linear colour columns alone
+    colour_only = bench.fitted(scans[:2], colours, 0, "colour_gbm")
+    assert bench.score(colour_only, [held], colours)[0] < 0.5
 
 
-def test_the_colour_gain_row_pairs_the_colour_gbm_with_geometry_only(monkeypatch):
+def test_the_colour_and_feature_gain_rows_pair_their_gbm_with_geometry_only(monkeypatch):
     groups = {g: [f"{g}{i}" for i in range(4)] for g in "ab"}
-    values = {s: {} for s in ("geometry", "lin9", "colour_gbm")}
-    scores = {"geometry": (0.5, 0.25), "lin9": (0.3, 0.1), "colour_gbm": (0.56, 0.33)}
+    values = {s: {} for s in ("geometry", "lin9", "colour_gbm", "image_gbm")}
+    scores = {
+        "geometry": (0.5, 0.25),
+        "lin9": (0.3, 0.1),
+        "colour_gbm": (0.56, 0.33),
+        "image_gbm": (0.52, 0.24),
+    }
     monkeypatch.setattr(bench, "fitted", lambda train, vals, seed, source: source)
     monkeypatch.setattr(bench, "score", lambda p, scans, vals: scores.get(p, (0.2, 0.2)))
     rows = [_cells(ln) for ln in bench.table(groups, values, [3], 2) if "| 3 |" in ln]
@@ -292,6 +300,9 @@ def test_the_colour_gain_row_pairs_the_colour_gbm_with_geometry_only(monkeypatch
         ["geometry only (R of a grey image)", bench.RECIPE],
         ["(h) linear colour + distance", bench.PREDICTORS["lin9"]],
         ["colour gbm (diagnostic)", bench.PREDICTORS["colour_gbm"]],
+        ["image gbm (diagnostic)", bench.PREDICTORS["image_gbm"]],
         ["**colour gain** (colour gbm − geometry only)", bench.PREDICTORS["colour_gbm"]],
+        ["**image-feature gain** (image gbm − geometry only)", bench.PREDICTORS["image_gbm"]],
     ]
-    assert rows[-1][3:6] == ["+0.060 ± 0.000", "+0.080 ± 0.000", "2"]
+    assert rows[-2][3:6] == ["+0.060 ± 0.000", "+0.080 ± 0.000", "2"]
+    assert rows[-1][3:6] == ["+0.020 ± 0.000", "-0.010 ± 0.000", "2"]

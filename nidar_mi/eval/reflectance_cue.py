@@ -22,14 +22,15 @@ On rendered frames (:mod:`nidar_mi.dataset`, ``source`` ``render``) two numbers 
   geometry.
 * **truth gain** (``--truth-gain KEY,...``): the image gain's ceiling. The same profile form
   fitted with a rendered truth map at the returns in place of R (``R_surface``: a per-surface
-  cue without error; ``reflectance``: the monostatic ρ the intensity is made of), scored on the
+  cue without error; ``reflectance``: the monostatic ρ the intensity is made of; ``R_true``:
+  the dense monostatic ρ·T² along the camera ray), scored on the
   test frames against the same form fitted on a constant value (the incidence alone): what no
   cue of that kind can exceed under this protocol (the returns' nearest pixels, the sensor's
   noise, ray drop and per-laser gains, the estimated incidence).
 
 ``python -m nidar_mi.eval.reflectance_cue --test DATA_TEST --train DATA_TRAIN
 --weights NAME=DIR ... [--truth-gain R_surface,reflectance] -o cue.json`` writes every number as
-JSON and prints a table.
+JSON (NaN, e.g. of a flat value, as null) and prints a table.
 """
 
 from __future__ import annotations
@@ -256,15 +257,15 @@ def truth_gain(train: list[Path], test: list[Path], key: str) -> dict[str, dict[
         raise NidarError(f"truth gain: {len(missing)} frame(s) have no {key!r} (e.g. {missing[0]})")
     keys = tuple(dict.fromkeys((*_FRAME_KEYS, key)))
     fit_ = _returns_with(train, lambda f: f[key], keys)
+    test_ = _returns_with(test, lambda f: f[key], keys)
     ref = np.clip(fit_["intensity"], 0.0, 1.0)
     scores = {}
-    for name, values in (("truth", fit_["R"]), ("geometry", np.zeros_like(fit_["R"]))):
+    for name, const in (("truth", False), ("geometry", True)):
+        values = np.zeros_like(fit_["R"]) if const else fit_["R"]
         profile = fit(
             "gbm", values, fit_["range"], ref, cos_incidence=fit_["cos"], use_geometry=False
         )
-        ret = _returns_with(test, lambda f: f[key], keys)
-        if name == "geometry":
-            ret["R"] = np.zeros_like(ret["R"])
+        ret = test_ | {"R": np.zeros_like(test_["R"])} if const else test_
         scores[name] = _profile_scores(profile, ret)
     scores["gain"] = {k: scores["truth"][k] - scores["geometry"][k] for k in scores["truth"]}
     return scores
@@ -281,8 +282,8 @@ def _parse(argv):
         "--truth-gain",
         default="",
         metavar="KEYS",
-        help=f"the image gain's ceiling with these truth maps in R's place ({', '.join(TRUTH_KEYS)}; "
-        "needs --train)",
+        help="the image gain's ceiling with these truth maps in R's place "
+        f"({', '.join(TRUTH_KEYS)}; needs --train)",
     )
     p.add_argument("-o", "--out", help="JSON file of every number")
     return p.parse_args(argv)
@@ -305,15 +306,17 @@ def main(argv=None) -> int:
 def _main(args) -> None:
     import torch
 
-    from ..io.atomic import atomic_write_json
     from ..nidar.model_io import load_pipeline, load_stn
+    from .report import write_json
 
     truths = [k.strip() for k in args.truth_gain.split(",") if k.strip()]
     bad = [k for k in truths if k not in TRUTH_KEYS]
     if bad:
         raise NidarError(f"--truth-gain: one or more of {', '.join(TRUTH_KEYS)} (got {bad[0]!r})")
     if truths and (not args.train or args.no_gain):
-        raise NidarError("--truth-gain needs --train (the frames its profiles are fitted on)")
+        raise NidarError(
+            "--truth-gain needs --train (the frames its profiles are fitted on) and no --no-gain"
+        )
     torch.set_num_threads(1)
     models = {}
     for spec in args.weights:
@@ -346,7 +349,7 @@ def _main(args) -> None:
             f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
         )
     if args.out:
-        atomic_write_json(args.out, result)
+        write_json(args.out, result)  # NaN (a flat value, too few returns) as null
 
 
 if __name__ == "__main__":

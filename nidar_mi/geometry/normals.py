@@ -311,14 +311,10 @@ def _estimated_normals(p: np.ndarray, k: int, notes: list[str] | None = None) ->
         far = np.zeros(len(p), dtype=bool)
     else:
         far = np.abs(p).max(axis=1) > MAX_COORDINATE
-        warn(
-            f"{int(far.sum())} point(s) beyond {MAX_COORDINATE:g} m: incidence taken as head-on",
-        )
+        warn(f"{int(far.sum())} point(s) beyond {MAX_COORDINATE:g} m: incidence taken as head-on")
     near = len(p) - int(far.sum())
     if 0 < near < 3:
-        warn(
-            f"{near} point(s): too few for a surface normal, incidence taken as head-on",
-        )
+        warn(f"{near} point(s): too few for a surface normal, incidence taken as head-on")
     if near < 3:
         return np.zeros_like(p)
     if far.any():
@@ -329,6 +325,6 @@ def _estimated_normals(p: np.ndarray, k: int, notes: list[str] | None = None) ->
     if flat.any():
         warn(
             f"{int(flat.sum())} of {near} points have neighbours that coincide or lie on one line "
-            "(no plane): incidence taken as head-on",
+            "(no plane): incidence taken as head-on"
         )
     return n

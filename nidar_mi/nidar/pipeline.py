@@ -437,8 +437,8 @@ def _profile_intensity(
     if profile.uses_incidence:
         if cos_incidence is None and seen_cos is not None and np.array_equal(seen_cos[0], observed):
             cos = seen_cos[1]
-            for message in seen_cos[2]:
-                warnings.warn(message, stacklevel=3)
+            for message in seen_cos[2]:  # located here, as the estimate's own warning would be
+                warnings.warn(message, stacklevel=1)
         elif cos_incidence is None:
             cos = incidence_cosine(p)
         else:

@@ -95,3 +95,38 @@ def test_the_truth_gain_is_the_ceiling_of_a_perfect_cue(tmp_path):
         assert got["gain"][key] == got["truth"][key] - got["geometry"][key]
     with pytest.raises(NidarError, match="truth is one of"):
         truth_gain(train, test, "rgb")
+
+
+def test_the_command_writes_the_truth_gain_and_refuses_bad_requests(tmp_path, capsys, monkeypatch):
+    """``--truth-gain`` adds its numbers to the JSON (NaN written as null); a map that is no
+    truth, or no training frames to fit on, is one line and exit 2, with nothing written."""
+    import json
+
+    from nidar_mi.eval.reflectance_cue import main
+
+    data = write_synthetic_dataset(
+        tmp_path / "d", {"train": 3, "test": 2}, height=48, width=64, intensity_scale=1.0
+    )
+    out = tmp_path / "cue.json"
+    args = ["--test", str(data), "--train", str(data), "--truth-gain", "reflectance"]
+    assert main([*args, "-o", str(out)]) == 0
+    got = json.loads(out.read_text())["truth_gain"]["reflectance"]
+    assert got["gain"]["per_frame"] == pytest.approx(
+        got["truth"]["per_frame"] - got["geometry"]["per_frame"]
+    )
+    assert "truth gain reflectance" in capsys.readouterr().out
+    import nidar_mi.eval.reflectance_cue as cue
+
+    flat = {"per_frame": float("nan"), "pooled": 0.5}  # e.g. a flat profile on a frame
+    monkeypatch.setattr(
+        cue, "truth_gain", lambda *a: {"truth": flat, "geometry": flat, "gain": flat}
+    )
+    assert main([*args, "-o", str(out)]) == 0
+    assert json.loads(out.read_text())["truth_gain"]["reflectance"]["gain"]["per_frame"] is None
+    monkeypatch.undo()
+    for bad in (["--truth-gain", "rgb"], ["--no-gain"]):
+        fresh = tmp_path / "none.json"
+        assert main([*args, *bad, "-o", str(fresh)]) == 2
+        assert not fresh.exists()
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--truth-gain" in err[0]

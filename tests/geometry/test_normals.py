@@ -108,8 +108,9 @@ def test_coincident_neighbours_are_head_on_with_a_warning():
     """25 copies of one point beside a plane: their neighbourhoods have no spread."""
     pts, _ = _plane((1, 0, 0), 10.0, n=200)
     dup = np.tile([[3.0, 40.0, 2.0]], (25, 1))
-    with pytest.warns(UserWarning, match="25 of 225 points have neighbours that coincide"):
+    with pytest.warns(UserWarning, match="25 of 225 points have neighbours that coincide") as w:
         cos = incidence_cosine(np.vstack([pts, dup]))
+    assert w[0].filename == __file__  # the warning names the caller's line
     np.testing.assert_array_equal(cos[200:], 1.0)
     np.testing.assert_allclose(cos[:200], 10.0 / np.linalg.norm(pts, axis=1), atol=1e-6)
     assert not np.any(estimate_normals(np.vstack([pts, dup]))[200:])
