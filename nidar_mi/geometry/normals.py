@@ -100,9 +100,9 @@ def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`estimate_normals` of checked (N, 3) points (N >= 3, ``k >= 3``): ``(normals,
     flat)``, (N, 3) float64 and (N,) bool, True where the normal is zero (no plane).
 
-    The plane fits of a chunk's neighbourhoods run on :data:`WORKERS` threads, each on its own
-    share (NumPy releases the GIL; each neighbourhood's result is the same however they are
-    split)."""
+    The neighbour search and the plane fits of a chunk run on :data:`WORKERS` threads, each on
+    its own share of the points (pykdtree and NumPy release the GIL; each point's neighbours
+    and each neighbourhood's fit are the same however the points are split)."""
     from concurrent.futures import ThreadPoolExecutor
 
     k = min(int(k), len(p))
@@ -112,10 +112,10 @@ def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     flat = np.empty(len(p), dtype=bool)
     with ThreadPoolExecutor(WORKERS) as pool:
         for start in range(0, len(p), CHUNK):
-            idx = _neighbours(tree, p[start : start + CHUNK], k)
-            cuts = np.linspace(0, len(idx), min(WORKERS, -(-len(idx) // BLOCK)) + 1).astype(int)
-            parts = [idx[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-            fits = pool.map(lambda part: _planes(p, part), parts)
+            q = p[start : start + CHUNK]
+            cuts = np.linspace(0, len(q), min(WORKERS, -(-len(q) // BLOCK)) + 1).astype(int)
+            shares = [q[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+            fits = pool.map(lambda share: _planes(p, _neighbours(tree, share, k)), shares)
             vec, no_plane = (np.concatenate(a, axis=-1) for a in zip(*fits, strict=True))
             normals[:, start : start + CHUNK] = vec
             flat[start : start + CHUNK] = no_plane
