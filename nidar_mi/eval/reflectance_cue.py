@@ -312,10 +312,10 @@ def _main(args) -> None:
     truths = [k.strip() for k in args.truth_gain.split(",") if k.strip()]
     bad = [k for k in truths if k not in TRUTH_KEYS]
     if bad:
-        raise NidarError(f"--truth-gain: one or more of {', '.join(TRUTH_KEYS)} (got {bad[0]!r})")
+        raise NidarError(f"`truth_gain`: one or more of {', '.join(TRUTH_KEYS)} (got {bad[0]!r})")
     if truths and (not args.train or args.no_gain):
         raise NidarError(
-            "--truth-gain needs --train (the frames its profiles are fitted on) and no --no-gain"
+            "`truth_gain` needs `train` (the frames its profiles are fitted on) and no `no_gain`"
         )
     torch.set_num_threads(1)
     models = {}
