@@ -1,5 +1,5 @@
 """Library errors name parameters, not command-line flags: a message writes a parameter in
-backticks and the command shows its flag (:func:`nidar_mi.cli._common.flag_message`)."""
+backticks and the command shows its flag (:func:`nidar_mi.errors.flag_message`)."""
 
 from __future__ import annotations
 

@@ -31,13 +31,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import re
 import signal
 import sys
 import warnings
 from collections.abc import Callable, Mapping
 
-from ..errors import MAX_SEED, NidarError, check_seed
+from ..errors import MAX_SEED, NidarError, check_seed, flag_message
 from ..progress import stderr_is_terminal
 
 __all__ = [
@@ -216,26 +215,6 @@ def scene_inputs(scene: str, depth: int = 8) -> list[str]:
 
 
 #: A parameter named in a library message: a Python identifier in backticks.
-_PARAM = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")
-
-
-def flag_message(message: str, flags: Mapping[str, str] | None = None) -> str:
-    """``message`` with every parameter it names in backticks shown as a flag.
-
-    Args:
-        message: a library message (:class:`~nidar_mi.errors.NidarError`).
-        flags: parameter name -> its flag where the two differ (e.g. ``{"images": "--image"}``);
-            any other name ``a_b`` is shown as ``--a-b``.
-    """
-    flags = flags or {}
-
-    def flag(m: re.Match) -> str:
-        name = m.group(1)
-        return flags.get(name, "--" + name.replace("_", "-"))
-
-    return _PARAM.sub(flag, message)
-
-
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 

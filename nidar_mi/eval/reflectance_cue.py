@@ -297,10 +297,21 @@ def _frames_of(data: str, splits=("train", "val", "test")) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    from ..cli._common import run
+    """The command (module docstring): 0 on success; a bad request or input is one line on
+    stderr and exit 2, Ctrl-C exit 130, with nothing written either way (the JSON is written
+    whole at the end)."""
+    from ..errors import flag_message
 
     args = _parse(argv)
-    return run(lambda: _main(args))
+    try:
+        _main(args)
+    except NidarError as e:
+        print(f"error: {' '.join(flag_message(str(e)).split())}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    return 0
 
 
 def _main(args) -> None:

@@ -130,3 +130,10 @@ def test_the_command_writes_the_truth_gain_and_refuses_bad_requests(tmp_path, ca
         assert not fresh.exists()
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--truth-gain" in err[0]
+
+    def interrupted(_args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cue, "_main", interrupted)
+    assert main(args) == 130
+    assert capsys.readouterr().err.strip() == "interrupted: nothing written"
