@@ -23,10 +23,10 @@ On rendered frames (:mod:`nidar_mi.dataset`, ``source`` ``render``) two numbers 
 * **truth gain** (``--truth-gain KEY,...``): the image gain's ceiling. The same profile form
   fitted with a rendered truth map at the returns in place of R (``R_surface``: a per-surface
   cue without error; ``reflectance``: the monostatic ρ the intensity is made of; ``R_true``:
-  the dense monostatic ρ·T² along the camera ray), scored on the
-  test frames against the same form fitted on a constant value (the incidence alone): what no
-  cue of that kind can exceed under this protocol (the returns' nearest pixels, the sensor's
-  noise, ray drop and per-laser gains, the estimated incidence).
+  the dense monostatic ρ·T² along the camera ray), scored on the test frames against the same
+  form fitted on a constant value (the incidence alone): what no cue of that kind can exceed
+  under this protocol (the returns' nearest pixels, the sensor's noise, ray drop and per-laser
+  gains, the estimated incidence).
 
 ``python -m nidar_mi.eval.reflectance_cue --test DATA_TEST --train DATA_TRAIN
 --weights NAME=DIR ... [--truth-gain R_surface,reflectance] -o cue.json`` writes every number as
