@@ -314,12 +314,37 @@ def main(argv=None) -> int:
     return 0
 
 
+def _check_out(out: str, inputs: list) -> None:
+    """Refuse a JSON path ``out`` that is an input, holds one, or would replace an existing
+    file inside an input folder (a dataset's ``meta.json`` or frames, a weights file)."""
+    from ..io.atomic import check_outside_inputs
+
+    check_outside_inputs(out, inputs)
+    target = Path(out).resolve()
+    for item in inputs:
+        if (
+            item
+            and target.exists()
+            and Path(item).is_dir()
+            and Path(item).resolve() in target.parents
+        ):
+            raise NidarError(
+                f"cannot write `out` {out}: it would replace a file of the input {item}; "
+                "choose another path"
+            )
+
+
 def _main(args) -> None:
     import torch
 
     from ..nidar.model_io import load_pipeline, load_stn
     from .report import write_json
 
+    if args.out:
+        _check_out(
+            args.out,
+            [args.test, args.train, args.stn, *(w.partition("=")[2] for w in args.weights)],
+        )
     truths = [k.strip() for k in args.truth_gain.split(",") if k.strip()]
     bad = [k for k in truths if k not in TRUTH_KEYS]
     if bad:

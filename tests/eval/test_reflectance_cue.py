@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -130,6 +132,13 @@ def test_the_command_writes_the_truth_gain_and_refuses_bad_requests(tmp_path, ca
         assert not fresh.exists()
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--truth-gain" in err[0]
+
+    meta = Path(data) / "meta.json"
+    before = meta.read_bytes()
+    for inside in (meta, Path(data)):  # a file of the input, or the input itself
+        assert main([*args, "-o", str(inside)]) == 2
+        assert "choose another" in capsys.readouterr().err
+    assert meta.read_bytes() == before
 
     def interrupted(_args):
         raise KeyboardInterrupt
