@@ -11,7 +11,7 @@ extra           modules                     what needs it
 ``nidar``       torch, safetensors,         the NIDAR networks and sensor profiles:
                 lightgbm                    ``render --intensity nidar``, ``train``,
                                             ``assign``, ``pseudo_nir``, ``calibrate``,
-                                            ``dataset``, ``evaluate``, ``drive``
+                                            ``evaluate``, ``drive --sources nidar``
 ``drive``       kiss_icp, gtsam             the drive study (``drive``): odometry, loop
                                             registration, pose-graph correction
 ``ray``         ray                         ``--workers`` / ``--ray-address``
