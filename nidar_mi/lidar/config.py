@@ -367,6 +367,10 @@ class LayoutParameters(BaseModel):
             "detection_threshold": p.detection_threshold if p and raw else 0.0,
             # the receiver noise belongs to the preset's receiver: kept when the threshold is set
             "receiver_noise_std": p.receiver_noise_std if p and raw else 0.0,
+            "fov_h": p.fov_h if p else 360.0,
+            "fov_h_centred": p.fov_h_centred if p else False,
+            "rotation_rate": p.rotation_rate if p else 10.0,
+            "scan_start_azimuth": p.scan_start_azimuth if p else 180.0,
         }
 
 

@@ -62,6 +62,11 @@ class Preset:
         range_min: minimum range in m.
         range_max: maximum range in m.
         reference: datasheet or paper the table comes from.
+        fov_h: default horizontal field of view, degrees (360 for a spinning head).
+        fov_h_centred: whether the default field of view is centred on +x.
+        rotation_rate: default rate of the horizontal sweep, Hz: turns per second of the head,
+            or of the beam for a scanning mirror (``at128``).
+        scan_start_azimuth: default azimuth where a sweep starts, degrees.
         detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
             the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
             datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.link_budget`).
@@ -78,6 +83,10 @@ class Preset:
     reference: str
     detection_threshold: float = 0.0
     receiver_noise_std: float = 0.0
+    fov_h: float = 360.0
+    fov_h_centred: bool = False
+    rotation_rate: float = 10.0
+    scan_start_azimuth: float = 180.0
 
 
 def _desc(values: np.ndarray) -> tuple[float, ...]:
