@@ -33,6 +33,8 @@ path in its header; all BSD-licensed):
                           (ouster-sdk test data): beam altitude and azimuth tables, beam origin
                           12.163 / 15.806 mm from the axis, lidar origin 36.18 mm above the
                           sensor frame; all beams of a column fire together.
+``vlp32c``                VLP-32C (ros-drivers/velodyne ``VeloView-VLP-32C.yaml``; offsets
+                          42.4 mm·tan(-θ)); pairs of lasers fire 2.304 µs apart.
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -64,6 +66,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "hdl64e": ("hdl64e_s2_sztaki.csv", 0.0, 0.0),
     "os1_64": ("os1_64.csv", 12.163e-3, 36.18e-3),
     "os1_128": ("os1_128.csv", 15.806e-3, 36.18e-3),
+    "vlp32c": ("vlp32c.csv", 0.0, 0.0),
 }
 
 

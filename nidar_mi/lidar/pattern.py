@@ -29,6 +29,8 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
 * ``waymo_top`` — Waymo Open Dataset top LiDAR (Sun et al., CVPR 2020, Table 1): 64 beams over
   -17.6..+2.4 deg; the real beam inclinations are non-uniform and per-vehicle, here uniform over that
   field of view; 2650 columns as in the dataset's range images.
+* ``vlp32c`` — Velodyne VLP-32C datasheet: 32 channels over +15..-25 deg; 1808 columns, the
+  55.296 µs firing sequences of one turn at 10 Hz.
 """
 
 from __future__ import annotations
@@ -137,6 +139,14 @@ PRESETS: dict[str, Preset] = {
         0.5,
         75.0,
         "Waymo Open Dataset top LiDAR (Sun et al. CVPR 2020)",
+    ),
+    "vlp32c": Preset(
+        _desc(np.linspace(15.0, -25.0, 32)),
+        1808,  # firing sequences per turn at 10 Hz: 1 / (10 Hz x 55.296 us) = 1808.4
+        0.5,
+        200.0,
+        "Velodyne VLP-32C (Ultra Puck) datasheet and user manual 63-9325: 32 channels, "
+        "+15..-25 deg, 360 deg, ~600,000 points/s (single return), range up to 200 m",
     ),
 }
 
