@@ -32,8 +32,9 @@ class LidarSensor(mi.Sensor):
          - Default
        * - ``preset``
          - string
-         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``, ``vlp32c``
-           (tables and sources in :mod:`nidar_mi.lidar.pattern` and :mod:`nidar_mi.lidar.layouts`)
+         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``, ``vlp32c``,
+           ``vls128`` (tables and sources in :mod:`nidar_mi.lidar.pattern` and
+           :mod:`nidar_mi.lidar.layouts`)
          - ``vlp16``
        * - ``layout``
          - string

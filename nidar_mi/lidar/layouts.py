@@ -35,6 +35,8 @@ path in its header; all BSD-licensed):
                           sensor frame; all beams of a column fire together.
 ``vlp32c``                VLP-32C (ros-drivers/velodyne ``VeloView-VLP-32C.yaml``; offsets
                           42.4 mm·tan(-θ)); pairs of lasers fire 2.304 µs apart.
+``vls128``                VLS-128 / Alpha Prime (ros-drivers/velodyne ``VLS128.yaml``; offsets
+                          58.63 mm·tan(-θ)); groups of 8 lasers 2.665 µs apart.
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -67,6 +69,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "os1_64": ("os1_64.csv", 12.163e-3, 36.18e-3),
     "os1_128": ("os1_128.csv", 15.806e-3, 36.18e-3),
     "vlp32c": ("vlp32c.csv", 0.0, 0.0),
+    "vls128": ("vls128.csv", 0.0, 0.0),
 }
 
 

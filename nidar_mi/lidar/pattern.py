@@ -31,6 +31,8 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
   field of view; 2650 columns as in the dataset's range images.
 * ``vlp32c`` — Velodyne VLP-32C datasheet: 32 channels over +15..-25 deg; 1808 columns, the
   55.296 µs firing sequences of one turn at 10 Hz.
+* ``vls128`` — Velodyne Alpha Prime (VLS-128) datasheet: 128 channels over +15..-25 deg; 1876
+  columns, the 53.3 µs firing sequences of one turn at 10 Hz.
 """
 
 from __future__ import annotations
@@ -147,6 +149,14 @@ PRESETS: dict[str, Preset] = {
         200.0,
         "Velodyne VLP-32C (Ultra Puck) datasheet and user manual 63-9325: 32 channels, "
         "+15..-25 deg, 360 deg, ~600,000 points/s (single return), range up to 200 m",
+    ),
+    "vls128": Preset(
+        _desc(np.linspace(15.0, -25.0, 128)),
+        1876,  # firing sequences per turn at 10 Hz: 1 / (10 Hz x 53.3 us) = 1876.2
+        0.5,
+        245.0,
+        "Velodyne Alpha Prime (VLS-128) datasheet and user manual 63-9480 Rev 3: 128 channels, "
+        "+15..-25 deg, 360 deg, ~2,400,000 points/s (single return), range up to 245 m",
     ),
 }
 

@@ -29,6 +29,8 @@ DATASHEETS = {
     # VLP-32C datasheet: 40 deg (+15..-25), 360 deg, 5-20 Hz, ~600,000 points/s single return;
     # the manual's 55.296 us firing sequence gives 32 / 55.296 us = 578,704 (3.5 % under)
     "vlp32c": Datasheet(32, 15.0, -25.0, 360.0, 10.0, 600_000, 0.05),
+    # Alpha Prime datasheet: 40 deg (+15..-25), 360 deg, ~2,400,000 points/s single return
+    "vls128": Datasheet(128, 15.0, -25.0, 360.0, 10.0, 2_400_000, 0.01),
 }
 
 
@@ -66,6 +68,14 @@ PUBLISHED = {
     "vlp32c": Published(
         15.0, -25.0, {0: (-25.0, -1.4, 0.0), 29: (15.0, 1.4, 32.256), 31: (-1.333, 1.4, 34.56)}
     ),
+    # VLS128.yaml: laser 0 vert -0.2049366 rad (-11.742 deg), rot -0.1108982 rad (-6.354 deg),
+    # laser 63 (-0.0232129, 0.1108982) rad, laser 64 (-0.0980875, -0.1108982) rad; groups of 8
+    # every 2.665 us, one idle group after laser 63 (VLS128_SEQ_TDURATION 53.3 us)
+    "vls128": Published(
+        15.0,
+        -25.0,
+        {0: (-11.742, -6.354, 0.0), 63: (-1.33, 6.354, 7 * 2.665), 64: (-5.62, -6.354, 9 * 2.665)},
+    ),
 }
 
 
@@ -84,6 +94,18 @@ def test_per_laser_table_is_the_published_one(preset):
             assert t.azimuth_offset_deg[i] == pytest.approx(azimuth, abs=1e-6), laser
         assert t.firing_offset_s[i] == pytest.approx(firing_us * 1e-6, abs=1e-12), laser
     assert min(t.firing_offset_s) >= 0.0
+
+
+def test_velodyne_firing_sequences_give_the_datasheet_rates():
+    """Points per second from the manuals' firing sequences: VLP-32C 32 lasers per 55.296 us,
+    VLS-128 128 per 53.3 us (20 groups of 2.665 us); the tables' last firing ends inside the
+    sequence."""
+    for preset, lasers, sequence_us in (("vlp32c", 32, 55.296), ("vls128", 128, 53.3)):
+        d = DATASHEETS[preset]
+        assert lasers / (sequence_us * 1e-6) == pytest.approx(d.points_per_s, rel=d.rel_tol)
+        assert max(preset_table(preset).firing_offset_s) < sequence_us * 1e-6
+        # the preset's columns: the sequences of one turn at 10 Hz
+        assert PRESETS[preset].horizontal_resolution == round(1 / (10.0 * sequence_us * 1e-6))
 
 
 WALL = """
