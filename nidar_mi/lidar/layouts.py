@@ -70,6 +70,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "os1_128": ("os1_128.csv", 15.806e-3, 36.18e-3),
     "vlp32c": ("vlp32c.csv", 0.0, 0.0),
     "vls128": ("vls128.csv", 0.0, 0.0),
+    "os0_128": ("os0_128.csv", 27.67e-3, 36.18e-3),
 }
 
 

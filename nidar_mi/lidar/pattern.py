@@ -33,6 +33,7 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
   55.296 µs firing sequences of one turn at 10 Hz.
 * ``vls128`` — Velodyne Alpha Prime (VLS-128) datasheet: 128 channels over +15..-25 deg; 1876
   columns, the 53.3 µs firing sequences of one turn at 10 Hz.
+* ``os0_128`` — Ouster OS0 Rev 6 datasheet: 128 channels over +45..-45 deg; 2048 columns.
 """
 
 from __future__ import annotations
@@ -157,6 +158,14 @@ PRESETS: dict[str, Preset] = {
         245.0,
         "Velodyne Alpha Prime (VLS-128) datasheet and user manual 63-9480 Rev 3: 128 channels, "
         "+15..-25 deg, 360 deg, ~2,400,000 points/s (single return), range up to 245 m",
+    ),
+    "os0_128": Preset(
+        _desc(np.linspace(45.0, -45.0, 128)),
+        2048,
+        0.3,
+        50.0,
+        "Ouster OS0 Rev 6 datasheet: 128 channels, +45..-45 deg, 360 deg, 2,621,440 points/s "
+        "(2048 x 10 Hz), 50 m at 80 % reflectivity",
     ),
 }
 
