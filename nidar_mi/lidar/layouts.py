@@ -37,6 +37,9 @@ path in its header; all BSD-licensed):
                           42.4 mm·tan(-θ)); pairs of lasers fire 2.304 µs apart.
 ``vls128``                VLS-128 / Alpha Prime (ros-drivers/velodyne ``VLS128.yaml``; offsets
                           58.63 mm·tan(-θ)); groups of 8 lasers 2.665 µs apart.
+``os0_128``, ``os2_128``  Ouster OS0-128 and OS2-128 (fw v2.3.0) sensor metadata (ouster-sdk test
+                          data): beam origin 27.67 / 13.762 mm from the axis, lidar origin
+                          36.18 / 78.296 mm above the sensor frame.
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -71,6 +74,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "vlp32c": ("vlp32c.csv", 0.0, 0.0),
     "vls128": ("vls128.csv", 0.0, 0.0),
     "os0_128": ("os0_128.csv", 27.67e-3, 36.18e-3),
+    "os2_128": ("os2_128.csv", 13.762e-3, 78.296e-3),
 }
 
 

@@ -34,6 +34,7 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
 * ``vls128`` — Velodyne Alpha Prime (VLS-128) datasheet: 128 channels over +15..-25 deg; 1876
   columns, the 53.3 µs firing sequences of one turn at 10 Hz.
 * ``os0_128`` — Ouster OS0 Rev 6 datasheet: 128 channels over +45..-45 deg; 2048 columns.
+* ``os2_128`` — Ouster OS2 Rev 6 datasheet: 128 channels over +11.25..-11.25 deg; 2048 columns.
 """
 
 from __future__ import annotations
@@ -166,6 +167,14 @@ PRESETS: dict[str, Preset] = {
         50.0,
         "Ouster OS0 Rev 6 datasheet: 128 channels, +45..-45 deg, 360 deg, 2,621,440 points/s "
         "(2048 x 10 Hz), 50 m at 80 % reflectivity",
+    ),
+    "os2_128": Preset(
+        _desc(np.linspace(11.25, -11.25, 128)),
+        2048,
+        0.5,
+        240.0,
+        "Ouster OS2 Rev 6 datasheet: 128 channels, +11.25..-11.25 deg, 360 deg, 2,621,440 "
+        "points/s (2048 x 10 Hz), 240 m at 80 % reflectivity",
     ),
 }
 

@@ -33,6 +33,8 @@ DATASHEETS = {
     "vls128": Datasheet(128, 15.0, -25.0, 360.0, 10.0, 2_400_000, 0.01),
     # OS0 Rev 6 datasheet: 90 deg (+45..-45), 360 deg, 2,621,440 points/s (2048 x 10 Hz)
     "os0_128": Datasheet(128, 45.0, -45.0, 360.0, 10.0, 2_621_440, 0.0),
+    # OS2 Rev 6 datasheet: 22.5 deg (+11.25..-11.25), 360 deg, 2,621,440 points/s
+    "os2_128": Datasheet(128, 11.25, -11.25, 360.0, 10.0, 2_621_440, 0.0),
 }
 
 
@@ -80,6 +82,8 @@ PUBLISHED = {
     ),
     # ouster-sdk OS-0-128-U1_v2.3.0_1024x10.json: beam 0 altitude 45.75, azimuth 11.24
     "os0_128": Published(45.75, -46.26, {0: (45.75, -11.24, 0.0)}),
+    # OS-2-128-U1_v2.3.0_1024x10.json: beam 0 altitude 10.76
+    "os2_128": Published(10.76, -11.09, {}),
 }
 
 
