@@ -18,7 +18,9 @@ return is the path length from the beam's own origin; distance corrections of a 
 (``dist_correction``) are measurement calibration and are not simulated.
 
 Shipped tables (``nidar_mi/lidar/data/*.csv``, each file names its source repository, commit and
-path in its header; all BSD-licensed):
+path in its header; all BSD-licensed). Hesai's azimuths grow clockwise: a table's azimuth offset
+is minus Hesai's (plus the AT128's, whose points are at minus it). Hesai's firing times are kept
+as published, less the earliest where some are negative (Pandar64):
 
 ========================  ==================================================================
 ``hdl64e``                HDL-64E S2.1 factory calibration of one unit (ros-drivers/velodyne
@@ -40,6 +42,7 @@ path in its header; all BSD-licensed):
 ``os0_128``, ``os2_128``  Ouster OS0-128 and OS2-128 (fw v2.3.0) sensor metadata (ouster-sdk test
                           data): beam origin 27.67 / 13.762 mm from the axis, lidar origin
                           36.18 / 78.296 mm above the sensor frame.
+``pandar64``              Pandar64 angle and firing time correction files (HesaiLidar_SDK_2.0).
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -75,6 +78,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "vls128": ("vls128.csv", 0.0, 0.0),
     "os0_128": ("os0_128.csv", 27.67e-3, 36.18e-3),
     "os2_128": ("os2_128.csv", 13.762e-3, 78.296e-3),
+    "pandar64": ("pandar64.csv", 0.0, 0.0),
 }
 
 

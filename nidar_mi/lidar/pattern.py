@@ -35,6 +35,8 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
   columns, the 53.3 µs firing sequences of one turn at 10 Hz.
 * ``os0_128`` — Ouster OS0 Rev 6 datasheet: 128 channels over +45..-45 deg; 2048 columns.
 * ``os2_128`` — Ouster OS2 Rev 6 datasheet: 128 channels over +11.25..-11.25 deg; 2048 columns.
+* ``pandar64`` — Hesai Pandar64 user manual: 64 channels over +15..-25 deg (the real channels are
+  denser near the horizon: the per-laser table); 1800 columns (0.2 deg at 10 Hz).
 """
 
 from __future__ import annotations
@@ -175,6 +177,14 @@ PRESETS: dict[str, Preset] = {
         240.0,
         "Ouster OS2 Rev 6 datasheet: 128 channels, +11.25..-11.25 deg, 360 deg, 2,621,440 "
         "points/s (2048 x 10 Hz), 240 m at 80 % reflectivity",
+    ),
+    "pandar64": Preset(
+        _desc(np.linspace(15.0, -25.0, 64)),
+        1800,  # 0.2 deg at 10 Hz
+        0.3,
+        200.0,
+        "Hesai Pandar64 user manual: 64 channels, +15..-25 deg, 360 deg, 0.2 deg at 10 Hz, "
+        "1,152,000 points/s (single return), 0.3-200 m",
     ),
 }
 

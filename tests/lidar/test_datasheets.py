@@ -35,6 +35,8 @@ DATASHEETS = {
     "os0_128": Datasheet(128, 45.0, -45.0, 360.0, 10.0, 2_621_440, 0.0),
     # OS2 Rev 6 datasheet: 22.5 deg (+11.25..-11.25), 360 deg, 2,621,440 points/s
     "os2_128": Datasheet(128, 11.25, -11.25, 360.0, 10.0, 2_621_440, 0.0),
+    # Pandar64 user manual: 40 deg (+15..-25), 360 deg, 1,152,000 points/s single return
+    "pandar64": Datasheet(64, 15.0, -25.0, 360.0, 10.0, 1_152_000, 0.0),
 }
 
 
@@ -84,6 +86,14 @@ PUBLISHED = {
     "os0_128": Published(45.75, -46.26, {0: (45.75, -11.24, 0.0)}),
     # OS-2-128-U1_v2.3.0_1024x10.json: beam 0 altitude 10.76
     "os2_128": Published(10.76, -11.09, {}),
+    # HesaiLidar_SDK_2.0 Pandar64 angle correction: channel 1 (14.708, -1.042), channel 64
+    # (-25.071, -1.042); fire times: channels 12 and 40 first (-54.668 us), 51 and 61 last
+    # (-3.62 us)
+    "pandar64": Published(
+        14.708,
+        -25.071,
+        {0: (14.708, 1.042, 54.668 - 23.18), 11: (0.839, 1.042, 0.0), 50: (-5.739, -5.208, 51.048)},
+    ),
 }
 
 
