@@ -33,7 +33,7 @@ class LidarSensor(mi.Sensor):
        * - ``preset``
          - string
          - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``, ``vlp32c``,
-           ``vls128``, ``os0_128``, ``os2_128``, ``pandar64`` (tables and sources in
+           ``vls128``, ``os0_128``, ``os2_128``, ``pandar64``, ``xt32`` (tables and sources in
            :mod:`nidar_mi.lidar.pattern` and :mod:`nidar_mi.lidar.layouts`)
          - ``vlp16``
        * - ``layout``

@@ -43,6 +43,7 @@ as published, less the earliest where some are negative (Pandar64):
                           data): beam origin 27.67 / 13.762 mm from the axis, lidar origin
                           36.18 / 78.296 mm above the sensor frame.
 ``pandar64``              Pandar64 angle and firing time correction files (HesaiLidar_SDK_2.0).
+``xt32``                  PandarXT-32 angle and firing time correction files (HesaiLidar_SDK_2.0).
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -79,6 +80,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "os0_128": ("os0_128.csv", 27.67e-3, 36.18e-3),
     "os2_128": ("os2_128.csv", 13.762e-3, 78.296e-3),
     "pandar64": ("pandar64.csv", 0.0, 0.0),
+    "xt32": ("xt32.csv", 0.0, 0.0),
 }
 
 

@@ -37,6 +37,8 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
 * ``os2_128`` — Ouster OS2 Rev 6 datasheet: 128 channels over +11.25..-11.25 deg; 2048 columns.
 * ``pandar64`` — Hesai Pandar64 user manual: 64 channels over +15..-25 deg (the real channels are
   denser near the horizon: the per-laser table); 1800 columns (0.2 deg at 10 Hz).
+* ``xt32`` — Hesai PandarXT-32 user manual: 32 channels, +15..-16 deg 1 deg apart; 2000 columns
+  (0.18 deg at 10 Hz).
 """
 
 from __future__ import annotations
@@ -185,6 +187,14 @@ PRESETS: dict[str, Preset] = {
         200.0,
         "Hesai Pandar64 user manual: 64 channels, +15..-25 deg, 360 deg, 0.2 deg at 10 Hz, "
         "1,152,000 points/s (single return), 0.3-200 m",
+    ),
+    "xt32": Preset(
+        _desc(np.linspace(15.0, -16.0, 32)),
+        2000,  # 0.18 deg at 10 Hz
+        0.05,
+        120.0,
+        "Hesai PandarXT-32 user manual: 32 channels, +15..-16 deg (1 deg apart), 360 deg, "
+        "0.18 deg at 10 Hz, 640,000 points/s (single return), 0.05-120 m",
     ),
 }
 

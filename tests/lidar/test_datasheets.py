@@ -37,6 +37,8 @@ DATASHEETS = {
     "os2_128": Datasheet(128, 11.25, -11.25, 360.0, 10.0, 2_621_440, 0.0),
     # Pandar64 user manual: 40 deg (+15..-25), 360 deg, 1,152,000 points/s single return
     "pandar64": Datasheet(64, 15.0, -25.0, 360.0, 10.0, 1_152_000, 0.0),
+    # PandarXT-32 user manual: 31 deg (+15..-16), 360 deg, 640,000 points/s single return
+    "xt32": Datasheet(32, 15.0, -16.0, 360.0, 10.0, 640_000, 0.0),
 }
 
 
@@ -94,6 +96,9 @@ PUBLISHED = {
         -25.071,
         {0: (14.708, 1.042, 54.668 - 23.18), 11: (0.839, 1.042, 0.0), 50: (-5.739, -5.208, 51.048)},
     ),
+    # PandarXT angle correction: +15..-16 deg, 1 deg apart, azimuth 0; fire time 6 + 1.512 us
+    # per channel
+    "xt32": Published(15.0, -16.0, {0: (15.0, 0.0, 6.0), 31: (-16.0, 0.0, 52.872)}),
 }
 
 
