@@ -44,6 +44,8 @@ as published, less the earliest where some are negative (Pandar64):
                           36.18 / 78.296 mm above the sensor frame.
 ``pandar64``              Pandar64 angle and firing time correction files (HesaiLidar_SDK_2.0).
 ``xt32``                  PandarXT-32 angle and firing time correction files (HesaiLidar_SDK_2.0).
+``at128``                 AT128E2X angle correction (binary, HesaiLidar_SDK_2.0) and firing times:
+                          128 channels' elevations and azimuth offsets.
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -81,6 +83,7 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "os2_128": ("os2_128.csv", 13.762e-3, 78.296e-3),
     "pandar64": ("pandar64.csv", 0.0, 0.0),
     "xt32": ("xt32.csv", 0.0, 0.0),
+    "at128": ("at128.csv", 0.0, 0.0),
 }
 
 

@@ -39,6 +39,11 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
   denser near the horizon: the per-laser table); 1800 columns (0.2 deg at 10 Hz).
 * ``xt32`` — Hesai PandarXT-32 user manual: 32 channels, +15..-16 deg 1 deg apart; 2000 columns
   (0.18 deg at 10 Hz).
+* ``at128`` — Hesai AT128 user manual: 128 channels over +12.9..-12.5 deg (0.2 deg apart), a
+  120 deg horizontal field of view centred on +x, 1200 columns (0.1 deg). Its channels are fixed;
+  a three-facet mirror turning at 200 rpm sweeps them, the beam at twice the mirror's rate
+  (``rotation_rate`` 6.67 Hz: 120 deg in 50 ms, from +60 deg clockwise), one frame per facet
+  (10 frames/s).
 """
 
 from __future__ import annotations
@@ -195,6 +200,20 @@ PRESETS: dict[str, Preset] = {
         120.0,
         "Hesai PandarXT-32 user manual: 32 channels, +15..-16 deg (1 deg apart), 360 deg, "
         "0.18 deg at 10 Hz, 640,000 points/s (single return), 0.05-120 m",
+    ),
+    "at128": Preset(
+        _desc(np.linspace(12.9, -12.5, 128)),
+        1200,  # 0.1 deg over 120 deg, one frame per mirror facet, 10 frames/s
+        0.5,
+        200.0,
+        "Hesai AT128 user manual: 128 channels, 120 x 25.4 deg (+12.9..-12.5), 0.1 x 0.2 deg, "
+        "10 Hz, 1,536,000 points/s (single return), 200 m at 10 % reflectivity",
+        fov_h=120.0,
+        fov_h_centred=True,
+        # the beam sweeps at twice the mirror's 200 rpm: 2400 deg/s, 120 deg in 50 ms, from the
+        # left edge (+60 deg) clockwise
+        rotation_rate=2.0 * 200.0 / 60.0,
+        scan_start_azimuth=60.0,
     ),
 }
 

@@ -39,6 +39,8 @@ DATASHEETS = {
     "pandar64": Datasheet(64, 15.0, -25.0, 360.0, 10.0, 1_152_000, 0.0),
     # PandarXT-32 user manual: 31 deg (+15..-16), 360 deg, 640,000 points/s single return
     "xt32": Datasheet(32, 15.0, -16.0, 360.0, 10.0, 640_000, 0.0),
+    # AT128 user manual: 120 x 25.4 deg (+12.9..-12.5), 10 Hz, 1,536,000 points/s single return
+    "at128": Datasheet(128, 12.9, -12.5, 120.0, 10.0, 1_536_000, 0.0),
 }
 
 
@@ -99,6 +101,11 @@ PUBLISHED = {
     # PandarXT angle correction: +15..-16 deg, 1 deg apart, azimuth 0; fire time 6 + 1.512 us
     # per channel
     "xt32": Published(15.0, -16.0, {0: (15.0, 0.0, 6.0), 31: (-16.0, 0.0, 52.872)}),
+    # AT128E2X angle correction (binary, 1/12800 deg): channel 1 elevation 164907 / 12800,
+    # azimuth -30720 / 12800; fire time of channel 3 8.24 us
+    "at128": Published(
+        164907 / 12800, -159010 / 12800, {0: (164907 / 12800, -2.4, 0.0), 2: (None, None, 8.24)}
+    ),
 }
 
 
@@ -129,6 +136,17 @@ def test_velodyne_firing_sequences_give_the_datasheet_rates():
         assert max(preset_table(preset).firing_offset_s) < sequence_us * 1e-6
         # the preset's columns: the sequences of one turn at 10 Hz
         assert PRESETS[preset].horizontal_resolution == round(1 / (10.0 * sequence_us * 1e-6))
+
+
+def test_at128_sweeps_its_120_degrees_from_left_to_right_in_50_ms():
+    """The AT128's beam turns at twice its mirror's 200 rpm (2400 deg/s): the 120 deg field of
+    view takes 50 ms of each 100 ms frame, first column at +60 deg (left), 0.1 deg apart."""
+    pattern = LidarConfig.from_mapping("l", {"preset": "at128"}).pattern
+    az, t = pattern.column_azimuth_deg(), pattern.column_time_s()
+    np.testing.assert_allclose(np.diff(az), 0.1, atol=1e-9)
+    assert az.min() == pytest.approx(-59.95) and az.max() == pytest.approx(59.95)
+    assert az[np.argmin(t)] == pytest.approx(59.95) and az[np.argmax(t)] == pytest.approx(-59.95)
+    assert t.max() - t.min() == pytest.approx((120.0 - 0.1) / 2400.0)
 
 
 WALL = """
