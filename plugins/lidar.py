@@ -33,11 +33,15 @@ class LidarSensor(mi.Sensor):
        * - ``preset``
          - string
          - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``,
-           ``vlp32c``, ``vls128``, ``os0_128``, ``os2_128``, ``pandar64``, ``xt32``, ``at128``
-           (tables and sources in :mod:`nidar_mi.lidar.pattern` and
+           ``vlp32c``, ``vls128``, ``os0_128``, ``os2_128``, ``pandar64``, ``xt32``, ``at128``,
+           ``livox_mid40`` (tables and sources in :mod:`nidar_mi.lidar.pattern` and
            :mod:`nidar_mi.lidar.layouts`); a preset also sets the defaults of
            ``horizontal_resolution``, ``range_min``, ``range_max`` and, for ``at128``,
-           ``fov_h`` (120), ``fov_h_centred``, ``rotation_rate`` and ``scan_start_azimuth``
+           ``fov_h`` (120), ``fov_h_centred``, ``rotation_rate`` and ``scan_start_azimuth``;
+           ``livox_mid40``: one laser behind two Risley prisms (:mod:`nidar_mi.lidar.risley`),
+           ``horizontal_resolution`` shots per sweep, ``rotation_rate`` sweeps per second
+           (their product the point rate), ``fov_h``, ``spin`` and ``scan_start_azimuth``
+           unused
          - ``vlp16``
        * - ``layout``
          - string

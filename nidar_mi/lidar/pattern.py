@@ -44,6 +44,9 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
   a three-facet mirror turning at 200 rpm sweeps them, the beam at twice the mirror's rate
   (``rotation_rate`` 6.67 Hz: 120 deg in 50 ms, from +60 deg clockwise), one frame per facet
   (10 frames/s).
+* ``livox_mid40`` — Livox Mid-40 datasheet: one laser, a 38.4 deg circular field of view around +x
+  swept in a non-repetitive rosette by two Risley prisms (:mod:`nidar_mi.lidar.risley`); 10,000
+  shots per sweep at 10 Hz (100,000 points/s).
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .layouts import LaserTable
+from .risley import MID40_PRISMS, RisleyPrisms
 
 __all__ = [
     "Preset",
@@ -82,6 +86,8 @@ class Preset:
         rotation_rate: default rate of the horizontal sweep, Hz: turns per second of the head,
             or of the beam for a scanning mirror (``at128``).
         scan_start_azimuth: default azimuth where a sweep starts, degrees.
+        risley: the prism pair of a Risley-prism (rosette) sensor, None for a spinning head or a
+            scanning mirror (:mod:`nidar_mi.lidar.risley`).
         detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
             the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
             datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.link_budget`).
@@ -102,6 +108,7 @@ class Preset:
     fov_h_centred: bool = False
     rotation_rate: float = 10.0
     scan_start_azimuth: float = 180.0
+    risley: RisleyPrisms | None = None
 
 
 def _desc(values: np.ndarray) -> tuple[float, ...]:
@@ -214,6 +221,17 @@ PRESETS: dict[str, Preset] = {
         # left edge (+60 deg) clockwise
         rotation_rate=2.0 * 200.0 / 60.0,
         scan_start_azimuth=60.0,
+    ),
+    "livox_mid40": Preset(
+        (0.0,),  # one laser behind two turning prisms
+        10_000,  # shots per sweep: 100,000 points/s at 10 sweeps/s
+        1.0,
+        260.0,
+        "Livox Mid-40 datasheet: 38.4 deg circular field of view, 100,000 points/s, 260 m at "
+        "80 % reflectivity; the rosette of two Risley prisms (nidar_mi.lidar.risley)",
+        fov_h=38.4,
+        fov_h_centred=True,
+        risley=MID40_PRISMS,
     ),
 }
 
