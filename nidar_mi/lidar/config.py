@@ -28,9 +28,8 @@ from pydantic import (
 
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
-from .pattern import PRESETS, BeamPattern, parse_angles
+from .pattern import PRESETS, BeamPattern, RisleyPattern, parse_angles
 from .return_model import INTENSITY_MODES
-from .risley import RisleyPattern
 
 __all__ = [
     "LidarConfig",
@@ -123,12 +122,15 @@ class LidarConfig:
         return self.table if self.table is not None else uniform_table(self.elevations_deg)
 
     @property
-    def pattern(self) -> BeamPattern | RisleyPattern:
+    def pattern(self) -> BeamPattern:
         """The beams of one sweep (directions, origins, firing times)."""
         prisms = PRESETS[self.preset].risley if self.preset is not None else None
         if prisms is not None and self.table is None:
             return RisleyPattern(
-                prisms, self.laser_table, self.horizontal_resolution, self.rotation_rate
+                self.laser_table,
+                self.horizontal_resolution,
+                rotation_rate=self.rotation_rate,
+                prisms=prisms,
             )
         return BeamPattern(
             self.laser_table,

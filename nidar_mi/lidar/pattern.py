@@ -66,6 +66,7 @@ __all__ = [
     "azimuths_deg",
     "beam_directions",
     "BeamPattern",
+    "RisleyPattern",
 ]
 
 
@@ -401,3 +402,44 @@ class BeamPattern:
             axis=-1,
         )
         return d, o
+
+
+@dataclass(frozen=True)
+class RisleyPattern(BeamPattern):
+    """The beams of one sweep of a Risley-prism LiDAR (:mod:`nidar_mi.lidar.risley`): one ring
+    (the laser), one column per shot, shot ``j`` at ``t_j = j / (cols · rotation_rate)``.
+
+    Attributes:
+        prisms: the prism pair (required).
+        (the rest as :class:`BeamPattern`; the laser's firing offset, ``fov_h``, ``start_deg``,
+        ``spin`` and ``scan_start_azimuth`` do not move its beams)
+    """
+
+    prisms: RisleyPrisms | None = None
+
+    def column_time_s(self) -> np.ndarray:
+        """(C,) float64 firing time of each shot since the sweep's start, s."""
+        return np.arange(self.cols, dtype=np.float64) / (self.cols * self.rotation_rate)
+
+    def column_azimuth_deg(self) -> np.ndarray:
+        """(C,) float64 azimuth of each shot's beam, degrees (counter-clockwise from +x)."""
+        d = self.prisms.directions(self.column_time_s())
+        return np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+
+    def time_s(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """(n,) float64 firing time of beams ``start..stop`` since the sweep's start, s."""
+        _, col = self._index(start, stop)
+        return self.column_time_s()[col]
+
+    def beams(self, start: int = 0, stop: int | None = None):
+        """``(directions, None)`` of beams ``start..stop``: (n, 3) float64 unit vectors, every
+        beam from the sensor origin."""
+        return self.prisms.directions(self.time_s(start, stop)), None
+
+    def rays_at(self, ring: np.ndarray, column_azimuth_deg: np.ndarray):
+        """Not defined for a Risley pattern (a shot's direction is not set by an azimuth).
+
+        Raises:
+            ValueError: always.
+        """
+        raise ValueError("a Risley-prism pattern has no beams per column azimuth")

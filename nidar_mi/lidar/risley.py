@@ -13,7 +13,8 @@ Mid-40's prisms (below) both aligned, the beam leaves 19.16° off the axis: a 38
 field of view, the datasheet's 38.4°; with them opposed, 0.01° (the petals pass through the
 centre).
 
-Shots are evenly spaced in time: column ``j`` of a sweep of ``C`` columns at ``rotation_rate``
+:class:`nidar_mi.lidar.pattern.RisleyPattern` makes a sweep of these beams. Shots are evenly
+spaced in time: column ``j`` of a sweep of ``C`` columns at ``rotation_rate``
 sweeps per second fires at ``t_j = j / (C · rotation_rate)`` after the sweep's start, so
 ``C · rotation_rate`` is the point rate (the Mid-40's 100,000 points/s: 10,000 columns at 10 Hz,
 or 100,000 at 1 Hz for a one-second integration). Every sweep starts with the prisms at angle 0:
@@ -34,9 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .layouts import LaserTable
-
-__all__ = ["RisleyPrisms", "RisleyPattern", "MID40_PRISMS"]
+__all__ = ["RisleyPrisms", "MID40_PRISMS"]
 
 
 def _refract(incident: np.ndarray, normal: np.ndarray, eta: float) -> np.ndarray:
@@ -95,59 +94,3 @@ MID40_PRISMS = RisleyPrisms(
     rotation_hz=(-121.5657, 77.7430),
     source="HELIOS++ scanners_tls.xml livox_mid-40 (3dgeo-heidelberg/helios @ fd94d1f)",
 )
-
-
-@dataclass(frozen=True)
-class RisleyPattern:
-    """The beams of one sweep of a Risley-prism LiDAR: one ring (the laser), one column per
-    shot; the same interface as :class:`nidar_mi.lidar.pattern.BeamPattern`.
-
-    Attributes:
-        prisms: the prism pair.
-        table: the one laser (its firing offset is ignored: the shots are the columns).
-        cols: shots per sweep.
-        rotation_rate: sweeps per second.
-    """
-
-    prisms: RisleyPrisms
-    table: LaserTable
-    cols: int
-    rotation_rate: float = 10.0
-    #: For the interface of a spinning head (a camera's trigger time): a sweep has no azimuth.
-    spin: int = -1
-    scan_start_azimuth: float = 180.0
-
-    @property
-    def rings(self) -> int:
-        return self.table.rings
-
-    @property
-    def size(self) -> int:
-        return self.rings * self.cols
-
-    def column_time_s(self) -> np.ndarray:
-        """(C,) float64 firing time of each shot since the sweep's start, s."""
-        return np.arange(self.cols, dtype=np.float64) / (self.cols * self.rotation_rate)
-
-    def column_azimuth_deg(self) -> np.ndarray:
-        """(C,) float64 azimuth of each shot's beam, degrees (counter-clockwise from +x)."""
-        d = self.prisms.directions(self.column_time_s())
-        return np.degrees(np.arctan2(d[:, 1], d[:, 0]))
-
-    def time_s(self, start: int = 0, stop: int | None = None) -> np.ndarray:
-        """(n,) float64 firing time of beams ``start..stop`` since the sweep's start, s."""
-        stop = self.size if stop is None else stop
-        return self.column_time_s()[np.arange(start, stop) % self.cols]
-
-    def beams(self, start: int = 0, stop: int | None = None):
-        """``(directions, None)`` of beams ``start..stop``: (n, 3) float64 unit vectors, every
-        beam from the sensor origin."""
-        return self.prisms.directions(self.time_s(start, stop)), None
-
-    def rays_at(self, ring: np.ndarray, column_azimuth_deg: np.ndarray):
-        """Not defined for a Risley pattern (a shot's direction is not set by an azimuth).
-
-        Raises:
-            ValueError: always.
-        """
-        raise ValueError("a Risley-prism pattern has no beams per column azimuth")

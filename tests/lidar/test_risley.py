@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from nidar_mi.lidar.config import LidarConfig
-from nidar_mi.lidar.pattern import PRESETS
-from nidar_mi.lidar.risley import MID40_PRISMS, RisleyPattern, RisleyPrisms
+from nidar_mi.lidar.pattern import PRESETS, RisleyPattern
+from nidar_mi.lidar.risley import MID40_PRISMS, RisleyPrisms
 
 # Livox Mid-40 datasheet: one laser, 38.4 deg circular field of view, 100,000 points/s
 MID40_FOV_DEG, MID40_POINTS_PER_S = 38.4, 100_000
@@ -19,7 +19,9 @@ def test_livox_mid40_against_its_datasheet():
     assert cfg.horizontal_resolution * cfg.rotation_rate == MID40_POINTS_PER_S
     assert np.all(np.diff(pattern.column_time_s()) == pytest.approx(1.0 / MID40_POINTS_PER_S))
     # one second of shots: the widest beam is the field of view's edge
-    second = RisleyPattern(MID40_PRISMS, cfg.laser_table, MID40_POINTS_PER_S, rotation_rate=1.0)
+    second = RisleyPattern(
+        cfg.laser_table, MID40_POINTS_PER_S, rotation_rate=1.0, prisms=MID40_PRISMS
+    )
     d, origins = second.beams()
     off_axis = np.degrees(np.arccos(d[:, 0]))
     assert origins is None and np.allclose(np.linalg.norm(d, axis=1), 1.0)
