@@ -107,7 +107,7 @@ class SequenceOptions:
     trajectory: str
     rate: float | None = None
     frames: int | None = None
-    formats: tuple[str, ...] = rf.FORMATS
+    formats: tuple[str, ...] = tuple(f for f in rf.FORMATS if f != "laz")  # laz: an extra
     sequence_formats: tuple[str, ...] = ()
     bin_intensity: str = "unit"
     seed: int | None = None
