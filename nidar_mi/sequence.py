@@ -297,7 +297,7 @@ def _open(options: SequenceOptions):
     request = check_sequence(options)
     session = RenderSession.open(options.frame_options(), request)
     lidars = session.lidars
-    rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
+    rate = float(options.rate if options.rate is not None else lidars[0].config.frame_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
     times = _frame_times(traj, rate, options.frames, sweep_s, options.max_frames)

@@ -78,8 +78,10 @@ class LidarSensor(mi.Sensor):
          - ``false`` (``at128``: ``true``)
        * - ``rotation_rate``
          - float
-         - spin rate in Hz, (0, 100]; one sweep takes 1/rotation_rate s
-         - 10 (``at128``: 6.67, its beam's sweep)
+         - spin rate in Hz, (0, 100]; a 360° turn takes 1/rotation_rate s, a sweep of
+           ``fov_h`` fov_h/360 of it; a sequence's default frame rate (one frame per turn;
+           ``at128``: one mirror facet, 240° of beam, so 1.5 · rotation_rate)
+         - 10 (``at128``: 6.67, its beam's turn rate: 120° in 50 ms, 10 frames/s)
        * - ``spin``
          - string
          - ``cw`` (clockwise seen from above, as Velodyne and Ouster sensors spin) or ``ccw``

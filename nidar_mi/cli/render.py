@@ -173,7 +173,8 @@ def _add_sequence_args(p) -> None:
         "--rate",
         type=float,
         default=None,
-        help="frames per second (default: the first lidar's rotation_rate); also the sample "
+        help="frames per second (default: the first lidar's frame rate, its rotation_rate but "
+        "for the at128's 10 Hz); also the sample "
         "rate of KITTI odometry poses",
     )
     seq.add_argument(

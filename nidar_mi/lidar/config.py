@@ -143,6 +143,14 @@ class LidarConfig:
         )
 
     @property
+    def frame_rate(self) -> float:
+        """Frames per second, Hz: ``rotation_rate`` for a spinning head (one frame per turn) and
+        a Risley sweep; ``rotation_rate · 360° / frame_sweep_deg`` for a preset whose frame is
+        part of a beam turn (the ``at128``'s mirror facet: 6.67 Hz · 360 / 240 = 10 Hz)."""
+        sweep = PRESETS[self.preset].frame_sweep_deg if self.preset is not None else 360.0
+        return self.rotation_rate * 360.0 / sweep
+
+    @property
     def subrays(self) -> int:
         """Sub-rays per beam: 1 without beam divergence, else 1 + 3·q·(q-1)."""
         if self.beam_divergence <= 0.0:

@@ -29,24 +29,34 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
 * ``waymo_top`` — Waymo Open Dataset top LiDAR (Sun et al., CVPR 2020, Table 1): 64 beams over
   -17.6..+2.4 deg; the real beam inclinations are non-uniform and per-vehicle, here uniform over that
   field of view; 2650 columns as in the dataset's range images.
-* ``vlp32c`` — Velodyne VLP-32C datasheet: 32 channels over +15..-25 deg; 1808 columns, the
-  55.296 µs firing sequences of one turn at 10 Hz.
-* ``vls128`` — Velodyne Alpha Prime (VLS-128) datasheet: 128 channels over +15..-25 deg; 1876
-  columns, the 53.3 µs firing sequences of one turn at 10 Hz.
-* ``os0_128`` — Ouster OS0 Rev 6 datasheet: 128 channels over +45..-45 deg; 2048 columns.
-* ``os2_128`` — Ouster OS2 Rev 6 datasheet: 128 channels over +11.25..-11.25 deg; 2048 columns.
-* ``pandar64`` — Hesai Pandar64 user manual: 64 channels over +15..-25 deg (the real channels are
-  denser near the horizon: the per-laser table); 1800 columns (0.2 deg at 10 Hz).
-* ``xt32`` — Hesai PandarXT-32 user manual: 32 channels, +15..-16 deg 1 deg apart; 2000 columns
-  (0.18 deg at 10 Hz).
-* ``at128`` — Hesai AT128 user manual: 128 channels over +12.9..-12.5 deg (0.2 deg apart), a
+* ``vlp32c`` — Velodyne VLP-32C: 32 channels over +15..-25 deg (user manual 63-9325 Rev C,
+  Table 9-6); 1808 columns, the 55.296 µs firing sequences of one turn at 10 Hz.
+* ``vls128`` — Velodyne VLS-128: 128 channels over +15..-25 deg (Velodyne's key features as quoted
+  in Apollo's installation guide); 1876 columns, the 53.3 µs firing sequences (user manual
+  63-9483 Rev A, 9.3.1.1) of one turn at 10 Hz.
+* ``os0_128`` — Ouster OS0 Rev 6 datasheet (v2.5): 128 channels over +45..-45 deg; 2048 columns
+  (the 2048 x 10 Hz mode).
+* ``os2_128`` — Ouster OS2 Rev 6 datasheet (v2.5): 128 channels over 22.5 deg
+  (+11.25..-11.25); 2048 columns.
+* ``pandar64`` — Hesai Pandar64: 64 channels over +15..-25 deg (the real channels are denser near
+  the horizon: the per-laser table); 1800 columns (0.2 deg at 10 Hz).
+* ``xt32`` — Hesai PandarXT-32 user manual X01-en-220410: 32 channels, +15..-16 deg 1 deg apart;
+  2000 columns (0.18 deg at 10 Hz).
+* ``at128`` — Hesai AT128 (AT128E2X): 128 channels over +12.9..-12.5 deg (0.2 deg apart), a
   120 deg horizontal field of view centred on +x, 1200 columns (0.1 deg). Its channels are fixed;
-  a three-facet mirror turning at 200 rpm sweeps them, the beam at twice the mirror's rate
-  (``rotation_rate`` 6.67 Hz: 120 deg in 50 ms, from +60 deg clockwise), one frame per facet
-  (10 frames/s).
-* ``livox_mid40`` — Livox Mid-40 datasheet: one laser, a 38.4 deg circular field of view around +x
-  swept in a non-repetitive rosette by two Risley prisms (:mod:`nidar_mi.lidar.risley`); 10,000
-  shots per sweep at 10 Hz (100,000 points/s).
+  a mirror of three facets (the SDK's correction file) on a motor turning at 200 rpm sweeps
+  them, the beam at twice the mirror's angle (the SDK's azimuth is 2 · (encoder - facet start)),
+  so ``rotation_rate`` is 2 · 200 / 60 = 6.67 Hz of the beam: the 120 deg view in 50 ms (one
+  column every 41.67 µs, as TIER IV's decoder times the blocks), from +60 deg clockwise. Each
+  facet is one frame: 120 deg of mirror, 240 deg of beam (``frame_sweep_deg``), 100 ms, so the
+  frame rate is 3 · 200 / 60 = 10 Hz (:attr:`nidar_mi.lidar.config.LidarConfig.frame_rate`);
+  half of each frame the beam is outside the view and nothing fires.
+* ``livox_mid40`` — Livox Mid-40: one laser, a 38.4 deg circular field of view around +x swept
+  in a non-repetitive rosette by two Risley prisms (:mod:`nidar_mi.lidar.risley`); 10,000 shots
+  per sweep at 10 Hz (100,000 points/s).
+
+Ranges and every other figure of these presets, with the source of each (and where none was
+found): ``docs/SENSORS.md``, "Presets against their sources".
 """
 
 from __future__ import annotations
@@ -87,6 +97,8 @@ class Preset:
         rotation_rate: default rate of the horizontal sweep, Hz: turns per second of the head,
             or of the beam for a scanning mirror (``at128``).
         scan_start_azimuth: default azimuth where a sweep starts, degrees.
+        frame_sweep_deg: beam azimuth swept per frame, degrees: 360 for a spinning head (one
+            frame per turn); 240 for the ``at128``, whose frame is one 120 deg mirror facet.
         risley: the prism pair of a Risley-prism (rosette) sensor, None for a spinning head or a
             scanning mirror (:mod:`nidar_mi.lidar.risley`).
         detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
@@ -109,6 +121,7 @@ class Preset:
     fov_h_centred: bool = False
     rotation_rate: float = 10.0
     scan_start_azimuth: float = 180.0
+    frame_sweep_deg: float = 360.0
     risley: RisleyPrisms | None = None
 
 
@@ -164,72 +177,79 @@ PRESETS: dict[str, Preset] = {
     "vlp32c": Preset(
         _desc(np.linspace(15.0, -25.0, 32)),
         1808,  # firing sequences per turn at 10 Hz: 1 / (10 Hz x 55.296 us) = 1808.4
-        0.5,
+        0.4,  # ros-drivers/velodyne VLP-32C_points.launch min_range (no datasheet minimum found)
         200.0,
-        "Velodyne VLP-32C (Ultra Puck) datasheet and user manual 63-9325: 32 channels, "
-        "+15..-25 deg, 360 deg, ~600,000 points/s (single return), range up to 200 m",
+        "Velodyne VLP-32C user manual 63-9325 Rev C (elevations, firing in pairs) and datasheet "
+        "as quoted in autonomymobilitylab/HenryRTD: 32 channels, +15..-25 deg, 360 deg, "
+        "200 m, ~600,000 points/s single return",
     ),
     "vls128": Preset(
         _desc(np.linspace(15.0, -25.0, 128)),
         1876,  # firing sequences per turn at 10 Hz: 1 / (10 Hz x 53.3 us) = 1876.2
-        0.5,
-        245.0,
-        "Velodyne Alpha Prime (VLS-128) datasheet and user manual 63-9480 Rev 3: 128 channels, "
-        "+15..-25 deg, 360 deg, ~2,400,000 points/s (single return), range up to 245 m",
+        0.4,  # ros-drivers/velodyne VLS128_points.launch min_range (no datasheet minimum found)
+        300.0,
+        "Velodyne VLS-128 user manual 63-9483 Rev A (53.3 us firing sequence, groups of 8) and "
+        "key features as quoted in ApolloAuto/apollo: 128 channels, +15..-25 deg, 360 deg, "
+        "up to 300 m, up to ~9.6 million points/s over 4 returns",
     ),
     "os0_128": Preset(
         _desc(np.linspace(45.0, -45.0, 128)),
         2048,
         0.3,
         50.0,
-        "Ouster OS0 Rev 6 datasheet: 128 channels, +45..-45 deg, 360 deg, 2,621,440 points/s "
-        "(2048 x 10 Hz), 50 m at 80 % reflectivity",
+        "Ouster OS0 Rev 6 datasheet v2.5 as quoted in isaac-sim/IsaacSim: 128 channels, "
+        "+45..-45 deg, 360 deg, 2048 x 10 Hz, minimum range 0.3 m, 50 m (>50 % detection, "
+        "100 klx)",
     ),
     "os2_128": Preset(
         _desc(np.linspace(11.25, -11.25, 128)),
         2048,
-        0.5,
+        1.0,
         240.0,
-        "Ouster OS2 Rev 6 datasheet: 128 channels, +11.25..-11.25 deg, 360 deg, 2,621,440 "
-        "points/s (2048 x 10 Hz), 240 m at 80 % reflectivity",
+        "Ouster OS2 Rev 6 datasheet v2.5 as quoted in isaac-sim/IsaacSim: 128 channels, "
+        "+11.25..-11.25 deg, 360 deg, 2048 x 10 Hz, minimum range 1.0 m, 240 m (>50 % "
+        "detection, 100 klx)",
     ),
     "pandar64": Preset(
         _desc(np.linspace(15.0, -25.0, 64)),
         1800,  # 0.2 deg at 10 Hz
         0.3,
         200.0,
-        "Hesai Pandar64 user manual: 64 channels, +15..-25 deg, 360 deg, 0.2 deg at 10 Hz, "
-        "1,152,000 points/s (single return), 0.3-200 m",
+        "Hesai Pandar64 (TIER IV nebula decoder's sensor constants; user manual 4.2.2: 600 rpm "
+        "default): 64 channels, +15..-25 deg, 360 deg, 0.2 deg at 10 Hz, 0.3-200 m",
     ),
     "xt32": Preset(
         _desc(np.linspace(15.0, -16.0, 32)),
         2000,  # 0.18 deg at 10 Hz
         0.05,
         120.0,
-        "Hesai PandarXT-32 user manual: 32 channels, +15..-16 deg (1 deg apart), 360 deg, "
-        "0.18 deg at 10 Hz, 640,000 points/s (single return), 0.05-120 m",
+        "Hesai PandarXT-32 user manual X01-en-220410 p.13 (as quoted in isaac-sim/IsaacSim) and "
+        "TIER IV nebula: 32 channels, +15..-16 deg, 360 deg, 0.18 deg at 10 Hz, 0.05-120 m",
     ),
     "at128": Preset(
         _desc(np.linspace(12.9, -12.5, 128)),
         1200,  # 0.1 deg over 120 deg, one frame per mirror facet, 10 frames/s
         0.5,
         200.0,
-        "Hesai AT128 user manual: 128 channels, 120 x 25.4 deg (+12.9..-12.5), 0.1 x 0.2 deg, "
-        "10 Hz, 1,536,000 points/s (single return), 200 m at 10 % reflectivity",
+        "Hesai AT128E2X (HesaiLidar_SDK_2.0 correction file: 3 mirror facets; TIER IV nebula: "
+        "120 x 25.4 deg, 0.1 x 0.2 deg, 200 rpm; user manual A01-en-230510 as transcribed in "
+        "tier4/AWSIM: 200 m, near field from 0.5 m)",
         fov_h=120.0,
         fov_h_centred=True,
         # the beam sweeps at twice the mirror's 200 rpm: 2400 deg/s, 120 deg in 50 ms, from the
-        # left edge (+60 deg) clockwise
+        # left edge (+60 deg) clockwise; a frame is one facet, 240 deg of beam (100 ms)
         rotation_rate=2.0 * 200.0 / 60.0,
         scan_start_azimuth=60.0,
+        frame_sweep_deg=240.0,
     ),
     "livox_mid40": Preset(
         (0.0,),  # one laser behind two turning prisms
         10_000,  # shots per sweep: 100,000 points/s at 10 sweeps/s
-        1.0,
+        1.0,  # HELIOS++ livox_mid-40 rangeMin_m (no datasheet minimum found)
         260.0,
-        "Livox Mid-40 datasheet: 38.4 deg circular field of view, 100,000 points/s, 260 m at "
-        "80 % reflectivity; the rosette of two Risley prisms (nidar_mi.lidar.risley)",
+        "Livox Mid-40 (Livox wiki, Mid series point cloud specifications): 38.4 deg circular "
+        "field of view, 100,000 points/s, 260 m at 80 % reflectivity; the rosette of two "
+        "Risley prisms (nidar_mi.lidar.risley)",
         fov_h=38.4,
         fov_h_centred=True,
         risley=MID40_PRISMS,

@@ -8,8 +8,12 @@ from nidar_mi.lidar.config import LidarConfig
 from nidar_mi.lidar.pattern import PRESETS, RisleyPattern
 from nidar_mi.lidar.risley import MID40_PRISMS, RisleyPrisms
 
-# Livox Mid-40 datasheet: one laser, 38.4 deg circular field of view, 100,000 points/s
-MID40_FOV_DEG, MID40_POINTS_PER_S = 38.4, 100_000
+# Livox wiki, "Livox Point Cloud and Coordinate System", Mid series point cloud specifications:
+# FOV 38.4 deg (circular), data rate 100,000 points/s, detection range 90 m @ 10 %, 130 m @ 20 %,
+# 260 m @ 80 % reflectivity (100 klx); one laser (the rosette of two Risley prisms)
+MID40_FOV_DEG, MID40_POINTS_PER_S, MID40_RANGE_80 = 38.4, 100_000, 260.0
+# no minimum range stated: HELIOS++'s livox_mid-40 rangeMin_m (3dgeo-heidelberg/helios@fd94d1f)
+MID40_RANGE_MIN = 1.0
 
 
 def test_livox_mid40_against_its_datasheet():
@@ -29,6 +33,8 @@ def test_livox_mid40_against_its_datasheet():
     assert 2.0 * MID40_PRISMS.half_angle_deg() == pytest.approx(MID40_FOV_DEG, abs=0.1)
     assert off_axis.min() < 0.1  # the rosette's petals pass through the centre
     assert PRESETS["livox_mid40"].fov_h == MID40_FOV_DEG
+    assert (cfg.range_min, cfg.range_max) == (MID40_RANGE_MIN, MID40_RANGE_80)
+    assert cfg.frame_rate == cfg.rotation_rate
 
 
 def test_thin_prisms_follow_the_thin_prism_law():
