@@ -1,0 +1,1 @@
+"""Weather: fog, rain and snow from scattering physics (see docs/WEATHER.md)."""
