@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -72,6 +73,7 @@ __all__ = [
     "SoftReturnTable",
     "ParticleTable",
     "WeatherModel",
+    "SensorTerms",
     "overlap",
     "soft_waveform",
     "soft_return_table",
@@ -362,21 +364,39 @@ class WeatherModel:
         return self.optics.volume_scatterer
 
 
+class SensorTerms(NamedTuple):
+    """What of a sensor's parameters the weather reads (units of :class:`~.config.LidarConfig`;
+    ``beam_divergence`` full angle in mrad)."""
+
+    wavelength: float
+    gain: float
+    intensity_mode: str
+    detection_threshold: float
+    receiver_noise_std: float
+    beam_divergence: float
+    range_max: float
+
+    @classmethod
+    def of(cls, cfg) -> SensorTerms:
+        return cls(*(getattr(cfg, name) for name in cls._fields))
+
+
 def weather_model(weather: Weather, cfg, receiver: ReceiverOptics | None = None) -> WeatherModel:
     """The :class:`WeatherModel` of ``weather`` for a sensor ``cfg`` (a
-    :class:`~.config.LidarConfig` or anything with its ``wavelength``, ``gain``,
-    ``intensity_mode``, ``detection_threshold``, ``receiver_noise_std``, ``beam_divergence``
-    (mrad) and ``range_max``)."""
-    receiver = receiver or ReceiverOptics()
+    :class:`~.config.LidarConfig`, or anything with the fields of :class:`SensorTerms`), built
+    once per weather, sensor and optics (cached: a sequence of scans builds it once)."""
+    return _weather_model(weather, SensorTerms.of(cfg), receiver or ReceiverOptics())
+
+
+@lru_cache(maxsize=16)
+def _weather_model(weather: Weather, cfg: SensorTerms, receiver: ReceiverOptics) -> WeatherModel:
     optics = medium_optics(weather, cfg.wavelength)
-    soft = soft_return_table(optics.alpha, optics.backscatter, receiver, cfg.range_max)
-    particles = particle_table(weather, cfg, optics.alpha, receiver)
     return WeatherModel(
         weather=weather,
         optics=optics,
         receiver=receiver,
-        soft=soft,
-        particles=particles,
+        soft=soft_return_table(optics.alpha, optics.backscatter, receiver, cfg.range_max),
+        particles=particle_table(weather, cfg, optics.alpha, receiver),
         gain=float(cfg.gain),
         mode=cfg.intensity_mode,
         noise=float(cfg.receiver_noise_std),
@@ -386,8 +406,9 @@ def weather_model(weather: Weather, cfg, receiver: ReceiverOptics | None = None)
 # ---------------------------------------------------------------- per beam (NumPy or Dr.Jit)
 
 
-def _lerp(table, pos, size: int, xp):
-    """``table`` (a (size,) array) read at fractional positions ``pos`` in [0, size-1]."""
+def _lerp(table, pos, size: int, xp, active=True):
+    """``table`` (a (size,) array) read at fractional positions ``pos`` in [0, size-1]; Dr.Jit
+    reads only the ``active`` lanes (the others get 0)."""
     if xp is np:
         return np.interp(pos, np.arange(size, dtype=np.float64), table)
     import drjit as dr
@@ -396,8 +417,8 @@ def _lerp(table, pos, size: int, xp):
     i = type(p)(dr.floor(p))
     t = p - i
     idx = dr.uint32_array_t(type(p))(i)
-    lo = dr.gather(type(p), table, idx)
-    hi = dr.gather(type(p), table, idx + 1)
+    lo = dr.gather(type(p), table, idx, active)
+    hi = dr.gather(type(p), table, idx + 1, active)
     return lo + (hi - lo) * t
 
 
@@ -446,21 +467,20 @@ def candidates(model: WeatherModel, limit, tables: dict, uniforms) -> Candidates
     for slot in range(p.slots):
         present = u_count > float(p.count_cdf[slot])  # the count N exceeds this slot
         qpos = uniforms() * (q - 1)
-        diameter = _lerp(tables["diameter"], qpos, q, xp)
-        reach = _lerp(tables["reach"], qpos, q, xp)
-        rho_p = _lerp(tables["reflectance"], qpos, q, xp)
+        diameter, reach, rho_p = (
+            _lerp(tables[name], qpos, q, xp, present)
+            for name in ("diameter", "reach", "reflectance")
+        )
         a = 0.5 * diameter
-        u_r, u_lat = uniforms(), uniforms()
         if p.half_angle > 0:  # invert ((k r + a)³ - a³) / ((k R + a)³ - a³)
+            u_r, u_lat = uniforms(), uniforms()
             top = (k * reach + a) ** 3
-            r = ((u_r * (top - a**3) + a**3) ** (1.0 / 3.0) - a) / k
-        else:
-            r = u_r * reach
-        r = xp.maximum(r, 1e-3)
-        offset = (k * r + a) * xp.sqrt(u_lat)
-        f = intercepted_fraction(a, offset, p.half_angle * r)
-        inside = present & (r < limit)
-        f = _where(xp, inside, f, 0.0)
+            r = xp.maximum(((u_r * (top - a**3) + a**3) ** (1.0 / 3.0) - a) / k, 1e-3)
+            f = intercepted_fraction(a, (k * r + a) * xp.sqrt(u_lat), p.half_angle * r)
+        else:  # a line through the particle's disk: all of the beam
+            r = xp.maximum(uniforms() * reach, 1e-3)
+            f = 1.0
+        f = _where(xp, present & (r < limit), f, 0.0)
         energy = (
             model.gain * rho_p * f * overlap(r, model.receiver) * xp.exp(-2.0 * model.alpha * r)
         )
