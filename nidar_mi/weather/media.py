@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .conditions import Weather
-from .mie import Efficiencies, efficiencies, seam_averages
+from .mie import Efficiencies, efficiencies, mean_backscatter, seam_averages
 from .particles import (
     Exponential,
     SizeDistribution,
@@ -180,9 +180,8 @@ def precipitation_distribution(weather: Weather) -> Exponential | None:
 def particle_reflectance(dist: SizeDistribution, d, wavelength_nm: float) -> np.ndarray:
     """The reflectance ``ρ = Q_back / 4`` of single particles of diameters ``d`` (m): what a
     LiDAR sees of a drop or flake in its beam, as a Lambertian disk of the particle's
-    cross-section facing it. A drop's ``Q_back`` is the cached grid's averaged over ±4 nodes
-    (±9.6 % in size), the resonances of one exact sphere smoothed out
-    (:func:`nidar_mi.weather.mie.smoothed_backscatter` does the same from the series).
+    cross-section facing it; a drop's ``Q_back`` without the resonances of one exact sphere
+    (:func:`~nidar_mi.weather.mie.mean_backscatter`).
 
     Returns:
         float64, the shape of ``d``.
@@ -190,10 +189,8 @@ def particle_reflectance(dist: SizeDistribution, d, wavelength_nm: float) -> np.
     d = np.asarray(d, dtype=np.float64)
     if dist.material == "ice":
         return np.full(d.shape, snow_reflectance(wavelength_nm))
-    grid, q = _sphere_grid("water", float(wavelength_nm))
-    kernel = np.ones(9) / 9.0
-    smooth = np.convolve(np.pad(q.qback, 4, mode="edge"), kernel, mode="valid")
-    return np.interp(np.log(d), np.log(grid), smooth) / 4.0
+    x = np.pi * d / (wavelength_nm * 1e-9)
+    return mean_backscatter(complex(water_index(wavelength_nm)), x, wavelength_nm) / 4.0
 
 
 @lru_cache(maxsize=64)
