@@ -59,6 +59,7 @@ __all__ = [
     "BulkOptics",
     "MediumOptics",
     "bulk_optics",
+    "sphere_efficiencies",
     "fog_number_density",
     "snow_reflectance",
     "particle_reflectance",
@@ -111,6 +112,12 @@ def _sphere_grid(material: str, wavelength_nm: float) -> tuple[np.ndarray, Effic
     d = _diameters()
     m = _index(material, wavelength_nm)
     return d, efficiencies(m, np.pi * d / (wavelength_nm * 1e-9), wavelength_nm)
+
+
+def sphere_efficiencies(material: str, wavelength_nm: float) -> tuple[np.ndarray, Efficiencies]:
+    """The integrals' diameter grid (m) and the efficiencies of ``water`` or ``ice`` spheres on
+    it at ``wavelength_nm`` (cached)."""
+    return _sphere_grid(material, float(wavelength_nm))
 
 
 def snow_reflectance(wavelength_nm: float) -> float:
