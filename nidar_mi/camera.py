@@ -474,7 +474,6 @@ def render_camera(
     other_wavelengths=(),
     nir: bool = True,
     albedo: bool = True,
-    weather=None,
 ) -> CameraRender:
     """Render RGB, NIR band, depth, reflectance at λ and albedo of one camera of a loaded scene.
 
@@ -488,15 +487,17 @@ def render_camera(
         nir: render the NIR bands (False: ``nir`` is all zeros; NIDAR needs only RGB).
         albedo: also give the surfaces' albedo colour and their reflectance at λ (the true maps
             that training frames carry; False: both None).
-        weather: a :class:`nidar_mi.weather.Weather`: the RGB and NIR images are rendered
-            through its medium (:mod:`nidar_mi.weather.camera`); depth, reflectance and albedo
-            stay the surfaces' own. None: clear.
+
+    In the scene's weather (:attr:`nidar_mi.scene.LoadedScene.weather`, its LiDARs'), the RGB
+    and NIR images are rendered through its medium (:mod:`nidar_mi.weather.camera`); depth,
+    reflectance and albedo stay the surfaces' own.
     """
     scene = loaded.scene
     _warn_rgb_emitters(loaded)
     timings = {}
     bands = list(dict.fromkeys([float(wavelength), *map(float, other_wavelengths)]))
-    rgb, bands = _radiance(loaded, camera, (bands if nir else [], spp, seed), weather, timings)
+    request = (bands if nir else [], spp, seed)
+    rgb, bands = _radiance(loaded, camera, request, loaded.weather, timings)
     nir = bands.pop(float(wavelength)) if nir else np.zeros(rgb.shape[:2], dtype=np.float32)
     t0 = time.perf_counter()
     K, T_world_cam, (W, H) = camera_calibration(camera)
