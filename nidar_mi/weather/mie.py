@@ -16,10 +16,13 @@ Up to :data:`X_MIE` the exact series is summed. Beyond it (raindrops and snowfla
 * absorption ``Q_abs = (1 - R̄)(1 - exp(-γ · 2D/3))``, the light refracted into the sphere
   (``R̄`` the Fresnel reflectance averaged over the sphere's face) absorbed along the mean chord
   ``2D/3`` with ``γ = 4πk/λ``;
-* backscatter ``Q_back = R0 + (Q̄_b - R0) exp(-γ (D - D*))``: the front face's specular
-  reflection ``R0 = |(m-1)/(m+1)|²`` plus the rays that cross the drop and come back, whose
-  share ``Q̄_b - R0`` (``Q̄_b`` the series averaged over x in [0.9, 1.1]·X_MIE, ``D*`` that
-  diameter) is absorbed along the extra path as the drop grows;
+* backscatter ``Q_back = R0 = |(m-1)/(m+1)|²``, the front face's specular reflection. A
+  perfect sphere also sends back the rays focused on its axis by the rear surface (the glory:
+  the series' ``Q_back`` of 1.5-2.7 near X_MIE for water at 905 nm), but drops this large
+  (> 0.3 mm at 905 nm, > 0.5 mm at 1550 nm) fall flattened and oscillating (Beard & Chuang, J.
+  Atmos. Sci. 44, 1509, 1987), which smooths the spheres' backscatter features away
+  (Macke & Großklaus, JQSRT 59, 355, 1998; Nousiainen & Muinonen, JQSRT 63, 643, 1999): only
+  the face's reflection is kept, a step at X_MIE where the sphere hands over;
 * asymmetry parameter ``g`` the series' average at X_MIE.
 
 Efficiencies oscillate with x (interference and resonances); a particle sampled from a
@@ -108,13 +111,12 @@ def _seam_averages(m_real: float, m_imag: float) -> tuple[float, float]:
 def _geometric(m: complex, x: np.ndarray, wavelength_m: float) -> Efficiencies:
     gamma = 4.0 * np.pi * abs(np.imag(m)) / wavelength_m
     d = x * wavelength_m / np.pi
-    d_seam = X_MIE * wavelength_m / np.pi
     qext = 2.0 + 1.9924 * x ** (-2.0 / 3.0)
     qabs = (1.0 - _fresnel_mean(m)) * (1.0 - np.exp(-gamma * 2.0 * d / 3.0))
-    qb_seam, g_seam = seam_averages(m)
-    r0 = fresnel_normal(m)
-    qback = r0 + (qb_seam - r0) * np.exp(-gamma * np.maximum(d - d_seam, 0.0))
-    return Efficiencies(qext, qext - qabs, qback, np.full_like(x, g_seam))
+    g_seam = seam_averages(m)[1]
+    return Efficiencies(
+        qext, qext - qabs, np.full_like(x, fresnel_normal(m)), np.full_like(x, g_seam)
+    )
 
 
 def efficiencies(m: complex, x, wavelength_nm: float) -> Efficiencies:

@@ -63,16 +63,18 @@ def test_large_spheres_extinguish_twice_their_cross_section():
     assert above == pytest.approx(below, rel=0.01)
 
 
-def test_backscatter_of_large_drops_is_absorbed_at_1550_nm_not_at_905():
-    """Beyond the series, what crosses the drop and comes back is absorbed along its path:
-    towards the Fresnel reflection of the front face at 1550 nm (k = 1.3e-4), not at 905 nm."""
-    x905 = np.pi * 6e-3 / 905e-9  # a 6 mm drop: 5.5 mm more path than at the seam
-    x1550 = np.pi * 6e-3 / 1550e-9
-    q905 = mie.efficiencies(complex(water_index(905.0)), [x905], 905.0).qback[0]
-    q1550 = mie.efficiencies(complex(water_index(1550.0)), [x1550], 1550.0).qback[0]
-    r0 = mie.fresnel_normal(complex(water_index(1550.0)))
-    assert q1550 == pytest.approx(r0, rel=0.02)
-    assert q905 > 20 * q1550
+def test_large_drops_backscatter_their_front_face():
+    """Beyond the series' range a drop returns the Fresnel reflection of its face,
+    |(m-1)/(m+1)|² ≈ 0.02 for water (the glory of perfect spheres is not kept: falling drops
+    that large are flattened); below it the series' glory stays, far above it."""
+    for wavelength in (905.0, 1550.0):
+        m = complex(water_index(wavelength))
+        r0 = ((m.real - 1) / (m.real + 1)) ** 2
+        x = np.pi * np.array([1e-3, 3e-3]) / (wavelength * 1e-9)
+        np.testing.assert_allclose(mie.efficiencies(m, x, wavelength).qback, r0, rtol=1e-3)
+        assert 0.017 < r0 < 0.021
+    small = mie.mean_backscatter(complex(water_index(905.0)), [300.0], 905.0)[0]
+    assert small > 20 * r0
 
 
 def test_phase_function_is_normalised_and_forward():
