@@ -205,6 +205,7 @@ LAYERS = {
             "nidar",
             "profiles",
             "cloud_intensity",
+            "cloud_weather",
             "scenegen",
         ),
         1,
