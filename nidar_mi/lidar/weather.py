@@ -63,7 +63,7 @@ from ..weather.media import (
     particle_reflectance,
     precipitation_distribution,
 )
-from .return_model import _math, box_muller, detect, received
+from .return_model import _math, detect, received
 
 __all__ = [
     "SPEED_OF_LIGHT",
@@ -84,6 +84,8 @@ __all__ = [
     "candidates",
     "choose",
     "range_jitter",
+    "detect_candidates",
+    "device_tables",
 ]
 
 SPEED_OF_LIGHT = 299_792_458.0
@@ -567,8 +569,3 @@ def detect_candidates(cands: Candidates, *, threshold, range_min, range_max, noi
         )
         output.append(received(e, noise, n))
     return valid, output
-
-
-def normal_from(uniforms):
-    """A function returning standard normals from pairs of ``uniforms()``."""
-    return lambda: box_muller(uniforms(), uniforms())
