@@ -5,7 +5,8 @@
 Writes ``street_clear.png``, ``street_fog.png`` and ``street_rain.png`` (default into
 ``docs/figures/weather/``): left, the forward camera's image (RGB through the medium,
 ``nidar_mi.weather.camera``; auto exposure of the clear image for all three, so the fog's own
-light shows); right, the HDL-64E's points seen from above, coloured by what they came from
+light shows; a 3 x 3 median filter on every image takes out the isolated bright pixels of the
+sun's light scattered by the medium, the path tracer's variance at this sample count); right, the HDL-64E's points seen from above, coloured by what they came from
 (surface by intensity, fog, drop). Fog: MOR 50 m (advection); rain: 25 mm/h. Simulated data
 only. The scene is ``scenes/street.xml``.
 """
@@ -50,6 +51,9 @@ def figure(rgb: np.ndarray, points: dict, exposure: float, title: str, path: Pat
     from nidar_mi.io.images import linear_to_srgb
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(9.6, 2.9), gridspec_kw={"width_ratios": [1.6, 1]})
+    from scipy.ndimage import median_filter
+
+    rgb = median_filter(rgb, size=(3, 3, 1))
     a.imshow(np.clip(linear_to_srgb(np.clip(rgb * exposure, 0.0, 1.0)), 0.0, 1.0))
     a.set_axis_off()
     a.set_title(f"camera, {title}", fontsize=9)
