@@ -156,3 +156,30 @@ def test_command_refuses_unknown_formats_and_its_own_input(tmp_path, capsys):
     assert main([str(src), "-o", str(src), "--fog", "50"]) == 2
     assert "it is the input" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_real_kitti_scan_in_fog_and_rain(tmp_path):
+    """A real HDL-64E sweep (KITTI, read from the shared data; skipped without it): fog takes
+    the far and dark returns and puts fog points near the sensor; light rain barely changes it."""
+    import os
+    from pathlib import Path
+
+    from nidar_mi.io.kitti import read_kitti_bin
+
+    root = Path(os.environ.get("NIDAR_MI_DATA", Path(__file__).parents[3] / "shared" / "data"))
+    path = root / "kitti" / "velodyne" / "000000.bin"
+    if not path.is_file():
+        pytest.skip(f"real KITTI scans not found at {path} (set NIDAR_MI_DATA)")
+    xyz, intensity = read_kitti_bin(path)
+    cloud = {"xyz": xyz, "intensity": intensity}
+    d = np.linalg.norm(xyz, axis=1)
+    fog = add_weather(cloud, Weather(fog=50.0), cloud_sensor(), np.random.default_rng(0))
+    kept = fog["scatterer"] == 0
+    r = np.linalg.norm(fog["xyz"], axis=1)
+    assert kept.sum() < 0.9 * len(d)  # far returns lost
+    assert np.median(r[kept]) < np.median(d)
+    assert (fog["scatterer"] == 1).sum() > 0 and r[fog["scatterer"] == 1].max() < 15.0
+    rain = add_weather(cloud, Weather(rain=2.0), cloud_sensor(), np.random.default_rng(0))
+    assert len(rain["xyz"]) > 0.98 * len(d)
+    for out in (fog, rain):
+        assert np.all(np.isfinite(out["xyz"])) and np.all(np.isfinite(out["intensity"]))
