@@ -73,4 +73,3 @@ def test_weather_runs_time_each_condition_on_the_same_rays(tmp_path, capsys, mon
     assert set(ratios) == {"fog", "rain", "snow"}
     assert ratios["fog"] == pytest.approx(r["median_s"]["fog"] / r["median_s"]["scan"])
     assert "ratio scan in snow / clear scan (s)" in capsys.readouterr().out
-
