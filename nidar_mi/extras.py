@@ -19,6 +19,8 @@ extra           modules                     what needs it
 ``laz``         lazrs                       ``render --formats laz``; reading ``.laz``
 ``earthlib``    earthlib                    the full earthlib library: ``scenegen --spectra
                                             earthlib``, the colour -> ρ map
+``weather``     miepython                   fog, rain and snow: ``render --fog/--rain/--snow``
+                                            (or the ``lidar`` parameters), ``weather``
 ``lpips``       lpips                       LPIPS in ``evaluate`` (reported as unavailable
                                             without it)
 ==============  ==========================  ===============================================
@@ -40,6 +42,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "ros": ("rosbags",),
     "laz": ("lazrs",),
     "earthlib": ("earthlib",),
+    "weather": ("miepython",),
     "lpips": ("lpips",),
 }
 

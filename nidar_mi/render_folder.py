@@ -112,6 +112,8 @@ class RenderRequest:
             None: the weights' own ``sim-905``).
         bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
         layout: :data:`LAYOUT_VERSION` of the folder.
+        weather: the weather set for the render (:meth:`nidar_mi.weather.Weather.to_dict`);
+            None (and absent from :meth:`to_dict`, as before weather existed): the scene's own.
     """
 
     scene: str
@@ -129,6 +131,7 @@ class RenderRequest:
     profile: str | None = None
     bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
+    weather: dict | None = None
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
@@ -150,6 +153,8 @@ class RenderRequest:
         """JSON-safe dict (what the manifest stores under ``request``)."""
         d = asdict(self)
         d["formats"] = list(self.formats)
+        if d["weather"] is None:
+            del d["weather"]
         return d
 
 

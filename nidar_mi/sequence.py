@@ -40,6 +40,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -101,6 +102,8 @@ class SequenceOptions:
         progress: show a progress bar on stderr.
         previews: range previews of ``all`` frames, the ``first`` only or ``none``
             (:data:`PREVIEWS`).
+        weather: the weather of every frame (:attr:`RenderOptions.weather`); None: the
+            scene's own.
     """
 
     scene: str
@@ -120,6 +123,7 @@ class SequenceOptions:
     max_disk: int | None = None
     progress: bool = True
     previews: str = "first"
+    weather: Any = None
 
     def frame_options(self) -> RenderOptions:
         """The options every frame is rendered with (physics intensity, the scene itself)."""
@@ -134,6 +138,7 @@ class SequenceOptions:
             max_memory=self.max_memory,
             deskew=self.deskew,
             progress=self.progress,
+            weather=self.weather,
         )
 
 

@@ -6,9 +6,14 @@ Executed once per Mitsuba variant by :func:`nidar_mi.plugins.register_all`; see
 
 from __future__ import annotations
 
+import re
+
 import mitsuba as mi
 
+from nidar_mi.errors import NidarError
 from nidar_mi.lidar.config import PARAMETERS, LidarConfig
+from nidar_mi.weather.conditions import PARAMETERS as WEATHER_PARAMETERS
+from nidar_mi.weather.conditions import Weather
 
 from . import PluginParameterError
 
@@ -164,6 +169,24 @@ class LidarSensor(mi.Sensor):
          - integer
          - seed of the noise and dropout draws, >= 0
          - 0
+       * - ``fog``
+         - float
+         - fog by its meteorological optical range in m, [5, 100000] (α at 550 nm = ln 20 /
+           MOR; droplets by ``fog_type``): attenuation, the fog's own soft return
+           (:mod:`nidar_mi.lidar.weather`, docs/WEATHER.md)
+         - none
+       * - ``fog_type``
+         - string
+         - ``advection`` or ``radiation`` (droplet sizes, :mod:`nidar_mi.weather.particles`)
+         - ``advection``
+       * - ``rain``
+         - float
+         - rain rate in mm/h, [0, 300]: attenuation, drops in the beam
+         - none
+       * - ``snow``
+         - float
+         - snowfall rate as melted water in mm/h, [0, 50]; not with ``rain``
+         - none
        * - ``to_world``
          - transform
          - pose; LiDAR frame x forward, y left, z up
@@ -192,10 +215,18 @@ class LidarSensor(mi.Sensor):
         if "calibration_file" in values:  # relative to the scene file
             path = str(values["calibration_file"])
             values["calibration_file"] = str(mi.file_resolver().resolve(path))
+        name = props.id() or "lidar"
         try:
-            self.config = LidarConfig.from_mapping(props.id() or "lidar", values)
+            self.config = LidarConfig.from_mapping(name, values)
         except ValueError as e:
             raise PluginParameterError(str(e)) from None
+        weather = {k: props.get(k) for k in WEATHER_PARAMETERS if k in props}
+        try:
+            #: the sensor's own weather (None: clear), what a scan uses unless told otherwise
+            self.weather = Weather.from_mapping(weather)
+        except NidarError as e:
+            message = re.sub(r"`(\w+)`", r"parameter '\1'", str(e))
+            raise PluginParameterError(f"lidar '{name}': {message}") from None
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"

@@ -190,7 +190,7 @@ LAYERS = {
         ("errors", "extras", "backend", "illumination", "io", "geometry", "labels", "lidar"),
         0,
     ),
-    **dict.fromkeys(("materials", "plugins", "tasks", "frames", "progress"), 0),
+    **dict.fromkeys(("materials", "weather", "plugins", "tasks", "frames", "progress"), 0),
     **dict.fromkeys(
         (
             "scene",
@@ -204,6 +204,7 @@ LAYERS = {
             "nidar",
             "profiles",
             "cloud_intensity",
+            "cloud_weather",
             "scenegen",
         ),
         1,

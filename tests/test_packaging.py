@@ -42,6 +42,8 @@ def test_wheel_install_ships_plugins(tmp_path):
         assert (target / "nidar_mi" / data).is_file(), data
     assert list((target / "nidar_mi" / "materials" / "data").glob("*.csv"))
     assert (target / "nidar_mi" / "lidar" / "data" / "hdl64e_s2_sztaki.csv").is_file()
+    for table in ("water_segelstein_1981.csv", "ice_warren_brandt_2008.csv"):
+        assert (target / "nidar_mi" / "weather" / "data" / table).is_file()
     code = (
         "import nidar_mi, nidar_mi.plugins as p; print(nidar_mi.__file__); print(p.__file__);"
         "from nidar_mi.backend import set_variant; set_variant('llvm_ad_spectral');"

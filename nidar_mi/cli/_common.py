@@ -54,6 +54,8 @@ __all__ = [
     "scene_inputs",
     "seed_arg",
     "show_progress",
+    "add_weather_args",
+    "weather_of",
 ]
 
 EXIT_OK = 0
@@ -283,3 +285,54 @@ def run(
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def add_weather_args(p: argparse.ArgumentParser, *, what: str) -> None:
+    """``--fog``, ``--fog-type``, ``--rain`` and ``--snow`` (:mod:`nidar_mi.weather`) in one
+    group; ``what`` says what they apply to."""
+    g = p.add_argument_group("weather (docs/WEATHER.md)")
+    g.add_argument(
+        "--fog",
+        type=float,
+        default=None,
+        metavar="MOR_M",
+        help=f"fog of this meteorological optical range in m (5 .. 100000) {what}",
+    )
+    g.add_argument(
+        "--fog-type",
+        default=None,
+        choices=("advection", "radiation"),
+        help="the fog's droplets: advection (default) or radiation fog",
+    )
+    g.add_argument(
+        "--rain", type=float, default=None, metavar="MM_PER_H", help=f"rain, mm/h (0 .. 300) {what}"
+    )
+    g.add_argument(
+        "--snow",
+        type=float,
+        default=None,
+        metavar="MM_PER_H",
+        help=f"snowfall as melted water, mm/h (0 .. 50; not with --rain) {what}",
+    )
+
+
+def weather_of(args: argparse.Namespace):
+    """The :class:`nidar_mi.weather.Weather` of the weather flags (checked), or None when no
+    flag was given.
+
+    Raises:
+        NidarError: an impossible value, or ``--fog-type`` without ``--fog``.
+    """
+    from ..weather import Weather, check_weather
+
+    if args.fog_type is not None and args.fog is None:
+        raise NidarError("`fog_type` needs `fog`")
+    if args.fog is None and args.rain is None and args.snow is None:
+        return None
+    from ..extras import require
+
+    w = check_weather(
+        Weather(fog=args.fog, fog_type=args.fog_type or "advection", rain=args.rain, snow=args.snow)
+    )
+    require("weather", "fog, rain and snow")
+    return w

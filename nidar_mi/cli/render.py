@@ -15,7 +15,16 @@ import os
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ..sequence import MAX_FRAMES
-from ._common import parse_defines, parser, run, scene_inputs, seed_arg, show_progress
+from ._common import (
+    add_weather_args,
+    parse_defines,
+    parser,
+    run,
+    scene_inputs,
+    seed_arg,
+    show_progress,
+    weather_of,
+)
 
 __all__ = ["main", "build_parser"]
 
@@ -115,6 +124,7 @@ def build_parser():
         help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
         "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
     )
+    add_weather_args(p, what="for every lidar and camera (replacing the scene's own)")
     _add_sequence_args(p)
     p.add_argument(
         "--deskew",
@@ -242,6 +252,7 @@ def _sequence_options(args):
         max_disk=_memory(args.max_disk, "--max-disk"),
         progress=show_progress(args),
         previews=args.previews or "first",
+        weather=weather_of(args),
     )
 
 
@@ -252,6 +263,12 @@ def _render_options(args):
 
     if args.intensity == "nidar" and args.no_cameras:
         raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
+    weather = weather_of(args)
+    if weather is not None and not weather.clear and args.intensity == "nidar":
+        raise NidarError(
+            "--intensity nidar reads the surfaces from the camera images, which the weather "
+            "veils (NIDAR learned clear days): render weather with --intensity physics"
+        )
     profile = None
     if args.intensity == "nidar":
         from ..datasets.sensor_profiles import profile_line
@@ -281,6 +298,7 @@ def _render_options(args):
         max_memory=_memory(args.max_memory),
         deskew=args.deskew,
         progress=show_progress(args),
+        weather=weather,
     )
 
 
