@@ -46,6 +46,8 @@ def test_every_module_belongs_to_one_extra():
         ("drive", ["-o", "out"], "drive", "kiss_icp"),
         ("render", ["scenes/street.xml", "-o", "OUT", "--intensity", "nidar"], "nidar", "torch"),
         ("render", ["scenes/street.xml", "-o", "OUT", "--formats", "npz,laz"], "laz", "lazrs"),
+        ("render", ["scenes/street.xml", "-o", "OUT", "--fog", "50"], "weather", "miepython"),
+        ("weather", ["scenes", "-o", "OUT", "--rain", "10"], "weather", "miepython"),
     ],
 )
 def test_a_command_without_its_extra_fails_in_one_line(
