@@ -231,7 +231,7 @@ def _scene_entry(render_dir: str, lidar_id: str | None) -> tuple[list[str], floa
 def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, parallel):
     """Run every scene's task (:func:`_scene_frames`) on :mod:`nidar_mi.tasks` (``parallel``:
     its ``workers``, ``address``, ``progress``); the frame ids per split and the wavelength."""
-    from .backend import prepare_worker
+    from .backend import worker_setup
     from .io.atomic import leftovers
     from .tasks import Task, run_tasks
 
@@ -246,7 +246,7 @@ def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, 
         tasks,
         workers=parallel["workers"],
         address=parallel["address"],
-        setup=prepare_worker,
+        setup=worker_setup(),
         progress=parallel["progress"],
         desc="dataset",
         unit="scene",

@@ -28,8 +28,10 @@ Whatever the mode, the job behaves the same:
 * Warnings raised in a worker are raised again in this process.
 
 Each worker process runs ``setup(threads)`` before each task (it must be cheap when repeated):
-for rendering, :func:`nidar_mi.backend.prepare_worker` sets Dr.Jit's thread count and the
-Mitsuba variant, whose plugins register per variant per process. Functions and arguments are
+for rendering, :func:`nidar_mi.backend.worker_setup` (``prepare_worker`` with the caller's
+variant) sets Dr.Jit's thread count and the Mitsuba variant, whose plugins register per variant
+per process. A serial job runs its tasks in the caller's process, whose variant stays as the
+caller's entry point chose it. Functions and arguments are
 pickled to the workers, so a task function must be importable there (a module-level function
 of an installed package) and take plain data (paths, numbers, dicts), never a loaded scene.
 

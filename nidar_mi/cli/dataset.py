@@ -114,6 +114,9 @@ def main(argv=None) -> int:
             raise NidarError(
                 f"--split: three fractions in [0, 1] summing to 1 expected (got '{args.split}')"
             )
+        from ..backend import set_variant
+
+        set_variant()  # the renders' variant, also the workers' (nidar_mi.backend.worker_setup)
         meta = build_dataset(
             args.scenes,
             args.out,

@@ -113,7 +113,7 @@ def render_scenes(
     """
     from functools import partial
 
-    from ..backend import prepare_worker
+    from ..backend import worker_setup
     from ..render_dataset import scene_params
     from ..render_folder import is_current
     from ..render_session import RenderOptions
@@ -139,7 +139,7 @@ def render_scenes(
         tasks,
         workers=workers,
         address=ray_address,
-        setup=prepare_worker,
+        setup=worker_setup(),
         progress=progress,
         desc="render",
         unit="scene",
