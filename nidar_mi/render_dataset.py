@@ -332,7 +332,7 @@ def build_dataset(
         The meta dict (also written to ``DATA/meta.json``).
     """
     from .io.atomic import atomic_write_json, check_output_folder, staged_entries
-    from .render_folder import file_sha256
+    from .io.cache_key import file_sha256
     from .tasks import check_parallel
 
     if not (isinstance(intensity_scale, (int, float)) and np.isfinite(intensity_scale)):

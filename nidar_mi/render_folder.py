@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from .errors import NidarError
+from .io.cache_key import file_sha256
 
 __all__ = [
     "BIN_INTENSITY",
@@ -57,12 +58,6 @@ MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
 #: without ``reflectance.exr`` or ``albedo.exr``) are rendered again.
 LAYOUT_VERSION = 3
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()
 
 
 #: The files of a NIDAR weights folder that decide its output (those present are hashed).

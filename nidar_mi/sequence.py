@@ -45,6 +45,7 @@ import numpy as np
 
 from . import render_folder as rf
 from .errors import NidarError
+from .io.cache_key import file_sha256
 from .render_session import RenderOptions, RenderSession, check_options
 
 __all__ = [
@@ -408,7 +409,7 @@ def _sequence_request(session: RenderSession, options: SequenceOptions, rate, fr
     """The request a sequence manifest records: the frames' cache key and the trajectory."""
     return session.request.to_dict() | {
         "trajectory": os.path.abspath(options.trajectory),
-        "trajectory_sha256": rf.file_sha256(options.trajectory),
+        "trajectory_sha256": file_sha256(options.trajectory),
         "rate_hz": rate,
         "frames": frames,
         "deskew": options.deskew,

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import NidarError
+from ..io.cache_key import file_sha256
 from .loo import CachedValues, LooMethod, profile_method, raw_method
 
 __all__ = ["FoldModels", "irnet_methods"]
@@ -103,7 +104,6 @@ class FoldModels:
     def _check_finished(self, fold: Path) -> None:
         """A finished fold is reused only if it was trained as this evaluation would train it
         (configuration, initial weights, rendered frames)."""
-        import hashlib
 
         try:
             record = json.loads((fold / "config.json").read_text())
@@ -114,7 +114,7 @@ class FoldModels:
             raise NidarError(f"cannot read {fold / 'config.json'}: {exc}") from None
         init = None
         if self.init_weights is not None:
-            init = {"sha256": hashlib.sha256(Path(self.init_weights).read_bytes()).hexdigest()}
+            init = {"sha256": file_sha256(self.init_weights)}
         renders = sorted(str(f) for f in self.render_frames) if self.render_frames else None
         want = _fold_identity(self.cfg.to_dict(), {"init": init, "renders": renders})
         if have != want:

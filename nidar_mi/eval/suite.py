@@ -434,8 +434,7 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
 
 def _ablation_key(meta: dict, stn) -> str:
     """16 hex digits naming the ablation runs of one dataset, STN and settings."""
-    from ..io.cache_key import cache_key
-    from ..render_folder import file_sha256
+    from ..io.cache_key import cache_key, file_sha256
     from .ablation import AblationSettings
 
     data = {k: meta.get(k) for k in ("request", "frames", "intensity_scale")}

@@ -145,17 +145,13 @@ class NidarModel:
         """SHA-256 of the weight files (``irnet_sha256``, ``stn_sha256`` when it has one): what
         a sensor profile records of the networks it was fitted for (computed once)."""
         if getattr(self, "_identity", None) is None:
-            import hashlib
+            from ..io.cache_key import file_sha256
 
             ident = {}
             for key in ("irnet", "stn"):
                 path = Path(self.weights_dir) / f"{key}.safetensors"
                 if path.is_file():
-                    h = hashlib.sha256()
-                    with open(path, "rb") as f:
-                        for chunk in iter(lambda f=f: f.read(1 << 20), b""):
-                            h.update(chunk)
-                    ident[f"{key}_sha256"] = h.hexdigest()
+                    ident[f"{key}_sha256"] = file_sha256(path)
             self._identity = ident
         return dict(self._identity)
 

@@ -22,7 +22,6 @@ CPU runs use deterministic algorithms; a resumed run continues with the same bat
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import json
 from collections.abc import Sequence
@@ -35,6 +34,7 @@ from torch import nn
 
 from ..errors import NidarError
 from ..frames import list_frames, load_frame, load_meta
+from ..io.cache_key import file_sha256
 from .checkpoint import atomic_write
 from .config import INPUT_CHANNELS, TrainConfig
 from .data import IRNetDataset, MixedDataset, STNDataset
@@ -234,7 +234,7 @@ def train_irnet(
     init_state = None
     if init_weights is not None:
         init_state = _init_state(cfg, Path(init_weights))
-        digest = hashlib.sha256(Path(init_weights).read_bytes()).hexdigest()
+        digest = file_sha256(init_weights)
         inputs["init"] = {"irnet": str(init_weights), "sha256": digest}
     _begin(cfg, data_dir, out_dir, "irnet", resume, inputs)
     if frames is not None:
@@ -261,7 +261,7 @@ def train_irnet(
                     "IRNet with pseudo-NIR input needs STN weights (train the STN first)"
                 )
             stn = load_stn(local, device)
-            digest = hashlib.sha256(local.read_bytes()).hexdigest()[:16]
+            digest = file_sha256(local)[:16]
             tag = f"pseudo_nir_{digest}" + (f"_x{cfg.scale:g}" if cfg.scale != 1.0 else "")
             cache = Path(cache_dir) if cache_dir is not None else out_dir / "cache"
             for split, fs in split_frames.items():

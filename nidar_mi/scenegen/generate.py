@@ -179,9 +179,11 @@ def _read_index(path: str) -> list[dict]:
 
 
 def _file_sha256(path: str) -> str | None:
+    """:func:`~nidar_mi.io.cache_key.file_sha256`, or None for a file that cannot be read."""
+    from ..io.cache_key import file_sha256
+
     try:
-        with open(path, "rb") as f:
-            return hashlib.sha256(f.read()).hexdigest()
+        return file_sha256(path)
     except OSError:
         return None
 

@@ -117,7 +117,7 @@ def render_drive(
     Returns:
         ``folder``.
     """
-    from ...render_folder import file_sha256
+    from ...io.cache_key import file_sha256
 
     poses = np.asarray(poses, dtype=np.float64)
     request = {
