@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import NidarError
+from .geometry.se3 import transform_matrix
 from .io.images import REC709_LUMA, linear_to_srgb
 
 __all__ = [
@@ -139,10 +140,6 @@ def nir_response(wavelength: float) -> tuple[list[tuple[float, float]], float]:
     return pts, 2.0 * a + r
 
 
-def _matrix(T) -> np.ndarray:
-    return np.array(T.matrix.numpy(), dtype=np.float64).reshape(4, 4)
-
-
 def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """OpenCV intrinsics, camera-to-world pose and (W, H) of a Mitsuba perspective camera.
 
@@ -153,7 +150,7 @@ def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]
     import mitsuba as mi
 
     W, H = (int(v) for v in camera.film().size())
-    T_world_cam = _matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    T_world_cam = transform_matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
     R_cw = T_world_cam[:3, :3].T
     # film positions (fractions): centre, +1 px in x, +1 px in y
     fx_pos = np.array([0.5, 0.5 + 1.0 / W, 0.5])
@@ -298,7 +295,7 @@ def _nir_camera(camera, wavelength: float, spp: int):
         "near_clip": float(params["near_clip"]),
         "far_clip": float(params["far_clip"]),
     }
-    to_world = _matrix(camera.world_transform())
+    to_world = transform_matrix(camera.world_transform())
     key = (mi.variant(), tuple(lens.items()), W, H, float(wavelength), int(spp))
     nir = _NIR_CAMERAS.get(key)
     if nir is None:

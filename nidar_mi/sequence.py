@@ -45,6 +45,7 @@ import numpy as np
 
 from . import render_folder as rf
 from .errors import NidarError
+from .geometry.se3 import transform_matrix
 from .io.cache_key import file_sha256
 from .render_session import RenderOptions, RenderSession, check_options
 
@@ -178,10 +179,6 @@ def camera_trigger_time(lidar_config, T_lidar_mount: np.ndarray, T_camera_mount:
     az = np.degrees(np.arctan2(forward[1], forward[0]))
     turn = pattern.spin * (az - pattern.scan_start_azimuth) / 360.0
     return float(np.mod(turn, 1.0) / pattern.rotation_rate)
-
-
-def _matrix(T) -> np.ndarray:
-    return np.array(T.matrix.numpy(), dtype=np.float64).reshape(4, 4)
 
 
 def _set_camera_pose(camera, pose: np.ndarray) -> None:
@@ -337,8 +334,8 @@ def _check_bounds(session: RenderSession, options: SequenceOptions, frames: int,
 def _rig(session: RenderSession) -> _Rig:
     """Every sensor's scene pose as its mounting on the rig; each camera's trigger time."""
     lidars, cams = session.lidars, session.cameras
-    mounts = {s.id(): _matrix(s.world_transform()) for s in lidars}
-    cam_mounts = {c.id(): _matrix(c.world_transform()) for c in cams}
+    mounts = {s.id(): transform_matrix(s.world_transform()) for s in lidars}
+    cam_mounts = {c.id(): transform_matrix(c.world_transform()) for c in cams}
     lead = lidars[0]
     cam_offsets = {
         c.id(): camera_trigger_time(lead.config, mounts[lead.id()], cam_mounts[c.id()])

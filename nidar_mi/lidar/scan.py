@@ -46,6 +46,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..geometry.se3 import transform_matrix
 from ..labels import SceneLabels, shape_labels
 from .config import LidarConfig
 from .echoes import group_echoes, select_returns
@@ -558,7 +559,7 @@ def _pattern(cfg: LidarConfig):
 def _pose(sensor, to_world) -> np.ndarray:
     """(4, 4) float64 pose: ``to_world`` when given, else the sensor's own."""
     if to_world is None:
-        return np.array(sensor.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
+        return transform_matrix(sensor.world_transform())
     return np.asarray(to_world, dtype=np.float64).reshape(4, 4)
 
 

@@ -150,6 +150,7 @@ def render_drive(
 def _render(scene_path, poses, folder, todo, rgb_twin, cameras, params, spp, seed, progress):
     """Scan (and photograph) the frames ``todo`` into ``folder``."""
     from ...camera import render_camera
+    from ...geometry.se3 import transform_matrix
     from ...io.atomic import atomic_path
     from ...lidar.scan import scan
     from ...progress import progress_bar
@@ -165,8 +166,8 @@ def _render(scene_path, poses, folder, todo, rgb_twin, cameras, params, spp, see
         if not loaded.cameras:
             raise NidarError(f"{scene_path}: NIDAR needs a perspective camera in the scene")
         camera = loaded.cameras[0]
-        T_wl0 = np.array(lidar.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
-        M0 = np.array(camera.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
+        T_wl0 = transform_matrix(lidar.world_transform())
+        M0 = transform_matrix(camera.world_transform())
         lidar_to_cam_mount = np.linalg.inv(T_wl0) @ M0
     desc = f"{os.path.basename(folder)} frames"
     for k in progress_bar(todo, show=progress, desc=desc, unit="frame"):
