@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import glob
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -221,16 +220,6 @@ def flat_road_scene_xml(
     return "\n".join(lines) + "\n"
 
 
-def _load_xml(xml: str):
-    from ..scene import load_scene
-
-    with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "scene.xml")
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(xml)
-        return load_scene(path)
-
-
 def _flat_ranges(pattern, height_m: float) -> np.ndarray:
     """(R,) ``|xyz|`` where each ring's beam of column 0 meets the plane ``z = -h`` below a
     level sensor; inf where it points up."""
@@ -269,8 +258,9 @@ def simulate_flat_road(
         seed: noise seed of the first sweep; sweep k uses ``seed + k``.
     """
     from ..lidar.scan import scan
+    from ..scene import load_scene_text
 
-    loaded = _load_xml(
+    loaded = load_scene_text(
         flat_road_scene_xml(
             preset,
             material,
@@ -526,7 +516,9 @@ def _target_scene(
     hi_m: float,
     divergence: float = 0.0,
 ):
-    return _load_xml(f"""<scene version="3.0.0">
+    from ..scene import load_scene_text
+
+    return load_scene_text(f"""<scene version="3.0.0">
   <sensor type="lidar" id="lidar">
     <float name="beam_divergence" value="{divergence:.9g}"/>
     <string name="elevation_angles" value="0"/>

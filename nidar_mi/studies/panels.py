@@ -6,8 +6,6 @@ See :mod:`nidar_mi.studies` for the experiments built on them.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -368,17 +366,13 @@ def load_panel_scene(
     Returns:
         (:class:`nidar_mi.scene.LoadedScene`, :class:`PanelLayout`).
     """
-    from ..scene import load_scene
+    from ..scene import load_scene_text
 
     layout_keys = ("distance_m", "incidence_deg", "panel_size_m", "cols", "spread_deg")
     count = None if isinstance(materials, str) else len(materials)
     layout = panel_layout(**{k: kwargs[k] for k in layout_keys if k in kwargs}, count=count)
     xml = panel_scene_xml(materials, **kwargs)
-    with tempfile.TemporaryDirectory(prefix="nidar_panels_") as tmp:
-        path = os.path.join(tmp, "panels.xml")
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(xml)
-        loaded = load_scene(path, variant=variant, rgb_twin=rgb_twin)
+    loaded = load_scene_text(xml, "panels.xml", variant=variant, rgb_twin=rgb_twin)
     return loaded, layout
 
 
