@@ -23,8 +23,10 @@ mask M:
   mask, invalid pixels are set to 0 and the spatial LPIPS map (layer maps upsampled to the
   input size) is averaged over the valid pixels. AlexNet needs maps of at least 31 x 31 pixels.
 
-**Points** ((N,) arrays): RMSE, MAE and Spearman's rank correlation (average ranks for ties;
-``nan`` when either side is constant).
+**Points** ((N,) arrays): RMSE, MAE and Spearman's rank correlation, the package's one
+(:func:`spearman`): average ranks for ties; ``nan`` when either side is constant or there are
+fewer than 3 pairs (two points always rank ±1: no evidence of an order); an error for
+non-finite values or shapes that differ.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ __all__ = [
     "psnr",
     "rmse",
     "scale_intensity",
+    "SPEARMAN_MIN_PAIRS",
     "spearman",
     "ssim",
     "ssim_map",
@@ -168,20 +171,32 @@ def ssim(pred: Any, gt: Any, mask: Any = None) -> float:
 # --- rank correlation -------------------------------------------------------------------------
 
 
+#: Fewest pairs :func:`spearman` scores (with two, ρ is ±1 whatever the values).
+SPEARMAN_MIN_PAIRS = 3
+
+
 def spearman(pred: Any, gt: Any) -> float:
     """Spearman's rank correlation (:func:`scipy.stats.spearmanr`; average ranks for ties).
 
     Args:
-        pred: (N,) values.
-        gt: (N,) values.
+        pred: (N,) finite values.
+        gt: (N,) finite values.
 
     Returns:
-        ρ in [-1, 1]; ``nan`` when either input is constant (or N < 2).
+        ρ in [-1, 1]; ``nan`` when either input is constant or N < :data:`SPEARMAN_MIN_PAIRS`
+        (empty included).
+
+    Raises:
+        NidarError: the shapes differ or are not 1-D, or a value is not finite.
     """
     from scipy.stats import spearmanr
 
-    p, g, _ = _pair(pred, gt, ndim=1)
-    if p.size < 2 or np.all(p == p[0]) or np.all(g == g[0]):
+    p = np.asarray(pred, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    if p.size == 0 and g.size == 0 and p.ndim == g.ndim == 1:
+        return float("nan")
+    p, g, _ = _pair(p, g, ndim=1)
+    if p.size < SPEARMAN_MIN_PAIRS or np.all(p == p[0]) or np.all(g == g[0]):
         return float("nan")
     return float(np.clip(spearmanr(p, g).statistic, -1.0, 1.0))
 

@@ -40,11 +40,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import spearmanr
 
 from ..errors import NidarError
 from ..frames import frame_has, list_frames, load_frame, load_meta
 from ..io.images import REC709_LUMA, srgb_to_linear
+from .metrics import spearman
 
 __all__ = [
     "GREY_LEVEL",
@@ -98,12 +98,6 @@ def frame_returns(frame: dict) -> dict[str, np.ndarray]:
 def _nanmean(values: list[float]) -> float:
     finite = [v for v in values if np.isfinite(v)]
     return float(np.mean(finite)) if finite else float("nan")
-
-
-def _spearman(a: np.ndarray, b: np.ndarray) -> float:
-    if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
-        return float("nan")
-    return float(spearmanr(a, b)[0])
 
 
 def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
@@ -169,7 +163,7 @@ def score_cues(
             truth = f[t][m].astype(np.float64)
             truth_all[t].append(truth)
             for name, v in maps.items():
-                per.setdefault((name, t), []).append(_spearman(v[m], truth))
+                per.setdefault((name, t), []).append(spearman(v[m], truth))
         for name, v in maps.items():
             pooled.setdefault(name, []).append(v[m].astype(np.float64))
     out = {}
@@ -177,7 +171,7 @@ def score_cues(
         v = np.concatenate(values)
         for t, prefix in zip(truths, ("", "surface_")):
             out.setdefault(name, {})[f"{prefix}per_frame"] = _nanmean(per[(name, t)])
-            out[name][f"{prefix}pooled"] = _spearman(v, np.concatenate(truth_all[t]))
+            out[name][f"{prefix}pooled"] = spearman(v, np.concatenate(truth_all[t]))
     return out
 
 
@@ -210,8 +204,8 @@ def _returns_with(frames: list[Path], value_map, keys) -> dict[str, np.ndarray]:
 def _profile_scores(profile, ret: dict[str, np.ndarray]) -> dict[str, float]:
     pred = profile(ret["R"], ret["range"], cos_incidence=ret["cos"])
     frames = np.unique(ret["frame"])
-    per = [_spearman(pred[ret["frame"] == k], ret["intensity"][ret["frame"] == k]) for k in frames]
-    return {"per_frame": _nanmean(per), "pooled": _spearman(pred, ret["intensity"])}
+    per = [spearman(pred[ret["frame"] == k], ret["intensity"][ret["frame"] == k]) for k in frames]
+    return {"per_frame": _nanmean(per), "pooled": spearman(pred, ret["intensity"])}
 
 
 def image_gain(train: list[Path], test: list[Path], stn, irnet) -> dict[str, dict[str, float]]:
