@@ -149,20 +149,16 @@ def source_values(source: str, xyz, intensity, rng_m, nidar=None) -> np.ndarray:
 
 
 def gt_at_mid_sweep(poses: np.ndarray, times: np.ndarray, period: float) -> np.ndarray:
-    """Poses interpolated at ``times + period / 2`` (translation linear, rotation slerp; the last
-    frame extrapolates with the last step's motion)."""
-    from scipy.spatial.transform import Rotation, Slerp
+    """(N, 4, 4) poses at ``times + period / 2``, SE(3)-interpolated
+    (:func:`nidar_mi.geometry.se3.interpolate_poses`); past the last frame the motion of the
+    last step goes on. ``period`` is at most the last step."""
+    from ...geometry.se3 import interpolate_poses
 
-    t_mid = np.asarray(times) + period / 2
+    times = np.asarray(times, dtype=np.float64)
     ext_t = np.r_[times, times[-1] + (times[-1] - times[-2])]
     step = np.linalg.inv(poses[-2]) @ poses[-1]
     ext = np.concatenate([poses, (poses[-1] @ step)[None]])
-    slerp = Slerp(ext_t, Rotation.from_matrix(ext[:, :3, :3]))
-    out = np.tile(np.eye(4), (len(times), 1, 1))
-    out[:, :3, :3] = slerp(t_mid).as_matrix()
-    for a in range(3):
-        out[:, a, 3] = np.interp(t_mid, ext_t, ext[:, a, 3])
-    return out
+    return interpolate_poses(ext_t, ext, times + period / 2)
 
 
 # ---------------------------------------------------------------- steps

@@ -52,17 +52,19 @@ def test_read_sequence_refuses_a_mismatch(tmp_path):
 
 
 def test_gt_at_mid_sweep_of_a_constant_turn():
-    # 2 m and 0.1 rad of yaw per 0.1 s frame: half a frame later is 1 m and 0.05 rad further
+    # a car turning at a constant rate: 2 m and 0.1 rad of yaw per 0.1 s frame, T_k = exp(k ξ);
+    # half a frame later it is at exp((k + 1/2) ξ), the last frame's extrapolated too
+    from nidar_mi.geometry.se3 import se3_exp
+
     n = 5
-    poses = np.tile(np.eye(4), (n, 1, 1))
-    for k in range(n):
-        poses[k, :3, :3] = Rotation.from_euler("z", 0.1 * k).as_matrix()
-        poses[k, 0, 3] = 2.0 * k
+    xi = np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.1])
+    poses = se3_exp(np.arange(n)[:, None] * xi)
     mid = gt_at_mid_sweep(poses, np.arange(n) * 0.1, 0.1)
-    # (the last frame extrapolates the last step in its own frame, so its position turns too)
-    np.testing.assert_allclose(mid[:-1, 0, 3], 2.0 * np.arange(n - 1) + 1.0, atol=1e-9)
+    np.testing.assert_allclose(mid, se3_exp((np.arange(n) + 0.5)[:, None] * xi), atol=1e-12)
     yaw = Rotation.from_matrix(mid[:, :3, :3]).as_euler("zyx")[:, 0]
-    np.testing.assert_allclose(yaw, 0.1 * np.arange(n) + 0.05, atol=1e-9)
+    np.testing.assert_allclose(yaw, 0.1 * np.arange(n) + 0.05, atol=1e-12)
+    # the arc of radius 20 m: the middle of the first frame is 20 sin(0.05) ahead
+    np.testing.assert_allclose(mid[0, :2, 3], [20 * np.sin(0.05), 20 * (1 - np.cos(0.05))])
 
 
 def test_source_values():
