@@ -130,12 +130,13 @@ def register_pair(source: np.ndarray, target: np.ndarray, guess: np.ndarray) -> 
 def overlap(source: np.ndarray, target: np.ndarray, T: np.ndarray, within_m: float = 0.3) -> float:
     """Fraction of ``source`` points above the ground and within 40 m of its origin that ``T``
     puts within ``within_m`` of a ``target`` point above the ground."""
-    from scipy.spatial import cKDTree
+    from pykdtree.kdtree import KDTree  # the package's k-d tree (geometry/normals.py)
 
     s = _above_ground(source)
     s = s[np.linalg.norm(s[:, :2], axis=1) < 40.0]
     if len(s) == 0:
         return 0.0
-    moved = s @ T[:3, :3].T + T[:3, 3]
-    d, _ = cKDTree(_above_ground(target)).query(moved, k=1, distance_upper_bound=within_m)
+    moved = np.ascontiguousarray(s @ T[:3, :3].T + T[:3, 3])
+    tree = KDTree(np.ascontiguousarray(_above_ground(target)))
+    d, _ = tree.query(moved, k=1, distance_upper_bound=within_m)
     return float(np.isfinite(d).mean())

@@ -145,3 +145,20 @@ def test_remove_ground_follows_a_tilted_road():
     kept = remove_ground(np.vstack([road, wall]))
     assert len(kept) == 300
     np.testing.assert_array_equal(kept[:, 0], 8.0)
+
+
+def test_overlap_counts_the_aligned_points_within_the_distance():
+    from nidar_mi.eval.drive.kiss import GROUND_Z_M, overlap
+
+    # a 1 m grid of points above the ground, 30 x 30 m; two ground points that never count
+    g = np.arange(-15.0, 15.0)
+    xyz = np.stack(np.meshgrid(g, g, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    xyz = np.vstack([xyz, [[0.0, 0.0, GROUND_Z_M - 1], [1.0, 0.0, GROUND_Z_M - 1]]])
+    T = np.eye(4)
+    assert overlap(xyz, xyz, T) == 1.0
+    T[0, 3] = 0.2  # every point 0.2 m from its old place
+    assert overlap(xyz, xyz, T) == 1.0 and overlap(xyz, xyz, T, within_m=0.1) == 0.0
+    T[0, 3] = 0.5  # half a cell: 0.5 m from two points
+    assert overlap(xyz, xyz, T) == 0.0
+    T[0, 3] = 20.0  # 20 m along x: a third of the columns land 0 m from a point
+    assert overlap(xyz, xyz, T) == pytest.approx(10 / 30)
