@@ -81,62 +81,31 @@ class SequenceOptions:
     """What to render of a scene along a trajectory, and how.
 
     Attributes:
-        scene: scene XML path.
+        frame: what every frame renders, and how
+            (:class:`~nidar_mi.render_session.RenderOptions`: the scene, its parameters and
+            twin, point formats, seed, spp, cameras, labels, ``bin_intensity``, ``deskew``,
+            ``max_memory``, ``progress``); the physics intensity only. Frame ``k`` uses
+            ``seed + k`` modulo 2³² (each LiDAR's own seed + k without one; the camera sampler
+            ``k``).
         trajectory: KITTI odometry, TUM or CSV poses of the rig.
         rate: frames per second, Hz (None: the first LiDAR's rotation rate); also the sample
             rate of a KITTI odometry pose file.
         frames: number of frames (None: as many as the trajectory holds).
-        formats: point formats of each frame (:data:`nidar_mi.render_folder.FORMATS`).
         sequence_formats: whole-sequence outputs, from :data:`SEQUENCE_FORMATS`.
-        bin_intensity: ``unit`` or ``raw`` KITTI ``.bin`` intensity of each frame
-            (:func:`nidar_mi.render_folder.write_lidar`).
-        seed: base seed; frame ``k`` uses ``seed + k`` modulo 2³² (each LiDAR's own seed + k
-            without it; the camera sampler ``k`` without it).
-        spp: camera samples per pixel.
-        params: the scene's ``<default>`` values (None: none).
-        cameras: render the cameras.
-        deskew: add ``xyz_deskewed`` (points in the LiDAR frame at the sweep's start) to every
-            frame's points.
-        max_memory: bytes one scan or camera render may use (None: the default limit).
         max_frames: the most frames the sequence may have (:data:`MAX_FRAMES`).
         max_disk: bytes the sequence may take on disk (None: the free space of its filesystem).
-        progress: show a progress bar on stderr.
         previews: range previews of ``all`` frames, the ``first`` only or ``none``
             (:data:`PREVIEWS`).
     """
 
-    scene: str
+    frame: RenderOptions
     trajectory: str
     rate: float | None = None
     frames: int | None = None
-    formats: tuple[str, ...] = rf.FORMATS
     sequence_formats: tuple[str, ...] = ()
-    bin_intensity: str = "unit"
-    seed: int | None = None
-    spp: int = 16
-    params: dict[str, str] | None = None
-    cameras: bool = True
-    deskew: bool = False
-    max_memory: int | None = None
     max_frames: int = MAX_FRAMES
     max_disk: int | None = None
-    progress: bool = True
     previews: str = "first"
-
-    def frame_options(self) -> RenderOptions:
-        """The options every frame is rendered with (physics intensity, the scene itself)."""
-        return RenderOptions(
-            self.scene,
-            formats=tuple(self.formats),
-            seed=self.seed,
-            spp=self.spp,
-            params=self.params,
-            cameras=self.cameras,
-            bin_intensity=self.bin_intensity,
-            max_memory=self.max_memory,
-            deskew=self.deskew,
-            progress=self.progress,
-        )
 
 
 @dataclass
@@ -281,7 +250,11 @@ def check_sequence(options: SequenceOptions):
             f"`sequence_formats`: unknown '{','.join(bad)}' "
             f"(choose from {', '.join(SEQUENCE_FORMATS)})"
         )
-    request = check_options(options.frame_options())
+    if options.frame.intensity != "physics":
+        raise NidarError(
+            f"`intensity`: a sequence renders the physics intensity (got '{options.frame.intensity}')"
+        )
+    request = check_options(options.frame)
     if not os.path.isfile(options.trajectory):
         raise NidarError(f"{options.trajectory}: no such trajectory file")
     return request
@@ -293,7 +266,7 @@ def _open(options: SequenceOptions):
     from .io.trajectory import read_trajectory
 
     request = check_sequence(options)
-    session = RenderSession.open(options.frame_options(), request)
+    session = RenderSession.open(options.frame, request)
     lidars = session.lidars
     rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
@@ -310,7 +283,7 @@ def sequence_bytes(session: RenderSession, options: SequenceOptions, frames: int
     cameras = [tuple(int(v) for v in c.film().size()) for c in session.cameras]
     bands = len(session.nir_wavelengths)
     per_frame = rf.folder_bytes(
-        lidars, cameras, options.formats, deskew=options.deskew, bands=bands
+        lidars, cameras, options.frame.formats, deskew=options.frame.deskew, bands=bands
     )
     lead = lidars[0].rings * lidars[0].horizontal_resolution * lidars[0].max_returns
     pixels = sum(w * h for w, h in cameras)
@@ -360,9 +333,10 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
         stage,
         options.sequence_formats,
         rig.lead,
-        lambda i: rf.bin_intensity_values(i, lead, options.bin_intensity),
+        lambda i: rf.bin_intensity_values(i, lead, options.frame.bin_intensity),
     )
-    bar = progress_bar(total=len(times), show=options.progress, desc="sequence", unit="frame")
+    show = options.frame.progress
+    bar = progress_bar(total=len(times), show=show, desc="sequence", unit="frame")
     loop = []
     try:
         with BackgroundWriter(depth=WRITE_QUEUE, on_abort=outputs.discard) as writer:
@@ -409,7 +383,7 @@ def _sequence_request(session: RenderSession, options: SequenceOptions, rate, fr
         "trajectory_sha256": file_sha256(options.trajectory),
         "rate_hz": rate,
         "frames": frames,
-        "deskew": options.deskew,
+        "deskew": options.frame.deskew,
         "sequence_formats": list(options.sequence_formats),
         "previews": options.previews,
     }

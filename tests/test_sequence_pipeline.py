@@ -30,11 +30,17 @@ def trajectory(tmp_path_factory):
 
 
 def _options(trajectory, **kw):
+    """Sequence options of the street; ``kw`` are fields of the sequence or of its frames."""
+    from dataclasses import fields
+
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions
 
     kw = {"rate": 10.0, "frames": 3, "formats": ("npz",), "spp": 1, "params": SMALL,
           "progress": False} | kw  # fmt: skip
-    return SequenceOptions(STREET, trajectory, **kw)
+    own = {f.name for f in fields(SequenceOptions)}
+    frame = RenderOptions(STREET, **{k: v for k, v in kw.items() if k not in own})
+    return SequenceOptions(frame, trajectory, **{k: v for k, v in kw.items() if k in own})
 
 
 def test_no_kernel_compiled_after_the_first_frame(variant, trajectory, tmp_path, monkeypatch):
