@@ -106,6 +106,8 @@ class RenderRequest:
             None: the weights' own ``sim-905``).
         bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
         layout: :data:`LAYOUT_VERSION` of the folder.
+        labels: whether the shapes' labels were read; recorded only when False, so that the
+            requests of renders with labels read as they always did.
     """
 
     scene: str
@@ -123,6 +125,7 @@ class RenderRequest:
     profile: str | None = None
     bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
+    labels: bool = True
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
@@ -144,6 +147,8 @@ class RenderRequest:
         """JSON-safe dict (what the manifest stores under ``request``)."""
         d = asdict(self)
         d["formats"] = list(self.formats)
+        if self.labels:
+            del d["labels"]
         return d
 
 

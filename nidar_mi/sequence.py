@@ -6,8 +6,12 @@ starts at ``t_k = t_0 + k / rate``. Each LiDAR sweeps from ``t_k`` on: column ``
 ``t_k + t_j`` (:class:`nidar_mi.lidar.pattern.BeamPattern`) and is cast from the rig pose
 SE(3)-interpolated at that time (motion distortion; ``t`` per point). Each camera is exposed
 when the first LiDAR's sweep points along the camera's optical axis (how KITTI triggers its
-cameras), from the rig pose of that time. Poses enter the kernels as data: after the first frame
-no kernel is compiled again, for any sensor.
+cameras), from the rig pose of that time. Without ``motion`` every sweep is cast from the
+frame's start pose (an instantaneous sweep; the points keep their firing times ``t``) and every
+camera is exposed at ``t_k``. Poses enter the kernels as data: after the first frame no kernel
+is compiled again, for any sensor.
+
+:func:`ensure_sequence` renders only when ``OUT`` does not hold the same request already.
 
 Frame ``k`` is written on a background thread (:class:`nidar_mi.io.background.BackgroundWriter`,
 two frames queued at most) while frame ``k + 1`` is rendered; the sequence outputs are written
@@ -56,6 +60,7 @@ __all__ = [
     "SequenceOptions",
     "camera_trigger_time",
     "check_sequence",
+    "ensure_sequence",
     "render_sequence",
     "sequence_bytes",
 ]
@@ -96,6 +101,8 @@ class SequenceOptions:
         max_disk: bytes the sequence may take on disk (None: the free space of its filesystem).
         previews: range previews of ``all`` frames, the ``first`` only or ``none``
             (:data:`PREVIEWS`).
+        motion: sweeps and exposures along the trajectory (module docstring); False: each
+            frame from its start pose, so the last frame may start at the trajectory's end.
     """
 
     frame: RenderOptions
@@ -106,6 +113,7 @@ class SequenceOptions:
     max_frames: int = MAX_FRAMES
     max_disk: int | None = None
     previews: str = "first"
+    motion: bool = True
 
 
 @dataclass
@@ -220,6 +228,34 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     return manifest
 
 
+def ensure_sequence(options: SequenceOptions, out_dir: str) -> dict:
+    """The manifest of ``out_dir`` when it holds this sequence complete, else
+    :func:`render_sequence` (replacing ``out_dir`` whole, as ``overwrite``).
+
+    The request of the manifest is compared with that of ``options``: the frames' cache key
+    (the scene file's hash included), the trajectory file's hash and every sequence option; a
+    rate or frame count left to the scene and the trajectory is taken as recorded (the scene
+    and the trajectory decide it, and their hashes are compared).
+    """
+    request = check_sequence(options).to_dict()
+    try:
+        manifest = rf.read_manifest(out_dir)
+    except NidarError:
+        manifest = {}
+    recorded = manifest.get("request") or {}
+    rate = options.rate if options.rate is not None else recorded.get("rate_hz")
+    frames = options.frames if options.frames is not None else recorded.get("frames")
+    want = request | _sequence_fields(options, rate, frames)
+    files = manifest.get("files", [])
+    if (
+        manifest.get("kind") == "sequence"
+        and recorded == want
+        and all(os.path.isfile(os.path.join(out_dir, f)) for f in files)
+    ):
+        return manifest
+    return render_sequence(options, out_dir, overwrite=True)
+
+
 def check_sequence(options: SequenceOptions):
     """Refuse options that cannot be rendered, before anything is loaded: a bad rate, frame
     count, sequence format or previews value, a bad frame option, a missing trajectory file. The frames' cache
@@ -271,6 +307,7 @@ def _open(options: SequenceOptions):
     rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
+    sweep_s = sweep_s if options.motion else 0.0
     times = _frame_times(traj, rate, options.frames, sweep_s, options.max_frames)
     return session, traj, rate, times
 
@@ -342,7 +379,7 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
         with BackgroundWriter(depth=WRITE_QUEUE, on_abort=outputs.discard) as writer:
             for k, t_k in enumerate(times):
                 t0 = time.perf_counter()
-                shot = _FrameShot(session, traj, rig, k, float(t_k))
+                shot = _FrameShot(session, traj, rig, k, float(t_k), options.motion)
                 rendered = _render_frame(shot, _previews(options.previews, k))
                 frames.start_poses.append(rendered.lidar_start_pose)
                 writer.submit(_write_frame, rendered, stage, frames, outputs)
@@ -378,12 +415,18 @@ def _write_poses_and_times(stage, start_poses: list, times: np.ndarray) -> list[
 
 def _sequence_request(session: RenderSession, options: SequenceOptions, rate, frames) -> dict:
     """The request a sequence manifest records: the frames' cache key and the trajectory."""
-    return session.request.to_dict() | {
+    return session.request.to_dict() | _sequence_fields(options, rate, frames)
+
+
+def _sequence_fields(options: SequenceOptions, rate, frames) -> dict:
+    """The sequence's own part of its request (:func:`_sequence_request`)."""
+    return {
         "trajectory": os.path.abspath(options.trajectory),
         "trajectory_sha256": file_sha256(options.trajectory),
         "rate_hz": rate,
         "frames": frames,
         "deskew": options.frame.deskew,
+        "motion": options.motion,
         "sequence_formats": list(options.sequence_formats),
         "previews": options.previews,
     }
@@ -476,6 +519,7 @@ class _FrameShot:
         rig: the sensors' mountings and camera trigger times.
         k: frame index.
         t_k: the frame's start time on the trajectory, s.
+        motion: sweeps and exposures along the trajectory (:attr:`SequenceOptions.motion`).
     """
 
     session: RenderSession
@@ -483,6 +527,7 @@ class _FrameShot:
     rig: _Rig
     k: int
     t_k: float
+    motion: bool = True
 
     def seed(self, base: int) -> int:
         """``base + k`` modulo 2³²: the seed of this frame."""
@@ -534,8 +579,10 @@ def _scan_frame(shot: _FrameShot):
     for sensor in session.lidars:
         lid = sensor.id()
         cfg = sensor.config
-        columns = traj.at(t_k + cfg.pattern.column_time_s()) @ shot.rig.mounts[lid]
         start = traj.at(t_k)[0] @ shot.rig.mounts[lid]
+        columns = None
+        if shot.motion:
+            columns = traj.at(t_k + cfg.pattern.column_time_s()) @ shot.rig.mounts[lid]
         frame_seed = shot.seed(cfg.seed if opts.seed is None else opts.seed)
         ts = time.perf_counter()
         result = scan(
@@ -572,7 +619,7 @@ def _shoot_frame(shot: _FrameShot) -> dict:
     cameras = {}
     for cam in session.cameras:
         cid = cam.id()
-        t_cam = shot.t_k + rig.cam_offsets[cid]
+        t_cam = shot.t_k + (rig.cam_offsets[cid] if shot.motion else 0.0)
         T_rig = shot.traj.at(t_cam)[0]
         _set_camera_pose(cam, T_rig @ rig.cam_mounts[cid])
         ts = time.perf_counter()
