@@ -192,7 +192,8 @@ def _frame_times(
             f"`frames` {frames}: the trajectory ({t1 - t0:.3g} s) holds {fit} frames at "
             f"{rate:g} Hz (each needs its whole sweep of {sweep_s:.3g} s inside it)"
         )
-    return t0 + np.arange(frames) / rate
+    # at most the last time that fits: t0 + k / rate may round past it by an ulp
+    return np.minimum(t0 + np.arange(frames) / rate, t1 - sweep_s)
 
 
 def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool = False) -> dict:
