@@ -160,11 +160,11 @@ class FoldModels:
 
 
 def _fold_identity(train_record: dict, data: dict) -> tuple:
-    from ..nidar.train import _comparable, _input_identity
+    from ..nidar.train import input_identity, resume_identity
 
     return (
-        _comparable({k: v for k, v in train_record.items() if k != "stn"}),
-        _input_identity(data.get("init")),
+        resume_identity({k: v for k, v in train_record.items() if k != "stn"}),
+        input_identity(data.get("init")),
         data.get("renders"),
     )
 

@@ -29,7 +29,7 @@ import numpy as np
 from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
-from .projection import _points, bilinear_sample, project_in_image
+from .projection import bilinear_sample, check_points, project_in_image
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
 
 __all__ = ["FUSION_RULES", "Sightings", "locate_in_cameras", "sample_cameras"]
@@ -181,7 +181,7 @@ def _locate(
         depth_images = [None] * len(cameras)
     elif len(depth_images) != len(cameras):
         raise NidarError(f"{caller}: {len(cameras)} cameras but {len(depth_images)} depth images")
-    p = _points(points)
+    p = check_points(points)
     per_camera = tuple(
         _locate_camera(p, cam, dimg, occlusion=occlusion, visibility=visibility)
         for cam, dimg in zip(cameras, depth_images, strict=True)

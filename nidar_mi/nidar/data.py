@@ -19,6 +19,7 @@ from ..frames import load_frame
 from .preprocess import colour_input, prepare_nir, prepare_rgb
 
 __all__ = [
+    "R_TARGET_KEYS",
     "area_resize",
     "reduce_sparse",
     "FrameDataset",
@@ -157,7 +158,7 @@ class STNDataset(FrameDataset):
 
 
 #: Frame keys each ``r_target`` reads beside ``R_true`` (:class:`~nidar_mi.nidar.config.LossConfig`).
-_R_TARGET_KEYS = {"monostatic": (), "surface": ("R_surface",), "colour": ("A_true",)}
+R_TARGET_KEYS = {"monostatic": (), "surface": ("R_surface",), "colour": ("A_true",)}
 
 
 def reflectance_target(arrays: dict, r_target: str, wavelength_nm: float) -> np.ndarray:
@@ -266,7 +267,7 @@ class IRNetDataset(FrameDataset):
 
             zero_targets = self.missing_targets_zero and not frame_has(path, ("R_true",))
             if not zero_targets:
-                keys = (*keys, "R_true", "S_true", *_R_TARGET_KEYS[self.r_target])
+                keys = (*keys, "R_true", "S_true", *R_TARGET_KEYS[self.r_target])
         arrays = load_frame(path, keys)
         if not zero_targets and self.intrinsic_targets:
             arrays["R_true"] = reflectance_target(arrays, self.r_target, self.wavelength_nm)

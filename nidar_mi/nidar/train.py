@@ -44,7 +44,14 @@ from .losses import irnet_objective, photo_stn_loss, stn_loss
 from .model_io import build_irnet, build_stn, load_stn, resolve_device, save_irnet, save_stn
 from .stn import image_pyramid
 
-__all__ = ["train", "train_stn", "train_stn_photos", "train_irnet"]
+__all__ = [
+    "input_identity",
+    "resume_identity",
+    "train",
+    "train_stn",
+    "train_stn_photos",
+    "train_irnet",
+]
 
 
 #: Real RGB/NIR photo pairs for the STN: ``(fit, val)``, lists of ``(rgb (H, W, 3) uint8,
@@ -365,7 +372,7 @@ _INPUT_KEYS = ("init", "renders")
 _INPUT_WORDS = {"init": "initial IRNet weights", "renders": "rendered frames mixed in"}
 
 
-def _input_identity(value: Any) -> Any:
+def input_identity(value: Any) -> Any:
     """What must match for a run to continue: the initial weights' hash, the renders' list."""
     if isinstance(value, dict):
         return value.get("sha256")
@@ -377,7 +384,9 @@ _RESUMABLE_CHANGES = ("device", "num_workers", "checkpoint_every", "keep_checkpo
 _SCHEDULE_KEYS = ("epochs", "max_steps")
 
 
-def _comparable(train_cfg: dict[str, Any]) -> dict[str, Any]:
+def resume_identity(train_cfg: dict[str, Any]) -> dict[str, Any]:
+    """The settings of a run that a resumed run must share: ``train_cfg`` without those a run
+    may change when it resumes (devices, workers, checkpoints, the schedule's length)."""
     d = json.loads(json.dumps(train_cfg))
     for key in _RESUMABLE_CHANGES:
         d.pop(key, None)
@@ -423,11 +432,11 @@ def _begin(
             old_data = previous.get("data", {})
         except (OSError, json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise NidarError(f"cannot read {cfg_path}: {exc}") from None
-        if _comparable(old) != _comparable(record["train"]):
+        if resume_identity(old) != resume_identity(record["train"]):
             raise NidarError(f"{out_dir} holds a run with a different configuration")
         if read_train_log(out_dir).get(stage, {}).get("steps"):  # a stage to continue
             for key in _INPUT_KEYS:
-                if _input_identity(old_data.get(key)) != _input_identity(record["data"].get(key)):
+                if input_identity(old_data.get(key)) != input_identity(record["data"].get(key)):
                     raise NidarError(f"{out_dir} holds a run with other {_INPUT_WORDS[key]}")
     if read_train_log(out_dir).get(stage, {}).get("steps") and not resume:
         raise NidarError(f"{out_dir} already holds a {stage} run; resume it or use a new directory")
@@ -490,9 +499,9 @@ def _check_intrinsic_frames(frames: list[Path], r_target: str = "monostatic") ->
     """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not), and
     the map ``r_target`` reads (``R_surface`` or ``A_true``: frames rendered by this version)."""
     from ..frames import frame_has
-    from .data import _R_TARGET_KEYS
+    from .data import R_TARGET_KEYS
 
-    extra = _R_TARGET_KEYS[r_target]
+    extra = R_TARGET_KEYS[r_target]
     for path in frames:
         if not frame_has(path, ("R_true", "S_true")):
             raise NidarError(

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..io.kitti import write_kitti_poses, write_kitti_times
 from ..io.trajectory import write_tum
-from .city import StreetGrid
+from .streets import StreetGrid
 from .trajectory import drive, revisits
 
 __all__ = ["DEFAULT_FRAMES", "write_drive"]

@@ -23,13 +23,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import NidarError
-from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
+from .city import sample_city
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
 from .lighting import relight
 from .objects import material_set
 from .primitives import Layout
 from .spectra import draw_spectra
+from .streets import CITY_KINDS, DEFAULT_BLOCKS, sample_grid
 from .xml import scene_xml
 
 __all__ = [

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_grid
+from nidar_mi.scenegen.streets import LIDAR_HEIGHT_M, sample_grid
 from nidar_mi.scenegen.trajectory import (
     A_LAT,
     A_LONG,

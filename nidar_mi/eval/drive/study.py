@@ -134,7 +134,7 @@ def source_values(source: str, xyz, intensity, rng_m, nidar=None) -> np.ndarray:
         rng_m: (N,) range, m.
         nidar: (N,) NIDAR intensity (0 where no camera saw the point), for ``nidar``.
     """
-    from ...scenegen.city import LIDAR_HEIGHT_M
+    from ...scenegen.streets import LIDAR_HEIGHT_M
 
     if source in ("physics", "rgb_twin"):
         return np.asarray(intensity, np.float64) * np.asarray(rng_m, np.float64) ** 2

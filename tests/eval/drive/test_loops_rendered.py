@@ -8,7 +8,8 @@ from nidar_mi.eval.drive.loops import match_drive, pr_summary
 from nidar_mi.eval.drive.scan_context import descriptor, normalise
 from nidar_mi.eval.drive.study import ISC_MIN_Z_M, source_values
 from nidar_mi.eval.drive.sweeps import SweepRequest, read_sequence, render_sweeps
-from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_city
+from nidar_mi.scenegen.city import sample_city
+from nidar_mi.scenegen.streets import LIDAR_HEIGHT_M
 
 
 @pytest.fixture(scope="module")
