@@ -47,7 +47,7 @@ def tiny_run(tmp_path_factory, variant):
     from nidar_mi.datasets.profile_fitting import fit_split_calibration
     from nidar_mi.nidar.config import TrainConfig
     from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.train import train
+    from nidar_mi.nidar.training import train
     from nidar_mi.render_dataset import build_dataset
 
     root = tmp_path_factory.mktemp("e2e")

@@ -15,7 +15,7 @@ trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted
 split (:func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). ``--all-frames`` (with ``--stage irnet``) trains
-IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.train`.
+IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.training`.
 
 An OUT where a stage of this command has trained already is refused unless ``--resume``
 (continue that run) or ``--overwrite`` (replace it: the earlier folder is moved aside, put back

@@ -2,7 +2,7 @@
 
 :func:`irnet_methods` gives :class:`~nidar_mi.eval.loo.LooMethod` rows for
 :func:`~nidar_mi.eval.loo.leave_one_out`: in each fold an IRNet is trained on the fold's
-training frames only (:func:`nidar_mi.nidar.train.train_irnet` with the fold's frame list, a
+training frames only (:func:`nidar_mi.nidar.training.train_irnet` with the fold's frame list, a
 fixed STN, the given configuration: e.g. a compact ``unet`` at quarter resolution) and its
 maps at the returns feed the rows:
 
@@ -52,7 +52,7 @@ class FoldModels:
         init_weights: IRNet weights every fold starts from (e.g. pretrained on renders; not
             fitted on any real frame), None for a random initialisation.
         render_frames: rendered frames every fold mixes in to supervise the decomposition
-            (:func:`~nidar_mi.nidar.train.train_irnet`), None for none.
+            (:func:`~nidar_mi.nidar.training.train_irnet`), None for none.
     """
 
     cfg: Any
@@ -128,7 +128,7 @@ class FoldModels:
 
         from ..nidar.loop import read_train_log
         from ..nidar.pipeline import NidarModel
-        from ..nidar.train import train_irnet
+        from ..nidar.training import train_irnet
 
         done = (fold / "irnet.safetensors").is_file() and read_train_log(fold).get("irnet", {}).get(
             "done"
@@ -160,7 +160,7 @@ class FoldModels:
 
 
 def _fold_identity(train_record: dict, data: dict) -> tuple:
-    from ..nidar.train import input_identity, resume_identity
+    from ..nidar.training import input_identity, resume_identity
 
     return (
         resume_identity({k: v for k, v in train_record.items() if k != "stn"}),

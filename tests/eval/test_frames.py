@@ -42,7 +42,7 @@ def data_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def model(data_dir, tmp_path_factory):
     from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.train import train
+    from nidar_mi.nidar.training import train
 
     out = tmp_path_factory.mktemp("run")
     train(dataclasses.replace(TrainConfig.reduced(), device="cpu"), data_dir, out, progress=False)

@@ -17,7 +17,7 @@ from nidar_mi.nidar.config import IRNetConfig, STNConfig, TrainConfig
 from nidar_mi.nidar.data import IRNetDataset, area_resize, reduce_sparse
 from nidar_mi.nidar.model_io import build_stn, save_stn
 from nidar_mi.nidar.pipeline import NidarModel
-from nidar_mi.nidar.train import train_irnet
+from nidar_mi.nidar.training import train_irnet
 from tests.helpers.synthetic_kitti import make_kitti
 
 SCALE = 0.25

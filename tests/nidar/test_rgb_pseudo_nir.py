@@ -16,7 +16,7 @@ from nidar_mi.nidar.infer import predict
 from nidar_mi.nidar.irnet import IRNet
 from nidar_mi.nidar.model_io import build_irnet, build_stn, load_pipeline, save_stn
 from nidar_mi.nidar.preprocess import chromaticity, colour_input, prepare_rgb
-from nidar_mi.nidar.train import train_irnet
+from nidar_mi.nidar.training import train_irnet
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

@@ -16,7 +16,7 @@ from nidar_mi.nidar.checkpoint import latest_checkpoint
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.infer import predict
 from nidar_mi.nidar.model_io import load_pipeline
-from nidar_mi.nidar.train import train, train_irnet, train_stn
+from nidar_mi.nidar.training import train, train_irnet, train_stn
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

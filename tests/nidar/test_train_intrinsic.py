@@ -15,7 +15,7 @@ from nidar_mi.cli.train import main
 from nidar_mi.errors import NidarError
 from nidar_mi.frames import list_frames
 from nidar_mi.nidar.config import LossConfig, TrainConfig
-from nidar_mi.nidar.train import train_irnet
+from nidar_mi.nidar.training import train_irnet
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
