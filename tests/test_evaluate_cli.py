@@ -77,7 +77,7 @@ def tiny_run(tmp_path_factory, variant):
 def test_end_to_end_tables(tiny_run, tmp_path):
     import csv
 
-    from nidar_mi.eval.frames import METHODS
+    from nidar_mi.eval.rendered import METHODS
 
     out = tmp_path / "out"
     argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]

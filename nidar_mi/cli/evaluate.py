@@ -29,7 +29,7 @@ the ablations.
 ``DATA/cache/evaluate``): a rerun reuses what it holds, and nothing of it is written into
 ``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row per frame and method, plus
 ``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of real data), published whole
-when everything succeeded. See :mod:`nidar_mi.eval.frames` for the methods and the metric scale.
+when everything succeeded. See :mod:`nidar_mi.eval.rendered` for the methods and the metric scale.
 """
 
 from __future__ import annotations

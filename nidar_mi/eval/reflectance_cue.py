@@ -332,7 +332,7 @@ def _main(args) -> None:
     import torch
 
     from ..nidar.model_io import load_pipeline, load_stn
-    from .report import write_json
+    from .tables import write_json
 
     if args.out:
         _check_out(

@@ -1,7 +1,7 @@
 """The whole evaluation behind ``python -m nidar_mi.evaluate``: every group, tables, figures.
 
 Held-out generated scenes (a dataset's ``test`` split), hand-made scene files, scenes of held-out
-materials and the IRNet ablations (scored with :mod:`nidar_mi.eval.frames`), and the real data:
+materials and the IRNet ablations (scored with :mod:`nidar_mi.eval.rendered`), and the real data:
 KITTI leave-one-frame-out (:mod:`nidar_mi.eval.loo`) and the held-out RGB/NIR photos
 (:mod:`nidar_mi.eval.photos`), both via :mod:`nidar_mi.eval.real`. The results are written as
 ``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of real data), published whole
@@ -394,7 +394,7 @@ def _heldout_materials(options, model, ctx: _Rendered, payload: dict) -> None:
 
 
 def _group(results, name: str, scenes: list[str], note: str = "") -> dict:
-    from .frames import mean_table, result_rows
+    from .rendered import mean_table, result_rows
 
     rows = result_rows(results, name)
     return {"scenes": scenes, "rows": rows, "mean": mean_table(rows), "note": note}
@@ -404,7 +404,7 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     import numpy as np
 
     from .figures import maps_figure, scatter_figure
-    from .frames import METHOD_LABELS
+    from .rendered import METHOD_LABELS
 
     paths = []
     for r in results[: max(count, 0)]:
@@ -445,21 +445,21 @@ def _ablation_key(meta: dict, stn) -> str:
 def _write(stage: str, payload: dict, out: str) -> None:
     """Write the tables into ``stage`` (figure paths in ``payload`` name their place in
     ``out``)."""
-    from . import report
+    from . import tables
 
     md, csv_rows = _tables(payload)
     if payload["figures"]:
         md.append("## Figures\n\n")
         md.extend(f"- `{os.path.relpath(p, out)}`\n" for p in payload["figures"])
-    report.write_csv(os.path.join(stage, "results.csv"), csv_rows)
-    report.write_json(os.path.join(stage, "results.json"), payload)
-    report.write_text(os.path.join(stage, "results.md"), "".join(md))
+    tables.write_csv(os.path.join(stage, "results.csv"), csv_rows)
+    tables.write_json(os.path.join(stage, "results.json"), payload)
+    tables.write_text(os.path.join(stage, "results.md"), "".join(md))
 
 
 def _tables(payload: dict) -> tuple[list[str], list[dict]]:
     """``results.md`` as a list of parts (figures left out) and the rows of ``results.csv``."""
-    from . import report
-    from .frames import METHOD_LABELS
+    from . import tables
+    from .rendered import METHOD_LABELS
 
     titles = {"generated": "Held-out generated scenes", "handmade": "Hand-made scenes"}
     md = ["# NIDAR evaluation\n\n"]
@@ -477,22 +477,22 @@ def _tables(payload: dict) -> tuple[list[str], list[dict]]:
         )
     csv_rows = []
     for key, group in payload["groups"].items():
-        md.append(report.group_markdown(titles.get(key, key), group, METHOD_LABELS) + "\n")
+        md.append(tables.group_markdown(titles.get(key, key), group, METHOD_LABELS) + "\n")
         csv_rows += group["rows"] + [
             {"group": key, "scene": "mean", "camera": "", **r} for r in group["mean"]
         ]
     if "intrinsic" in payload:
-        md.append(report.intrinsic_markdown(payload["intrinsic"]) + "\n")
+        md.append(tables.intrinsic_markdown(payload["intrinsic"]) + "\n")
     if "heldout_materials" in payload:
         h = payload["heldout_materials"]
-        md.append(report.heldout_materials_markdown(h, METHOD_LABELS) + "\n")
+        md.append(tables.heldout_materials_markdown(h, METHOD_LABELS) + "\n")
         csv_rows += [{"group": "heldout_materials", **r} for r in h["rows"]]
     if "kitti" in payload:
-        md.append(report.loo_markdown(payload["kitti"]) + "\n")
+        md.append(tables.loo_markdown(payload["kitti"]) + "\n")
         csv_rows += [{"group": "kitti_loo", **r} for r in payload["kitti"].get("rows", [])]
     if "photos" in payload:
-        md.append(report.photos_markdown(payload["photos"]) + "\n")
+        md.append(tables.photos_markdown(payload["photos"]) + "\n")
         csv_rows += [{"group": "photos", **r} for r in payload["photos"].get("rows", [])]
     if "ablation" in payload:
-        md.append(report.ablation_markdown(payload["ablation"]) + "\n")
+        md.append(tables.ablation_markdown(payload["ablation"]) + "\n")
     return md, csv_rows

@@ -18,7 +18,8 @@ from scipy.stats import spearmanr
 from nidar_mi.datasets.profile_fitting import fit_split_calibration
 from nidar_mi.errors import NidarError
 from nidar_mi.eval.baselines import ClassConstant
-from nidar_mi.eval.frames import (
+from nidar_mi.eval.heldout import twin_prediction
+from nidar_mi.eval.rendered import (
     METHODS,
     FrameData,
     evaluate_frame,
@@ -26,8 +27,7 @@ from nidar_mi.eval.frames import (
     predict_frame,
     result_rows,
 )
-from nidar_mi.eval.heldout import twin_prediction
-from nidar_mi.eval.report import goal_check, markdown_table, write_csv, write_json
+from nidar_mi.eval.tables import goal_check, markdown_table, write_csv, write_json
 from nidar_mi.geometry import CameraModel, bilinear_sample, project
 from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
