@@ -47,8 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     from nidar_mi.eval.loo import leave_one_out, standard_methods
     from nidar_mi.eval.loo_irnet import FoldModels, irnet_methods
     from nidar_mi.eval.tables import loo_markdown
-    from nidar_mi.frames import list_frames, load_meta
     from nidar_mi.nidar.config import TrainConfig
+    from nidar_mi.training_frames import list_frames, load_meta
 
     cfg = TrainConfig.from_dict(json.loads(args.config.read_text()))
     cfg.validate()

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import spearmanr
 
-from nidar_mi.datasets.kitti import frame_ids, load_frame
+from nidar_mi.datasets.kitti_objects import frame_ids, load_frame
 from nidar_mi.nidar.pipeline import NidarModel
 from nidar_mi.nidar.precision import emulated_convolutions
 

@@ -7,7 +7,7 @@ Layout::
     DATA/renders/<scene>/                each scene's render folder (nidar_mi.render_folder): a
                                          cache, reused while the scene's render request holds
     DATA/{train,val,test}/<frame>.npz    one frame per (scene, camera), in the format of
-                                         :mod:`nidar_mi.frames` (source ``"render"``)
+                                         :mod:`nidar_mi.training_frames` (source ``"render"``)
 
 The splits and ``meta.json`` are published together when the whole build succeeded; the renders
 are a cache that an interrupted build leaves for the next one (:func:`build_dataset`).
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import NidarError, check_seed
-from .frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
+from .training_frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
 
 __all__ = [
     "build_dataset",

@@ -190,7 +190,7 @@ LAYERS = {
         ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
         0,
     ),
-    **dict.fromkeys(("plugins", "tasks", "frames", "progress"), 0),
+    **dict.fromkeys(("plugins", "tasks", "training_frames", "progress"), 0),
     **dict.fromkeys(
         (
             "scene",

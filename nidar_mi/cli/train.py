@@ -270,7 +270,7 @@ def _train(args: argparse.Namespace, cfg) -> None:
 
 
 def _render_frames(data: Path) -> list[Path]:
-    from ..frames import list_frames
+    from ..training_frames import list_frames
 
     frames = list_frames(data, "train")
     if not frames:
@@ -279,7 +279,7 @@ def _render_frames(data: Path) -> list[Path]:
 
 
 def _all_frames(data: Path) -> dict[str, list[Path]]:
-    from ..frames import SPLITS, list_frames
+    from ..training_frames import SPLITS, list_frames
 
     return {"train": [f for split in SPLITS for f in list_frames(data, split)], "val": []}
 

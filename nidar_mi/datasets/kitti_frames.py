@@ -1,8 +1,8 @@
 """KITTI frames as NIDAR training frames: real sparse intensity, visible returns, rings.
 
-Each KITTI frame (:func:`nidar_mi.datasets.kitti.load_frame`) becomes one training frame in the
-format of :mod:`nidar_mi.frames` (source ``"kitti"``, keys
-:data:`nidar_mi.frames.FRAME_SOURCES` ``["kitti"]``):
+Each KITTI frame (:func:`nidar_mi.datasets.kitti_objects.load_frame`) becomes one training frame in the
+format of :mod:`nidar_mi.training_frames` (source ``"kitti"``, keys
+:data:`nidar_mi.training_frames.FRAME_SOURCES` ``["kitti"]``):
 
 * the returns camera 2 sees: in front of it, inside the image and not hidden in the cloud's own
   z-buffer (:func:`nidar_mi.geometry.camera_returns`, the package defaults; KITTI has no
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..io.cache_key import cache_key
-from .kitti import KittiFrame, frame_ids, load_frame
+from .kitti_objects import KittiFrame, frame_ids, load_frame
 from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
 from .paths import cache_dir, data_root
 
@@ -145,9 +145,9 @@ def build_kitti_frames(
     Raises:
         NidarError: no frames, clashing folder names, or a malformed frame.
     """
-    from ..frames import SPLITS, list_frames, write_frame
     from ..io.atomic import atomic_write_json, check_outside_inputs
     from ..progress import progress_bar
+    from ..training_frames import SPLITS, list_frames, write_frame
 
     dirs = [Path(d) for d in kitti_dirs]
     check_outside_inputs(out_dir, dirs)
@@ -168,7 +168,7 @@ def build_kitti_frames(
     meta_path = out / "meta.json"
     old_version, old_info = None, {}
     if meta_path.is_file():
-        from ..frames import load_meta
+        from ..training_frames import load_meta
 
         old = load_meta(out)
         old_version, old_info = old.get("version"), old.get("frame_info", {})

@@ -141,8 +141,8 @@ def evaluate_run(
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
     from ..datasets.profile_fitting import fit_split_calibration
-    from ..frames import list_frames, load_meta
     from ..nidar.pipeline import NidarModel
+    from ..training_frames import list_frames, load_meta
 
     run_dir = Path(run_dir)
     scale = float(load_meta(data_dir).get("intensity_scale", 1.0))

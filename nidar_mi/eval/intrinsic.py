@@ -1,7 +1,7 @@
 """How well IRNet's decomposition separates reflectance from shading, on rendered frames.
 
 Rendered frames carry the true reflectance at the LiDAR wavelength (``R_true``) and the true
-shading (``S_true``: irradiance, so cast shadows and incidence; :mod:`nidar_mi.frames`). A
+shading (``S_true``: irradiance, so cast shadows and incidence; :mod:`nidar_mi.training_frames`). A
 decomposition whose ``R`` still carries shadows correlates with ``S_true``; one that recovers the
 material correlates with ``R_true``. :func:`intrinsic_scores` measures both on the pixels with a
 surface (``R_true >= 1e-3``; ``R_true`` clipped to [0, 1] as in training):
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ..frames import load_frame
+from ..training_frames import load_frame
 
 __all__ = ["INTRINSIC_KEYS", "intrinsic_frame_scores", "intrinsic_scores"]
 

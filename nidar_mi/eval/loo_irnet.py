@@ -68,7 +68,7 @@ class FoldModels:
 
     def fold_dir(self, train: Sequence[Any]) -> Path:
         """``WORK/fold-<held-out frames>`` of the fold that trains on ``train``."""
-        from ..frames import SPLITS, list_frames
+        from ..training_frames import SPLITS, list_frames
 
         names = {s.name for s in train}
         every = sorted(f.stem for split in SPLITS for f in list_frames(self.data_dir, split))

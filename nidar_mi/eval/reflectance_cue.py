@@ -42,8 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ..frames import frame_has, list_frames, load_frame, load_meta
 from ..io.images import REC709_LUMA, srgb_to_linear
+from ..training_frames import frame_has, list_frames, load_frame, load_meta
 from .metrics import spearman
 
 __all__ = [
@@ -115,7 +115,7 @@ def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
 def _truth_maps(path: Path, wavelength_nm: float) -> dict[str, np.ndarray]:
     """Ceilings a cue could reach, from the frame's true maps where it carries them: the ρ(λ)
     its true albedo colour predicts through the earthlib map."""
-    from ..frames import frame_has
+    from ..training_frames import frame_has
 
     if not frame_has(path, ("A_true",)):
         return {}
@@ -148,7 +148,7 @@ def score_cues(
         every frame has it. Sources: ``luminance``, ``pseudo_nir``, ``R:<name>``, and on frames
         with ``A_true`` the earthlib colour map of the true albedo (a ceiling).
     """
-    from ..frames import frame_has
+    from ..training_frames import frame_has
 
     surface = all(frame_has(p, ("R_surface",)) for p in frames)
     truths = ("reflectance", "R_surface") if surface else ("reflectance",)

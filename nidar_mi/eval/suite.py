@@ -131,7 +131,7 @@ def _inputs(options: EvaluateOptions) -> list[str | None]:
 
 def _real_data(options: EvaluateOptions) -> bool:
     """Whether ``kitti`` or ``photos`` hold anything to score (else both would be skipped)."""
-    from ..datasets.kitti import frame_ids
+    from ..datasets.kitti_objects import frame_ids
     from ..datasets.rgbnir import list_pairs
 
     if any(frame_ids(d) for d in options.kitti):
@@ -146,7 +146,7 @@ def _real_data(options: EvaluateOptions) -> bool:
 
 def _check_inputs(options: EvaluateOptions) -> dict | None:
     """The dataset's meta (None without ``data``), after checking every input exists."""
-    from ..frames import load_meta
+    from ..training_frames import load_meta
 
     o = options
     if not (o.data or o.kitti or o.photos):
@@ -253,7 +253,7 @@ def _photos(options: EvaluateOptions, model, payload: dict):
 
 def _kitti(options: EvaluateOptions, model, linear, payload: dict) -> None:
     """KITTI leave-one-frame-out into ``payload["kitti"]`` (skipped without frames)."""
-    from ..datasets.kitti import frame_ids
+    from ..datasets.kitti_objects import frame_ids
 
     present = [d for d in options.kitti if frame_ids(d)]
     if not present:
@@ -332,7 +332,7 @@ def _fit_baselines(options: EvaluateOptions, meta: dict, model, payload: dict) -
 def _generated(options, meta: dict, model, ctx: _Rendered, fig_dir: str, payload: dict) -> None:
     """The dataset's held-out generated scenes (and the decomposition against the true maps
     when the frames carry them)."""
-    from ..frames import frame_has, list_frames
+    from ..training_frames import frame_has, list_frames
     from .heldout import evaluate_renders
 
     names = meta["scenes"][options.split]

@@ -1,6 +1,6 @@
 """Torch datasets over the training frames: crops, flips and tensors for the networks.
 
-The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.frames`; these classes only
+The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.training_frames`; these classes only
 read it. Intensity is divided by ``intensity_scale`` and clipped to [0, 1].
 Crops and flips are drawn from a generator seeded by ``(seed, epoch, index)``, so a sample
 does not depend on worker processes or on where a run was resumed.
@@ -15,7 +15,7 @@ import torch
 from torch.utils.data import Dataset
 
 from ..errors import NidarError
-from ..frames import load_frame
+from ..training_frames import load_frame
 from .preprocess import colour_input, prepare_nir, prepare_rgb
 
 __all__ = [
@@ -180,7 +180,7 @@ def reflectance_target(arrays: dict, r_target: str, wavelength_nm: float) -> np.
         from ..materials.visible_albedo import colour_reflectance_map
 
         target = colour_reflectance_map(wavelength_nm)(arrays["A_true"])
-    from ..frames import R_TRUE_MIN
+    from ..training_frames import R_TRUE_MIN
 
     return np.where(r_true >= R_TRUE_MIN, np.maximum(target, R_TRUE_MIN), 0.0).astype(np.float32)
 
@@ -263,7 +263,7 @@ class IRNetDataset(FrameDataset):
             keys = (*keys, "range")
         zero_targets = False
         if self.intrinsic_targets:
-            from ..frames import frame_has
+            from ..training_frames import frame_has
 
             zero_targets = self.missing_targets_zero and not frame_has(path, ("R_true",))
             if not zero_targets:

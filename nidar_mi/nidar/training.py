@@ -33,8 +33,8 @@ import torch
 from torch import nn
 
 from ..errors import NidarError
-from ..frames import list_frames, load_frame, load_meta
 from ..io.cache_key import file_sha256
+from ..training_frames import list_frames, load_frame, load_meta
 from .checkpoint import atomic_write
 from .config import INPUT_CHANNELS, TrainConfig
 from .data import IRNetDataset, MixedDataset, STNDataset
@@ -498,7 +498,7 @@ def _stored_config(path: Path, kind: str, config_cls):
 def _check_intrinsic_frames(frames: list[Path], r_target: str = "monostatic") -> None:
     """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not), and
     the map ``r_target`` reads (``R_surface`` or ``A_true``: frames rendered by this version)."""
-    from ..frames import frame_has
+    from ..training_frames import frame_has
     from .data import R_TARGET_KEYS
 
     extra = R_TARGET_KEYS[r_target]

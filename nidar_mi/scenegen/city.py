@@ -403,7 +403,7 @@ def sample_city(
         The layout (its rig stands at the start of :func:`drive_route`, heading north, in the
         right-hand lane) and the grid.
     """
-    from .trajectory import route_start
+    from .route import route_start
 
     g = sample_grid(rng, kind, blocks)
     shapes = _streets(rng, g)

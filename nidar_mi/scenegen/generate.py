@@ -29,7 +29,7 @@ from .layout import sample_layout
 from .lighting import relight
 from .objects import material_set
 from .primitives import Layout
-from .spectra import draw_spectra
+from .spectral_regimes import draw_spectra
 from .streets import CITY_KINDS, DEFAULT_BLOCKS, sample_grid
 from .xml import scene_xml
 
@@ -82,7 +82,7 @@ def generate_scene(
             has one).
         lighting: lighting regime (:data:`nidar_mi.scenegen.lighting.LIGHTING_REGIMES`):
             ``default`` (the layout's sun and sky) or ``varied`` (redrawn, overcast included).
-        spectra: spectral regime (:data:`nidar_mi.scenegen.spectra.SPECTRA_REGIMES`):
+        spectra: spectral regime (:data:`nidar_mi.scenegen.spectral_regimes.SPECTRA_REGIMES`):
             ``library`` (each material's own spectrum), ``earthlib`` (measured spectra drawn
             per scene for most diffuse, road and paint materials) or ``earthlib-family`` (drawn
             within each material's family).

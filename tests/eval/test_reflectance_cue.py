@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from nidar_mi.eval.reflectance_cue import frame_returns, image_gain, luminance, score_cues
-from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.config import IRNetConfig, STNConfig
 from nidar_mi.nidar.model_io import build_irnet, build_stn
+from nidar_mi.training_frames import list_frames, load_frame
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

@@ -128,8 +128,8 @@ def test_nidar_rows_are_the_model_outputs(evaluated, model):
 
 @pytest.mark.parametrize("branch", ["R", "pseudo_nir"])
 def test_dataset_calibration_pools_the_named_map_at_masked_pixels(model, data_dir, branch):
-    from nidar_mi.frames import list_frames, load_meta
     from nidar_mi.profiles import fit
+    from nidar_mi.training_frames import list_frames, load_meta
 
     scale = load_meta(data_dir)["intensity_scale"]
     preds, dists, refs = [], [], []

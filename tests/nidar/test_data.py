@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
 from nidar_mi.nidar.data import IRNetDataset, STNDataset
 from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
+from nidar_mi.training_frames import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

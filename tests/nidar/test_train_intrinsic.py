@@ -13,9 +13,9 @@ from safetensors.numpy import load_file
 
 from nidar_mi.cli.train import main
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import list_frames
 from nidar_mi.nidar.config import LossConfig, TrainConfig
 from nidar_mi.nidar.training import train_irnet
+from nidar_mi.training_frames import list_frames
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

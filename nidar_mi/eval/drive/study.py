@@ -86,7 +86,7 @@ class StudyConfig:
         loop_candidates: the best-scoring matches of each source that are registered (and, when
             they pass the overlap check, enter the pose graph).
         sequence: a ``render --trajectory`` folder of the same drive (optional).
-        body_motion: the body rolls, pitches and heaves (:func:`nidar_mi.scenegen.trajectory.drive`).
+        body_motion: the body rolls, pitches and heaves (:func:`nidar_mi.scenegen.route.drive`).
     """
 
     kind: str = "city"

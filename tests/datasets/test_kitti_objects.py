@@ -1,4 +1,4 @@
-"""Tests for nidar_mi.datasets.kitti (calib files, frame ids, whole frames)."""
+"""Tests for nidar_mi.datasets.kitti_objects (calib files, frame ids, whole frames)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nidar_mi.datasets.kitti import KittiFrame, frame_ids, load_frame
+from nidar_mi.datasets.kitti_objects import KittiFrame, frame_ids, load_frame
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry import in_image, project
 from nidar_mi.io.images import write_png
