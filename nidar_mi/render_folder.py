@@ -534,7 +534,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     Raises:
         NidarError: missing or malformed manifest, or an unknown LiDAR id.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
     from .io.images import read_exr
     from .io.points import read_npz
     from .lidar.return_model import compensate
@@ -553,7 +553,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     cameras = []
     for cam_id, cam in sorted(manifest.get("cameras", {}).items()):
         cam_dir = os.path.join(folder, cam_id)
-        model = render_camera(cam, cam_id, lid, f"{folder}: camera {cam_id}")
+        model = render_calib_model(cam, cam_id, lid, f"{folder}: camera {cam_id}")
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
         cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)

@@ -256,10 +256,12 @@ def test_the_command_line_becomes_evaluate_options():
 
 def test_the_library_names_parameters_and_the_command_flags(tmp_path, capsys):
     from nidar_mi.errors import NidarError
-    from nidar_mi.eval.suite import EvaluateOptions, run
+    from nidar_mi.eval.suite import EvaluateOptions, run_evaluation
 
     with pytest.raises(NidarError, match="`heldout_materials` needs `data`"):
-        run(EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path)))
+        run_evaluation(
+            EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path))
+        )
     argv = ["--photos", "p", "--heldout-materials", str(tmp_path), "-o", str(tmp_path / "o")]
     assert main(argv) == 2
     assert "error: --heldout-materials needs --data" in capsys.readouterr().err

@@ -85,3 +85,80 @@ def test_the_finder_sees_a_private_import():
 
 def test_no_module_imports_another_modules_private_names():
     assert private_imports() == []
+
+
+# --------------------------------------------------------------------------- one name, one thing
+
+#: Public names several modules define on purpose, and why.
+SHARED_NAMES = {
+    # every command module's entry point and parser: the command-line contract (cli/__init__.py)
+    "main": "cli",
+    "build_parser": "cli",
+}
+
+#: Module basenames several packages hold on purpose, and why.
+SHARED_BASENAMES = {
+    # each package's settings, read as the package's: lidar.config (the sensor's XML
+    # parameters, LidarConfig) and nidar.config (the networks and their training, TrainConfig)
+    "config": {"nidar_mi.lidar.config", "nidar_mi.nidar.config"},
+}
+
+
+def public_names() -> dict[str, list[str]]:
+    """Public function and class name -> the modules that define it at module level."""
+    found: dict[str, list[str]] = {}
+    for module, _, tree in _modules():
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                if not node.name.startswith("_"):
+                    found.setdefault(node.name, []).append(module)
+    return found
+
+
+def _allowed_name(name: str, modules: list[str]) -> bool:
+    package = SHARED_NAMES.get(name)
+    return package is not None and all(
+        m.startswith(f"nidar_mi.{package}.") or m == f"nidar_mi.{package}" for m in modules
+    )
+
+
+def test_no_public_name_is_defined_by_two_modules():
+    repeated = {
+        name: modules
+        for name, modules in public_names().items()
+        if len(modules) > 1 and not _allowed_name(name, modules)
+    }
+    assert repeated == {}
+
+
+def _is_shim_pair(modules: list[str]) -> bool:
+    """``nidar_mi.<command>`` (the ``python -m`` shim) and ``nidar_mi.cli.<command>``."""
+    shims = [m for m in modules if m.count(".") == 1]
+    return (
+        len(modules) == 2
+        and len(shims) == 1
+        and set(modules) == {shims[0], "nidar_mi.cli." + shims[0].rpartition(".")[2]}
+    )
+
+
+def test_no_module_basename_repeats():
+    by_name: dict[str, list[str]] = {}
+    for module, is_pkg, _ in _modules():
+        if not is_pkg and not module.endswith("__main__"):
+            by_name.setdefault(module.rpartition(".")[2], []).append(module)
+    repeated = {
+        name: modules
+        for name, modules in by_name.items()
+        if len(modules) > 1
+        and not _is_shim_pair(modules)
+        and set(modules) != SHARED_BASENAMES.get(name)
+    }
+    assert repeated == {}
+
+
+def test_the_name_checks_see_a_repeat():
+    assert _is_shim_pair(["nidar_mi.render", "nidar_mi.cli.render"])
+    assert not _is_shim_pair(["nidar_mi.eval.report", "nidar_mi.materials.report"])
+    assert _allowed_name("main", ["nidar_mi.cli.render", "nidar_mi.cli"])
+    assert not _allowed_name("main", ["nidar_mi.cli.render", "nidar_mi.eval.reflectance_cue"])
+    assert not _allowed_name("load_frame", ["nidar_mi.training_frames", "nidar_mi.x"])

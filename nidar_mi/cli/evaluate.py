@@ -127,14 +127,14 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     def work():
-        from ..eval.suite import run as evaluate
+        from ..eval.suite import run_evaluation
 
         opts = options(args, argv_text)
         if opts.scans_scenes:
             from ..backend import set_variant
 
             set_variant("llvm_ad_spectral")
-        payload = evaluate(opts)
+        payload = run_evaluation(opts)
         log.info("wrote %s in %.0f s", os.path.join(opts.out, "results.md"), payload["seconds"])
 
     return run(work, flags={"scene_dir": "--scenes"}, args=args)

@@ -1,6 +1,6 @@
 """KITTI frames as NIDAR training frames: real sparse intensity, visible returns, rings.
 
-Each KITTI frame (:func:`nidar_mi.datasets.kitti_objects.load_frame`) becomes one training frame in the
+Each KITTI frame (:func:`nidar_mi.datasets.kitti_objects.load_kitti_frame`) becomes one training frame in the
 format of :mod:`nidar_mi.training_frames` (source ``"kitti"``, keys
 :data:`nidar_mi.training_frames.FRAME_SOURCES` ``["kitti"]``):
 
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..io.cache_key import cache_key
-from .kitti_objects import KittiFrame, frame_ids, load_frame
+from .kitti_objects import KittiFrame, frame_ids, load_kitti_frame
 from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
 from .paths import cache_dir, data_root
 
@@ -189,7 +189,7 @@ def build_kitti_frames(
             )
             prev = old_info.get(name) if fresh else None
             if prev is None:
-                frame, prev = kitti_training_frame(load_frame(kitti_dir, fid))
+                frame, prev = kitti_training_frame(load_kitti_frame(kitti_dir, fid))
                 if not target.exists():
                     added.append(target)
                 write_frame(target, frame)

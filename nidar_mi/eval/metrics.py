@@ -14,7 +14,7 @@ mask M:
   the window is cut at the image edge and renormalised (the local statistics use only pixels
   inside the image), so the map has the input's size; farther in, it is the reference
   formulation exactly. It is the training loss's SSIM
-  (:func:`nidar_mi.nidar.losses.ssim_map`), evaluated in float64.
+  (:func:`nidar_mi.nidar.losses.ssim_map_torch`), evaluated in float64.
 * LPIPS (AlexNet, via the ``lpips`` package): only with ImageNet AlexNet weights in the torch
   cache (``torch.hub.get_dir()/checkpoints/alexnet-owt-7be5be79.pth``); otherwise ``None`` with
   the reason, never a random backbone. The backbone is loaded from that file with
@@ -134,7 +134,7 @@ def psnr(pred: Any, gt: Any, mask: Any = None) -> float:
 def ssim_map(x: Any, y: Any) -> np.ndarray:
     """Per-pixel SSIM of two (H, W) maps in [0, 1] (data range 1), in float64.
 
-    This evaluates the package's one SSIM, :func:`nidar_mi.nidar.losses.ssim_map` (the one the
+    This evaluates the package's one SSIM, :func:`nidar_mi.nidar.losses.ssim_map_torch` (the one the
     training loss uses): 11x11 Gaussian window (σ = 1.5), cut at the image edge and
     renormalised; variances and covariance are the window-weighted population ones.
 
@@ -147,11 +147,11 @@ def ssim_map(x: Any, y: Any) -> np.ndarray:
     """
     import torch
 
-    from ..nidar.losses import ssim_map as _ssim_map
+    from ..nidar.losses import ssim_map_torch
 
     x, y, _ = _pair(x, y, ndim=2)
     with torch.no_grad():
-        s = _ssim_map(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])
+        s = ssim_map_torch(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])
     return s[0, 0].numpy()
 
 

@@ -6,7 +6,7 @@ KITTI leave-one-frame-out (:mod:`nidar_mi.eval.loo`) and the held-out RGB/NIR ph
 (:mod:`nidar_mi.eval.photos`), both via :mod:`nidar_mi.eval.real`. The results are written as
 ``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of real data), published whole
 when everything succeeded; renders and ablation runs are cached outside ``OUT``
-(:func:`cache_dir`; the KITTI frames in the user's cache, :mod:`nidar_mi.datasets.paths`).
+(:func:`evaluation_cache`; the KITTI frames in the user's cache, :mod:`nidar_mi.datasets.paths`).
 
 The run is described by an :class:`EvaluateOptions` (the command line builds one from its
 arguments). Scanning and rendering scenes (baseline (a), ``scenes``, ``heldout_materials``)
@@ -23,7 +23,7 @@ import time
 
 from ..errors import NidarError
 
-__all__ = ["EvaluateOptions", "run", "cache_dir"]
+__all__ = ["EvaluateOptions", "run_evaluation", "evaluation_cache"]
 
 log = logging.getLogger("nidar_mi.evaluate")
 
@@ -76,7 +76,7 @@ class EvaluateOptions:
         return bool(self.data) and bool(self.twin or self.scenes or self.heldout_materials)
 
 
-def cache_dir(options: EvaluateOptions) -> str:
+def evaluation_cache(options: EvaluateOptions) -> str:
     """The evaluation's cache: ``options.cache``, default ``DATA/cache/evaluate``.
 
     It holds ``renders/<scene>`` (the hand-made scenes rendered with the dataset's parameters;
@@ -88,11 +88,11 @@ def cache_dir(options: EvaluateOptions) -> str:
     return options.cache or os.path.join(options.data, "cache", "evaluate")
 
 
-def run(options: EvaluateOptions) -> dict:
+def run_evaluation(options: EvaluateOptions) -> dict:
     """Everything the evaluation does; returns the results payload (also written to OUT).
 
     ``OUT`` (results and figures) is published whole when everything succeeded
-    (:func:`nidar_mi.io.atomic.staged_directory`); caches go to :func:`cache_dir`.
+    (:func:`nidar_mi.io.atomic.staged_directory`); caches go to :func:`evaluation_cache`.
 
     Raises:
         NidarError: a missing or inconsistent input, LPIPS requested but unavailable, no
@@ -125,7 +125,7 @@ def _inputs(options: EvaluateOptions) -> list[str | None]:
     """Every file and folder the run reads (the output must not hold one); the cache too,
     which a replaced output would take with it."""
     o = options
-    extra = [o.cache or (cache_dir(o) if o.data else None)]
+    extra = [o.cache or (evaluation_cache(o) if o.data else None)]
     return [o.data, o.weights, o.scenes, o.heldout_materials, *o.kitti, o.photos, *extra]
 
 
@@ -297,7 +297,7 @@ def _synthetic(options: EvaluateOptions, meta: dict, model, fig_dir: str, payloa
         stn = model.weights_dir / "stn.safetensors"
         payload["ablation"] = run_ablation(
             options.data,
-            os.path.join(cache_dir(options), "ablation", _ablation_key(meta, stn)),
+            os.path.join(evaluation_cache(options), "ablation", _ablation_key(meta, stn)),
             stn,
             split=options.split,
         )
@@ -359,7 +359,7 @@ def _handmade(options, model, ctx: _Rendered, fig_dir: str, payload: dict) -> No
     log.info("rendering and evaluating %d hand-made scenes", len(files))
     dirs = render_scenes(
         files,
-        os.path.join(cache_dir(options), "renders"),
+        os.path.join(evaluation_cache(options), "renders"),
         **ctx.render_opts,
         workers=options.workers,
         ray_address=options.ray_address,
@@ -382,7 +382,7 @@ def _heldout_materials(options, model, ctx: _Rendered, payload: dict) -> None:
 
     files = find_scenes(options.heldout_materials)
     log.info("rendering and evaluating %d scenes of held-out materials", len(files))
-    cache = os.path.join(cache_dir(options), "renders_heldout")
+    cache = os.path.join(evaluation_cache(options), "renders_heldout")
     dirs = render_scenes(files, cache, **ctx.render_opts)
     res = evaluate_renders(dirs, model, ctx.scale, **ctx.scoring)
     class_const = ctx.scoring["class_const"]

@@ -3,10 +3,10 @@
 :func:`run_study` reads as its steps:
 
 1. **drive**: a ``city`` (or ``suburb``) layout and its drive (:mod:`nidar_mi.scenegen`);
-2. **frames**: the drive scanned from every pose (:func:`.sweeps.render_sweeps`: the package's
+2. **frames**: the drive scanned from every pose (:func:`.drive_sweeps.render_sweeps`: the package's
    trajectory renderer, :mod:`nidar_mi.sequence`, one instantaneous sweep per pose), once with
    the spectral materials (plus the camera at every pose) and once on the RGB-only twin; NIDAR's
-   intensity from the camera images (:func:`.sweeps.nidar_intensity`);
+   intensity from the camera images (:func:`.drive_sweeps.nidar_intensity`);
 3. **odometry**: KISS-ICP on the frames (:func:`.kiss.run_odometry`), ATE / RPE / end drift
    against the true poses (:mod:`.odometry`), on the whole sweeps, on the same sweeps written in
    the KITTI odometry layout and read by kiss-icp's own loader (:data:`KITTI_LAYOUT`: a client
@@ -220,7 +220,7 @@ class _Sweeps:
 
     Attributes:
         folders: kind -> its sequence folder.
-        loads: kind -> ``load(k) -> Sweep`` (:func:`.sweeps.read_sequence`).
+        loads: kind -> ``load(k) -> Sweep`` (:func:`.drive_sweeps.read_sequence`).
         nidar: the folder of NIDAR's columns (None without the ``nidar`` source).
     """
 
@@ -236,7 +236,7 @@ class _Sweeps:
 
 def _render(out: str, cfg: StudyConfig, drive: _Drive, timings: dict, progress: bool) -> _Sweeps:
     """The sweeps of every kind the sources need and NIDAR's columns, timed into ``timings``."""
-    from .sweeps import SweepRequest, nidar_intensity, read_sequence, render_sweeps
+    from .drive_sweeps import SweepRequest, nidar_intensity, read_sequence, render_sweeps
 
     params = {"cols": str(cfg.cols), "width": str(cfg.width), "height": str(cfg.height)}
     base = SweepRequest(drive.scene, drive.trajectory, cfg.rate_hz, cfg.frames, params=params)
@@ -290,8 +290,8 @@ def _odometry_runs(cfg: StudyConfig, out: str, sweeps: _Sweeps, gt, progress: bo
 def _distorted_runs(cfg: StudyConfig, metrics, progress: bool) -> dict:
     """KISS-ICP on the motion-distorted sweeps of ``cfg.sequence``, with and without its
     de-skewing, scored against the poses at mid-sweep."""
+    from .drive_sweeps import read_sequence
     from .kiss import run_odometry
-    from .sweeps import read_sequence
 
     seq_poses, seq_times, load = read_sequence(cfg.sequence)
     # the renderer needs each sweep inside the trajectory, so it may hold a frame less

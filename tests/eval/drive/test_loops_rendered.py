@@ -4,10 +4,10 @@ on, 0.3 m to the side and turned by 9 degrees (a revisit of the drive's shared s
 import numpy as np
 import pytest
 
+from nidar_mi.eval.drive.drive_sweeps import SweepRequest, read_sequence, render_sweeps
 from nidar_mi.eval.drive.loops import match_drive, pr_summary
 from nidar_mi.eval.drive.scan_context import descriptor, normalise
 from nidar_mi.eval.drive.study import ISC_MIN_Z_M, source_values
-from nidar_mi.eval.drive.sweeps import SweepRequest, read_sequence, render_sweeps
 from nidar_mi.scenegen.city import sample_city
 from nidar_mi.scenegen.streets import LIDAR_HEIGHT_M
 

@@ -8,8 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from nidar_mi.errors import NidarError
+from nidar_mi.eval.drive.drive_sweeps import SweepRequest, read_sequence, render_sweeps
 from nidar_mi.eval.drive.study import SOURCES, gt_at_mid_sweep, source_values
-from nidar_mi.eval.drive.sweeps import SweepRequest, read_sequence, render_sweeps
 from nidar_mi.io.points import write_npz
 
 
