@@ -212,7 +212,17 @@ LAYERS = {
     **dict.fromkeys(("eval", "cli"), 2),
 }
 #: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
-SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate", "drive", "dataset"}
+SHIMS = {
+    "render",
+    "assign",
+    "train",
+    "evaluate",
+    "pseudo_nir",
+    "calibrate",
+    "drive",
+    "dataset",
+    "reflectance_cue",
+}
 
 
 def _component(module: str) -> str:

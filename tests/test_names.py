@@ -160,5 +160,5 @@ def test_the_name_checks_see_a_repeat():
     assert _is_shim_pair(["nidar_mi.render", "nidar_mi.cli.render"])
     assert not _is_shim_pair(["nidar_mi.eval.report", "nidar_mi.materials.report"])
     assert _allowed_name("main", ["nidar_mi.cli.render", "nidar_mi.cli"])
-    assert not _allowed_name("main", ["nidar_mi.cli.render", "nidar_mi.eval.reflectance_cue"])
+    assert not _allowed_name("main", ["nidar_mi.cli.render", "nidar_mi.eval.image_cues"])
     assert not _allowed_name("load_frame", ["nidar_mi.training_frames", "nidar_mi.x"])

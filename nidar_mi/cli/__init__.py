@@ -23,6 +23,7 @@ COMMANDS = {
     "calibrate": "fit a sensor profile (distance and ring response) on a sensor's own scans",
     "assign": "NIDAR intensity for a point cloud from camera images (or a KITTI frame)",
     "evaluate": "score NIDAR and the baselines (tables, figures)",
+    "reflectance_cue": "how well image values rank the true reflectance; what the image adds",
     "drive": "odometry and loop closure per intensity source on a simulated drive",
 }
 

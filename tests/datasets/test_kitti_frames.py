@@ -16,7 +16,7 @@ from nidar_mi.datasets.kitti_frames import (
     kitti_training_data,
     kitti_training_frame,
 )
-from nidar_mi.datasets.kitti_objects import load_frame as load_kitti
+from nidar_mi.datasets.kitti_objects import load_kitti_frame as load_kitti
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry import project
 from nidar_mi.io.images import write_png
