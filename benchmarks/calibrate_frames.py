@@ -79,9 +79,9 @@ from nidar_mi.datasets.sensor_profiles import (
     GENERIC_RAW_PROFILE,
     generic_profile,
 )
+from nidar_mi.eval.image_cues import GREY_LEVEL, luminance
 from nidar_mi.eval.loo import colour_at_returns, linear_colour_distance_method
 from nidar_mi.eval.metrics import spearman
-from nidar_mi.eval.image_cues import GREY_LEVEL, luminance
 from nidar_mi.eval.scan_metrics import binned_spearman
 from nidar_mi.nidar.pipeline import NidarModel
 
