@@ -217,7 +217,7 @@ def _photos(folder, progress: bool):
 
 
 def _train(args: argparse.Namespace, cfg) -> None:
-    from ..nidar import train as training
+    from ..nidar import training
 
     progress = show_progress(args)
     if args.stage == "stn" and args.photos is not None:
