@@ -37,7 +37,7 @@ from ..io.cache_key import file_sha256
 from ..training_frames import list_frames, load_frame, load_meta
 from .checkpoint import atomic_write
 from .config import INPUT_CHANNELS, TrainConfig
-from .data import IRNetDataset, MixedDataset, STNDataset
+from .data import IntrinsicTargets, IRNetDataset, MixedDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
 from .losses import irnet_objective, photo_stn_loss, stn_loss
@@ -291,10 +291,13 @@ def train_irnet(
             crop_size=cfg.crop_shape,
             seed=cfg.seed,
             scale=cfg.scale,
-            intrinsic_targets=cfg.intrinsic_supervision,
-            missing_targets_zero=bool(renders),
-            r_target=cfg.loss.r_target,
-            wavelength_nm=float(meta.get("wavelength_nm") or 905.0),
+            intrinsic=IntrinsicTargets(
+                r_target=cfg.loss.r_target,
+                wavelength_nm=float(meta.get("wavelength_nm") or 905.0),
+                missing_zero=bool(renders),
+            )
+            if cfg.intrinsic_supervision
+            else None,
             colour=cfg.irnet.input if INPUT_CHANNELS[cfg.irnet.input] == 4 else None,
         )
         train_set = IRNetDataset(
