@@ -10,8 +10,6 @@ import mitsuba as mi
 
 from nidar_mi.lidar.config import PARAMETERS, LidarConfig
 
-from . import PluginParameterError
-
 __all__ = ["VARIANT", "LidarSensor"]
 
 #: The Mitsuba variant this module's class belongs to.
@@ -159,7 +157,7 @@ class LidarSensor(mi.Sensor):
          - pose; LiDAR frame x forward, y left, z up
          - identity
 
-    An invalid value fails the scene load with :class:`nidar_mi.plugins.PluginParameterError`:
+    An invalid value fails the scene load with :class:`nidar_mi.errors.NidarError`:
     one line naming the sensor and the parameter.
 
     .. code-block:: xml
@@ -182,10 +180,7 @@ class LidarSensor(mi.Sensor):
         if "calibration_file" in values:  # relative to the scene file
             path = str(values["calibration_file"])
             values["calibration_file"] = str(mi.file_resolver().resolve(path))
-        try:
-            self.config = LidarConfig.from_mapping(props.id() or "lidar", values)
-        except ValueError as e:
-            raise PluginParameterError(str(e)) from None
+        self.config = LidarConfig.from_mapping(props.id() or "lidar", values)
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"
