@@ -73,13 +73,14 @@ def test_the_paths_exist():
     assert all(any(PACKAGE.glob(p)) for p in PATHS)
 
 
+def _longer_than(functions, max_lines: int) -> dict[str, int]:
+    """Name -> length in lines of every function longer than ``max_lines``."""
+    lengths = {name: node.end_lineno - node.lineno + 1 for name, node in functions}
+    return {name: n for name, n in lengths.items() if n > max_lines}
+
+
 def test_no_long_function():
-    long = {
-        name: node.end_lineno - node.lineno + 1
-        for name, node in _functions()
-        if node.end_lineno - node.lineno + 1 > MAX_LINES
-    }
-    assert long == {}
+    assert _longer_than(_functions(), MAX_LINES) == {}
 
 
 def test_no_long_signature():
@@ -90,21 +91,12 @@ def test_no_long_signature():
 
 
 def test_no_long_function_in_the_package():
-    long = {
-        name: node.end_lineno - node.lineno + 1
-        for name, node in _package_functions()
-        if node.end_lineno - node.lineno + 1 > PACKAGE_MAX_LINES
-    }
-    assert long == {}
+    assert _longer_than(_package_functions(), PACKAGE_MAX_LINES) == {}
 
 
 def test_no_long_signature_in_the_package():
-    over = {
-        name: _parameters(node)
-        for name, node in _package_functions()
-        if _parameters(node) > PACKAGE_MAX_PARAMETERS
-    }
-    assert over == {}
+    counts = {name: _parameters(node) for name, node in _package_functions()}
+    assert {name: n for name, n in counts.items() if n > PACKAGE_MAX_PARAMETERS} == {}
 
 
 def test_the_package_guard_reads_every_module():
