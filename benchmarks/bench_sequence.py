@@ -195,7 +195,8 @@ def _camera_sequence(tmp: str, traj_path: str, frames: int, cols: int) -> dict:
     from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions
 
-    frame = RenderOptions(STREET, formats=rf.FORMATS, params={"cols": str(cols)}, progress=False)
+    formats = tuple(f for f in rf.FORMATS if f != "laz")  # laz: an extra
+    frame = RenderOptions(STREET, formats=formats, params={"cols": str(cols)}, progress=False)
     options = SequenceOptions(frame, traj_path, rate=10.0, frames=frames)
     with _kernels_per_frame() as hashes:
         m, r = _sequence(options, tempfile.mkdtemp(dir=tmp))

@@ -47,8 +47,9 @@ __all__ = [
     "write_manifest",
 ]
 
-#: Point-cloud formats a LiDAR folder can hold.
-FORMATS = ("npz", "ply", "las", "bin", "pcd")
+#: Point-cloud formats a LiDAR folder can hold (``laz``: LAS compressed by laspy's lazrs back
+#: end, the ``laz`` extra).
+FORMATS = ("npz", "ply", "las", "laz", "bin", "pcd")
 #: The formats written when none are asked for.
 DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
 #: ``bin_intensity`` values: KITTI's [0, 1] convention, or the simulator's own intensity.
@@ -192,8 +193,9 @@ def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
 # --------------------------------------------------------------------------- size
 
 #: Bytes per point of each format, the simulator's columns (:mod:`nidar_mi.io.points`), rounded
-#: up; LAS adds its point record, ``bin`` holds x, y, z and intensity only.
-POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "bin": 16}
+#: up; LAS adds its point record (LAZ, compressed, is counted as LAS), ``bin`` holds x, y, z and
+#: intensity only.
+POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "laz": 80, "bin": 16}
 #: Bytes per point of ``xyz_deskewed`` (every format but ``bin``).
 DESKEW_BYTES = 12
 #: Bytes per beam of ``range_image.exr`` (4 float32 channels, uncompressed).
@@ -314,6 +316,7 @@ def write_lidar(
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
+        "laz": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
         "bin": lambda p: write_kitti_bin(p, pts["xyz"], bin_i),
         "pcd": lambda p: write_pcd(p, pts),
     }

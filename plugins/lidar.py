@@ -30,8 +30,16 @@ class LidarSensor(mi.Sensor):
          - Default
        * - ``preset``
          - string
-         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top`` (tables and
-           sources in :mod:`nidar_mi.lidar.pattern` and :mod:`nidar_mi.lidar.layouts`)
+         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``,
+           ``vlp32c``, ``vls128``, ``os0_128``, ``os2_128``, ``pandar64``, ``xt32``, ``at128``,
+           ``livox_mid40`` (tables and sources in :mod:`nidar_mi.lidar.pattern` and
+           :mod:`nidar_mi.lidar.layouts`); a preset also sets the defaults of
+           ``horizontal_resolution``, ``range_min``, ``range_max`` and, for ``at128``,
+           ``fov_h`` (120), ``fov_h_centred``, ``rotation_rate`` and ``scan_start_azimuth``;
+           ``livox_mid40``: one laser behind two Risley prisms (:mod:`nidar_mi.lidar.risley`),
+           ``horizontal_resolution`` shots per sweep, ``rotation_rate`` sweeps per second
+           (their product the point rate), ``fov_h``, ``spin`` and ``scan_start_azimuth``
+           unused
          - ``vlp16``
        * - ``layout``
          - string
@@ -60,16 +68,16 @@ class LidarSensor(mi.Sensor):
          - float
          - horizontal field of view in degrees, (0, 360]; column j points at azimuth
            a0 + (j + 0.5)·fov_h/cols from +x, counter-clockwise
-         - 360
+         - 360 (``at128``: 120)
        * - ``fov_h_centred``
          - boolean
          - ``true``: a0 = -fov_h/2, the columns span ±fov_h/2 around +x (forward);
            ``false``: a0 = 0, they span 0..fov_h
-         - ``false``
+         - ``false`` (``at128``: ``true``)
        * - ``rotation_rate``
          - float
          - spin rate in Hz, (0, 100]; one sweep takes 1/rotation_rate s
-         - 10
+         - 10 (``at128``: 6.67, its beam's sweep)
        * - ``spin``
          - string
          - ``cw`` (clockwise seen from above, as Velodyne and Ouster sensors spin) or ``ccw``
@@ -77,7 +85,7 @@ class LidarSensor(mi.Sensor):
        * - ``scan_start_azimuth``
          - float
          - azimuth in degrees where a sweep starts (firing time 0), [-360, 360]
-         - 180
+         - 180 (``at128``: 60)
        * - ``wavelength``
          - float
          - laser wavelength in nm, [360, 1700]

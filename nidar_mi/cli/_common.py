@@ -8,7 +8,8 @@ status:
 status  meaning
 ======  ====================================================================================
 0       success
-2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file)
+2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file,
+        a module of an optional extra that is not installed: :mod:`nidar_mi.extras`)
 130     interrupted by Ctrl-C (SIGINT)
 143     terminated (SIGTERM)
 ======  ====================================================================================
@@ -37,6 +38,7 @@ import warnings
 from collections.abc import Callable, Mapping
 
 from ..errors import MAX_SEED, NidarError, check_seed, flag_message
+from ..extras import extra_of, missing_extra
 from ..progress import stderr_is_terminal
 
 __all__ = [
@@ -267,6 +269,13 @@ def run(
     except KeyboardInterrupt:
         print(f"interrupted; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except ModuleNotFoundError as e:  # a module of an extra that is not installed
+        extra = extra_of(e.name or "")
+        if extra is None:
+            raise
+        message = missing_extra(extra, "this command", ((e.name or "").split(".")[0],))
+        print(f"error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
     except OSError as e:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"error: {where}{_one_line(e.strerror or e)}", file=sys.stderr)

@@ -9,6 +9,7 @@ and the analysis).
 
 from __future__ import annotations
 
+from ..extras import require
 from ._common import parser, run, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -95,6 +96,9 @@ def main(argv=None) -> int:
             body_motion=not args.no_body_motion,
         )
         cfg.check()  # bad options are named before the variant starts
+        require("drive", "drive")
+        if "nidar" in cfg.sources:
+            require("nidar", "drive --sources nidar")
         set_variant()
         results = run_study(args.out, cfg, progress=show_progress(args), overwrite=args.overwrite)
         if not args.quiet:

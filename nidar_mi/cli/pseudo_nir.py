@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import require
 from ._common import parser, run, show_progress
 
 __all__ = ["IMAGE_EXTENSIONS", "build_parser", "collect_inputs", "main", "output_names"]
@@ -209,7 +210,12 @@ def build_parser():
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _convert(args), args=args)
+
+    def work():
+        require("nidar", "pseudo_nir")
+        _convert(args)
+
+    return run(work, args=args)
 
 
 def _convert(args) -> None:

@@ -287,6 +287,19 @@ def _render_options(args):
     )
 
 
+def _require_extras(args) -> None:
+    """The optional dependencies the options need (:mod:`nidar_mi.extras`), checked before any
+    work."""
+    from ..extras import require
+
+    if args.intensity == "nidar" or args.profile is not None:
+        require("nidar", "--intensity nidar")
+    if "laz" in _parse_formats(args.formats):
+        require("laz", "--formats laz")
+    if "rosbag" in args.sequence_formats.lower():
+        require("ros", "--sequence-formats rosbag")
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     out = args.out or os.path.join("out", os.path.splitext(os.path.basename(args.scene))[0])
@@ -299,6 +312,7 @@ def main(argv=None) -> int:
         sequence_only = (args.rate, args.frames, args.max_frames, args.max_disk)
         inputs = [*scene_inputs(args.scene), args.trajectory, args.weights, args.profile]
         check_outside_inputs(out, inputs)
+        _require_extras(args)
         if args.trajectory is None and (
             any(v is not None for v in sequence_only)
             or args.sequence_formats

@@ -37,6 +37,7 @@ import shutil
 from pathlib import Path
 
 from ..errors import NidarError
+from ..extras import require
 from ._common import parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_config"]
@@ -184,6 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     def work():
         from ..io.atomic import check_output_folder
 
+        require("nidar", "train")
         cfg = build_config(args)
         out = args.out
         if args.overwrite and args.resume:
