@@ -59,10 +59,10 @@ class CloudInputs:
 def kitti_inputs(folder: str, frame: str) -> CloudInputs:
     """KITTI ``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2); the rings
     recovered from the storage order (:func:`nidar_mi.datasets.kitti_rings.checked_rings`)."""
-    from .datasets.kitti import load_frame
+    from .datasets.kitti_objects import load_kitti_frame
     from .datasets.kitti_rings import checked_rings
 
-    f = load_frame(folder, frame)
+    f = load_kitti_frame(folder, frame)
     points = {"xyz": f.xyz, "intensity": f.intensity}
     ring = checked_rings(f.xyz)
     if ring is not None:

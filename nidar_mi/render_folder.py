@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from .errors import NidarError
+from .io.cache_key import file_sha256
 
 __all__ = [
     "BIN_INTENSITY",
@@ -58,12 +59,6 @@ MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
 #: without ``reflectance.exr`` or ``albedo.exr``) are rendered again.
 LAYOUT_VERSION = 3
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()
 
 
 #: The files of a NIDAR weights folder that decide its output (those present are hashed).
@@ -114,6 +109,8 @@ class RenderRequest:
         layout: :data:`LAYOUT_VERSION` of the folder.
         weather: the weather set for the render (:meth:`nidar_mi.weather.Weather.to_dict`);
             None (and absent from :meth:`to_dict`, as before weather existed): the scene's own.
+        labels: whether the shapes' labels were read; recorded only when False, so that the
+            requests of renders with labels read as they always did.
     """
 
     scene: str
@@ -132,6 +129,7 @@ class RenderRequest:
     bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
     weather: dict | None = None
+    labels: bool = True
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
@@ -155,6 +153,8 @@ class RenderRequest:
         d["formats"] = list(self.formats)
         if d["weather"] is None:
             del d["weather"]
+        if self.labels:
+            del d["labels"]
         return d
 
 
@@ -542,7 +542,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     Raises:
         NidarError: missing or malformed manifest, or an unknown LiDAR id.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
     from .io.images import read_exr
     from .io.points import read_npz
     from .lidar.return_model import compensate
@@ -561,7 +561,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     cameras = []
     for cam_id, cam in sorted(manifest.get("cameras", {}).items()):
         cam_dir = os.path.join(folder, cam_id)
-        model = render_camera(cam, cam_id, lid, f"{folder}: camera {cam_id}")
+        model = render_calib_model(cam, cam_id, lid, f"{folder}: camera {cam_id}")
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
         cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)

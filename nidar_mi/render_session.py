@@ -75,6 +75,9 @@ class RenderOptions:
         weather: a :class:`nidar_mi.weather.Weather` for every LiDAR (their ``fog``, ``rain``,
             ``snow`` replaced) and the cameras; None: the scene's own. Not with ``intensity``
             nidar.
+        labels: read the shapes' semantic labels (:func:`nidar_mi.scene.load_scene`). False:
+            every point ``unlabeled``, and Mitsuba merges the meshes that share a BSDF (a
+            generated city scans ~7x faster, the same returns).
     """
 
     scene: str
@@ -93,6 +96,7 @@ class RenderOptions:
     deskew: bool = False
     progress: bool = True
     weather: Any = None
+    labels: bool = True
 
     def key(self) -> rf.RenderRequest:
         """The cache key of this render (hashes the scene file; NidarError when it is missing)."""
@@ -110,6 +114,7 @@ class RenderOptions:
             profile=profile_key(self.profile),
             bin_intensity=self.bin_intensity,
             weather=None if self.weather is None else self.weather.to_dict(),
+            labels=self.labels,
         )
 
 
@@ -182,7 +187,7 @@ def _load_checked(req: rf.RenderRequest):
     """The scene of a request, in the active variant; it must have a LiDAR and unique ids."""
     from .scene import load_scene
 
-    loaded = load_scene(req.scene, rgb_twin=req.rgb_twin, params=req.params)
+    loaded = load_scene(req.scene, rgb_twin=req.rgb_twin, params=req.params, labels=req.labels)
     if not loaded.lidars:
         raise NidarError(f'{req.scene}: no lidar sensor (add <sensor type="lidar">)')
     names = [s.id() for s in loaded.lidars + loaded.cameras]

@@ -19,7 +19,7 @@ from .backend import active_variant
 from .errors import NidarError
 from .labels import SceneLabels, strip_labels
 
-__all__ = ["LoadedScene", "load_scene", "RGB_EMITTER_MARKERS"]
+__all__ = ["LoadedScene", "load_scene", "load_scene_text", "RGB_EMITTER_MARKERS"]
 
 #: Substrings of an emitter's description that betray an RGB or float radiance (D65-shaped in the
 #: spectral variants, hence empty past 830 nm).
@@ -211,6 +211,27 @@ def load_scene(
         rgb_twin=rgb_twin,
         labels=declared,
     )
+
+
+def load_scene_text(xml: str, name: str = "scene.xml", **kwargs) -> LoadedScene:
+    """Load a scene from its XML text (a scene a study builds in memory).
+
+    The text is written to ``name`` in a temporary folder, loaded by :func:`load_scene` and
+    the folder removed (the loaded scene keeps nothing of the file), so the scene may name no
+    file by a relative path.
+
+    Args:
+        xml: the scene XML.
+        name: the file name messages give the scene.
+        **kwargs: the keyword arguments of :func:`load_scene`.
+    """
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="nidar_mi_scene-") as tmp:
+        path = os.path.join(tmp, name)
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(xml)
+        return load_scene(path, **kwargs)
 
 
 def _sensors(path: str, scene, variant: str) -> tuple[list, list]:

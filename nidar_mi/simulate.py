@@ -161,14 +161,14 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
         "nidar_observed": (N,) bool}``, one value
         per valid return.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
 
     maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in renders.items()}
     out = {}
     for lid, result in results.items():
         cams, depth, cam_maps = [], [], []
         for cid, (r, calib) in renders.items():
-            cams.append(render_camera(calib, cid, lid))
+            cams.append(render_calib_model(calib, cid, lid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
         pts = result.points()

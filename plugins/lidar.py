@@ -15,8 +15,6 @@ from nidar_mi.lidar.config import PARAMETERS, LidarConfig
 from nidar_mi.weather.conditions import PARAMETERS as WEATHER_PARAMETERS
 from nidar_mi.weather.conditions import Weather
 
-from . import PluginParameterError
-
 __all__ = ["VARIANT", "LidarSensor"]
 
 #: The Mitsuba variant this module's class belongs to.
@@ -173,7 +171,7 @@ class LidarSensor(mi.Sensor):
          - float
          - fog by its meteorological optical range in m, [5, 100000] (α at 550 nm = ln 20 /
            MOR; droplets by ``fog_type``): attenuation, the fog's own soft return
-           (:mod:`nidar_mi.lidar.weather`, docs/WEATHER.md)
+           (:mod:`nidar_mi.lidar.weather_returns`, docs/WEATHER.md)
          - none
        * - ``fog_type``
          - string
@@ -192,7 +190,7 @@ class LidarSensor(mi.Sensor):
          - pose; LiDAR frame x forward, y left, z up
          - identity
 
-    An invalid value fails the scene load with :class:`nidar_mi.plugins.PluginParameterError`:
+    An invalid value fails the scene load with :class:`nidar_mi.errors.NidarError`:
     one line naming the sensor and the parameter.
 
     .. code-block:: xml
@@ -216,17 +214,14 @@ class LidarSensor(mi.Sensor):
             path = str(values["calibration_file"])
             values["calibration_file"] = str(mi.file_resolver().resolve(path))
         name = props.id() or "lidar"
-        try:
-            self.config = LidarConfig.from_mapping(name, values)
-        except ValueError as e:
-            raise PluginParameterError(str(e)) from None
+        self.config = LidarConfig.from_mapping(name, values)
         weather = {k: props.get(k) for k in WEATHER_PARAMETERS if k in props}
         try:
             #: the sensor's own weather (None: clear), what a scan uses unless told otherwise
             self.weather = Weather.from_mapping(weather)
         except NidarError as e:
             message = re.sub(r"`(\w+)`", r"parameter '\1'", str(e))
-            raise PluginParameterError(f"lidar '{name}': {message}") from None
+            raise NidarError(f"lidar '{name}': {message}") from None
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"

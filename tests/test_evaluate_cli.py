@@ -47,7 +47,7 @@ def tiny_run(tmp_path_factory, variant):
     from nidar_mi.datasets.profile_fitting import fit_split_calibration
     from nidar_mi.nidar.config import TrainConfig
     from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.train import train
+    from nidar_mi.nidar.training import train
     from nidar_mi.render_dataset import build_dataset
 
     root = tmp_path_factory.mktemp("e2e")
@@ -77,7 +77,7 @@ def tiny_run(tmp_path_factory, variant):
 def test_end_to_end_tables(tiny_run, tmp_path):
     import csv
 
-    from nidar_mi.eval.frames import METHODS
+    from nidar_mi.eval.rendered import METHODS
 
     out = tmp_path / "out"
     argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]
@@ -256,10 +256,12 @@ def test_the_command_line_becomes_evaluate_options():
 
 def test_the_library_names_parameters_and_the_command_flags(tmp_path, capsys):
     from nidar_mi.errors import NidarError
-    from nidar_mi.eval.suite import EvaluateOptions, run
+    from nidar_mi.eval.suite import EvaluateOptions, run_evaluation
 
     with pytest.raises(NidarError, match="`heldout_materials` needs `data`"):
-        run(EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path)))
+        run_evaluation(
+            EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path))
+        )
     argv = ["--photos", "p", "--heldout-materials", str(tmp_path), "-o", str(tmp_path / "o")]
     assert main(argv) == 2
     assert "error: --heldout-materials needs --data" in capsys.readouterr().err

@@ -10,7 +10,7 @@ entry per camera (schema: :mod:`nidar_mi.io.calib`; the render command's ``calib
 ``--lidar`` choosing the LiDAR of a scene with several), one ``--image`` per camera in the same
 order: 8-bit colour PNG as a camera delivers it (RGBA loses alpha, 16-bit is reduced to 8 bit, a
 greyscale image is used as R = G = B with a warning). ``--kitti`` reads ``velodyne/ID.bin``,
-``image_2/ID.png`` and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti.load_frame`).
+``image_2/ID.png`` and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti_objects.load_kitti_frame`).
 
 Points with a non-finite value (NaN or infinity, e.g. the no-return points of an organised
 cloud) are dropped before any work, with a warning that counts them.

@@ -2,11 +2,11 @@
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form gbm|range_ring|distance_quantile|physical] [--branch R|I_hat]
-                                 [--incidence [--no-geometry] | --no-incidence]
+                                 [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
 
-A ``gbm`` profile reads the incidence by default (``--incidence`` says so explicitly).
+A ``gbm`` profile reads the incidence unless ``--no-incidence``.
 
 ``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
 ``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with
@@ -16,9 +16,8 @@ its ``--branch`` map at the returns a camera sees is fitted to the sensor's inte
 (:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default
 form) also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
 (:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
-``kitti-hdl64e``. ``--incidence`` asks for that default and changes nothing (kept for existing
-scripts). ``assign`` and ``render`` then estimate it the same way on the clouds they are
-given. With ``--no-geometry`` the profile reads the value and the
+``kitti-hdl64e``. ``assign`` and ``render`` then estimate it the same way on the clouds they
+are given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
 ``--max-frames K`` fits on K of the frames, evenly spaced over their order
@@ -67,19 +66,10 @@ def build_parser():
         "distance_quantile: the paper's distance encoding + quantile map; physical: "
         "gain * R * |cos θ| / d^p, the generic profiles' closed form",
     )
-    inc = p.add_mutually_exclusive_group()
-    inc.add_argument(
-        "--incidence",
-        action="store_true",
-        default=None,
-        help="gbm: read the incidence |cos θ| of each return (the default of the gbm form: "
-        "changes nothing, kept for existing scripts)",
-    )
-    inc.add_argument(
+    p.add_argument(
         "--no-incidence",
-        dest="incidence",
-        action="store_false",
-        help="gbm: do not read the incidence",
+        action="store_true",
+        help="gbm, physical: do not read the incidence |cos θ| of each return (read by default)",
     )
     p.add_argument(
         "--no-geometry",
@@ -145,13 +135,12 @@ def _calibrate(args, argv) -> None:
     from ..datasets.scans import load_scans
     from ..nidar.pipeline import NidarModel
 
-    if args.incidence is not None and args.form not in ("gbm", "physical"):
-        flag = "--incidence" if args.incidence else "--no-incidence"
-        raise NidarError(f"{flag} needs --form gbm or physical (got --form {args.form})")
+    if args.no_incidence and args.form not in ("gbm", "physical"):
+        raise NidarError(f"--no-incidence needs --form gbm or physical (got --form {args.form})")
     if args.max_frames is not None and args.max_frames < 1:
         raise NidarError(f"--max-frames must be at least 1 (got {args.max_frames})")
     incidence = args.form in ("gbm", "physical") and (
-        KITTI_PROFILE_INCIDENCE if args.incidence is None else args.incidence
+        KITTI_PROFILE_INCIDENCE and not args.no_incidence
     )
     if args.no_geometry and not incidence:
         raise NidarError(

@@ -3,7 +3,7 @@
     python -m nidar_mi.dataset --scenes DIR -o DATA [...]        rendered scenes
     python -m nidar_mi.dataset --kitti DIR [--kitti DIR ...] -o DATA   real KITTI frames
 
-The frame format is :mod:`nidar_mi.frames`; KITTI frames are
+The frame format is :mod:`nidar_mi.training_frames`; KITTI frames are
 :mod:`nidar_mi.datasets.kitti_frames` (held-out frame list, rings, short scans). KITTI data is
 non-commercial: keep ``DATA`` out of any repository.
 """
@@ -90,8 +90,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     def work():
-        from ..frames import SPLITS
         from ..render_dataset import build_dataset
+        from ..training_frames import SPLITS
 
         if args.kitti:
             given = [f for f, d in _SCENE_OPTIONS.items() if getattr(args, d) != p.get_default(d)]
@@ -114,6 +114,9 @@ def main(argv=None) -> int:
             raise NidarError(
                 f"--split: three fractions in [0, 1] summing to 1 expected (got '{args.split}')"
             )
+        from ..backend import set_variant
+
+        set_variant()  # the renders' variant, also the workers' (nidar_mi.backend.worker_setup)
         meta = build_dataset(
             args.scenes,
             args.out,

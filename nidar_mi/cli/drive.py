@@ -1,9 +1,10 @@
 """``python -m nidar_mi.drive -o OUT``: the drive study (odometry and loop closure per intensity
 source on a simulated drive; :mod:`nidar_mi.eval.drive.study`).
 
-Writes ``OUT/results.json``, ``OUT/report.md`` and figures; the scene, the frames and NIDAR's
-columns are cached under ``OUT`` (an interrupted run resumes; new NIDAR weights recompute only
-NIDAR's columns and the analysis).
+Writes ``OUT/results.json``, ``OUT/report.md`` and figures; the scene, the sweeps (a sequence
+folder per kind, published whole) and NIDAR's columns are cached under ``OUT`` (an interrupted
+run resumes from the last step it completed; new NIDAR weights recompute only NIDAR's columns
+and the analysis).
 """
 
 from __future__ import annotations
@@ -104,4 +105,8 @@ def main(argv=None) -> int:
             print(markdown_tables(results))
             print(f"report: {args.out}/report.md")
 
-    return run(work, on_interrupt="frames rendered so far are kept; run again to resume", args=args)
+    return run(
+        work,
+        on_interrupt="the scene and the sweeps completed so far are kept; run again to resume",
+        args=args,
+    )

@@ -29,7 +29,7 @@ the ablations.
 ``DATA/cache/evaluate``): a rerun reuses what it holds, and nothing of it is written into
 ``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row per frame and method, plus
 ``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of real data), published whole
-when everything succeeded. See :mod:`nidar_mi.eval.frames` for the methods and the metric scale.
+when everything succeeded. See :mod:`nidar_mi.eval.rendered` for the methods and the metric scale.
 """
 
 from __future__ import annotations
@@ -127,14 +127,14 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     def work():
-        from ..eval.suite import run as evaluate
+        from ..eval.suite import run_evaluation
 
         opts = options(args, argv_text)
         if opts.scans_scenes:
             from ..backend import set_variant
 
             set_variant("llvm_ad_spectral")
-        payload = evaluate(opts)
+        payload = run_evaluation(opts)
         log.info("wrote %s in %.0f s", os.path.join(opts.out, "results.md"), payload["seconds"])
 
     return run(work, flags={"scene_dir": "--scenes"}, args=args)

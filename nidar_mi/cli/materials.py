@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
 
     def work():
-        from ..materials.report import format_table, list_materials, plot_spectra
+        from ..materials.listing import format_table, list_materials, plot_spectra
 
         if args.output is not None and not args.plot:
             raise NidarError("-o/--output names the --plot file: give --plot NAME ... too")

@@ -224,6 +224,7 @@ def _add_sequence_args(p) -> None:
 def _sequence_options(args):
     """The :class:`~nidar_mi.sequence.SequenceOptions` of ``--trajectory``."""
     from ..errors import NidarError
+    from ..render_session import RenderOptions
     from ..sequence import SequenceOptions
 
     if args.intensity != "physics" or args.rgb_twin:
@@ -232,27 +233,30 @@ def _sequence_options(args):
         raise NidarError(
             "--weights, --nidar-branch and --profile are used only with --intensity nidar"
         )
-    return SequenceOptions(
+    frame = RenderOptions(
         args.scene,
-        args.trajectory,
-        rate=args.rate,
-        frames=args.frames,
         formats=tuple(_parse_formats(args.formats)),
-        sequence_formats=tuple(
-            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
-        ),
-        bin_intensity=args.bin_intensity,
         seed=args.seed,
         spp=args.spp,
         params=parse_defines(args.params),
         cameras=not args.no_cameras,
-        deskew=args.deskew,
+        bin_intensity=args.bin_intensity,
         max_memory=_memory(args.max_memory),
+        deskew=args.deskew,
+        progress=show_progress(args),
+        weather=weather_of(args),
+    )
+    return SequenceOptions(
+        frame,
+        args.trajectory,
+        rate=args.rate,
+        frames=args.frames,
+        sequence_formats=tuple(
+            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
+        ),
         max_frames=MAX_FRAMES if args.max_frames is None else args.max_frames,
         max_disk=_memory(args.max_disk, "--max-disk"),
-        progress=show_progress(args),
         previews=args.previews or "first",
-        weather=weather_of(args),
     )
 
 

@@ -15,7 +15,7 @@ trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted
 split (:func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). ``--all-frames`` (with ``--stage irnet``) trains
-IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.train`.
+IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.training`.
 
 An OUT where a stage of this command has trained already is refused unless ``--resume``
 (continue that run) or ``--overwrite`` (replace it: the earlier folder is moved aside, put back
@@ -219,7 +219,7 @@ def _photos(folder, progress: bool):
 
 
 def _train(args: argparse.Namespace, cfg) -> None:
-    from ..nidar import train as training
+    from ..nidar import training
 
     progress = show_progress(args)
     if args.stage == "stn" and args.photos is not None:
@@ -272,7 +272,7 @@ def _train(args: argparse.Namespace, cfg) -> None:
 
 
 def _render_frames(data: Path) -> list[Path]:
-    from ..frames import list_frames
+    from ..training_frames import list_frames
 
     frames = list_frames(data, "train")
     if not frames:
@@ -281,7 +281,7 @@ def _render_frames(data: Path) -> list[Path]:
 
 
 def _all_frames(data: Path) -> dict[str, list[Path]]:
-    from ..frames import SPLITS, list_frames
+    from ..training_frames import SPLITS, list_frames
 
     return {"train": [f for split in SPLITS for f in list_frames(data, split)], "val": []}
 

@@ -1,8 +1,8 @@
 """KITTI frames as NIDAR training frames: real sparse intensity, visible returns, rings.
 
-Each KITTI frame (:func:`nidar_mi.datasets.kitti.load_frame`) becomes one training frame in the
-format of :mod:`nidar_mi.frames` (source ``"kitti"``, keys
-:data:`nidar_mi.frames.FRAME_SOURCES` ``["kitti"]``):
+Each KITTI frame (:func:`nidar_mi.datasets.kitti_objects.load_kitti_frame`) becomes one training frame in the
+format of :mod:`nidar_mi.training_frames` (source ``"kitti"``, keys
+:data:`nidar_mi.training_frames.FRAME_SOURCES` ``["kitti"]``):
 
 * the returns camera 2 sees: in front of it, inside the image and not hidden in the cloud's own
   z-buffer (:func:`nidar_mi.geometry.camera_returns`, the package defaults; KITTI has no
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..io.cache_key import cache_key
-from .kitti import KittiFrame, frame_ids, load_frame
+from .kitti_objects import KittiFrame, frame_ids, load_kitti_frame
 from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
 from .paths import cache_dir, data_root
 
@@ -145,12 +145,36 @@ def build_kitti_frames(
     Raises:
         NidarError: no frames, clashing folder names, or a malformed frame.
     """
-    from ..frames import SPLITS, list_frames, write_frame
     from ..io.atomic import atomic_write_json, check_outside_inputs
-    from ..progress import progress_bar
 
     dirs = [Path(d) for d in kitti_dirs]
     check_outside_inputs(out_dir, dirs)
+    names, held, jobs = _kitti_jobs(dirs, held_out)
+    out = Path(out_dir)
+    splits, info = _write_frames(jobs, held, out, progress)
+    _drop_moved_frames(out, splits)
+    short = _warn_about_scans(info)
+    meta = {
+        "source": "kitti",
+        "version": KITTI_FRAMES_VERSION,
+        "sensor": "Velodyne HDL-64E (KITTI), camera 2",
+        "intensity": "stored Velodyne reflectance in [0, 1]",
+        "intensity_scale": 1.0,
+        "kitti_dirs": {s: str(d.resolve()) for d, s in zip(dirs, names)},
+        "held_out": {k: sorted(v) for k, v in held.items()},
+        "frames": splits,
+        "frame_info": info,
+        "short_scans": short,
+    }
+    atomic_write_json(out / "meta.json", meta)
+    return meta
+
+
+def _kitti_jobs(dirs: list[Path], held_out) -> tuple[list[str], dict[str, set], list[tuple]]:
+    """The folders' names (the frames' prefixes), the held-out frames per split and the frames
+    to write, ``(folder, name, frame id)`` each, checked (:func:`build_kitti_frames`)."""
+    from ..training_frames import SPLITS
+
     names = [d.resolve().name for d in dirs]
     if len(set(names)) != len(names):
         raise NidarError(f"KITTI folders need distinct names (got {', '.join(map(str, dirs))})")
@@ -164,17 +188,23 @@ def build_kitti_frames(
             "no KITTI frame (velodyne/ID.bin + image_2/ID.png + calib/ID.txt) in "
             + ", ".join(map(str, dirs))
         )
-    out = Path(out_dir)
-    meta_path = out / "meta.json"
-    old_version, old_info = None, {}
-    if meta_path.is_file():
-        from ..frames import load_meta
+    return names, held, jobs
 
+
+def _write_frames(jobs, held: dict[str, set], out: Path, progress: bool):
+    """Write every frame not current in ``out`` (written by this version after its scan):
+    ``(splits, info)``, the frame names per split and each frame's record. Frames this build
+    created are removed again if it fails (``meta.json`` does not list them)."""
+    from ..progress import progress_bar
+    from ..training_frames import SPLITS, load_meta, write_frame
+
+    old_version, old_info = None, {}
+    if (out / "meta.json").is_file():
         old = load_meta(out)
         old_version, old_info = old.get("version"), old.get("frame_info", {})
     splits: dict[str, list[str]] = {s: [] for s in SPLITS}
     info: dict[str, dict] = {}
-    added: list[Path] = []  # frame files this build created: removed if it fails
+    added: list[Path] = []
     try:
         for kitti_dir, source, fid in progress_bar(
             jobs, show=progress, desc="KITTI frames", unit="frame"
@@ -189,28 +219,40 @@ def build_kitti_frames(
             )
             prev = old_info.get(name) if fresh else None
             if prev is None:
-                frame, prev = kitti_training_frame(load_frame(kitti_dir, fid))
+                frame, prev = kitti_training_frame(load_kitti_frame(kitti_dir, fid))
                 if not target.exists():
                     added.append(target)
                 write_frame(target, frame)
             info[name] = prev
             splits[split].append(name)
     except BaseException:
-        for path in added:  # meta.json does not list them
+        for path in added:
             path.unlink(missing_ok=True)
         raise
-    for split in SPLITS:  # frames an earlier build left in another split
+    return splits, info
+
+
+def _drop_moved_frames(out: Path, splits: dict[str, list[str]]) -> None:
+    """Remove the frames an earlier build left in another split."""
+    from ..training_frames import SPLITS, list_frames
+
+    for split in SPLITS:
         keep = set(splits[split])
         for path in list_frames(out, split):
             if path.stem not in keep:
                 path.unlink()
+
+
+def _warn_about_scans(info: dict[str, dict]) -> dict[str, int]:
+    """Warn about short scans and scans whose rings come from their elevations; the short
+    scans' ring counts by frame name."""
     short = {n: i["rings"] for n, i in info.items() if 0 < i["rings"] < HDL64E_RINGS}
     if short:
         warnings.warn(
             "short scans (fewer than 64 rings, only the top ones): "
             + ", ".join(f"{n} ({r} rings)" for n, r in sorted(short.items())),
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     elevation = sorted(n for n, i in info.items() if i["ring_method"] != "scan order")
     if elevation:
@@ -218,22 +260,9 @@ def build_kitti_frames(
             f"{len(elevation)} scan(s) not in KITTI's stored order; their rings come from the "
             "nominal HDL-64E elevations (approximate): " + ", ".join(elevation[:5]),
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
-    meta = {
-        "source": "kitti",
-        "version": KITTI_FRAMES_VERSION,
-        "sensor": "Velodyne HDL-64E (KITTI), camera 2",
-        "intensity": "stored Velodyne reflectance in [0, 1]",
-        "intensity_scale": 1.0,
-        "kitti_dirs": {s: str(d.resolve()) for d, s in zip(dirs, names)},
-        "held_out": {k: sorted(v) for k, v in held.items()},
-        "frames": splits,
-        "frame_info": info,
-        "short_scans": short,
-    }
-    atomic_write_json(meta_path, meta)
-    return meta
+    return short
 
 
 def kitti_training_data(kitti_dirs=None, *, progress: bool = True) -> Path:

@@ -239,7 +239,7 @@ def fit_split_calibration(
     Raises:
         NidarError: unknown branch, a model without that map, or no frames in the split.
     """
-    from ..frames import list_frames, load_frame, load_meta
+    from ..training_frames import list_frames, load_frame, load_meta
 
     if branch not in CALIBRATION_BRANCHES:
         raise NidarError(

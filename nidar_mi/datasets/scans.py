@@ -4,7 +4,7 @@ A :class:`ScanFrame` is one LiDAR scan reduced to the returns that a camera sees
 intensity on the [0, 1] scale, their ring when known, and the camera images and models (loaded
 when asked for, so that many frames fit in memory). :func:`load_scans` reads any of:
 
-* a **NIDAR data folder** (``meta.json``; :mod:`nidar_mi.frames`), rendered or KITTI: its
+* a **NIDAR data folder** (``meta.json``; :mod:`nidar_mi.training_frames`), rendered or KITTI: its
   frames' ``points_*`` keys (frames of every split, or the splits asked for); intensities are
   divided by the folder's ``intensity_scale`` and clipped to [0, 1];
 * a **KITTI folder** (``velodyne/``, ``image_2/``, ``calib/``): converted once into cached
@@ -125,8 +125,8 @@ def frames_from_data(
     Raises:
         NidarError: a frame without the ``points_*`` keys (rebuild the folder).
     """
-    from ..frames import SPLITS, list_frames, load_frame, load_meta
     from ..geometry import CameraModel
+    from ..training_frames import SPLITS, list_frames, load_frame, load_meta
 
     meta = load_meta(data_dir)
     scale = float(meta["intensity_scale"])

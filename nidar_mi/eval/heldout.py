@@ -4,7 +4,7 @@
 * :func:`twin_prediction`: baseline (a) at a frame's points from the RGB-twin scan.
 * :func:`render_scenes`: cached renders of scene files (the hand-made scenes).
 * :func:`evaluate_renders`: every frame of a set of rendered scenes through
-  :func:`~nidar_mi.eval.frames.predict_frame` and :func:`~nidar_mi.eval.frames.evaluate_frame`.
+  :func:`~nidar_mi.eval.rendered.predict_frame` and :func:`~nidar_mi.eval.rendered.evaluate_frame`.
 * :func:`heldout_material_scores`: the methods on the returns whose material no training scene
   has (scenes from ``python -m nidar_mi.scenegen --materials heldout``).
 """
@@ -18,14 +18,14 @@ import numpy as np
 
 from ..errors import NidarError
 from .baselines import ClassConstant
-from .frames import (
+from .metrics import scale_intensity
+from .rendered import (
     FrameData,
     FrameResult,
     evaluate_frame,
     load_render_frames,
     predict_frame,
 )
-from .metrics import scale_intensity
 
 __all__ = [
     "evaluate_renders",
@@ -113,7 +113,7 @@ def render_scenes(
     """
     from functools import partial
 
-    from ..backend import prepare_worker
+    from ..backend import worker_setup
     from ..render_dataset import scene_params
     from ..render_folder import is_current
     from ..render_session import RenderOptions
@@ -139,7 +139,7 @@ def render_scenes(
         tasks,
         workers=workers,
         address=ray_address,
-        setup=prepare_worker,
+        setup=worker_setup(),
         progress=progress,
         desc="render",
         unit="scene",

@@ -1,4 +1,5 @@
-"""Rigid motions: SE(3) exponential and logarithm, and poses interpolated along a trajectory.
+"""Rigid motions: SE(3) exponential and logarithm, poses interpolated along a trajectory, and a
+Mitsuba transform as a NumPy pose (:func:`transform_matrix`).
 
 Between two poses ``T0`` and ``T1`` the interpolated pose at fraction ``s`` is the constant-twist
 (screw) motion ``T(s) = T0 · exp(s · log(T0⁻¹ T1))``: a vehicle turning at constant yaw rate and
@@ -10,7 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["se3_exp", "se3_log", "interpolate_poses"]
+__all__ = ["se3_exp", "se3_log", "interpolate_poses", "transform_matrix"]
+
+
+def transform_matrix(transform) -> np.ndarray:
+    """(4, 4) float64 matrix of a Mitsuba transform (``mi.Transform4f``, ``AffineTransform4f``
+    or anything with ``.matrix.numpy()``), e.g. a sensor's ``world_transform()``."""
+    return np.array(transform.matrix.numpy(), dtype=np.float64).reshape(4, 4)
 
 
 def _hat(w: np.ndarray) -> np.ndarray:

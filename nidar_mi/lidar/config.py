@@ -26,6 +26,7 @@ from pydantic import (
     model_validator,
 )
 
+from ..errors import NidarError
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
 from .pattern import PRESETS, BeamPattern, RisleyPattern, parse_angles
@@ -204,11 +205,11 @@ class LidarConfig:
                 are ignored).
 
         Raises:
-            ValueError: one line naming the sensor and the offending parameter.
+            NidarError: one line naming the sensor and the offending parameter.
         """
 
-        def fail(param: str, why: str) -> ValueError:
-            return ValueError(f"lidar '{name}': parameter '{param}' {why}")
+        def fail(param: str, why: str) -> NidarError:
+            return NidarError(f"lidar '{name}': parameter '{param}' {why}")
 
         try:
             lasers = LayoutParameters.model_validate(dict(values))
@@ -432,7 +433,7 @@ class SensorParameters(BaseModel):
     return_separation: Annotated[float, _number(lo=0.0, lo_open=True)] = 0.5
 
 
-def _first_error(error: ValidationError, fail: Callable[[str, str], ValueError]) -> ValueError:
+def _first_error(error: ValidationError, fail: Callable[[str, str], NidarError]) -> NidarError:
     """The first problem of a validation, as the plugin's one-line message."""
     e = error.errors()[0]
     problem = (e.get("ctx") or {}).get("error")

@@ -41,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "array_module",
     "INTENSITY_MODES",
     "attenuation",
     "expected_intensity",
@@ -61,7 +62,7 @@ def _is_drjit(x) -> bool:
     return type(x).__module__.startswith("drjit")
 
 
-def _math(*xs):
+def array_module(*xs):
     """``drjit`` if any argument is a Dr.Jit array, else ``numpy``."""
     if any(_is_drjit(x) for x in xs):
         import drjit as dr
@@ -88,7 +89,7 @@ def attenuation(d, cos_theta, alpha, mode: str = "raw"):
         Broadcast shape of the arguments; unitless (``compensated``) or 1/m² (``raw``).
     """
     _check_mode(mode)
-    a = cos_theta * _math(d, alpha).exp(-2.0 * alpha * d)
+    a = cos_theta * array_module(d, alpha).exp(-2.0 * alpha * d)
     return a / (d * d) if mode == "raw" else a
 
 
@@ -145,7 +146,7 @@ def detect(
         no energy is never reported, whatever the threshold and the noise),
         ``E + σ_n·normal >= T``, ``range_min <= d <= range_max`` and ``u >= dropout``.
     """
-    xp = _math(expected, d, u, normal)
+    xp = array_module(expected, d, u, normal)
     return (
         hit
         & xp.isfinite(expected)
@@ -201,12 +202,12 @@ def add_noise(value, std, normal):
         std: standard deviation, in the unit of ``value``, >= 0.
         normal: standard normal deviates (:func:`box_muller`), same shape as ``value``.
     """
-    return _math(value, std, normal).maximum(value + std * normal, 0.0)
+    return array_module(value, std, normal).maximum(value + std * normal, 0.0)
 
 
 def box_muller(u1, u2):
     """Standard normal deviates from two uniform deviates in [0, 1) (Box–Muller, cosine branch)."""
-    xp = _math(u1, u2)
+    xp = array_module(u1, u2)
     return xp.sqrt(-2.0 * xp.log(1.0 - u1)) * xp.cos(2.0 * xp.pi * u2)
 
 

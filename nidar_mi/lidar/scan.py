@@ -46,6 +46,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..geometry.se3 import transform_matrix
 from ..labels import SceneLabels, shape_labels
 from .config import LidarConfig
 from .echoes import group_echoes, select_returns
@@ -63,7 +64,7 @@ from .return_model import (
     received,
 )
 from .scene_tables import SceneTables, material_table, scene_tables, shape_table
-from .weather import device_tables, range_jitter, weather_model
+from .weather_returns import device_tables, range_jitter, weather_model
 
 __all__ = ["ScanResult", "ReturnLayer", "scan", "material_table", "shape_table"]
 
@@ -366,7 +367,7 @@ def _ideal_weather_block(ctx: _Context, beams, sh: _Shading, draws, span) -> Non
     clear weather."""
     import drjit as dr
 
-    from .weather import candidates, choose, detect_candidates, range_jitter
+    from .weather_returns import candidates, choose, detect_candidates, range_jitter
 
     (model, tables), inputs, cfg = ctx.weather, ctx.inputs, ctx.cfg
     start, stop, first = span
@@ -553,7 +554,7 @@ def _with_weather(ctx: _Context, beams, sh: _Shading, contributions, start: int)
     import drjit as dr
     import mitsuba as mi
 
-    from .weather import candidates
+    from .weather_returns import candidates
 
     (model, tables), cfg = ctx.weather, ctx.cfg
     contrib_range, contrib_energy, attrs = contributions
@@ -760,7 +761,7 @@ def _pattern(cfg: LidarConfig):
 def _pose(sensor, to_world) -> np.ndarray:
     """(4, 4) float64 pose: ``to_world`` when given, else the sensor's own."""
     if to_world is None:
-        return np.array(sensor.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
+        return transform_matrix(sensor.world_transform())
     return np.asarray(to_world, dtype=np.float64).reshape(4, 4)
 
 

@@ -1,6 +1,6 @@
 """Building the networks from their configuration and loading trained weights.
 
-A weights directory written by :mod:`nidar_mi.nidar.train` holds ``stn.safetensors``,
+A weights directory written by :mod:`nidar_mi.nidar.training` holds ``stn.safetensors``,
 ``irnet.safetensors``, ``config.json`` and ``train_log.json``. Each weights file carries its
 network configuration as JSON in its safetensors metadata, so it can be loaded on its own.
 """

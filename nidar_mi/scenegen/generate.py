@@ -23,19 +23,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import NidarError
-from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
+from .city import sample_city
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
 from .lighting import relight
 from .objects import material_set
 from .primitives import Layout
-from .spectra import draw_spectra
+from .spectral_regimes import draw_spectra
+from .streets import CITY_KINDS, DEFAULT_BLOCKS, sample_grid
 from .xml import scene_xml
 
 __all__ = [
     "INDEX_NAME",
     "KINDS",
     "MAX_SCENES",
+    "SCENE_OPTIONS",
     "generate",
     "generate_scene",
     "index_entry",
@@ -81,7 +83,7 @@ def generate_scene(
             has one).
         lighting: lighting regime (:data:`nidar_mi.scenegen.lighting.LIGHTING_REGIMES`):
             ``default`` (the layout's sun and sky) or ``varied`` (redrawn, overcast included).
-        spectra: spectral regime (:data:`nidar_mi.scenegen.spectra.SPECTRA_REGIMES`):
+        spectra: spectral regime (:data:`nidar_mi.scenegen.spectral_regimes.SPECTRA_REGIMES`):
             ``library`` (each material's own spectrum), ``earthlib`` (measured spectra drawn
             per scene for most diffuse, road and paint materials) or ``earthlib-family`` (drawn
             within each material's family).
@@ -179,9 +181,11 @@ def _read_index(path: str) -> list[dict]:
 
 
 def _file_sha256(path: str) -> str | None:
+    """:func:`~nidar_mi.io.cache_key.file_sha256`, or None for a file that cannot be read."""
+    from ..io.cache_key import file_sha256
+
     try:
-        with open(path, "rb") as f:
-            return hashlib.sha256(f.read()).hexdigest()
+        return file_sha256(path)
     except OSError:
         return None
 
@@ -337,19 +341,19 @@ def _write(folder: _Folder, scene: _Scene, seed: int, options: dict) -> None:
         atomic_write_text(scene.path, scene.text)
 
 
+#: What every scene of a run is drawn with (:func:`generate`'s scene options), and the defaults.
+SCENE_OPTIONS = {
+    "kind": None,
+    "blocks": None,
+    "materials": "all",
+    "lighting": "default",
+    "spectra": "library",
+    "drive": None,
+}
+
+
 def generate(
-    out_dir: str,
-    count: int,
-    seed: int,
-    *,
-    kind: str | None = None,
-    progress: bool = True,
-    overwrite: bool = False,
-    blocks: tuple[int, int] | None = None,
-    drive: dict | None = None,
-    materials: str = "all",
-    lighting: str = "default",
-    spectra: str = "library",
+    out_dir: str, count: int, seed: int, *, progress: bool = True, overwrite: bool = False, **scene
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -365,15 +369,14 @@ def generate(
         out_dir: destination folder (created).
         count: number of scenes, 1 .. :data:`MAX_SCENES`.
         seed: run seed (>= 0).
-        kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
         overwrite: replace scene files that differ from this run's.
-        blocks: (nx, ny) blocks of ``city`` and ``suburb`` layouts (None: the default).
-        drive: keyword arguments of :func:`.drives.write_drive` (``frames``, ``rate_hz``,
-            ``speed``) for ``city`` and ``suburb`` scenes.
-        materials: material set of every scene (:func:`generate_scene`).
-        lighting: lighting regime of every scene (:func:`generate_scene`).
-        spectra: spectral regime of every scene (:func:`generate_scene`).
+        **scene: what every scene is drawn with (:data:`SCENE_OPTIONS`): ``kind``
+            (:data:`KINDS`, None for a mix of urban and vegetated), ``blocks`` ((nx, ny) blocks
+            of ``city`` and ``suburb`` layouts, None: the default), ``materials``,
+            ``lighting`` and ``spectra`` (the set and regimes of :func:`generate_scene`) and
+            ``drive`` (keyword arguments of :func:`.drives.write_drive`: ``frames``,
+            ``rate_hz``, ``speed``, for ``city`` and ``suburb`` scenes).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -388,17 +391,13 @@ def generate(
     from ..io.atomic import check_output_folder
     from ..progress import progress_bar
 
-    _check_run(out_dir, count, seed, kind, blocks, drive)
+    unknown = sorted(set(scene) - set(SCENE_OPTIONS))
+    if unknown:
+        raise TypeError(f"generate() got unknown scene option(s) {', '.join(unknown)}")
+    options = SCENE_OPTIONS | scene
+    _check_run(out_dir, count, seed, options["kind"], options["blocks"], options["drive"])
     check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
     folder = _Folder.read(out_dir)
-    options = {
-        "kind": kind,
-        "blocks": blocks,
-        "materials": materials,
-        "lighting": lighting,
-        "spectra": spectra,
-        "drive": drive,
-    }
     bar = progress_bar(total=count, show=progress, desc="scenegen", unit="scene")
     written = skipped = 0
     try:

@@ -54,6 +54,7 @@ def _argv(command, out, tiny_scene, assign_inputs, synthetic_data, tmp_path):
         "pseudo_nir": [assign_inputs[5], "-o", out, "-q"],
         "calibrate": [synthetic_data, "-o", out, "-q"],
         "weather": [assign_inputs[1], "-o", out, "--fog", "50", "-q"],
+        "reflectance_cue": ["--test", synthetic_data, "-o", out, "-q"],
     }[command]
 
 

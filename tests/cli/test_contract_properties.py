@@ -498,12 +498,12 @@ def test_assign_input_modes(modes, call, assign_inputs):
 @settings(SETTINGS, max_examples=30)
 @given(
     form=st.sampled_from(["gbm", "range_ring", "distance_quantile"]),
-    incidence=st.sampled_from([None, "--incidence", "--no-incidence"]),
+    incidence=st.sampled_from([None, "--no-incidence"]),
     no_geometry=st.booleans(),
 )
 def test_calibrate_form_options(form, incidence, no_geometry, call):
-    """``--incidence``/``--no-incidence`` and ``--no-geometry`` act with the gbm form only
-    (``--no-geometry`` also needs the incidence); otherwise refused before any scan is read."""
+    """``--no-incidence`` and ``--no-geometry`` act with the gbm form only (``--no-geometry``
+    also needs the incidence); otherwise refused before any scan is read."""
     reads_incidence = form == "gbm" and incidence != "--no-incidence"
     legal = (incidence is None or form == "gbm") and (not no_geometry or reads_incidence)
     with tempfile.TemporaryDirectory() as tmp:

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from nidar_mi.lidar.weather import (
+from nidar_mi.lidar.weather_returns import (
     ReceiverOptics,
     SensorTerms,
     candidates,

@@ -16,7 +16,12 @@ from nidar_mi.materials.earthlib_data import earthlib_row_spectrum, load_earthli
 from nidar_mi.materials.spectra import Spectrum
 from nidar_mi.scenegen.generate import generate, generate_scene
 from nidar_mi.scenegen.objects import HELDOUT_MATERIALS
-from nidar_mi.scenegen.spectra import FAMILIES, REPLACED_FRACTION, draw_spectra, pool_classes
+from nidar_mi.scenegen.spectral_regimes import (
+    FAMILIES,
+    REPLACED_FRACTION,
+    draw_spectra,
+    pool_classes,
+)
 
 
 def test_the_pool_holds_no_spectrum_of_a_held_out_family():

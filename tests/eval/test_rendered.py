@@ -18,7 +18,8 @@ from scipy.stats import spearmanr
 from nidar_mi.datasets.profile_fitting import fit_split_calibration
 from nidar_mi.errors import NidarError
 from nidar_mi.eval.baselines import ClassConstant
-from nidar_mi.eval.frames import (
+from nidar_mi.eval.heldout import twin_prediction
+from nidar_mi.eval.rendered import (
     METHODS,
     FrameData,
     evaluate_frame,
@@ -26,8 +27,7 @@ from nidar_mi.eval.frames import (
     predict_frame,
     result_rows,
 )
-from nidar_mi.eval.heldout import twin_prediction
-from nidar_mi.eval.report import goal_check, markdown_table, write_csv, write_json
+from nidar_mi.eval.tables import goal_check, markdown_table, write_csv, write_json
 from nidar_mi.geometry import CameraModel, bilinear_sample, project
 from nidar_mi.io.images import REC709_LUMA, srgb_to_linear
 from nidar_mi.nidar.config import TrainConfig
@@ -42,7 +42,7 @@ def data_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def model(data_dir, tmp_path_factory):
     from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.train import train
+    from nidar_mi.nidar.training import train
 
     out = tmp_path_factory.mktemp("run")
     train(dataclasses.replace(TrainConfig.reduced(), device="cpu"), data_dir, out, progress=False)
@@ -128,8 +128,8 @@ def test_nidar_rows_are_the_model_outputs(evaluated, model):
 
 @pytest.mark.parametrize("branch", ["R", "pseudo_nir"])
 def test_dataset_calibration_pools_the_named_map_at_masked_pixels(model, data_dir, branch):
-    from nidar_mi.frames import list_frames, load_meta
     from nidar_mi.profiles import fit
+    from nidar_mi.training_frames import list_frames, load_meta
 
     scale = load_meta(data_dir)["intensity_scale"]
     preds, dists, refs = [], [], []

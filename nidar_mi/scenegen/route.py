@@ -36,7 +36,7 @@ __all__ = [
     "PITCH_PER_MS2",
     "ROLL_PER_MS2",
     "TURN_RADIUS_M",
-    "Trajectory",
+    "DrivePoses",
     "route_start",
     "route_polyline",
     "drive",
@@ -57,7 +57,7 @@ _STEP_M = 0.05  # spacing of the dense path
 
 
 @dataclass(frozen=True)
-class Trajectory:
+class DrivePoses:
     """LiDAR poses of a drive.
 
     Attributes:
@@ -162,7 +162,7 @@ def drive(
     *,
     seed: int = 0,
     body_motion: bool = True,
-) -> Trajectory:
+) -> DrivePoses:
     """LiDAR poses of a drive round :func:`~.streets.drive_route` (repeated as needed).
 
     Args:
@@ -214,7 +214,7 @@ def drive(
     poses = np.tile(np.eye(4), (frames, 1, 1))
     poses[:, :3, :3] = Rotation.from_euler("ZYX", np.stack([yaw, pitch, roll], -1)).as_matrix()
     poses[:, 0, 3], poses[:, 1, 3], poses[:, 2, 3] = x, y, LIDAR_HEIGHT_M + heave
-    return Trajectory(times=times, poses=poses, distance=s_f - s_f[0])
+    return DrivePoses(times=times, poses=poses, distance=s_f - s_f[0])
 
 
 def _body_motion(times, s_f, s, t, v, pts, curv, seed):
@@ -239,7 +239,7 @@ def _body_motion(times, s_f, s, t, v, pts, curv, seed):
     return roll, pitch, heave
 
 
-def revisits(traj: Trajectory, radius_m: float = 5.0, min_gap_m: float = 30.0) -> int:
+def revisits(traj: DrivePoses, radius_m: float = 5.0, min_gap_m: float = 30.0) -> int:
     """How many times the drive returns within ``radius_m`` of a place it passed at least
     ``min_gap_m`` of driving earlier (runs of consecutive revisiting frames count once)."""
     p = traj.positions()[:, :2]

@@ -28,31 +28,28 @@ On rendered frames (:mod:`nidar_mi.dataset`, ``source`` ``render``) two numbers 
   under this protocol (the returns' nearest pixels, the sensor's noise, ray drop and per-laser
   gains, the estimated incidence).
 
-``python -m nidar_mi.eval.reflectance_cue --test DATA_TEST --train DATA_TRAIN
---weights NAME=DIR ... [--truth-gain R_surface,reflectance] -o cue.json`` writes every number as
-JSON (NaN, e.g. of a flat value, as null) and prints a table.
+The command ``python -m nidar_mi.reflectance_cue`` (:mod:`nidar_mi.cli.reflectance_cue`) runs
+them on datasets and writes every number as JSON.
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import spearmanr
 
 from ..errors import NidarError
-from ..frames import frame_has, list_frames, load_frame, load_meta
 from ..io.images import REC709_LUMA, srgb_to_linear
+from ..training_frames import frame_has, list_frames, load_frame
+from .metrics import spearman
 
 __all__ = [
     "GREY_LEVEL",
     "TRUTH_KEYS",
+    "dataset_frames",
     "frame_returns",
     "image_gain",
     "luminance",
-    "main",
     "score_cues",
     "truth_gain",
 ]
@@ -100,12 +97,6 @@ def _nanmean(values: list[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
-def _spearman(a: np.ndarray, b: np.ndarray) -> float:
-    if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
-        return float("nan")
-    return float(spearmanr(a, b)[0])
-
-
 def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
     """Every value source's ``(H, W)`` map of one image."""
     from ..nidar.infer import predict, pseudo_nir
@@ -121,7 +112,7 @@ def _maps(models: dict, rgb: np.ndarray, stn) -> dict[str, np.ndarray]:
 def _truth_maps(path: Path, wavelength_nm: float) -> dict[str, np.ndarray]:
     """Ceilings a cue could reach, from the frame's true maps where it carries them: the ρ(λ)
     its true albedo colour predicts through the earthlib map."""
-    from ..frames import frame_has
+    from ..training_frames import frame_has
 
     if not frame_has(path, ("A_true",)):
         return {}
@@ -154,7 +145,7 @@ def score_cues(
         every frame has it. Sources: ``luminance``, ``pseudo_nir``, ``R:<name>``, and on frames
         with ``A_true`` the earthlib colour map of the true albedo (a ceiling).
     """
-    from ..frames import frame_has
+    from ..training_frames import frame_has
 
     surface = all(frame_has(p, ("R_surface",)) for p in frames)
     truths = ("reflectance", "R_surface") if surface else ("reflectance",)
@@ -169,7 +160,7 @@ def score_cues(
             truth = f[t][m].astype(np.float64)
             truth_all[t].append(truth)
             for name, v in maps.items():
-                per.setdefault((name, t), []).append(_spearman(v[m], truth))
+                per.setdefault((name, t), []).append(spearman(v[m], truth))
         for name, v in maps.items():
             pooled.setdefault(name, []).append(v[m].astype(np.float64))
     out = {}
@@ -177,7 +168,7 @@ def score_cues(
         v = np.concatenate(values)
         for t, prefix in zip(truths, ("", "surface_")):
             out.setdefault(name, {})[f"{prefix}per_frame"] = _nanmean(per[(name, t)])
-            out[name][f"{prefix}pooled"] = _spearman(v, np.concatenate(truth_all[t]))
+            out[name][f"{prefix}pooled"] = spearman(v, np.concatenate(truth_all[t]))
     return out
 
 
@@ -210,8 +201,8 @@ def _returns_with(frames: list[Path], value_map, keys) -> dict[str, np.ndarray]:
 def _profile_scores(profile, ret: dict[str, np.ndarray]) -> dict[str, float]:
     pred = profile(ret["R"], ret["range"], cos_incidence=ret["cos"])
     frames = np.unique(ret["frame"])
-    per = [_spearman(pred[ret["frame"] == k], ret["intensity"][ret["frame"] == k]) for k in frames]
-    return {"per_frame": _nanmean(per), "pooled": _spearman(pred, ret["intensity"])}
+    per = [spearman(pred[ret["frame"] == k], ret["intensity"][ret["frame"] == k]) for k in frames]
+    return {"per_frame": _nanmean(per), "pooled": spearman(pred, ret["intensity"])}
 
 
 def image_gain(train: list[Path], test: list[Path], stn, irnet) -> dict[str, dict[str, float]]:
@@ -271,122 +262,13 @@ def truth_gain(train: list[Path], test: list[Path], key: str) -> dict[str, dict[
     return scores
 
 
-def _parse(argv):
-    p = argparse.ArgumentParser(prog="python -m nidar_mi.eval.reflectance_cue", description=__doc__)
-    p.add_argument("--test", required=True, help="dataset of rendered test frames (every split)")
-    p.add_argument("--train", help="dataset whose train split fits the image-gain profile")
-    p.add_argument("--weights", action="append", default=[], metavar="NAME=DIR")
-    p.add_argument("--stn", help="STN weights whose pseudo-NIR is scored (a .safetensors file)")
-    p.add_argument("--no-gain", action="store_true", help="score the cues only")
-    p.add_argument(
-        "--truth-gain",
-        default="",
-        metavar="KEYS",
-        help="the image gain's ceiling with these truth maps in R's place "
-        f"({', '.join(TRUTH_KEYS)}; needs --train)",
-    )
-    p.add_argument("-o", "--out", help="JSON file of every number")
-    return p.parse_args(argv)
+def dataset_frames(data: str, splits=("train", "val", "test")) -> list[Path]:
+    """The frame files of a dataset folder's ``splits``.
 
-
-def _frames_of(data: str, splits=("train", "val", "test")) -> list[Path]:
+    Raises:
+        NidarError: the splits hold no frame.
+    """
     frames = [f for s in splits for f in list_frames(data, s)]
     if not frames:
         raise NidarError(f"no frames in {data}")
     return frames
-
-
-def main(argv=None) -> int:
-    """The command (module docstring): 0 on success; a bad request or input is one line on
-    stderr and exit 2, Ctrl-C exit 130, with nothing written either way (the JSON is written
-    whole at the end)."""
-    from ..errors import flag_message
-
-    args = _parse(argv)
-    try:
-        _main(args)
-    except NidarError as e:
-        print(f"error: {' '.join(flag_message(str(e)).split())}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted: nothing written", file=sys.stderr)
-        return 130
-    return 0
-
-
-def _check_out(out: str, inputs: list) -> None:
-    """Refuse a JSON path ``out`` that is an input, holds one, or would replace an existing
-    file inside an input folder (a dataset's ``meta.json`` or frames, a weights file)."""
-    from ..io.atomic import check_outside_inputs
-
-    check_outside_inputs(out, inputs)
-    target = Path(out).resolve()
-    for item in inputs:
-        if (
-            item
-            and target.exists()
-            and Path(item).is_dir()
-            and Path(item).resolve() in target.parents
-        ):
-            raise NidarError(
-                f"cannot write `out` {out}: it would replace a file of the input {item}; "
-                "choose another path"
-            )
-
-
-def _main(args) -> None:
-    import torch
-
-    from ..nidar.model_io import load_pipeline, load_stn
-    from .report import write_json
-
-    if args.out:
-        _check_out(
-            args.out,
-            [args.test, args.train, args.stn, *(w.partition("=")[2] for w in args.weights)],
-        )
-    truths = [k.strip() for k in args.truth_gain.split(",") if k.strip()]
-    bad = [k for k in truths if k not in TRUTH_KEYS]
-    if bad:
-        raise NidarError(f"`truth_gain`: one or more of {', '.join(TRUTH_KEYS)} (got {bad[0]!r})")
-    if truths and (not args.train or args.no_gain):
-        raise NidarError(
-            "`truth_gain` needs `train` (the frames its profiles are fitted on) and no `no_gain`"
-        )
-    torch.set_num_threads(1)
-    models = {}
-    for spec in args.weights:
-        name, _, folder = spec.partition("=")
-        stn, irnet, _cfg = load_pipeline(folder, "cpu")
-        models[name] = (stn, irnet)
-    test = _frames_of(args.test)
-    stn = load_stn(args.stn, "cpu") if args.stn else None
-    wavelength = float(load_meta(args.test).get("wavelength_nm") or 905.0)
-    result: dict = {"test_frames": len(test), "cue": score_cues(test, models, stn, wavelength)}
-    if args.train and not args.no_gain:
-        train = _frames_of(args.train, ("train",))
-        result["gain"] = {n: image_gain(train, test, *m) for n, m in models.items()}
-        result["truth_gain"] = {k: truth_gain(train, test, k) for k in truths}
-    for k, v in result["cue"].items():
-        line = f"cue  {k:40s} vs rho: per-frame {v['per_frame']:+.3f}  pooled {v['pooled']:+.3f}"
-        if "surface_pooled" in v:
-            line += f"  vs R_surface: {v['surface_per_frame']:+.3f} / {v['surface_pooled']:+.3f}"
-        print(line)
-    for k, v in result.get("gain", {}).items():
-        g, i = v["gain"], v["image"]
-        print(
-            f"gain {k:40s} image {i['per_frame']:+.3f}/{i['pooled']:+.3f}  "
-            f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
-        )
-    for k, v in result.get("truth_gain", {}).items():
-        g, t = v["gain"], v["truth"]
-        print(
-            f"truth gain {k:34s} truth {t['per_frame']:+.3f}/{t['pooled']:+.3f}  "
-            f"gain {g['per_frame']:+.3f}/{g['pooled']:+.3f}"
-        )
-    if args.out:
-        write_json(args.out, result)  # NaN (a flat value, too few returns) as null
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,4 +1,4 @@
-"""Tests for nidar_mi.frames (the training-frame format, apart from any frame builder)."""
+"""Tests for nidar_mi.training_frames (the training-frame format, apart from any frame builder)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import (
+from nidar_mi.training_frames import (
     CORE_KEYS,
     FRAME_KEYS,
     FRAME_SOURCES,
@@ -36,7 +36,7 @@ def test_the_format_loads_no_renderer():
     code = textwrap.dedent(
         """
         import sys
-        import nidar_mi.frames
+        import nidar_mi.training_frames
         loaded = {"mitsuba", "drjit", "torch", "nidar_mi.simulate", "nidar_mi.scene",
                   "nidar_mi.render_dataset", "nidar_mi.render_folder"} & set(sys.modules)
         assert not loaded, loaded

@@ -63,7 +63,7 @@ from ..weather.media import (
     particle_reflectance,
     precipitation_distribution,
 )
-from .return_model import _math, detect, received
+from .return_model import array_module, detect, received
 
 __all__ = [
     "SPEED_OF_LIGHT",
@@ -130,7 +130,7 @@ class ReceiverOptics:
 
 def overlap(r, optics: ReceiverOptics):
     """ξ(r): 0 before ``overlap_start``, linear to 1 at ``overlap_full`` (NumPy or Dr.Jit)."""
-    xp = _math(r)
+    xp = array_module(r)
     span = max(optics.overlap_full - optics.overlap_start, 1e-9)
     return xp.minimum(xp.maximum((r - optics.overlap_start) / span, 0.0), 1.0)
 
@@ -246,7 +246,7 @@ def intercepted_fraction(radius, offset, footprint):
     """The fraction of a Gaussian beam of 1/e² radius ``footprint`` intercepted by a disk of
     ``radius`` whose centre lies ``offset`` from the axis (module docstring); 1 where the beam
     is a line (``footprint`` 0). NumPy or Dr.Jit."""
-    xp = _math(radius, offset, footprint)
+    xp = array_module(radius, offset, footprint)
     w2 = xp.maximum(footprint * footprint, 1e-30)
     f = (1.0 - xp.exp(-2.0 * radius * radius / w2)) * xp.exp(-2.0 * offset * offset / w2)
     return _where(xp, footprint > 0.0, f, 1.0)
@@ -450,7 +450,7 @@ def candidates(model: WeatherModel, limit, tables: dict, uniforms) -> Candidates
     Returns:
         :class:`Candidates`.
     """
-    xp = _math(limit)
+    xp = array_module(limit)
     soft = model.soft
     n_soft = soft.limits.size
     pos = limit / soft.limits[-1] * (n_soft - 1)
@@ -517,7 +517,7 @@ def device_tables(model: WeatherModel, backend) -> dict:
 def range_jitter(model: WeatherModel, energy, clear_energy):
     """The weather's extra range deviation (m) of a return of expected ``energy`` that would
     have returned ``clear_energy`` in clear air (inf: none), module docstring."""
-    xp = _math(energy, clear_energy)
+    xp = array_module(energy, clear_energy)
     scale = model.receiver.pulse_length * model.noise / math.pi
     if scale <= 0:
         return 0.0 * energy
@@ -530,7 +530,7 @@ def choose(mode: str, valid: list, output: list, range_m: list):
     """Which candidate a beam reports: the index (into the lists) of the strongest detected
     output (``strongest``, ``dual``), the nearest (``first``) or the farthest (``last``); -1
     where none was detected. NumPy or Dr.Jit (int32)."""
-    xp = _math(*output)
+    xp = array_module(*output)
     best = None
     best_out = best_rng = any_valid = None
     for i, (v, o, r) in enumerate(zip(valid, output, range_m)):

@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_grid
-from nidar_mi.scenegen.trajectory import (
+from nidar_mi.scenegen.route import (
     A_LAT,
     A_LONG,
     PITCH_PER_MS2,
@@ -16,6 +15,7 @@ from nidar_mi.scenegen.trajectory import (
     route_polyline,
     route_start,
 )
+from nidar_mi.scenegen.streets import LIDAR_HEIGHT_M, sample_grid
 
 
 @pytest.fixture(scope="module")
@@ -57,14 +57,14 @@ def test_drive_respects_the_speed_limits_and_looks_along_its_path(grid):
 
 def test_revisits_by_hand():
     # out along x and straight back 2 m to the side: one revisit run
-    from nidar_mi.scenegen.trajectory import Trajectory
+    from nidar_mi.scenegen.route import DrivePoses
 
     x = np.r_[np.arange(0, 50.0), np.arange(49, -1, -1.0)]
     y = np.r_[np.zeros(50), np.full(50, 2.0)]
     poses = np.tile(np.eye(4), (100, 1, 1))
     poses[:, 0, 3], poses[:, 1, 3] = x, y
     d = np.r_[0, np.cumsum(np.hypot(np.diff(x), np.diff(y)))]
-    traj = Trajectory(times=np.arange(100) / 10, poses=poses, distance=d)
+    traj = DrivePoses(times=np.arange(100) / 10, poses=poses, distance=d)
     assert revisits(traj, radius_m=5.0, min_gap_m=30.0) == 1
     assert revisits(traj, radius_m=1.0, min_gap_m=30.0) == 0
 

@@ -28,7 +28,7 @@ from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.images import read_png
 from nidar_mi.io.kitti import load_kitti_calib, read_kitti_bin
 
-__all__ = ["KittiFrame", "frame_ids", "load_frame"]
+__all__ = ["KittiFrame", "frame_ids", "load_kitti_frame"]
 
 
 def _frame_paths(kitti_dir: str | os.PathLike[str], frame_id: str) -> dict[str, str]:
@@ -78,7 +78,7 @@ class KittiFrame:
     frame_id: str
 
 
-def load_frame(kitti_dir: str | os.PathLike[str], frame_id: str) -> KittiFrame:
+def load_kitti_frame(kitti_dir: str | os.PathLike[str], frame_id: str) -> KittiFrame:
     """Read ``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2).
 
     Args:

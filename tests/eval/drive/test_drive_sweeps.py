@@ -1,11 +1,14 @@
-"""Drive frames: the sequence-folder reader, mid-sweep poses, per-source values, the frame cache."""
+"""Drive sweeps: the sequence-folder reader, mid-sweep poses, per-source values, the sweeps of a
+drive rendered by the sequence renderer."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from nidar_mi.errors import NidarError
-from nidar_mi.eval.drive.frames import frame_count, load_frame, read_sequence, render_drive
+from nidar_mi.eval.drive.drive_sweeps import SweepRequest, read_sequence, render_sweeps
 from nidar_mi.eval.drive.study import SOURCES, gt_at_mid_sweep, source_values
 from nidar_mi.io.points import write_npz
 
@@ -52,17 +55,19 @@ def test_read_sequence_refuses_a_mismatch(tmp_path):
 
 
 def test_gt_at_mid_sweep_of_a_constant_turn():
-    # 2 m and 0.1 rad of yaw per 0.1 s frame: half a frame later is 1 m and 0.05 rad further
+    # a car turning at a constant rate: 2 m and 0.1 rad of yaw per 0.1 s frame, T_k = exp(k ξ);
+    # half a frame later it is at exp((k + 1/2) ξ), the last frame's extrapolated too
+    from nidar_mi.geometry.se3 import se3_exp
+
     n = 5
-    poses = np.tile(np.eye(4), (n, 1, 1))
-    for k in range(n):
-        poses[k, :3, :3] = Rotation.from_euler("z", 0.1 * k).as_matrix()
-        poses[k, 0, 3] = 2.0 * k
+    xi = np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.1])
+    poses = se3_exp(np.arange(n)[:, None] * xi)
     mid = gt_at_mid_sweep(poses, np.arange(n) * 0.1, 0.1)
-    # (the last frame extrapolates the last step in its own frame, so its position turns too)
-    np.testing.assert_allclose(mid[:-1, 0, 3], 2.0 * np.arange(n - 1) + 1.0, atol=1e-9)
+    np.testing.assert_allclose(mid, se3_exp((np.arange(n) + 0.5)[:, None] * xi), atol=1e-12)
     yaw = Rotation.from_matrix(mid[:, :3, :3]).as_euler("zyx")[:, 0]
-    np.testing.assert_allclose(yaw, 0.1 * np.arange(n) + 0.05, atol=1e-9)
+    np.testing.assert_allclose(yaw, 0.1 * np.arange(n) + 0.05, atol=1e-12)
+    # the arc of radius 20 m: the middle of the first frame is 20 sin(0.05) ahead
+    np.testing.assert_allclose(mid[0, :2, 3], [20 * np.sin(0.05), 20 * (1 - np.cos(0.05))])
 
 
 def test_source_values():
@@ -80,29 +85,35 @@ def test_source_values():
     assert set(SOURCES) == {"physics", "nidar", "rgb_twin", "carla", "none"}
 
 
-def test_render_drive_caches_frames_and_matches_a_direct_scan(tmp_path, variant):
+def test_render_sweeps_scans_from_each_pose_and_reuses_the_sequence(tmp_path, variant):
+    """One instantaneous sweep per pose of the trajectory, the scan from that pose with seed
+    + k exactly; the same request renders nothing again, another renders again."""
+    from nidar_mi.geometry.se3 import transform_matrix
+    from nidar_mi.io.trajectory import write_tum
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
-    poses = np.tile(np.eye(4), (2, 1, 1))
-    poses[:, 2, 3] = 1.0
-    poses[1, 0, 3] = 0.5
-    folder = str(tmp_path / "f")
+    rig = np.tile(np.eye(4), (3, 1, 1))
+    rig[:, 0, 3] = [0.0, 0.5, 1.0]
+    write_tum(tmp_path / "d.tum", np.arange(3) * 0.1, rig)
     scene = "scenes/target.xml"
     params = {"cols": "64"}
-    render_drive(scene, poses, folder, params=params, seed=3, progress=False)
-    assert frame_count(folder) == 2
-    loaded = load_scene(scene, params=params)
-    direct = scan(loaded.scene, loaded.lidars[0], seed=4, to_world=poses[1]).points()
-    f = load_frame(folder, 1)
-    np.testing.assert_array_equal(f.xyz, direct["xyz"])
-    np.testing.assert_array_equal(f.intensity, direct["intensity"])
-    # the same request reuses the frames; another request renders them again
-    before = (tmp_path / "f" / "000001.npz").stat().st_mtime_ns
-    render_drive(scene, poses, folder, params=params, seed=3, progress=False)
-    assert (tmp_path / "f" / "000001.npz").stat().st_mtime_ns == before
-    render_drive(scene, poses[:1], folder, params=params, seed=3, progress=False)
-    assert frame_count(folder) == 1
+    request = SweepRequest(scene, str(tmp_path / "d.tum"), 10.0, 3, params=params, seed=3)
+    folder = render_sweeps(request, str(tmp_path / "f"), progress=False)
+    poses, times, load = read_sequence(folder)
+    np.testing.assert_allclose(times, [0.0, 0.1, 0.2])
+    loaded = load_scene(scene, params=params, labels=False)
+    lidar = loaded.lidars[0]
+    pose = rig[1] @ transform_matrix(lidar.world_transform())
+    direct = scan(loaded.scene, lidar, seed=4, to_world=pose).points()
+    np.testing.assert_array_equal(load(1).xyz, direct["xyz"])
+    np.testing.assert_array_equal(load(1).intensity, direct["intensity"])
+    np.testing.assert_allclose(poses[1][:3, 3], [0.5, 0, 0], atol=1e-6)
+    stamp = (tmp_path / "f" / "manifest.json").stat().st_mtime_ns
+    render_sweeps(request, str(tmp_path / "f"), progress=False)
+    assert (tmp_path / "f" / "manifest.json").stat().st_mtime_ns == stamp
+    render_sweeps(replace(request, frames=2), str(tmp_path / "f"), progress=False)
+    assert len(read_sequence(folder)[0]) == 2
 
 
 def test_loading_without_labels_scans_the_same_returns(tmp_path, variant):

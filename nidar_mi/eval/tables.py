@@ -1,6 +1,6 @@
 """Result tables as Markdown, CSV and JSON (written atomically).
 
-Rows are flat dicts (see :func:`nidar_mi.eval.frames.result_rows`); a table is a list of rows
+Rows are flat dicts (see :func:`nidar_mi.eval.rendered.result_rows`); a table is a list of rows
 plus the columns to show. Missing values (``None``, NaN) print as ``–`` in Markdown and as an
 empty cell in CSV; JSON keeps ``null`` (NaN and inf become ``null``).
 """

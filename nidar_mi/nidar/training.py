@@ -22,10 +22,10 @@ CPU runs use deterministic algorithms; a resumed run continues with the same bat
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import json
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,17 +34,25 @@ import torch
 from torch import nn
 
 from ..errors import NidarError
-from ..frames import list_frames, load_frame, load_meta
+from ..io.cache_key import file_sha256
+from ..training_frames import list_frames, load_frame, load_meta
 from .checkpoint import atomic_write
 from .config import INPUT_CHANNELS, TrainConfig
-from .data import IRNetDataset, MixedDataset, STNDataset
+from .data import IntrinsicTargets, IRNetDataset, MixedDataset, STNDataset
 from .infer import pseudo_nir
 from .loop import Stage, read_train_log, run_stage, write_stage_log
 from .losses import irnet_objective, photo_stn_loss, stn_loss
 from .model_io import build_irnet, build_stn, load_stn, resolve_device, save_irnet, save_stn
 from .stn import image_pyramid
 
-__all__ = ["train", "train_stn", "train_stn_photos", "train_irnet"]
+__all__ = [
+    "input_identity",
+    "resume_identity",
+    "train",
+    "train_stn",
+    "train_stn_photos",
+    "train_irnet",
+]
 
 
 #: Real RGB/NIR photo pairs for the STN: ``(fit, val)``, lists of ``(rgb (H, W, 3) uint8,
@@ -204,18 +212,69 @@ def train_irnet(
             ``config.json`` (``data.renders``).
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
-    meta = load_meta(data_dir)
     source = Path(stn_weights) if stn_weights is not None else out_dir / "stn.safetensors"
     if source.is_file():
         cfg = _with_stn_config(cfg, source)  # config.json describes the STN actually used
     cfg.validate()
+    # every check of the inputs comes before anything is written into OUT
+    run = _irnet_run(cfg, data_dir, frames, render_frames, init_weights)
+    _begin(cfg, data_dir, out_dir, "irnet", resume, run.inputs)
+    if frames is not None:
+        _record_frames(out_dir, run.frames)
+    device = resolve_device(cfg.device)
+    local = _place_stn(stn_weights, out_dir)
+    with _torch_threads(cfg.threads):
+        if cfg.irnet.input != "rgb":
+            cache = Path(cache_dir) if cache_dir is not None else out_dir / "cache"
+            _cache_irnet_inputs(run, cfg, local, device, cache)
+        torch.manual_seed(cfg.seed)
+        model = build_irnet(cfg.irnet)
+        if run.init_state is not None:
+            model.load_state_dict(run.init_state)
+        for side in cfg.crop_shape:
+            _check_crop(side, model.stride, "IRNet")
+        train_set, val_set = _irnet_datasets(run, cfg)
+        warmup = cfg.loss.int_warmup_epochs
+        loss_fn = _irnet_loss(cfg)
+        stage = Stage("irnet", model, cfg.irnet_optim, train_set, val_set, loss_fn, warmup)
+        run_stage(stage, cfg, out_dir, resume, progress)
+    path = save_irnet(out_dir / "irnet.safetensors", model, cfg.irnet)
+    _mark_done(out_dir, "irnet")
+    return path
+
+
+@dataclass
+class _IRNetRun:
+    """The checked inputs of an IRNet run (:func:`train_irnet`).
+
+    Attributes:
+        meta: the data folder's ``meta.json``.
+        frames: ``{"train": [...], "val": [...]}`` frame files.
+        renders: rendered frames mixed in (empty: none).
+        inputs: what ``config.json`` records of them (``renders``, ``init``).
+        init_state: the initial weights' state dict, or None.
+        input_dirs: per split the folder of its cached pseudo-NIR inputs (None: RGB input).
+        render_input: the folder of the renders' cached pseudo-NIR inputs.
+    """
+
+    meta: dict
+    frames: dict[str, list[Path]]
+    renders: list[Path]
+    inputs: dict[str, Any]
+    init_state: dict | None = None
+    input_dirs: dict[str, Path | None] = field(default_factory=lambda: {"train": None, "val": None})
+    render_input: Path | None = None
+
+
+def _irnet_run(cfg: TrainConfig, data_dir: Path, frames, render_frames, init_weights) -> _IRNetRun:
+    """Check the frames, the renders mixed in and the initial weights of an IRNet run."""
+    meta = load_meta(data_dir)
     if frames is None:
         split_frames = {"train": _frames(data_dir, "train"), "val": list_frames(data_dir, "val")}
     else:
         split_frames = {k: [Path(f) for f in frames.get(k, ())] for k in ("train", "val")}
         if not split_frames["train"]:
             raise NidarError("no training frames given")
-    # every check of the inputs comes before anything is written into OUT
     renders = [Path(f) for f in render_frames or ()]
     inputs: dict[str, Any] = {}
     if render_frames is not None:
@@ -234,99 +293,96 @@ def train_irnet(
     init_state = None
     if init_weights is not None:
         init_state = _init_state(cfg, Path(init_weights))
-        digest = hashlib.sha256(Path(init_weights).read_bytes()).hexdigest()
-        inputs["init"] = {"irnet": str(init_weights), "sha256": digest}
-    _begin(cfg, data_dir, out_dir, "irnet", resume, inputs)
-    if frames is not None:
-        _record_frames(out_dir, split_frames)
-    device = resolve_device(cfg.device)
-    input_dirs: dict[str, Path | None] = {"train": None, "val": None}
-    render_input: Path | None = None
+        inputs["init"] = {"irnet": str(init_weights), "sha256": file_sha256(init_weights)}
+    return _IRNetRun(meta, split_frames, renders, inputs, init_state)
+
+
+def _place_stn(stn_weights, out_dir: Path) -> Path | None:
+    """``OUT/stn.safetensors``, copied there from ``stn_weights`` when that lies elsewhere
+    (checked to be an STN first); None when there is neither."""
     local = out_dir / "stn.safetensors"
-    if stn_weights is None and local.is_file():
-        stn_weights = local
-    if stn_weights is not None:
-        stn_weights = Path(stn_weights)
-        if not stn_weights.is_file():
-            raise NidarError(f"STN weights {stn_weights} not found")
-        if stn_weights.resolve() != local.resolve():
-            if local.is_file() and local.read_bytes() != stn_weights.read_bytes():
-                raise NidarError(f"{local} exists and differs from {stn_weights}")
-            load_stn(stn_weights, "cpu")  # a file that is no STN fails here, before the copy
-            atomic_write(local, stn_weights.read_bytes())
-    with _torch_threads(cfg.threads):
-        if cfg.irnet.input != "rgb":
-            if stn_weights is None:
-                raise NidarError(
-                    "IRNet with pseudo-NIR input needs STN weights (train the STN first)"
-                )
-            stn = load_stn(local, device)
-            digest = hashlib.sha256(local.read_bytes()).hexdigest()[:16]
-            tag = f"pseudo_nir_{digest}" + (f"_x{cfg.scale:g}" if cfg.scale != 1.0 else "")
-            cache = Path(cache_dir) if cache_dir is not None else out_dir / "cache"
-            for split, fs in split_frames.items():
-                input_dirs[split] = _cache_pseudo_nir(stn, fs, cache / tag, cfg.scale)
-            if renders:
-                rtag = f"pseudo_nir_{digest}_renders" + (
-                    f"_x{cfg.render_scale:g}" if cfg.render_scale != 1.0 else ""
-                )
-                render_input = _cache_pseudo_nir(stn, renders, cache / rtag, cfg.render_scale)
-            del stn
+    if stn_weights is None:
+        return local if local.is_file() else None
+    stn_weights = Path(stn_weights)
+    if not stn_weights.is_file():
+        raise NidarError(f"STN weights {stn_weights} not found")
+    if stn_weights.resolve() != local.resolve():
+        if local.is_file() and local.read_bytes() != stn_weights.read_bytes():
+            raise NidarError(f"{local} exists and differs from {stn_weights}")
+        load_stn(stn_weights, "cpu")  # a file that is no STN fails here, before the copy
+        atomic_write(local, stn_weights.read_bytes())
+    return local
 
-        torch.manual_seed(cfg.seed)
-        model = build_irnet(cfg.irnet)
-        if init_state is not None:
-            model.load_state_dict(init_state)
-        for side in cfg.crop_shape:
-            _check_crop(side, model.stride, "IRNet")
-        scale = float(meta["intensity_scale"])
-        common = dict(
-            crop_size=cfg.crop_shape,
-            seed=cfg.seed,
-            scale=cfg.scale,
-            intrinsic_targets=cfg.intrinsic_supervision,
-            missing_targets_zero=bool(renders),
+
+def _cache_irnet_inputs(run: _IRNetRun, cfg: TrainConfig, stn_path, device, cache: Path) -> None:
+    """The STN's pseudo-NIR of every frame (and render), cached under ``cache`` per STN and
+    scale; the folders go to ``run.input_dirs`` and ``run.render_input``."""
+    if stn_path is None:
+        raise NidarError("IRNet with pseudo-NIR input needs STN weights (train the STN first)")
+    stn = load_stn(stn_path, device)
+    digest = file_sha256(stn_path)[:16]
+    tag = f"pseudo_nir_{digest}" + (f"_x{cfg.scale:g}" if cfg.scale != 1.0 else "")
+    for split, fs in run.frames.items():
+        run.input_dirs[split] = _cache_pseudo_nir(stn, fs, cache / tag, cfg.scale)
+    if run.renders:
+        rtag = f"pseudo_nir_{digest}_renders" + (
+            f"_x{cfg.render_scale:g}" if cfg.render_scale != 1.0 else ""
+        )
+        run.render_input = _cache_pseudo_nir(stn, run.renders, cache / rtag, cfg.render_scale)
+
+
+def _irnet_datasets(run: _IRNetRun, cfg: TrainConfig):
+    """``(train_set, val_set)``: the run's frames, the renders mixed into the training set."""
+    scale = float(run.meta["intensity_scale"])
+    common = dict(
+        crop_size=cfg.crop_shape,
+        seed=cfg.seed,
+        scale=cfg.scale,
+        intrinsic=IntrinsicTargets(
             r_target=cfg.loss.r_target,
-            wavelength_nm=float(meta.get("wavelength_nm") or 905.0),
-            colour=cfg.irnet.input if INPUT_CHANNELS[cfg.irnet.input] == 4 else None,
+            wavelength_nm=float(run.meta.get("wavelength_nm") or 905.0),
+            missing_zero=bool(run.renders),
         )
-        train_set = IRNetDataset(
-            split_frames["train"], scale, train=True, input_dir=input_dirs["train"], **common
+        if cfg.intrinsic_supervision
+        else None,
+        colour=cfg.irnet.input if INPUT_CHANNELS[cfg.irnet.input] == 4 else None,
+    )
+    dirs = run.input_dirs
+    train_set = IRNetDataset(
+        run.frames["train"], scale, train=True, input_dir=dirs["train"], **common
+    )
+    if run.renders:
+        render_set = IRNetDataset(
+            run.renders,
+            1.0,
+            train=True,
+            input_dir=run.render_input if cfg.irnet.input != "rgb" else None,
+            **(common | {"scale": cfg.render_scale}),
+            supervise_intensity=False,
         )
-        if renders:
-            render_set = IRNetDataset(
-                renders,
-                1.0,
-                train=True,
-                input_dir=render_input if cfg.irnet.input != "rgb" else None,
-                **(common | {"scale": cfg.render_scale}),
-                supervise_intensity=False,
-            )
-            train_set = MixedDataset(train_set, render_set)
-        val_set = IRNetDataset(
-            split_frames["val"], scale, train=False, input_dir=input_dirs["val"], **common
-        )
+        train_set = MixedDataset(train_set, render_set)
+    val_set = IRNetDataset(run.frames["val"], scale, train=False, input_dir=dirs["val"], **common)
+    return train_set, val_set
 
-        def loss_fn(net, batch, factor):
-            x = batch["x"]
-            loss, terms = irnet_objective(
-                net(x),
-                net.intrinsic_target(x),
-                batch["intensity"],
-                batch["mask"],
-                cfg.loss,
-                factor,
-                batch.get("R_true"),
-                batch.get("S_true"),
-            )
-            return loss, {**terms, "int_factor": factor}
 
-        warmup = cfg.loss.int_warmup_epochs
-        stage = Stage("irnet", model, cfg.irnet_optim, train_set, val_set, loss_fn, warmup)
-        run_stage(stage, cfg, out_dir, resume, progress)
-    path = save_irnet(out_dir / "irnet.safetensors", model, cfg.irnet)
-    _mark_done(out_dir, "irnet")
-    return path
+def _irnet_loss(cfg: TrainConfig):
+    """The IRNet stage's loss of a batch (:func:`~nidar_mi.nidar.losses.irnet_objective`)."""
+
+    def loss_fn(net, batch, factor):
+        x = batch["x"]
+        loss, terms = irnet_objective(
+            net(x),
+            net.intrinsic_target(x),
+            batch["intensity"],
+            batch["mask"],
+            cfg.loss,
+            factor,
+            batch.get("R_true"),
+            batch.get("S_true"),
+        )
+        return loss, {**terms, "int_factor": factor}
+
+    return loss_fn
 
 
 # --------------------------------------------------------------------------- run bookkeeping
@@ -365,7 +421,7 @@ _INPUT_KEYS = ("init", "renders")
 _INPUT_WORDS = {"init": "initial IRNet weights", "renders": "rendered frames mixed in"}
 
 
-def _input_identity(value: Any) -> Any:
+def input_identity(value: Any) -> Any:
     """What must match for a run to continue: the initial weights' hash, the renders' list."""
     if isinstance(value, dict):
         return value.get("sha256")
@@ -377,7 +433,9 @@ _RESUMABLE_CHANGES = ("device", "num_workers", "checkpoint_every", "keep_checkpo
 _SCHEDULE_KEYS = ("epochs", "max_steps")
 
 
-def _comparable(train_cfg: dict[str, Any]) -> dict[str, Any]:
+def resume_identity(train_cfg: dict[str, Any]) -> dict[str, Any]:
+    """The settings of a run that a resumed run must share: ``train_cfg`` without those a run
+    may change when it resumes (devices, workers, checkpoints, the schedule's length)."""
     d = json.loads(json.dumps(train_cfg))
     for key in _RESUMABLE_CHANGES:
         d.pop(key, None)
@@ -423,11 +481,11 @@ def _begin(
             old_data = previous.get("data", {})
         except (OSError, json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise NidarError(f"cannot read {cfg_path}: {exc}") from None
-        if _comparable(old) != _comparable(record["train"]):
+        if resume_identity(old) != resume_identity(record["train"]):
             raise NidarError(f"{out_dir} holds a run with a different configuration")
         if read_train_log(out_dir).get(stage, {}).get("steps"):  # a stage to continue
             for key in _INPUT_KEYS:
-                if _input_identity(old_data.get(key)) != _input_identity(record["data"].get(key)):
+                if input_identity(old_data.get(key)) != input_identity(record["data"].get(key)):
                     raise NidarError(f"{out_dir} holds a run with other {_INPUT_WORDS[key]}")
     if read_train_log(out_dir).get(stage, {}).get("steps") and not resume:
         raise NidarError(f"{out_dir} already holds a {stage} run; resume it or use a new directory")
@@ -489,10 +547,10 @@ def _stored_config(path: Path, kind: str, config_cls):
 def _check_intrinsic_frames(frames: list[Path], r_target: str = "monostatic") -> None:
     """Every frame must carry ``R_true`` and ``S_true`` (rendered frames do, real ones not), and
     the map ``r_target`` reads (``R_surface`` or ``A_true``: frames rendered by this version)."""
-    from ..frames import frame_has
-    from .data import _R_TARGET_KEYS
+    from ..training_frames import frame_has
+    from .data import R_TARGET_KEYS
 
-    extra = _R_TARGET_KEYS[r_target]
+    extra = R_TARGET_KEYS[r_target]
     for path in frames:
         if not frame_has(path, ("R_true", "S_true")):
             raise NidarError(

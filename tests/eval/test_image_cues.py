@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from nidar_mi.eval.reflectance_cue import frame_returns, image_gain, luminance, score_cues
-from nidar_mi.frames import list_frames, load_frame
+from nidar_mi.eval.image_cues import frame_returns, image_gain, luminance, score_cues
 from nidar_mi.nidar.config import IRNetConfig, STNConfig
 from nidar_mi.nidar.model_io import build_irnet, build_stn
+from nidar_mi.training_frames import list_frames, load_frame
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
@@ -74,7 +74,7 @@ def test_the_truth_gain_is_the_ceiling_of_a_perfect_cue(tmp_path):
     from scipy.stats import spearmanr
 
     from nidar_mi.errors import NidarError
-    from nidar_mi.eval.reflectance_cue import truth_gain
+    from nidar_mi.eval.image_cues import truth_gain
 
     data = write_synthetic_dataset(
         tmp_path, {"train": 3, "test": 2}, height=48, width=64, intensity_scale=1.0
@@ -104,7 +104,7 @@ def test_the_command_writes_the_truth_gain_and_refuses_bad_requests(tmp_path, ca
     truth, or no training frames to fit on, is one line and exit 2, with nothing written."""
     import json
 
-    from nidar_mi.eval.reflectance_cue import main
+    from nidar_mi.cli.reflectance_cue import main
 
     data = write_synthetic_dataset(
         tmp_path / "d", {"train": 3, "test": 2}, height=48, width=64, intensity_scale=1.0
@@ -117,7 +117,7 @@ def test_the_command_writes_the_truth_gain_and_refuses_bad_requests(tmp_path, ca
         got["truth"]["per_frame"] - got["geometry"]["per_frame"]
     )
     assert "truth gain reflectance" in capsys.readouterr().out
-    import nidar_mi.eval.reflectance_cue as cue
+    import nidar_mi.eval.image_cues as cue
 
     flat = {"per_frame": float("nan"), "pooled": 0.5}  # e.g. a flat profile on a frame
     monkeypatch.setattr(
@@ -143,6 +143,8 @@ def test_the_command_writes_the_truth_gain_and_refuses_bad_requests(tmp_path, ca
     def interrupted(_args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cue, "_main", interrupted)
+    import nidar_mi.cli.reflectance_cue as command
+
+    monkeypatch.setattr(command, "_score", lambda *a: interrupted(a))
     assert main(args) == 130
-    assert capsys.readouterr().err.strip() == "interrupted: nothing written"
+    assert capsys.readouterr().err.strip() == "interrupted; nothing written"

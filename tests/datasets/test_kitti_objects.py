@@ -1,4 +1,4 @@
-"""Tests for nidar_mi.datasets.kitti (calib files, frame ids, whole frames)."""
+"""Tests for nidar_mi.datasets.kitti_objects (calib files, frame ids, whole frames)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nidar_mi.datasets.kitti import KittiFrame, frame_ids, load_frame
+from nidar_mi.datasets.kitti_objects import KittiFrame, frame_ids, load_kitti_frame
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry import in_image, project
 from nidar_mi.io.images import write_png
@@ -146,7 +146,7 @@ def test_kitti_real_frames_load_whole():
     ids = frame_ids(root)
     assert ids == sorted(p.stem for p in (root / "calib").glob("*.txt"))
     for fid in ids:
-        frame = load_frame(root, fid)
+        frame = load_kitti_frame(root, fid)
         n = (root / "velodyne" / f"{fid}.bin").stat().st_size // 16
         assert frame.frame_id == fid and frame.camera.name == "P2"
         assert frame.xyz.shape == (n, 3) and frame.xyz.dtype == np.float32
@@ -190,7 +190,7 @@ def test_frame_ids_lists_complete_frames_sorted(kitti_dir, tmp_path):
 def test_load_frame(kitti_dir):
     from nidar_mi.io.kitti import read_kitti_bin
 
-    frame = load_frame(kitti_dir, "000004")
+    frame = load_kitti_frame(kitti_dir, "000004")
     assert isinstance(frame, KittiFrame) and frame.frame_id == "000004"
     xyz, intensity = read_kitti_bin(kitti_dir / "velodyne" / "000004.bin")
     np.testing.assert_array_equal(frame.xyz, xyz)
@@ -209,5 +209,5 @@ def test_load_frame(kitti_dir):
 )
 def test_load_frame_names_the_missing_file(kitti_dir, frame_id, message):
     with pytest.raises(NidarError, match=message) as info:
-        load_frame(kitti_dir, frame_id)
+        load_kitti_frame(kitti_dir, frame_id)
     assert f"KITTI frame {frame_id}" in str(info.value) and "\n" not in str(info.value)
