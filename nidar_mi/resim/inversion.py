@@ -1,0 +1,296 @@
+"""The surfaces' reflectance and the sensor's response, fitted jointly by differentiating the
+``lidar`` plugin's own return model with Dr.Jit.
+
+For a training sample (:mod:`.observations`) of laser ``l`` hitting the surfaces at range
+``d`` with incidence cosine ``cos θ``, the plugin's model in ``compensated`` mode without
+extinction gives
+
+    E = G_l · ρ(x) · cos θ · r(d)        (:func:`nidar_mi.lidar.return_model.expected_intensity`
+                                          times :func:`~nidar_mi.lidar.return_model.range_response`)
+
+with ``ρ(x)`` read by the surfaces' BSDF (a ``mesh_attribute`` texture interpolating the
+per-vertex ``vertex_rho``; :func:`nidar_mi.lidar.raycast.monostatic_reflectance`), ``G_l`` the
+per-laser gain (``laser_gains``) and ``r(d)`` the range response (``range_response``: piecewise
+linear through :data:`KNOTS_M`). The sensor reports ``max(E - b, 0)`` (``intensity_offset``
+b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
+returns) and detects a return with probability ``Φ((E - T) / σ_n)`` (``detection_threshold``,
+``receiver_noise_std``; :func:`~nidar_mi.lidar.return_model.detection_probability`).
+
+The loss, minimised with :class:`mitsuba.ad.Adam` on the gradients of ``dr.backward``:
+
+* intensity: mean over returns of ``(max(E - b, 0) - y)²``, where a return read as 0 counts
+  only when ``E - b`` exceeds 0 (it says ``E <= b``, nothing more);
+* detection: ``w_det`` times the mean binary cross-entropy of ``Φ((E - T)/σ_n)`` against
+  hit/miss over the detection samples;
+* smoothness: ``w_smooth`` times the mean of ``(ρ_a - ρ_b)²`` over the mesh's edges (the prior
+  where the data are thin);
+* prior: ``w_prior`` times the mean of ``(ρ_v - s·R_v)²`` over the vertices that NIDAR's
+  reflectance ``R`` sees (``s`` the median ratio of the fitted ρ to R, refreshed every step),
+  weighted by how rarely the LiDAR hit the vertex.
+
+Scale: ``ρ`` and the sensor's gains trade off (``G·ρ``), so the gains are normalised to a
+geometric mean of 1 and ``r`` to 1 at :data:`REFERENCE_M`; ρ is thus the intensity a surface
+gives at normal incidence at that range with the average laser (KITTI's [0, 1] scale).
+Without per-laser gains (``per_laser=False``) every ``G_l`` stays 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .observations import Samples
+
+__all__ = ["FitOptions", "SensorFit", "KNOTS_M", "REFERENCE_M", "fit", "edges_of", "predict"]
+
+#: Knots of the fitted range response, m; the response is 1 at REFERENCE_M.
+KNOTS_M = (2.0, 4.0, 7.0, 10.0, 15.0, 20.0, 30.0, 45.0, 70.0, 120.0)
+REFERENCE_M = 10.0
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Settings of the inversion (defaults used on the real drives)."""
+
+    iterations: int = 150
+    lr_rho: float = 0.02
+    lr_sensor: float = 0.02
+    w_det: float = 0.02
+    w_smooth: float = 0.2
+    w_prior: float = 0.05
+    per_laser: bool = True
+    fit_response: bool = True
+    fit_offset: bool = True
+
+
+@dataclass
+class SensorFit:
+    """The recovered sensor and the fit's record.
+
+    Attributes:
+        gains: (R,) per-laser gains (geometric mean 1).
+        knots_m, response: the range response r(d) at the knots.
+        offset: the intensity offset b.
+        threshold, noise: T and σ_n of detection.
+        history: per iteration the loss terms.
+    """
+
+    gains: np.ndarray
+    knots_m: tuple[float, ...]
+    response: np.ndarray
+    offset: float
+    threshold: float
+    noise: float
+    history: list[dict] = field(default_factory=list)
+
+    def response_at(self, d):
+        """r(d) (NumPy)."""
+        from ..lidar.return_model import range_response
+
+        return range_response(np.asarray(d, dtype=np.float64), self.knots_m, list(self.response))
+
+
+def edges_of(faces: np.ndarray) -> np.ndarray:
+    """(E, 2) the unique undirected edges of (T, 3) triangles."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.sort(e, axis=1)
+    return np.unique(e, axis=0)
+
+
+def hit_reflectance(samples: Samples, rho):
+    """ρ at each sample's hit: the barycentric interpolation of the per-vertex ``rho`` (Dr.Jit,
+    differentiable in ``rho``), as the surfaces' ``mesh_attribute`` texture computes it."""
+    import drjit as dr
+    import mitsuba as mi
+
+    return sum(w * dr.gather(mi.Float, rho, c) for w, c in zip(samples.weights, samples.corners))
+
+
+def _expected(samples: Samples, rho, gains, response):
+    """E of every sample (Dr.Jit), differentiable in ρ, the gains and the response."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..lidar.return_model import expected_intensity, range_response
+
+    g = dr.gather(mi.Float, gains, samples.ring)
+    d = samples.beams.path_m
+    values = [dr.gather(mi.Float, response, i) for i in range(len(KNOTS_M))]
+    e = expected_intensity(g, hit_reflectance(samples, rho), d, samples.cos_t, 0.0, "compensated")
+    return e * range_response(d, KNOTS_M, values)
+
+
+def predict(samples: Samples, rho: np.ndarray, fitted: SensorFit) -> np.ndarray:
+    """(S,) expected intensity E of the samples with per-vertex ``rho`` and the fitted sensor
+    (NumPy)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    with dr.suspend_grad():
+        e = _expected(
+            samples,
+            mi.Float(np.asarray(rho, dtype=np.float32)),
+            mi.Float(fitted.gains.astype(np.float32)),
+            mi.Float(fitted.response.astype(np.float32)),
+        )
+        dr.eval(e)
+    return e.numpy()
+
+
+class _Problem:
+    """The fit's data on the device: samples, edges, the prior."""
+
+    def __init__(self, samples: Samples, edges: np.ndarray, prior, prior_weight):
+        import mitsuba as mi
+
+        self.samples = samples
+        self.det = mi.Bool(samples.detected)
+        self.y = mi.Float(samples.intensity)
+        self.zero = mi.Bool(samples.intensity <= 0.005)
+        self.n_det = max(int(samples.detected.sum()), 1)
+        self.e0 = mi.UInt32(edges[:, 0].astype(np.uint32))
+        self.e1 = mi.UInt32(edges[:, 1].astype(np.uint32))
+        self.prior = None
+        if prior is not None:
+            seen = np.isfinite(prior)
+            self.prior_idx = mi.UInt32(np.flatnonzero(seen).astype(np.uint32))
+            self.prior = mi.Float(prior[seen].astype(np.float32))
+            self.prior_w = mi.Float(np.asarray(prior_weight)[seen].astype(np.float32))
+            self.prior_host = prior[seen]
+
+
+def _sensor_values(opt, rings: int):
+    """The normalised gains and response, offset, threshold and noise from the optimiser's
+    variables (Dr.Jit)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    log_g = opt["log_g"]
+    gains = dr.exp(log_g - dr.sum(log_g) / rings)
+    log_r = opt["log_r"]
+    ref = dr.gather(mi.Float, log_r, KNOTS_M.index(REFERENCE_M))
+    response = dr.exp(log_r - ref)
+    return gains, response, opt["b"], dr.exp(opt["log_t"]), dr.exp(opt["log_s"])
+
+
+def _loss(pb: _Problem, opt, options: FitOptions, rings: int):
+    """The total loss and its terms (Dr.Jit scalars)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..lidar.return_model import detection_probability
+
+    gains, response, b, t, s = _sensor_values(opt, rings)
+    e = _expected(pb.samples, opt["rho"], gains, response)
+    shown = dr.maximum(e - b, 0.0)
+    resid = dr.select(pb.zero, shown, shown - pb.y)
+    l_int = dr.sum(dr.select(pb.det, dr.square(resid), 0.0)) / pb.n_det
+    p = dr.clip(detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
+    l_det = -dr.mean(dr.select(pb.det, dr.log(p), dr.log(1.0 - p)))
+    rho = opt["rho"]
+    diff = dr.gather(mi.Float, rho, pb.e0) - dr.gather(mi.Float, rho, pb.e1)
+    l_smooth = dr.mean(dr.square(diff))
+    terms = {"intensity": l_int, "detection": l_det, "smooth": l_smooth}
+    total = l_int + options.w_det * l_det + options.w_smooth * l_smooth
+    if pb.prior is not None and options.w_prior > 0:
+        rv = dr.gather(mi.Float, rho, pb.prior_idx)
+        scale = float(np.median(rv.numpy() / np.maximum(pb.prior_host, 1e-3)))
+        l_prior = dr.sum(pb.prior_w * dr.square(rv - scale * pb.prior)) / dr.sum(pb.prior_w)
+        terms["prior"] = l_prior
+        total = total + options.w_prior * l_prior
+    return total, terms
+
+
+def _initial_rho(pb: _Problem, vertices: int) -> np.ndarray:
+    """Per-vertex start: the returns' intensity over their cos θ, averaged with the
+    interpolation weights; the median where no return landed."""
+    smp = pb.samples
+    det = smp.detected
+    num, den = np.zeros(vertices), np.zeros(vertices)
+    for c, w in zip(smp.corners, smp.weights):
+        idx, wt = c.numpy()[det].astype(np.int64), w.numpy()[det].astype(np.float64)
+        num += np.bincount(idx, wt * smp.intensity[det], minlength=vertices)
+        den += np.bincount(idx, wt * smp.cos[det], minlength=vertices)
+    start = np.where(den > 1e-3, num / np.maximum(den, 1e-3), np.nan)
+    fill = float(np.nanmedian(start)) if np.isfinite(start).any() else 0.3
+    return np.clip(np.where(np.isfinite(start), start, fill), 0.0, 2.0)
+
+
+def _start(pb: _Problem, vertices: int, rings: int, options: FitOptions):
+    """The optimiser with every variable at its start and its learning rates."""
+    import mitsuba as mi
+
+    e = pb.samples.intensity[pb.samples.detected]
+    opt = mi.ad.Adam(lr=options.lr_sensor)
+    opt["rho"] = mi.Float(_initial_rho(pb, vertices).astype(np.float32))
+    opt["log_g"] = mi.Float(np.zeros(rings, np.float32))
+    opt["log_r"] = mi.Float(np.zeros(len(KNOTS_M), np.float32))
+    opt["b"] = mi.Float(np.zeros(1, np.float32))
+    low = float(np.percentile(e[e > 0], 2)) if (e > 0).any() else 0.01
+    opt["log_t"] = mi.Float(np.float32([np.log(max(low, 1e-3))]))
+    opt["log_s"] = mi.Float(np.float32([np.log(max(low, 1e-3) / 2)]))
+    opt.set_learning_rate(rho=options.lr_rho)
+    return opt
+
+
+def _clamp(opt, options: FitOptions) -> None:
+    """Keep the variables in their domain; freeze what is not fitted."""
+    import drjit as dr
+    import mitsuba as mi
+
+    opt["rho"] = dr.clip(opt["rho"], 0.0, 4.0)
+    opt["b"] = dr.maximum(opt["b"], 0.0) if options.fit_offset else mi.Float(0.0)
+    if not options.per_laser:
+        opt["log_g"] = dr.zeros(mi.Float, dr.width(opt["log_g"]))
+    if not options.fit_response:
+        opt["log_r"] = dr.zeros(mi.Float, dr.width(opt["log_r"]))
+
+
+def fit(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOptions, **kw):
+    """Fit ρ and the sensor to the samples (module docstring).
+
+    Args:
+        samples: the training samples (cast into ``scene``).
+        scene: the surfaces (:func:`.surfaces.surface_scene`); its ``vertex_rho`` (its
+            ``mi.traverse`` parameter) is set to the fitted reflectance.
+        edges: (E, 2) the mesh's edges (:func:`edges_of`).
+        rings: lasers of the sensor.
+        options: the settings.
+        kw: ``prior`` (V,) NIDAR's R per vertex (NaN unseen), ``prior_weight`` (V,),
+            ``progress`` (bool).
+
+    Returns:
+        ``(rho, sensor)``: (V,) fitted reflectance and the :class:`SensorFit`.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..progress import progress_bar
+    from .surfaces import RHO_KEY
+
+    params = mi.traverse(scene)
+    pb = _Problem(samples, edges, kw.get("prior"), kw.get("prior_weight"))
+    opt = _start(pb, dr.width(params[RHO_KEY]), rings, options)
+    _clamp(opt, options)
+    history = []
+    for _ in progress_bar(range(options.iterations), show=kw.get("progress", False), desc="fit"):
+        total, terms = _loss(pb, opt, options, rings)
+        dr.backward(total)
+        opt.step()
+        _clamp(opt, options)
+        history.append({k: float(v.numpy()[0]) for k, v in terms.items()})
+    params[RHO_KEY] = dr.detach(opt["rho"])
+    params.update()
+    with dr.suspend_grad():
+        g, r, b, t, s = _sensor_values(opt, rings)
+    sensor = SensorFit(
+        gains=g.numpy().astype(np.float64),
+        knots_m=KNOTS_M,
+        response=r.numpy().astype(np.float64),
+        offset=float(b.numpy()[0]),
+        threshold=float(t.numpy()[0]),
+        noise=float(s.numpy()[0]),
+        history=history,
+    )
+    return opt["rho"].numpy().astype(np.float64), sensor
