@@ -60,13 +60,13 @@ def load_frames(drive: Drive, *, progress: bool = False) -> Frames:
 
     A scan whose storage order is lost gets its rings from the fitted layout's elevations.
     """
-    from ..datasets.kitti_rings import checked_rings
     from ..errors import NidarError
     from ..progress import progress_bar
+    from .range_image import storage_rings
 
     raw = [_read(drive, i) for i in progress_bar(drive.ids, show=progress, desc="read")]
     train = [drive.index(i) for i in drive.train]
-    rings = [checked_rings(raw[k][0]) for k in range(len(raw))]
+    rings = [storage_rings(raw[k][0]) for k in range(len(raw))]
     ordered = [k for k in train if rings[k] is not None and len(raw[k][0])]
     if not ordered:
         raise NidarError(

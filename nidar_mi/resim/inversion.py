@@ -53,9 +53,10 @@ REFERENCE_M = 10.0
 class FitOptions:
     """Settings of the inversion (defaults used on the real drives)."""
 
-    iterations: int = 150
-    lr_rho: float = 0.02
-    lr_sensor: float = 0.02
+    iterations: int = 100
+    lr_rho: float = 0.01
+    lr_sensor: float = 0.01
+    lr_gains: float = 0.0002
     w_det: float = 0.02
     w_smooth: float = 0.2
     w_prior: float = 0.05
@@ -174,21 +175,22 @@ def _sensor_values(opt, rings: int):
     return gains, response, opt["b"], dr.exp(opt["log_t"]), dr.exp(opt["log_s"])
 
 
-def _loss(pb: _Problem, opt, options: FitOptions, rings: int):
-    """The total loss and its terms (Dr.Jit scalars)."""
+def _loss(pb: _Problem, opt, sensor, options: FitOptions, rings: int):
+    """The total loss and its terms (Dr.Jit scalars); ``sensor``: the variables of
+    :func:`_sensor_values` (the optimiser's, or frozen values)."""
     import drjit as dr
     import mitsuba as mi
 
     from ..lidar.return_model import detection_probability
 
-    gains, response, b, t, s = _sensor_values(opt, rings)
-    e = _expected(pb.samples, opt["rho"], gains, response)
+    gains, response, b, t, s = _sensor_values(sensor, rings)
+    rho = opt["rho"]
+    e = _expected(pb.samples, rho, gains, response)
     shown = dr.maximum(e - b, 0.0)
     resid = dr.select(pb.zero, shown, shown - pb.y)
     l_int = dr.sum(dr.select(pb.det, dr.square(resid), 0.0)) / pb.n_det
     p = dr.clip(detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
     l_det = -dr.mean(dr.select(pb.det, dr.log(p), dr.log(1.0 - p)))
-    rho = opt["rho"]
     diff = dr.gather(mi.Float, rho, pb.e0) - dr.gather(mi.Float, rho, pb.e1)
     l_smooth = dr.mean(dr.square(diff))
     terms = {"intensity": l_int, "detection": l_det, "smooth": l_smooth}
@@ -202,35 +204,67 @@ def _loss(pb: _Problem, opt, options: FitOptions, rings: int):
     return total, terms
 
 
-def _initial_rho(pb: _Problem, vertices: int) -> np.ndarray:
-    """Per-vertex start: the returns' intensity over their cos θ, averaged with the
-    interpolation weights; the median where no return landed."""
-    smp = pb.samples
-    det = smp.detected
-    num, den = np.zeros(vertices), np.zeros(vertices)
-    for c, w in zip(smp.corners, smp.weights):
-        idx, wt = c.numpy()[det].astype(np.int64), w.numpy()[det].astype(np.float64)
-        num += np.bincount(idx, wt * smp.intensity[det], minlength=vertices)
-        den += np.bincount(idx, wt * smp.cos[det], minlength=vertices)
-    start = np.where(den > 1e-3, num / np.maximum(den, 1e-3), np.nan)
-    fill = float(np.nanmedian(start)) if np.isfinite(start).any() else 0.3
-    return np.clip(np.where(np.isfinite(start), start, fill), 0.0, 2.0)
+def alternate(samples: Samples, vertices: int, rings: int, rounds: int = 25, per_laser=True):
+    """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d)`` (each sample assigned to
+    the corner of its triangle with the largest weight): ρ per vertex, then the gains, then the
+    range response's knot values (a linear least-squares problem in them), each the exact
+    minimiser with the others fixed, normalised after each round (gains' geometric mean 1,
+    ``r(REFERENCE_M) = 1``). Levinson and Thrun's alternation between the beams' responses and
+    the map's reflectance; it starts the gradient fit near the optimum.
+
+    Returns:
+        ``(rho (V,), gains (R,), response (K,))`` NumPy float64.
+    """
+    from ..lidar.return_model import range_response
+
+    det = samples.detected
+    y = samples.intensity[det].astype(np.float64)
+    corners = np.stack([c.numpy() for c in samples.corners], axis=1)[det]
+    weights = np.stack([w.numpy() for w in samples.weights], axis=1)[det]
+    v = corners[np.arange(len(corners)), weights.argmax(axis=1)].astype(np.int64)
+    ring = samples.ring.numpy().astype(np.int64)[det]
+    q = samples.cos[det].astype(np.float64)
+    d = samples.range_m[det].astype(np.float64)
+    eye = np.eye(len(KNOTS_M))
+    hat = np.stack([range_response(d, KNOTS_M, list(eye[k])) for k in range(len(KNOTS_M))], 1)
+    gains, resp = np.ones(rings), np.ones(len(KNOTS_M))
+    rho = np.zeros(vertices)
+    ref = KNOTS_M.index(REFERENCE_M)
+    for _ in range(rounds):
+        a = gains[ring] * (hat @ resp) * q
+        rho = np.bincount(v, y * a, vertices) / np.maximum(np.bincount(v, a * a, vertices), 1e-9)
+        if per_laser:
+            a = rho[v] * (hat @ resp) * q
+            num, den = np.bincount(ring, y * a, rings), np.bincount(ring, a * a, rings)
+            gains = np.where(den > 1e-9, num / np.maximum(den, 1e-9), 1.0)
+        m = (gains[ring] * rho[v] * q)[:, None] * hat
+        resp = np.linalg.solve(m.T @ m + 1e-6 * eye, m.T @ y)
+        resp = np.where(resp > 1e-3, resp, 1e-3)
+        g0 = float(np.exp(np.mean(np.log(np.maximum(gains, 1e-6)))))
+        scale = g0 * resp[ref]
+        gains, resp, rho = gains / g0, resp / resp[ref], rho * scale
+    seen = np.bincount(v, minlength=vertices) > 0
+    rho = np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
+    return np.clip(rho, 0.0, 4.0), gains, resp
 
 
-def _start(pb: _Problem, vertices: int, rings: int, options: FitOptions):
-    """The optimiser with every variable at its start and its learning rates."""
+def _start(pb: _Problem, start, rings: int, options: FitOptions):
+    """The optimiser at the alternating least squares' solution (``start``: ρ, gains,
+    response), the offset at 0 and the detection threshold and noise at a low quantile of the
+    returns' intensities."""
     import mitsuba as mi
 
+    rho, gains, resp = start
     e = pb.samples.intensity[pb.samples.detected]
     opt = mi.ad.Adam(lr=options.lr_sensor)
-    opt["rho"] = mi.Float(_initial_rho(pb, vertices).astype(np.float32))
-    opt["log_g"] = mi.Float(np.zeros(rings, np.float32))
-    opt["log_r"] = mi.Float(np.zeros(len(KNOTS_M), np.float32))
+    opt["rho"] = mi.Float(rho.astype(np.float32))
+    opt["log_g"] = mi.Float(np.log(np.maximum(gains, 1e-3)).astype(np.float32))
+    opt["log_r"] = mi.Float(np.log(np.maximum(resp, 1e-3)).astype(np.float32))
     opt["b"] = mi.Float(np.zeros(1, np.float32))
     low = float(np.percentile(e[e > 0], 2)) if (e > 0).any() else 0.01
     opt["log_t"] = mi.Float(np.float32([np.log(max(low, 1e-3))]))
     opt["log_s"] = mi.Float(np.float32([np.log(max(low, 1e-3) / 2)]))
-    opt.set_learning_rate(rho=options.lr_rho)
+    opt.set_learning_rate(rho=options.lr_rho, log_g=options.lr_gains, log_r=options.lr_gains)
     return opt
 
 
@@ -248,7 +282,9 @@ def _clamp(opt, options: FitOptions) -> None:
 
 
 def fit(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOptions, **kw):
-    """Fit ρ and the sensor to the samples (module docstring).
+    """Fit ρ and the sensor to the samples (module docstring): alternating least squares
+    (:func:`alternate`) for ρ, the gains and the range response, then every variable jointly by
+    Adam on the gradients of the full loss (offset, detection, smoothness, prior included).
 
     Args:
         samples: the training samples (cast into ``scene``).
@@ -271,11 +307,13 @@ def fit(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOpti
 
     params = mi.traverse(scene)
     pb = _Problem(samples, edges, kw.get("prior"), kw.get("prior_weight"))
-    opt = _start(pb, dr.width(params[RHO_KEY]), rings, options)
+    start = alternate(samples, dr.width(params[RHO_KEY]), rings, per_laser=options.per_laser)
+    opt = _start(pb, start, rings, options)
     _clamp(opt, options)
-    history = []
-    for _ in progress_bar(range(options.iterations), show=kw.get("progress", False), desc="fit"):
-        total, terms = _loss(pb, opt, options, rings)
+    history: list[dict] = []
+    steps = progress_bar(range(options.iterations), show=kw.get("progress", False), desc="fit")
+    for _ in steps:
+        total, terms = _loss(pb, opt, opt, options, rings)
         dr.backward(total)
         opt.step()
         _clamp(opt, options)
@@ -284,7 +322,7 @@ def fit(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOpti
     params.update()
     with dr.suspend_grad():
         g, r, b, t, s = _sensor_values(opt, rings)
-    sensor = SensorFit(
+    fitted = SensorFit(
         gains=g.numpy().astype(np.float64),
         knots_m=KNOTS_M,
         response=r.numpy().astype(np.float64),
@@ -293,4 +331,4 @@ def fit(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOpti
         noise=float(s.numpy()[0]),
         history=history,
     )
-    return opt["rho"].numpy().astype(np.float64), sensor
+    return opt["rho"].numpy().astype(np.float64), fitted

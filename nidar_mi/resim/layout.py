@@ -5,8 +5,11 @@ A Velodyne driver places a return of laser ``r`` at range ``d`` on the beam line
 laser's elevation, v its ``vert_offset_correction``; :mod:`nidar_mi.lidar.layouts`), i.e. on
 the straight line ``z = v_r / cosθ_r + ρ·tanθ_r`` in the (ρ, z) plane. :func:`fit_layout` fits
 that line to every return of each ring of the training scans by iteratively reweighted least
-squares (Huber weights at twice the robust residual scale), which recovers θ and v to a fraction
-of a millidegree and a millimetre on KITTI (residual scale 1.4 mm on ``kitti_raw_0926``). The
+squares (Huber weights at twice the robust residual scale): on ``kitti_raw_0926`` the returns
+lie within 1.4 mm (robust scale) of their ring's line. A ring whose returns span less than a
+factor 2 in distance (it sees only the road), or whose offset comes out beyond
+:data:`MAX_OFFSET_M`, takes the offset interpolated from its neighbours and its elevation
+refitted with that offset. The
 azimuth corrections are already in the returns' azimuths, which define the columns, so they are
 0 here; the horizontal offsets (~2.6 cm on an HDL-64E) are left at 0.
 
@@ -25,6 +28,8 @@ __all__ = ["RingLayout", "fit_layout", "write_velodyne_yaml"]
 
 #: Returns closer than this (horizontal distance, m) are left out of the fit.
 MIN_RHO_M = 2.0
+#: The largest vertical offset believed, m (an HDL-64E's are ~0.1-0.2 m).
+MAX_OFFSET_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,6 +82,7 @@ def fit_layout(points: list[np.ndarray], rings: list[np.ndarray], n_rings: int) 
     count = np.bincount(ring, minlength=n_rings)[:n_rings]
     order = np.argsort(ring, kind="stable")
     bounds = np.searchsorted(ring[order], np.arange(n_rings + 1))
+    offset_known = np.zeros(n_rings, bool)
     for r in range(n_rings):
         idx = order[bounds[r] : bounds[r + 1]]
         if len(idx) < 50:
@@ -84,6 +90,9 @@ def fit_layout(points: list[np.ndarray], rings: list[np.ndarray], n_rings: int) 
         a, b = _line(rho[idx], xyz[idx, 2])
         theta = np.arctan(b)
         el[r], v[r] = np.degrees(theta), a * np.cos(theta)
+        lo, hi = np.percentile(rho[idx], [5, 95])
+        offset_known[r] = abs(v[r]) <= MAX_OFFSET_M and hi >= 2.0 * lo
+    _refit_elevations(el, v, offset_known, rho, xyz[:, 2], order, bounds)
     known = np.isfinite(el)
     if known.sum() >= 2:  # a ring out of order is refitted from its neighbours
         bad = known.copy()
@@ -95,6 +104,20 @@ def fit_layout(points: list[np.ndarray], rings: list[np.ndarray], n_rings: int) 
     el = np.interp(idx, idx[known], el[known]) if not known.all() else el
     v = np.where(known, v, np.interp(idx, idx[known], v[known]))
     return RingLayout(el, v, count)
+
+
+def _refit_elevations(el, v, offset_known, rho, z, order, bounds) -> None:
+    """Rings whose returns span too narrow a range of distances (a ring that sees only the
+    road) fix no offset: theirs is interpolated from the rings that do, and their elevation is
+    refitted with it (in place)."""
+    idx = np.arange(len(el))
+    if offset_known.sum() < 2:
+        v[:] = 0.0
+        offset_known = np.ones(len(el), bool)
+    v[~offset_known] = np.interp(idx[~offset_known], idx[offset_known], v[offset_known])
+    for r in np.flatnonzero(~offset_known & np.isfinite(el)):
+        sel = order[bounds[r] : bounds[r + 1]]
+        el[r] = np.degrees(np.median(np.arctan2(z[sel] - v[r], rho[sel])))
 
 
 def write_velodyne_yaml(path: str | os.PathLike, layout: RingLayout, laser_ids) -> None:

@@ -1,8 +1,11 @@
 """Each return of a recorded scan on the sensor's (ring, column) grid, and the beams that
 returned nothing.
 
-Rings come from the storage order (:func:`nidar_mi.datasets.kitti_rings.checked_rings`), or,
-for a cloud whose order is lost, from the nearest ring elevation of the drive's layout. Columns
+Rings come from the storage order (:func:`nidar_mi.datasets.kitti_rings.checked_rings`; where
+its strict test fails, the storage order is still taken when it gives at most 64 rings whose far
+elevations fall with the ring index at a rank correlation below -0.95: two lasers of different
+blocks whose beams lie within a few hundredths of a degree may swap there), or, for a cloud
+whose order is lost, from the nearest ring elevation of the drive's layout. Columns
 come from the azimuth: ``column = floor((azimuth + 180°) / step)`` with ``step = 360° / C``, C
 the sensor's columns per revolution (:func:`columns_per_revolution`, from the azimuth step
 between neighbouring returns of a ring). The scan's coverage (:func:`azimuth_coverage`) is the
@@ -16,10 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..datasets.kitti_rings import azimuth_deg, checked_rings, elevation_rings
+from ..datasets.kitti_rings import azimuth_deg, checked_rings, elevation_rings, scan_rings
 
 __all__ = [
     "ScanGrid",
+    "storage_rings",
     "columns_per_revolution",
     "scan_grid",
     "azimuth_coverage",
@@ -68,6 +72,27 @@ def column_azimuth_deg(column, columns: int):
     return -180.0 + (np.asarray(column) + 0.5) * 360.0 / columns
 
 
+def storage_rings(xyz: np.ndarray, max_rings: int = 64) -> np.ndarray | None:
+    """(N,) rings from the storage order, or None when it does not look like a scan (module
+    docstring)."""
+    from scipy.stats import spearmanr
+
+    ring = checked_rings(xyz, max_rings)
+    if ring is not None or len(xyz) < 100:
+        return ring
+    ring = scan_rings(xyz)
+    n = int(ring.max()) + 1
+    if n > max_rings or n < 8:
+        return None
+    far = np.linalg.norm(xyz, axis=1) > 10.0
+    el = np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
+    rows = [r for r in range(n) if np.count_nonzero(far & (ring == r)) >= 5]
+    if len(rows) < 8:
+        return None
+    med = [float(np.median(el[far & (ring == r)])) for r in rows]
+    return ring if spearmanr(rows, med).statistic < -0.95 else None
+
+
 def scan_grid(xyz: np.ndarray, columns: int, elevations_deg: np.ndarray | None = None) -> ScanGrid:
     """The (ring, column) of every return.
 
@@ -81,7 +106,7 @@ def scan_grid(xyz: np.ndarray, columns: int, elevations_deg: np.ndarray | None =
         ValueError: the order is lost and no elevation table is given.
     """
     xyz = np.asarray(xyz, dtype=np.float64)
-    ring = checked_rings(xyz)
+    ring = storage_rings(xyz)
     ordered = ring is not None
     if ring is None:
         if elevations_deg is None:
