@@ -209,10 +209,20 @@ LAYERS = {
         1,
     ),
     "studies": 1,
-    **dict.fromkeys(("eval", "cli"), 2),
+    **dict.fromkeys(("eval", "resim", "cli"), 2),
 }
 #: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
-SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate", "drive", "dataset"}
+SHIMS = {
+    "render",
+    "assign",
+    "train",
+    "evaluate",
+    "pseudo_nir",
+    "calibrate",
+    "drive",
+    "dataset",
+    "reconstruct",
+}
 
 
 def _component(module: str) -> str:

@@ -24,6 +24,7 @@ COMMANDS = {
     "assign": "NIDAR intensity for a point cloud from camera images (or a KITTI frame)",
     "evaluate": "score NIDAR and the baselines (tables, figures)",
     "drive": "odometry and loop closure per intensity source on a simulated drive",
+    "reconstruct": "re-simulate a recorded drive: scene, reflectance and sensor from its scans",
 }
 
 
