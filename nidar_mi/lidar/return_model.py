@@ -29,7 +29,10 @@ threshold is detected half the time. The sensor reports the receiver's output ``
 ``η`` is further zero-mean Gaussian noise added after the detection test (:func:`add_noise`;
 the range gets its own), the result clipped at 0. :func:`compensate` turns written intensities
 back into the range-compensated ``g·ρ·T²·cos θ·exp(-2αd)`` (+ noise).
-:func:`full_scale_intensity` is a sensor's fixed reference for integer or unit-range encodings
+A sensor may add per-laser gains (``laser_gains``: ``g`` becomes ``g·G_r`` for ring ``r``), a
+range response ``r(d)`` multiplying ``E`` (:func:`range_response`, piecewise linear) and an
+intensity offset ``b`` (the reported intensity is ``max(E + σ_n·n - b + η, 0)``); detection
+is on ``E`` itself. :func:`full_scale_intensity` is a sensor's fixed reference for integer or unit-range encodings
 (LAS counts, KITTI's [0, 1]): the same for every frame of the sensor.
 
 Every function takes NumPy arrays (or Python floats) or Dr.Jit arrays alike and returns the

@@ -92,7 +92,9 @@ def _residuals(samples, rho_fit: SensorFit, predicted: np.ndarray) -> dict:
     from scipy.special import ndtr
 
     p = ndtr((predicted - rho_fit.threshold) / rho_fit.noise)
+    rings = len(rho_fit.gains)
     return {
+        "laser_returns": np.bincount(samples.ring.numpy()[det], minlength=rings).tolist(),
         "samples_returns": int(det.sum()),
         "samples_misses": int((~det).sum()),
         "intensity_rmse": float(np.sqrt(np.mean((np.clip(shown, 0, 1) - y) ** 2))),
