@@ -14,7 +14,10 @@ from .inversion import FitOptions, SensorFit, edges_of, fit, predict
 from .mesh import Mesh
 from .rays import Rays, concat, miss_rays
 
-__all__ = ["Inversion", "invert", "sensor_summary"]
+__all__ = ["Inversion", "invert", "sensor_summary", "MAX_SAMPLES"]
+
+#: The most returns the fit samples; more are subsampled evenly (seeded); misses at most half.
+MAX_SAMPLES = 2_000_000
 
 
 @dataclass
@@ -116,7 +119,6 @@ def _prior_weight(samples, mesh: Mesh) -> np.ndarray:
 def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options, stage: str):
     """Cast the training samples, run NIDAR for the prior, fit twice (module docstring)."""
     from .observations import cast_samples
-    from .pipeline import MAX_SAMPLES
     from .prior import nidar_prior
 
     rng = np.random.default_rng(options.seed)

@@ -29,8 +29,6 @@ __all__ = ["ReconstructOptions", "check", "reconstruct", "MAX_FRAMES"]
 
 #: The most frames a drive may have (bounds memory and time before any work).
 MAX_FRAMES = 400
-#: The most fit samples; more are subsampled evenly (seeded).
-MAX_SAMPLES = 2_000_000
 
 
 @dataclass(frozen=True)
