@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh
+from .mesh import Mesh, compact
 from .rays import Rays, jit_rays
 
 __all__ = ["carve", "hit_depths"]
@@ -75,7 +75,4 @@ def carve(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, passes:
         if not drop.any():
             break
         mesh = Mesh(mesh.vertices, mesh.faces[~drop])
-    used = np.unique(mesh.faces)
-    remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    return Mesh(mesh.vertices[used], remap[mesh.faces]), removed
+    return compact(mesh), removed

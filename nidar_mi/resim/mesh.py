@@ -28,6 +28,7 @@ from .range_image import ScanGrid
 
 __all__ = [
     "Mesh",
+    "compact",
     "scan_mesh",
     "fuse_meshes",
     "MAX_INCIDENCE_DEG",
@@ -101,7 +102,7 @@ def scan_mesh(xyz: np.ndarray, grid: ScanGrid, *, wrap: bool = False) -> Mesh:
         ]
     )
     tris = tris[_kept(xyz, tris)]
-    return _compact(Mesh(xyz, tris))
+    return compact(Mesh(xyz, tris))
 
 
 def _kept(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -133,7 +134,7 @@ def _kept(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return ok
 
 
-def _compact(mesh: Mesh) -> Mesh:
+def compact(mesh: Mesh) -> Mesh:
     """The mesh without unreferenced vertices."""
     used = np.unique(mesh.faces)
     remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
@@ -166,4 +167,4 @@ def fuse_meshes(meshes: list[Mesh], voxel: float) -> Mesh:
     order = np.lexsort((s[:, 2], s[:, 1], s[:, 0]))
     s = s[order]
     new = np.concatenate([[True], np.any(s[1:] != s[:-1], axis=1)])
-    return _compact(Mesh(centre, f[np.sort(order[new])]))
+    return compact(Mesh(centre, f[np.sort(order[new])]))
