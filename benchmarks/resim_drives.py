@@ -9,7 +9,7 @@ Each run lays a drive folder out of the shared data (symbolic links: ``velodyne/
 (wall time measured around the command) and reads ``report.json``. Runs:
 
 * ``0926_interp``: ``kitti_raw_0926`` frames 000000-000077, held out 000035-000039;
-* ``0926_extrap``: the same drive, held out its last five frames 000073-000077;
+* ``0926_extrap``: its frames 000000-000024, held out the last five (000020-000024);
 * ``<drive>_interp`` / ``<drive>_extrap`` for each five-frame ``kitti_more`` drive
   (``r0064_0500``, ``r0048_0000``, ``r0009_0328``, ``r0005_0140``): held out the middle frame /
   the last frame.
@@ -38,7 +38,7 @@ def _runs() -> dict:
     ids = [f"{k:06d}" for k in range(78)]
     runs = {
         "0926_interp": ("kitti_raw_0926", ids, ids[35:40]),
-        "0926_extrap": ("kitti_raw_0926", ids, ids[73:]),
+        "0926_extrap": ("kitti_raw_0926", ids[:25], ids[20:25]),
     }
     for first in MORE:
         drive, start = first.split("_")

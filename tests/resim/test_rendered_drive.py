@@ -6,7 +6,7 @@ Tolerances: the recovered per-laser gains (both normalised to a geometric mean o
 truth: median error below 4 %, 80 % of the lasers within 5 %, all within 12 % (measured: median
 3 %, the upper block ~3 % high and the lower ~3 % low against each other, the worst laser 10.7 %
 where the two blocks' elevations interleave); the recovered per-vertex ρ ranks the
-true ρ at the vertices' positions at Spearman >= 0.8 (measured 0.84-0.86: the vertices are
+true ρ at the vertices' positions at Spearman >= 0.8 (measured 0.84-0.88: the vertices are
 cluster means of 0.1 m cubes that straddle lane marks and corners, and the incidence comes from
 the reconstructed mesh's normals); the layout within 0.1° and 2 cm (the rings that see only the road take their neighbours'
 offsets: measured 0.06° and 1.6 cm off at most; the rings that see walls to 10⁻⁴°); the held-out frame's
