@@ -95,7 +95,7 @@ def test_loss_gradient_matches_finite_differences(variant, tmp_path):
         dr.backward(total)
         ad = sum(float(np.dot(dr.grad(x[k]).numpy(), u[k])) for k in x)
 
-        def at(step):
+        def at(step, u=u):
             y = {k: mi.Float((host[k] + step * u[k]).astype(np.float32)) for k in host}
             with dr.suspend_grad():
                 return float(_loss(pb, y, y, options, 4)[0].numpy()[0])
