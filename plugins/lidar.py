@@ -101,6 +101,23 @@ class LidarSensor(mi.Sensor):
          - float
          - g in I = g·ρ·T²·a(d,θ) + η, > 0
          - 1
+       * - ``laser_gains``
+         - string
+         - comma-separated per-laser gains G_r, one per ring (ring 0 the highest), each > 0:
+           a return of ring r is G_r·g·ρ·T²·a(d,θ) (a real unit's lasers differ; recovered by
+           ``python -m nidar_mi.reconstruct``)
+         - all 1
+       * - ``range_response``
+         - string
+         - comma-separated ``d:f`` pairs (ranges in m, strictly increasing; factors >= 0): the
+           expected intensity is multiplied by r(d), linear between the pairs and constant
+           outside (a receiver's range-dependent gain, e.g. a sensor's own range compensation)
+         - none (r = 1)
+       * - ``intensity_offset``
+         - float
+         - b >= 0: the reported intensity is max(output - b, 0) (an encoding that reads 0 for
+           weak returns it still detects, as KITTI's HDL-64E does); detection is unchanged
+         - 0
        * - ``range_min``
          - float
          - minimum range in m, >= 0

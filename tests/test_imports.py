@@ -210,7 +210,7 @@ LAYERS = {
         1,
     ),
     "studies": 1,
-    **dict.fromkeys(("eval", "cli"), 2),
+    **dict.fromkeys(("eval", "resim", "cli"), 2),
 }
 #: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
 SHIMS = {
@@ -223,6 +223,7 @@ SHIMS = {
     "drive",
     "dataset",
     "reflectance_cue",
+    "reconstruct",
 }
 
 

@@ -26,6 +26,7 @@ COMMANDS = {
     "evaluate": "score NIDAR and the baselines (tables, figures)",
     "reflectance_cue": "how well image values rank the true reflectance; what the image adds",
     "drive": "odometry and loop closure per intensity source on a simulated drive",
+    "reconstruct": "re-simulate a recorded drive: scene, reflectance and sensor from its scans",
 }
 
 

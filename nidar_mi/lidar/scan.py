@@ -61,6 +61,7 @@ from .return_model import (
     box_muller,
     detect,
     expected_intensity,
+    range_response,
     received,
 )
 from .scene_tables import SceneTables, material_table, scene_tables, shape_table
@@ -298,8 +299,10 @@ def _scan_block(ctx: _Context, start: int, stop: int) -> None:
             cfg.intensity_mode,
             beams.two_way_transmittance,
         )
+        laser = _laser_gain(cfg, first, stop - start, 1 if subrays is None else cfg.subrays)
+        expected = expected * laser * _range_factor(cfg, d)
     draws = _draws(cfg, stop - start, inputs, first)
-    shading = _Shading(rho, cos_t, bsdf, d, expected)
+    shading = _Shading(rho, cos_t, bsdf, d, expected, laser)
     if subrays is None and ctx.weather is not None:
         _ideal_weather_block(ctx, beams, shading, draws, (start, stop, first))
     elif subrays is None:
@@ -317,6 +320,36 @@ class _Shading(NamedTuple):
     bsdf: Any
     d: Any
     expected: Any
+    laser_gain: Any = 1.0
+
+
+def _laser_gain(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
+    """Each ray's per-laser gain (``laser_gains`` of its ring; 1.0 when the sensor has none).
+
+    Args:
+        first_beam: opaque ``mi.UInt32`` flat index of the block's first beam.
+        beams: beams in the block; per_beam: rays per beam (sub-rays).
+    """
+    if cfg.laser_gains is None:
+        return 1.0
+    import drjit as dr
+    import mitsuba as mi
+
+    gains = _cached(
+        _jit_cache,
+        ("laser_gains", cfg.laser_gains, mi.variant()),
+        lambda: jit_float(np.asarray(cfg.laser_gains, dtype=np.float32)),
+    )
+    beam = dr.arange(mi.UInt32, beams * per_beam) // per_beam + first_beam
+    return dr.gather(mi.Float, gains, beam // cfg.horizontal_resolution)
+
+
+def _range_factor(cfg: LidarConfig, d):
+    """The sensor's ``range_response`` at range ``d`` (1.0 when it has none)."""
+    if cfg.range_response is None:
+        return 1.0
+    knots, values = zip(*cfg.range_response)
+    return range_response(d, knots, values)
 
 
 def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: int) -> None:
@@ -324,7 +357,7 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
     columns in one kernel, then one synchronisation and the columns' read-back."""
     import drjit as dr
 
-    inputs, tables = ctx.inputs, ctx.tables
+    inputs, tables, cfg = ctx.inputs, ctx.tables, ctx.cfg
     with _timed(ctx.timings, "detect"):
         u_dropout, normal_intensity, normal_range = draws.returns[0]
         valid = detect(
@@ -340,7 +373,9 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
             normal=draws.receiver,
         )
         output = received(sh.expected, inputs.receiver_noise, draws.receiver)
-        intensity = add_noise(output, inputs.noise_intensity, normal_intensity)
+        intensity = add_noise(
+            output - cfg.intensity_offset, inputs.noise_intensity, normal_intensity
+        )
         range_m = add_noise(sh.d, inputs.noise_range, normal_range)
         hit = beams.hit
         material = dr.select(hit, tables.material_index(sh.bsdf), -1)
@@ -530,7 +565,11 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
                 start,
                 stop,
                 valid=valid,
-                intensity=np.where(valid, add_noise(e, cfg.noise_intensity_std, normal_i), 0.0),
+                intensity=np.where(
+                    valid,
+                    add_noise(e - cfg.intensity_offset, cfg.noise_intensity_std, normal_i),
+                    0.0,
+                ),
                 range=np.where(valid, add_noise(r, cfg.noise_range_std, normal_r), 0.0),
                 reflectance=np.where(has, attrs["reflectance"][rows, src], 0.0),
                 cos=np.where(has, attrs["cos"][rows, src], 0.0),
@@ -628,6 +667,8 @@ def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
         * attenuation(
             dr.select(glass.hit, glass.path_m, 1.0), 1.0, inputs.alpha, cfg.intensity_mode
         )
+        * sh.laser_gain
+        * _range_factor(cfg, dr.select(glass.hit, glass.path_m, 1.0))
     )
     surface = {
         "hit": beams.hit,

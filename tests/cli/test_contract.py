@@ -55,7 +55,20 @@ def _argv(command, out, tiny_scene, assign_inputs, synthetic_data, tmp_path):
         "calibrate": [synthetic_data, "-o", out, "-q"],
         "weather": [assign_inputs[1], "-o", out, "--fog", "50", "-q"],
         "reflectance_cue": ["--test", synthetic_data, "-o", out, "-q"],
+        "reconstruct": [_tiny_drive(tmp_path), "-o", out, "-q"],
     }[command]
+
+
+def _tiny_drive(tmp_path) -> str:
+    """A drive folder of two scans beside ``tmp_path`` (outside the folder the tests snapshot;
+    its content is never read: the output is refused first)."""
+    import numpy as np
+
+    vel = tmp_path.parent / f"{tmp_path.name}_drive" / "velodyne"
+    vel.mkdir(parents=True, exist_ok=True)
+    for k in range(2):
+        np.zeros((4, 4), "<f4").tofile(vel / f"{k:06d}.bin")
+    return str(vel.parent)
 
 
 # ------------------------------------------------------------------------ 1: output paths
