@@ -8,6 +8,7 @@ response through the given knots (computed here by hand).
 
 import numpy as np
 import pytest
+
 from nidar_mi.errors import NidarError
 
 ELEV = (-10.0, -30.0)
