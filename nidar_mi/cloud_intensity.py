@@ -11,14 +11,17 @@ columns of :func:`assign_intensity`; :func:`write_points` publishes the result w
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import warnings
 
 import numpy as np
 
 from .errors import NidarError
+from .io.ownership import Owner
 
 __all__ = [
+    "ASSIGN_OWNER",
     "FORMATS",
     "CloudInputs",
     "assign_cloud",
@@ -30,8 +33,12 @@ __all__ = [
     "write_points",
 ]
 
+log = logging.getLogger("nidar_mi.assign")
+
 #: Output formats of :func:`write_points`: ``points.<format>``.
 FORMATS = ("npz", "ply", "las")
+#: Who writes an assign output folder (:mod:`nidar_mi.io.ownership`).
+ASSIGN_OWNER = Owner("assign", "points", names=tuple(f"points.{f}" for f in FORMATS))
 
 
 @dataclasses.dataclass
@@ -54,6 +61,9 @@ class CloudInputs:
     simulator: bool = False
     """The cloud is a render of the simulator (its calibration is a renderer ``calib.json``; its
     sensor profile is the weights' own, ``sim-905``)."""
+    kitti_frame: tuple[str, str] | None = None
+    """``(folder, frame id)`` of a KITTI frame: its ``kitti-hdl64e`` profile is fitted on the
+    folder's other frames, never on this one."""
 
 
 def kitti_inputs(folder: str, frame: str) -> CloudInputs:
@@ -68,7 +78,13 @@ def kitti_inputs(folder: str, frame: str) -> CloudInputs:
     if ring is not None:
         points["ring"] = ring
     return CloudInputs(
-        points, [f.camera], [f.rgb], f"kitti_{frame}", f"KITTI frame {frame}", kitti=True
+        points,
+        [f.camera],
+        [f.rgb],
+        f"kitti_{frame}",
+        f"KITTI frame {frame}",
+        kitti=True,
+        kitti_frame=(folder, frame),
     )
 
 
@@ -111,7 +127,16 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
 
 
 def assign_intensity(
-    xyz, cameras, images, *, weights=None, occlusion=True, branch=None, profile=None, ring=None
+    xyz,
+    cameras,
+    images,
+    *,
+    weights=None,
+    occlusion=True,
+    branch=None,
+    profile=None,
+    ring=None,
+    kitti_frame=None,
 ) -> dict[str, np.ndarray]:
     """Per-point NIDAR intensity: ``{"intensity_nidar", "reflectance_nidar", "nidar_observed"}``.
 
@@ -125,6 +150,8 @@ def assign_intensity(
         profile: a profile name or file (None: ``branch`` with the weights' own calibration,
             or raw for ``I_hat``).
         ring: (N,) the points' rings for the profile (-1 unknown), or None.
+        kitti_frame: ``(folder, frame id)`` when the cloud is that KITTI frame
+            (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile`).
 
     Returns:
         ``intensity_nidar`` (N,) float32 (0 where unobserved), ``reflectance_nidar`` (N,) float32
@@ -135,7 +162,9 @@ def assign_intensity(
     from .nidar.pipeline import NidarModel
 
     model = NidarModel.load(weights)
-    prof = resolve_profile(profile, model) if profile is not None else None
+    prof = None
+    if profile is not None:
+        prof = resolve_profile(profile, model, kitti_frame=kitti_frame)
     if (
         prof is not None
         and branch is not None
@@ -187,7 +216,9 @@ def check_observed(xyz, cameras) -> None:
     seen = np.zeros(n, dtype=bool)
     for cam in cameras:
         uv, _, front = project(xyz, cam)
-        seen[front] |= in_image(uv[front], cam)
+        inside = in_image(uv[front], cam)
+        seen[front] |= inside
+        log.debug("camera '%s': %d of %d points fall inside its image", cam.name, inside.sum(), n)
         cx, cy = cam.K[0, 2], cam.K[1, 2]
         if not (0 <= cx <= cam.width and 0 <= cy <= cam.height):
             warnings.warn(
@@ -245,6 +276,9 @@ def assign_cloud(
     present, gives the profile its rings.
     """
     points = dict(finite_points(inputs.points, inputs.where))
+    log.debug(
+        "%s: %d points read, %d finite", inputs.where, len(inputs.points["xyz"]), len(points["xyz"])
+    )
     check_observed(points["xyz"], inputs.cameras)
     if profile is None and branch in (None, "R"):
         from .datasets.sensor_profiles import default_profile, warn_unknown_sensor
@@ -263,6 +297,7 @@ def assign_cloud(
             branch=branch,
             profile=profile,
             ring=ring,
+            kitti_frame=inputs.kitti_frame,
         )
     )
     return points
@@ -279,7 +314,7 @@ def write_points(out_dir: str, points: dict, formats, overwrite: bool = False) -
     from .io.points import write_npz, write_ply
 
     writers = {"npz": write_npz, "ply": write_ply, "las": write_las}
-    with staged_directory(out_dir, overwrite=overwrite, marker="points.npz") as stage:
+    with staged_directory(out_dir, owner=ASSIGN_OWNER, overwrite=overwrite) as stage:
         for fmt in formats:
             writers[fmt](os.path.join(stage, f"points.{fmt}"), points)
     return [os.path.join(out_dir, f"points.{fmt}") for fmt in formats]

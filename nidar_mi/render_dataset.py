@@ -25,6 +25,7 @@ is shared across splits.
 from __future__ import annotations
 
 import glob
+import logging
 import os
 from pathlib import Path
 
@@ -32,14 +33,35 @@ import numpy as np
 
 from .errors import NidarError, check_seed
 from .frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
+from .io.ownership import Owner
 
 __all__ = [
+    "OWNER",
     "build_dataset",
     "find_scenes",
     "frames_of_render",
     "scene_params",
     "split_scenes",
 ]
+
+log = logging.getLogger("nidar_mi.dataset")
+
+#: Who writes a dataset folder (:mod:`nidar_mi.io.ownership`): the frames and ``meta.json``,
+#: the render cache, the evaluation's default cache, and the staging of an unfinished build.
+OWNER = Owner(
+    "dataset",
+    "scenes",
+    names=(
+        "meta.json",
+        *(f"{s}/*" for s in SPLITS),
+        "renders/*",
+        "cache/*",
+        ".partial-*",
+        ".*.old-*",
+        ".meta.json.tmp-*",
+    ),
+    label="`dataset --scenes`",
+)
 
 # --------------------------------------------------------------------------- scenes and splits
 
@@ -258,15 +280,15 @@ def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, 
     for name in names:
         cameras, wavelength = _scene_entry(os.path.join(out_dir, "renders", name), lidar_id)
         frames[split_of[name]] += [f"{name}__{c}" for c in cameras]
+        log.debug("%s: %d frame(s) in %s", name, len(cameras), split_of[name])
     for split in SPLITS:  # what a worker killed while writing a frame left
         for _, path in leftovers(os.path.join(stage, split)):
             path.unlink(missing_ok=True)
     return frames, wavelength
 
 
-def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
-    """Drop cached renders of scenes no longer in the dataset and, with ``foreign`` (an
-    ``--overwrite`` of a folder that was no dataset), every other entry."""
+def _remove_leftovers(out_dir: str, names: list[str]) -> None:
+    """Drop cached renders of scenes no longer in the dataset."""
     import shutil
 
     renders = Path(out_dir) / "renders"
@@ -274,10 +296,14 @@ def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
     for d in renders.iterdir() if renders.is_dir() else ():
         if d.is_dir() and not d.name.startswith(".") and d.name not in keep:
             shutil.rmtree(d, ignore_errors=True)
-    if foreign:
-        for entry in Path(out_dir).iterdir():
-            if entry.name not in {"renders", "meta.json", *SPLITS}:
-                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+
+
+def _record(out_dir: str) -> None:
+    """The dataset folder's record: what the dataset wrote there, by name."""
+    from .io.ownership import folder_files, write_record
+
+    os.makedirs(out_dir, exist_ok=True)
+    write_record(out_dir, OWNER, [f for f in folder_files(out_dir) if OWNER.writes(f)])
 
 
 def build_dataset(
@@ -308,8 +334,9 @@ def build_dataset(
 
     Args:
         scene_dir: folder of scene XML files.
-        out_dir: the dataset folder; a non-empty folder that is no dataset is refused unless
-            ``overwrite`` (its other entries are then removed once the dataset is published).
+        out_dir: the dataset folder; an earlier dataset of rendered scenes is updated, any
+            other folder as :func:`nidar_mi.io.ownership.check_owner` says (a file the dataset
+            did not write is never removed: such a folder is refused).
         fractions: train/val/test fractions of the scenes.
         seed: split seed, scan seed and sampler seed, in [0, 2**32).
         spp: camera samples per pixel (>= 1).
@@ -318,7 +345,8 @@ def build_dataset(
         lidar_id: the LiDAR whose returns supervise (None: the first by id).
         intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
         progress: show a progress bar.
-        overwrite: accept a non-empty ``out_dir`` that is no dataset.
+        overwrite: the user passed ``overwrite`` (an unrecorded dataset of nidar_mi 0.1.0, a
+            dataset of KITTI frames: :func:`~nidar_mi.io.ownership.check_owner`).
         workers: scenes at once on a local Ray runtime (None: one after the other, in this
             process); see :mod:`nidar_mi.tasks`.
         ray_address: run the scenes on this Ray cluster instead.
@@ -347,6 +375,10 @@ def build_dataset(
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
         raise NidarError(f"{scene_dir}: scene file names must be unique")
+    from .scene import read_scene_xml
+
+    for path in files:  # every scene file is checked before any is rendered
+        read_scene_xml(path)
     used = {path: scene_params(path, params) for path in files}
     unused = sorted(set(params or {}) - {k for u in used.values() for k in u})
     if unused:
@@ -355,9 +387,10 @@ def build_dataset(
     if lidar_id is not None:
         for path, name in zip(files, names):
             _check_lidar(path, name, lidar_id)
+    out_dir = str(
+        check_output_folder(out_dir, owner=OWNER, overwrite=overwrite, inputs=[scene_dir, *files])
+    )
     old = _read_meta(out_dir)
-    earlier = old is not None or os.path.isdir(os.path.join(out_dir, "renders"))
-    check_output_folder(out_dir, overwrite=overwrite or earlier, inputs=[scene_dir, *files])
     request = {
         "scenes": {n: file_sha256(f) for f, n in zip(files, names)},
         "params": dict(sorted((params or {}).items())),
@@ -368,6 +401,7 @@ def build_dataset(
         "intensity_scale": float(intensity_scale),
     }
     renders = {n: _render_request(f, used[f], seed, spp) for f, n in zip(files, names)}
+    _record(out_dir)  # known as a dataset from here on, interrupted or not
     if _published(out_dir, old, request, renders):
         return old
     split_of = {n: s for s, ns in splits.items() for n in ns}
@@ -393,5 +427,6 @@ def build_dataset(
             "request": request,
         }
         atomic_write_json(os.path.join(stage, "meta.json"), meta)
-    _remove_leftovers(out_dir, names, foreign=overwrite and not earlier)
+    _remove_leftovers(out_dir, names)
+    _record(out_dir)
     return meta

@@ -27,12 +27,15 @@ from typing import Any
 import numpy as np
 
 from .errors import NidarError
+from .io.ownership import Owner
 
 __all__ = [
     "BIN_INTENSITY",
     "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
+    "RENDER_OWNER",
+    "SEQUENCE_OWNER",
     "RenderRequest",
     "RenderedCamera",
     "RenderedScan",
@@ -157,6 +160,20 @@ def write_manifest(folder: str | os.PathLike, manifest: dict) -> None:
     from .io.atomic import atomic_write_json
 
     atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+
+
+def _manifest_files(folder) -> list[str]:
+    """The files a render or sequence folder of nidar_mi 0.1.0 (no record) lists."""
+    manifest = read_manifest(folder)
+    return [MANIFEST, *manifest["files"]]
+
+
+#: Who writes a render folder (one render) and a sequence folder (``render --trajectory``):
+#: :mod:`nidar_mi.io.ownership`; an unrecorded folder of either is recognised by its manifest.
+RENDER_OWNER = Owner("render", "scene", names=(MANIFEST,), listed=_manifest_files)
+SEQUENCE_OWNER = Owner(
+    "render", "sequence", names=(MANIFEST,), listed=_manifest_files, label="`render --trajectory`"
+)
 
 
 def read_manifest(folder: str | os.PathLike) -> dict:

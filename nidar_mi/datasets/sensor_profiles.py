@@ -14,7 +14,9 @@ Names :func:`resolve_profile` knows (besides a path to a profile file):
   (``<cache>/profiles/kitti-hdl64e-<key>.json``, :func:`~nidar_mi.datasets.paths.cache_dir`;
   the key covers the weights, the folders and the form). Form :data:`KITTI_PROFILE_FORM` with
   the incidence (:data:`KITTI_PROFILE_INCIDENCE`), input the ``R`` branch, fitted on every frame
-  of those folders. The default of ``assign --kitti``.
+  of those folders. The default of ``assign --kitti``, where it is fitted instead on up to
+  :data:`KITTI_ASSIGN_FRAMES` other frames of the ``--kitti`` folder, never on the frame it
+  assigns (:func:`kitti_frame_profile`; cached per set of frames).
 * ``generic-compensated``: a range-compensated sensor of unknown make, from physics, not from
   data: ``I = clip(ρ·|cos θ|, 0, 1)`` with ``ρ`` the NIDAR ``R`` value (a ``physical`` profile,
   :class:`~nidar_mi.profiles.PhysicalMap`, gain 1, no range term). The default of ``assign``
@@ -41,6 +43,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ..errors import NidarError
 from ..nidar.pipeline import SIM_PROFILE
 from ..profiles import PhysicalMap, SensorProfile, load_profile
@@ -56,11 +60,13 @@ __all__ = [
     "GENERIC_RAW_GAIN",
     "GENERIC_RAW_LEVEL",
     "GENERIC_RAW_PROFILE",
+    "KITTI_ASSIGN_FRAMES",
     "KITTI_PROFILE_FORM",
     "KITTI_PROFILE_INCIDENCE",
     "PROFILE_NAMES",
     "default_profile",
     "generic_profile",
+    "kitti_frame_profile",
     "profile_line",
     "resolve_profile",
     "warn_unknown_sensor",
@@ -152,6 +158,93 @@ def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfi
     return profile
 
 
+#: How many frames of the ``--kitti`` folder ``kitti-hdl64e`` is fitted on for ``assign --kitti``
+#: (evenly spread; ten frames of a sensor calibrate it about as well as all, docs/NIDAR.md).
+KITTI_ASSIGN_FRAMES = 10
+
+
+def _assign_frames(ids: list[str], frame_id: str) -> list[str]:
+    """:data:`KITTI_ASSIGN_FRAMES` of ``ids`` evenly spread, ``frame_id`` never among them (its
+    next neighbour not chosen takes its place, so that most frames share one choice)."""
+    if len(ids) <= KITTI_ASSIGN_FRAMES + 1:
+        return [i for i in ids if i != frame_id]
+    pick = np.unique(np.round(np.linspace(0, len(ids) - 1, KITTI_ASSIGN_FRAMES)).astype(int))
+    chosen = [ids[i] for i in pick]
+    if frame_id in chosen:
+        free = [i for i in ids if i not in chosen and i != frame_id]
+        at = ids.index(frame_id)
+        chosen[chosen.index(frame_id)] = min(free, key=lambda i: (abs(ids.index(i) - at), i))
+    return sorted(chosen)
+
+
+def kitti_frame_profile(
+    model: NidarModel, kitti_dir: str | os.PathLike, frame_id: str, *, progress: bool = True
+) -> SensorProfile:
+    """``kitti-hdl64e`` for assigning the KITTI frame ``frame_id`` of ``kitti_dir``: fitted on up
+    to :data:`KITTI_ASSIGN_FRAMES` other frames of that folder (evenly spread), never on the
+    frame itself, cached in the user's cache folder under a key of the frames used (their
+    files' sizes and times), the weights, the form and the fitting version.
+
+    Raises:
+        NidarError: the folder holds no other frame.
+    """
+    from ..io.atomic import atomic_write_json
+    from ..io.cache_key import cache_key
+    from .kitti import frame_ids, load_frame
+    from .kitti_frames import kitti_training_frame
+    from .paths import cache_dir
+    from .profile_fitting import fit_scan_profile
+    from .scans import scan_frame
+
+    folder = Path(kitti_dir).resolve()
+    chosen = _assign_frames(frame_ids(folder), frame_id)
+    if not chosen:
+        raise NidarError(
+            f"the {DEFAULT_KITTI_PROFILE} profile of a KITTI frame is fitted on the other frames "
+            f"of its folder, and {kitti_dir} holds no other: give --profile FILE (python -m "
+            "nidar_mi.calibrate fits one)"
+        )
+    stamps = {
+        i: [(f.stat().st_size, f.stat().st_mtime_ns) for f in sorted(folder.glob(f"*/{i}.*"))]
+        for i in chosen
+    }
+    key = cache_key(
+        {
+            "model": model.identity(),
+            "folder": str(folder),
+            "frames": stamps,
+            "form": KITTI_PROFILE_FORM,
+            "incidence": KITTI_PROFILE_INCIDENCE,
+            "version": _FIT_VERSION,
+        }
+    )
+    path = cache_dir("profiles", f"{DEFAULT_KITTI_PROFILE}-{key}.json")
+    if path.is_file():
+        return load_profile(path)
+    warnings.warn(
+        f"fitting the {DEFAULT_KITTI_PROFILE} profile on {len(chosen)} other frames of "
+        f"{kitti_dir} (not on {frame_id}; once: cached in {path})",
+        stacklevel=3,
+    )
+    scans = []
+    for fid in chosen:
+        frame, _ = kitti_training_frame(load_frame(folder, fid))
+        scans.append(scan_frame(frame, fid, str(folder), 1.0, lambda f=frame: [f["rgb"]]))
+    profile = fit_scan_profile(
+        model,
+        scans,
+        name=DEFAULT_KITTI_PROFILE,
+        sensor=_KITTI_SENSOR,
+        form=KITTI_PROFILE_FORM,
+        branch="R",
+        provenance={"data": str(folder), "frames": chosen, "cache": str(path)},
+        progress=progress,
+        incidence=KITTI_PROFILE_INCIDENCE,
+    )
+    atomic_write_json(path, profile.to_dict())
+    return profile
+
+
 def generic_profile(name: str) -> SensorProfile:
     """``generic-raw`` or ``generic-compensated`` (module docstring): closed forms, no data.
 
@@ -231,6 +324,7 @@ def resolve_profile(
     *,
     kitti_dirs: Sequence[str | os.PathLike] | None = None,
     progress: bool = True,
+    kitti_frame: tuple[str | os.PathLike, str] | None = None,
 ) -> SensorProfile:
     """The profile named by ``spec``: a file, or one of :data:`PROFILE_NAMES` (module docstring).
 
@@ -239,6 +333,9 @@ def resolve_profile(
         model: the NIDAR model the profile is used with.
         kitti_dirs: KITTI folders for ``kitti-hdl64e`` (default: those under the data root).
         progress: show progress while fitting.
+        kitti_frame: ``(folder, frame id)`` of the KITTI frame the profile is for:
+            ``kitti-hdl64e`` is then fitted on that folder's other frames
+            (:func:`kitti_frame_profile`), never on the frame.
 
     Raises:
         NidarError: an unknown name, an invalid file, or no data to fit ``kitti-hdl64e``.
@@ -246,6 +343,8 @@ def resolve_profile(
     spec = DEFAULT_SIM_PROFILE if spec is None else spec
     if str(spec) == DEFAULT_SIM_PROFILE:
         profile = _sim_profile(model)
+    elif str(spec) == DEFAULT_KITTI_PROFILE and kitti_frame is not None:
+        profile = kitti_frame_profile(model, *kitti_frame, progress=progress)
     elif str(spec) == DEFAULT_KITTI_PROFILE:
         profile = _kitti_profile(model, kitti_dirs, progress)
     elif str(spec) in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):

@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import NidarError
+from ..io.ownership import Owner
 from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
@@ -36,6 +38,7 @@ __all__ = [
     "INDEX_NAME",
     "KINDS",
     "MAX_SCENES",
+    "OWNER",
     "generate",
     "generate_scene",
     "index_entry",
@@ -45,7 +48,11 @@ __all__ = [
     "scene_rng",
 ]
 
+log = logging.getLogger("nidar_mi.scenegen")
+
 INDEX_NAME = "index.json"
+#: Who writes a scenegen folder (:mod:`nidar_mi.io.ownership`): it adds scenes to it.
+OWNER = Owner("scenegen", "scenes", names=(INDEX_NAME, "scene_*", ".scene_*.tmp-*"), replaces=False)
 #: Every kind of scene: the street and path layouts (:mod:`.layout`), then cities (:mod:`.city`).
 KINDS = LAYOUT_KINDS + CITY_KINDS
 
@@ -337,6 +344,25 @@ def _write(folder: _Folder, scene: _Scene, seed: int, options: dict) -> None:
         atomic_write_text(scene.path, scene.text)
 
 
+#: How ``-v`` names what happened to a scene.
+_ACTION_WORDS = {
+    "write": "written",
+    "skip": "already there, skipped",
+    "keep": "edited by hand, kept",
+}
+
+
+def _publish_index(folder) -> dict:
+    """Write the folder's ``index.json`` and its record (:mod:`nidar_mi.io.ownership`)."""
+    from ..io.ownership import folder_files, write_record
+
+    index = folder.write_index()
+    write_record(
+        folder.out_dir, OWNER, [f for f in folder_files(folder.out_dir) if OWNER.writes(f)]
+    )
+    return index
+
+
 def generate(
     out_dir: str,
     count: int,
@@ -389,7 +415,8 @@ def generate(
     from ..progress import progress_bar
 
     _check_run(out_dir, count, seed, kind, blocks, drive)
-    check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
+    # scenes are added to it: a folder of other files is refused unless `overwrite`
+    out_dir = str(check_output_folder(out_dir, owner=OWNER, overwrite=overwrite))
     folder = _Folder.read(out_dir)
     options = {
         "kind": kind,
@@ -417,13 +444,14 @@ def generate(
                 scene = _plan(folder, seed, k, options, overwrite)
                 bar.update(1)
             _write(folder, scene, seed, options)
+            log.debug("%s: %s", scene_id(seed, k), _ACTION_WORDS.get(scene.action, scene.action))
             written += scene.action == "write"
             skipped += scene.action != "write"
     except BaseException:  # interrupted or failed: the index lists the scenes written so far
         if written:
-            folder.write_index()
+            _publish_index(folder)
         raise
     finally:
         bar.close()
-    index = folder.write_index()
+    index = _publish_index(folder)
     return index | {"run": {"seed": seed, "count": count, "written": written, "skipped": skipped}}

@@ -75,10 +75,18 @@ def test_library_parameters_are_shown_as_flags(capsys):
 
 
 def test_parse_defines():
-    assert parse_defines(["a=1", " b = x y ", "a=2", "c="]) == {"a": "2", "b": "x y", "c": ""}
+    assert parse_defines(["a=1", " b = x y ", "a=2"]) == {"a": "2", "b": "x y"}
     for bad in (["a"], ["=1"], [" =1"]):
         with pytest.raises(NidarError, match="NAME=VALUE"):
             parse_defines(bad)
+
+
+@pytest.mark.parametrize("item", ["drop=", "drop=  ", "drop=\t"])
+def test_an_empty_define_is_refused(item):
+    """``-D drop=`` used to set the parameter to an empty string, which the scene then read as
+    0.0 instead of its own value."""
+    with pytest.raises(NidarError, match=r"^-D drop= has no value: give NAME=VALUE"):
+        parse_defines(["cols=8", item])
 
 
 def _cli(*args, **kw):
@@ -153,7 +161,7 @@ def test_every_command_has_quiet_verbose_and_progress_options(command, capsys):
 def _args(argv):
     from nidar_mi.cli._common import parser
 
-    return parser("x", "a command").parse_args(argv)
+    return parser("x", "a command", verbose="none").parse_args(argv)
 
 
 @pytest.mark.parametrize(

@@ -27,6 +27,7 @@ columns and the steps after them.
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import time
@@ -35,6 +36,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ...errors import NidarError
+from ...io.ownership import Owner
 
 __all__ = [
     "GROUND_REMOVED",
@@ -45,6 +47,8 @@ __all__ = [
     "run_study",
     "gt_at_mid_sweep",
 ]
+
+log = logging.getLogger("nidar_mi.drive")
 
 #: Intensity sources: the per-point value each puts into the descriptor.
 SOURCES = {
@@ -117,8 +121,11 @@ class StudyConfig:
             raise NidarError(
                 f"`sources`: unknown '{','.join(bad)}' (choose from {', '.join(SOURCES)})"
             )
+        from ...scenegen.trajectory import check_drive
+
         if self.frames < 10:
             raise NidarError(f"`frames` must be >= 10 (got {self.frames})")
+        check_drive(self.frames, self.rate_hz, self.speed)
         if self.cols < 16 or self.width < 16 or self.height < 16 or self.spp < 1:
             raise NidarError("`cols`, `width` and `height` must be >= 16 and `spp` >= 1")
 
@@ -381,8 +388,14 @@ def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -
     return out
 
 
-#: A folder holding this file (the scene index, written first) is an earlier study's output.
-MARKER = os.path.join("scene", "index.json")
+#: Who writes a study's folder (:mod:`nidar_mi.io.ownership`): it adds to it (the scene, the
+#: frames and NIDAR's columns are its cache), and its files are those below.
+OWNER = Owner(
+    "drive",
+    "study",
+    names=("scene/*", "frames/*", "results.json", "report.md", "*.png", "*.tmp-*"),
+    replaces=False,
+)
 
 
 def run_study(
@@ -390,22 +403,30 @@ def run_study(
 ) -> dict:
     """Run every step into ``out`` and return the results.
 
-    ``out`` is created; an earlier study's folder (:data:`MARKER`) is reused as the cache, any
-    other non-empty folder is refused unless ``overwrite`` (then the study's files are added to
-    it; nothing else there is touched).
+    ``out`` is created; an earlier study's folder is reused as the cache, any other non-empty
+    folder is refused unless ``overwrite`` (then the study's files are added to it; nothing
+    else there is touched), another command's output always (:data:`OWNER`,
+    :func:`nidar_mi.io.ownership.check_owner`).
     """
     from ...io.atomic import check_output_folder
+    from ...io.ownership import write_record
     from .frames import nidar_columns, render_drive
     from .report import write_report
 
     cfg.check()
-    check_output_folder(out, overwrite=overwrite, marker=MARKER, inputs=[cfg.weights, cfg.sequence])
+    out = str(
+        check_output_folder(
+            out, owner=OWNER, overwrite=overwrite, inputs=[cfg.weights, cfg.sequence]
+        )
+    )
     os.makedirs(out, exist_ok=True)
+    write_record(out, OWNER, [])  # an interrupted study is known as one
     timings = {}
     t0 = time.perf_counter()
     scene, times, poses, drive_info = _drive(out, cfg)
     gt = np.linalg.inv(poses[0]) @ poses
     timings["drive"] = time.perf_counter() - t0
+    log.debug("%s: %.1f s", "drive", timings["drive"])
 
     params = {"cols": str(cfg.cols), "width": str(cfg.width), "height": str(cfg.height)}
     frames_dir = os.path.join(out, "frames")
@@ -420,6 +441,7 @@ def run_study(
         progress=progress,
     )
     timings["frames_physics"] = time.perf_counter() - t0
+    log.debug("%s: %.1f s", "frames_physics", timings["frames_physics"])
     twin = None
     if "rgb_twin" in cfg.sources:
         t0 = time.perf_counter()
@@ -432,11 +454,13 @@ def run_study(
             progress=progress,
         )
         timings["frames_rgb_twin"] = time.perf_counter() - t0
+        log.debug("%s: %.1f s", "frames_rgb_twin", timings["frames_rgb_twin"])
     nidar_dir = None
     if "nidar" in cfg.sources:
         t0 = time.perf_counter()
         nidar_dir = nidar_columns(phys, cfg.frames, cfg.weights, progress=progress)
         timings["nidar"] = time.perf_counter() - t0
+        log.debug("%s: %.1f s", "nidar", timings["nidar"])
 
     observed = None
     if nidar_dir is not None:
@@ -449,15 +473,18 @@ def run_study(
     t0 = time.perf_counter()
     odometry = _odometry_runs(cfg, phys, gt, progress)
     timings["odometry"] = time.perf_counter() - t0
+    log.debug("%s: %.1f s", "odometry", timings["odometry"])
     odo = odometry[GROUND_REMOVED]["poses"]
 
     t0 = time.perf_counter()
     desc = _descriptors(cfg, {"physics": phys, "rgb_twin": twin}, nidar_dir, progress)
     loops = _loops(cfg, desc, gt, odo)
     timings["loops"] = time.perf_counter() - t0
+    log.debug("%s: %.1f s", "loops", timings["loops"])
     t0 = time.perf_counter()
     graphs = _pose_graphs(cfg, phys, twin, loops, odo, gt)
     timings["pose_graph"] = time.perf_counter() - t0
+    log.debug("%s: %.1f s", "pose_graph", timings["pose_graph"])
 
     cfg.timings = timings
     results = {
@@ -484,4 +511,12 @@ def run_study(
         layout=layout,
         world_poses=poses,
     )
+    write_record(out, OWNER, _own_files(out))
     return results
+
+
+def _own_files(out: str) -> list[str]:
+    """The files of ``out`` the study wrote (by name; any other file there is not listed)."""
+    from ...io.ownership import folder_files
+
+    return [f for f in folder_files(out) if OWNER.writes(f)]
