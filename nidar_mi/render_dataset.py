@@ -60,7 +60,8 @@ OWNER = Owner(
         ".*.old-*",
         ".meta.json.tmp-*",
     ),
-    label="`dataset --scenes`",
+    label="dataset --scenes",
+    whole=False,
 )
 
 # --------------------------------------------------------------------------- scenes and splits

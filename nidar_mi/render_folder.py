@@ -172,7 +172,7 @@ def _manifest_files(folder) -> list[str]:
 #: :mod:`nidar_mi.io.ownership`; an unrecorded folder of either is recognised by its manifest.
 RENDER_OWNER = Owner("render", "scene", names=(MANIFEST,), listed=_manifest_files)
 SEQUENCE_OWNER = Owner(
-    "render", "sequence", names=(MANIFEST,), listed=_manifest_files, label="`render --trajectory`"
+    "render", "sequence", names=(MANIFEST,), listed=_manifest_files, label="render --trajectory"
 )
 
 

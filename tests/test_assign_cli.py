@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.nidar.pipeline import shipped_weights_dir
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -79,7 +80,7 @@ def test_points_image_calib(tmp_path):
     assert "profile: generic-compensated (" in r.stdout
     assert "warning: unknown sensor" in r.stderr and "python -m nidar_mi.calibrate" in r.stderr
     p = read_npz(out / "points.npz")
-    assert sorted(os.listdir(out)) == ["points.las", "points.npz", "points.ply"]
+    assert sorted(os.listdir(out)) == [RECORD, "points.las", "points.npz", "points.ply"]
     np.testing.assert_array_equal(p["xyz"], xyz)
     np.testing.assert_array_equal(p["intensity"], np.arange(len(xyz), dtype=np.float32))
     obs = p["nidar_observed"]

@@ -56,6 +56,7 @@ OWNER = Owner(
         "profiles/*",
         "*.tmp-*",
     ),
+    whole=False,
 )
 
 __all__ = ["main", "build_config"]

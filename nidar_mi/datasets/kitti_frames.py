@@ -132,7 +132,8 @@ OWNER = Owner(
     "dataset",
     "kitti",
     names=("meta.json", "train/*", "val/*", "test/*", "*.tmp-*"),
-    label="`dataset --kitti`",
+    label="dataset --kitti",
+    whole=False,
 )
 
 

@@ -69,7 +69,11 @@ class Owner:
         replaces: the command replaces its folder whole (else it adds to it).
         listed: a function giving the relative paths an unrecorded earlier output lists in its
             own index (a render's ``manifest.json``), or None.
-        label: how messages name the command's output (default ``` `command` ```).
+        whole: the command publishes its folder whole (staged): its record lists every file
+            it wrote, and any other file is not its own. A command that writes in place
+            (``train``, ``dataset``) may have been stopped before it recorded what it wrote:
+            its files by name (:attr:`names`) are its own too.
+        label: how messages name the command (default its name, quoted: ``'render'``).
     """
 
     command: str
@@ -78,9 +82,10 @@ class Owner:
     replaces: bool = True
     listed: Callable[[Path], Iterable[str]] | None = field(default=None, compare=False)
     label: str = ""
+    whole: bool = True
 
     def __str__(self) -> str:
-        return self.label or f"`{self.command}`"
+        return f"'{self.label or self.command}'"
 
     def writes(self, rel: str) -> bool:
         """Whether ``rel`` is a path the command writes by name."""
@@ -150,7 +155,7 @@ def _names(paths: list[str]) -> str:
 
 def _recorded_as(rec: dict) -> str:
     kind = rec.get("kind")
-    return f"`{rec['command']}`" + (f" ({kind})" if kind and kind != rec["command"] else "")
+    return f"'{rec['command']}'" + (f" ({kind})" if kind and kind != rec["command"] else "")
 
 
 def _listed(owner: Owner, target: Path) -> set[str]:
@@ -187,7 +192,10 @@ def check_owner(target: Path, owner: Owner, *, overwrite: bool) -> dict | None:
             "command's output; choose another folder"
         )
     listed = set(rec["files"]) if rec is not None else _listed(owner, target)
-    foreign = [f for f in files if f not in listed and not owner.writes(f)]
+    by_name = rec is None or not owner.whole
+    foreign = [
+        f for f in files if f not in listed and f != RECORD and not (by_name and owner.writes(f))
+    ]
     if foreign and (owner.replaces or (rec is None and not overwrite)):
         why = (
             "never deleted: move them or choose another folder"
@@ -195,7 +203,7 @@ def check_owner(target: Path, owner: Owner, *, overwrite: bool) -> dict | None:
             else "kept; pass `overwrite` to add to this folder anyway"
         )
         raise NidarError(
-            f"{target} holds {len(foreign)} file(s) {owner} did not write "
+            f"{target} holds {len(foreign)} file(s) that {owner} did not write "
             f"({_names(foreign)}): they are {why}"
         )
     if rec is None and owner.replaces and not overwrite:

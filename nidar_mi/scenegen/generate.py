@@ -52,7 +52,13 @@ log = logging.getLogger("nidar_mi.scenegen")
 
 INDEX_NAME = "index.json"
 #: Who writes a scenegen folder (:mod:`nidar_mi.io.ownership`): it adds scenes to it.
-OWNER = Owner("scenegen", "scenes", names=(INDEX_NAME, "scene_*", ".scene_*.tmp-*"), replaces=False)
+OWNER = Owner(
+    "scenegen",
+    "scenes",
+    names=(INDEX_NAME, "scene_*", ".scene_*.tmp-*"),
+    replaces=False,
+    whole=False,
+)
 #: Every kind of scene: the street and path layouts (:mod:`.layout`), then cities (:mod:`.city`).
 KINDS = LAYOUT_KINDS + CITY_KINDS
 
@@ -376,6 +382,7 @@ def generate(
     materials: str = "all",
     lighting: str = "default",
     spectra: str = "library",
+    nested: bool = False,
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -400,6 +407,7 @@ def generate(
         materials: material set of every scene (:func:`generate_scene`).
         lighting: lighting regime of every scene (:func:`generate_scene`).
         spectra: spectral regime of every scene (:func:`generate_scene`).
+        nested: ``out_dir`` is inside an output of the caller's own (the drive study's scene).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -416,7 +424,7 @@ def generate(
 
     _check_run(out_dir, count, seed, kind, blocks, drive)
     # scenes are added to it: a folder of other files is refused unless `overwrite`
-    out_dir = str(check_output_folder(out_dir, owner=OWNER, overwrite=overwrite))
+    out_dir = str(check_output_folder(out_dir, owner=OWNER, overwrite=overwrite, nested=nested))
     folder = _Folder.read(out_dir)
     options = {
         "kind": kind,

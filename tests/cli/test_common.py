@@ -158,6 +158,37 @@ def test_every_command_has_quiet_verbose_and_progress_options(command, capsys):
         assert "--progress" in text and "--no-progress" in text
 
 
+def test_every_command_says_what_verbose_adds(capsys):
+    """``-v``'s help used to say "one per epoch" on every command; each says its own lines."""
+    import importlib
+    import re
+
+    helps = {}
+    for command in COMMANDS:
+        with pytest.raises(SystemExit):
+            importlib.import_module(f"nidar_mi.cli.{command}").main(["--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        helps[command] = re.search(r"-v, --verbose debug lines too: (.*?)(?: --|$)", text).group(1)
+    assert len(set(helps.values())) == len(COMMANDS), helps
+    assert [c for c, h in helps.items() if "epoch" in h] == ["train"]
+    assert "per frame" in helps["render"] and "per scene" in helps["scenegen"]
+
+
+@pytest.mark.parametrize("argv", [["-q"], [], ["-q", "--no-progress"]])
+def test_no_bar_of_the_work_shows_where_the_command_wants_none(argv, capsys):
+    """A library function asked for its bar (``progress=True``, a default) inside a command run
+    with ``-q`` or into a log used to draw it there all the same."""
+    from nidar_mi.progress import progress_bar
+
+    def work():
+        assert list(progress_bar(range(3), show=True, desc="library bar")) == [0, 1, 2]
+
+    assert run(work, args=_args(argv)) == 0
+    assert "library bar" not in capsys.readouterr().err
+    assert run(work, args=_args(["--progress"])) == 0
+    assert "library bar" in capsys.readouterr().err
+
+
 def _args(argv):
     from nidar_mi.cli._common import parser
 

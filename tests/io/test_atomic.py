@@ -122,7 +122,9 @@ def test_staged_directory_never_mixes_runs(tmp_path):
     out.mkdir()
     (out / "mine.md").write_text("user data")
     for overwrite in (False, True):  # a file the command did not write is never deleted
-        with pytest.raises(NidarError, match=r"holds 1 file\(s\) `test` did not write \(mine.md\)"):
+        with pytest.raises(
+            NidarError, match=r"holds 1 file\(s\) that 'test' did not write \(mine.md\)"
+        ):
             with staged_directory(out, owner=OWNER, overwrite=overwrite):
                 raise AssertionError("not reached")
     assert (out / "mine.md").read_text() == "user data"

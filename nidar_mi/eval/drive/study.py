@@ -193,6 +193,7 @@ def _drive(out: str, cfg: StudyConfig):
             "speed": cfg.speed,
             "body_motion": cfg.body_motion,
         },
+        nested=True,
     )
     sid = scene_id(cfg.seed, 0)
     entry = next(e for e in index["scenes"] if e["id"] == sid)
@@ -393,8 +394,9 @@ def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -
 OWNER = Owner(
     "drive",
     "study",
-    names=("scene/*", "frames/*", "results.json", "report.md", "*.png", "*.tmp-*"),
+    names=("scene/*", "frames/*", "kitti/*", "results.json", "report.md", "*.png", "*.tmp-*"),
     replaces=False,
+    whole=False,
 )
 
 
