@@ -136,22 +136,19 @@ def assign_intensity(
     branch=None,
     profile=None,
     ring=None,
-    kitti_frame=None,
 ) -> dict[str, np.ndarray]:
     """Per-point NIDAR intensity: ``{"intensity_nidar", "reflectance_nidar", "nidar_observed"}``.
 
     Args:
         xyz: (N, 3) points in the LiDAR frame (m).
         cameras: the cameras; ``images`` one (H, W, 3) uint8 image each.
-        weights: NIDAR weights folder (None: the shipped model).
+        weights: NIDAR weights folder (None: the shipped model), or the loaded model.
         occlusion: drop points another point hides from the camera.
         branch: ``R`` or ``I_hat``; None: the profile's branch (``R`` without a profile). A
             branch the profile was not fitted on is an error.
-        profile: a profile name or file (None: ``branch`` with the weights' own calibration,
-            or raw for ``I_hat``).
+        profile: a profile name or file, or the profile itself (None: ``branch`` with the
+            weights' own calibration, or raw for ``I_hat``).
         ring: (N,) the points' rings for the profile (-1 unknown), or None.
-        kitti_frame: ``(folder, frame id)`` when the cloud is that KITTI frame
-            (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile`).
 
     Returns:
         ``intensity_nidar`` (N,) float32 (0 where unobserved), ``reflectance_nidar`` (N,) float32
@@ -160,11 +157,12 @@ def assign_intensity(
     """
     from .datasets.sensor_profiles import resolve_profile
     from .nidar.pipeline import NidarModel
+    from .profiles import SensorProfile
 
-    model = NidarModel.load(weights)
-    prof = None
-    if profile is not None:
-        prof = resolve_profile(profile, model, kitti_frame=kitti_frame)
+    model = weights if isinstance(weights, NidarModel) else NidarModel.load(weights)
+    prof = profile
+    if profile is not None and not isinstance(profile, SensorProfile):
+        prof = resolve_profile(profile, model)
     if (
         prof is not None
         and branch is not None
@@ -275,6 +273,8 @@ def assign_cloud(
     warning (an unknown sensor); on ``I_hat`` the raw head. The cloud's ``ring`` column, when
     present, gives the profile its rings.
     """
+    from .datasets.sensor_profiles import DEFAULT_KITTI_PROFILE
+
     points = dict(finite_points(inputs.points, inputs.where))
     log.debug(
         "%s: %d points read, %d finite", inputs.where, len(inputs.points["xyz"]), len(points["xyz"])
@@ -287,6 +287,12 @@ def assign_cloud(
         if not (inputs.kitti or inputs.simulator):
             warn_unknown_sensor()
     ring = np.asarray(points["ring"], dtype=np.int64) if "ring" in points else None
+    if inputs.kitti_frame is not None and str(profile) == DEFAULT_KITTI_PROFILE:
+        from .datasets.sensor_profiles import resolve_profile
+        from .nidar.pipeline import NidarModel
+
+        weights = NidarModel.load(weights)  # kitti-hdl64e of the frame's own folder, not of it
+        profile = resolve_profile(profile, weights, kitti_frame=inputs.kitti_frame)
     points.update(
         assign_intensity(
             points["xyz"],
@@ -297,7 +303,6 @@ def assign_cloud(
             branch=branch,
             profile=profile,
             ring=ring,
-            kitti_frame=inputs.kitti_frame,
         )
     )
     return points

@@ -301,7 +301,8 @@ def _remove_leftovers(out_dir: str, names: list[str]) -> None:
 
 def _record(out_dir: str) -> None:
     """The dataset folder's record: what the dataset wrote there, by name."""
-    from .io.ownership import folder_files, write_record
+    from .io.atomic import write_record
+    from .io.ownership import folder_files
 
     os.makedirs(out_dir, exist_ok=True)
     write_record(out_dir, OWNER, [f for f in folder_files(out_dir) if OWNER.writes(f)])

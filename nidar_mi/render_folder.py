@@ -135,9 +135,12 @@ class RenderRequest:
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
         """The request for a scene file (hashes the file); ``options`` are the fields."""
+        from .io.atomic import file_problem
+
         path = os.path.abspath(scene_path)
-        if not os.path.isfile(path):
-            raise NidarError(f"{scene_path}: no such scene file")
+        problem = file_problem(path, "scene file")
+        if problem:
+            raise NidarError(f"{scene_path}: {problem}")
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":

@@ -207,8 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     left = {"text": "nothing written"}
 
     def work():
-        from ..io.atomic import check_output_folder
-        from ..io.ownership import write_record
+        from ..io.atomic import check_output_folder, write_record
 
         cfg = build_config(args)
         if args.overwrite and args.resume:

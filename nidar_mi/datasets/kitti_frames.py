@@ -165,8 +165,8 @@ def build_kitti_frames(
             wrote is left then), or an output folder :data:`OWNER` may not write.
     """
     from ..frames import SPLITS, list_frames, write_frame
-    from ..io.atomic import atomic_write_json, check_output_folder
-    from ..io.ownership import folder_files, write_record
+    from ..io.atomic import atomic_write_json, check_output_folder, write_record
+    from ..io.ownership import folder_files
     from ..progress import progress_bar
 
     dirs = [Path(d) for d in kitti_dirs]

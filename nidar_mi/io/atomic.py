@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import NidarError
-from .ownership import Owner, check_not_inside_output, check_owner, write_record
+from .ownership import Owner, check_not_inside_output, check_owner, folder_files, record_dict
 
 __all__ = [
     "atomic_path",
@@ -57,6 +57,7 @@ __all__ = [
     "reading",
     "remove_stale",
     "staged_directory",
+    "write_record",
 ]
 
 
@@ -145,6 +146,15 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
     except ValueError as e:
         raise NidarError(f"cannot write {path}: {e}") from None
     atomic_write_text(path, text + "\n")
+
+
+def write_record(folder: str | os.PathLike, owner: Owner, files: Iterable[str] | None = None):
+    """Write the record of what ``owner`` wrote in ``folder`` (:mod:`nidar_mi.io.ownership`):
+    ``files`` (relative paths; default: every file in it now)."""
+    from .ownership import RECORD
+
+    listed = folder_files(folder) if files is None else files
+    atomic_write_json(Path(folder) / RECORD, record_dict(owner, listed))
 
 
 def _one_line(e: BaseException) -> str:
@@ -322,10 +332,10 @@ def check_output_folder(
     check_outside_inputs(out_dir, inputs)
     if target.exists() and not target.is_dir():
         raise NidarError(f"cannot write {target}: it exists and is not a folder")
-    if target.is_dir():
-        check_owner(target, owner, overwrite=overwrite)
     if not nested:
         check_not_inside_output(target)
+    if target.is_dir():
+        check_owner(target, owner, overwrite=overwrite)
     check_writable(target)
     return target
 
@@ -364,7 +374,8 @@ def check_output_file(
     """Check, before any work, that a command can write the file ``path`` (atomically, with
     :func:`atomic_path`, to the path returned).
 
-    A symbolic link is written through: the file it names is replaced, the link is kept.
+    A symbolic link is written through: the file it names is replaced (or made), the link is
+    kept.
 
     Args:
         path: the file.
@@ -377,19 +388,13 @@ def check_output_file(
         The file to write, absolute, links resolved.
 
     Raises:
-        NidarError: an empty path, a symbolic link loop or a link to nothing, a folder, an
-            existing file that is not an earlier output without ``overwrite``, a file inside
-            another command's output folder, or a place that cannot be written.
+        NidarError: an empty path, a symbolic link loop, a folder, an existing file that is not
+            an earlier output without ``overwrite``, a file inside another command's output
+            folder, or a place that cannot be written.
     """
     if not os.fspath(path):
         raise NidarError("the output path is empty: name an output file")
-    if os.path.islink(path) and not os.path.exists(path):
-        _real(path, f"cannot write {path}")
-        raise NidarError(
-            f"cannot write {path}: it is a symbolic link to {os.readlink(path)}, which does not "
-            "exist; choose another output"
-        )
-    target = _real(path, f"cannot write {path}")
+    target = _real(path, f"cannot write {path}")  # a link to nothing yet: its target is made
     check_outside_inputs(path, inputs)
     if target.is_dir():
         raise NidarError(f"cannot write {path}: it is a folder; name a file")

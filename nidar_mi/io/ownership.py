@@ -3,7 +3,7 @@
 A command that writes a folder leaves :data:`RECORD` (``.nidar_mi-output.json``) in it: the
 command, the kind of run (``render``: ``scene`` or ``sequence``; ``dataset``: ``scenes`` or
 ``kitti``; one kind for the others), the package version and every file it wrote (POSIX paths
-relative to the folder). :func:`check_owner` decides, before any work, whether a command may
+relative to the folder; :func:`nidar_mi.io.atomic.write_record` writes it). :func:`check_owner` decides, before any work, whether a command may
 write a folder ``OUT``:
 
 =============================================  ===============================================
@@ -45,7 +45,6 @@ __all__ = [
     "folder_files",
     "read_record",
     "record_dict",
-    "write_record",
 ]
 
 #: The record's file name, inside the output folder.
@@ -128,23 +127,19 @@ def read_record(folder: str | os.PathLike) -> dict | None:
 
 def record_dict(owner: Owner, files: Iterable[str]) -> dict:
     """The record of a folder ``owner`` wrote with ``files`` (relative paths)."""
-    from .. import __version__
+    from importlib.metadata import PackageNotFoundError, version
 
+    try:  # the installed distribution's (the package itself sits above this layer)
+        release = version("nidar_mi")
+    except PackageNotFoundError:
+        release = "unknown"
     return {
         "schema": SCHEMA,
         "command": owner.command,
         "kind": owner.kind,
-        "version": __version__,
+        "version": release,
         "files": sorted(f for f in files if f != RECORD),
     }
-
-
-def write_record(folder: str | os.PathLike, owner: Owner, files: Iterable[str] | None = None):
-    """Write the record of ``folder``: ``files`` (default: every file in it now)."""
-    from .atomic import atomic_write_json
-
-    listed = folder_files(folder) if files is None else files
-    atomic_write_json(Path(folder) / RECORD, record_dict(owner, listed))
 
 
 def _names(paths: list[str]) -> str:
@@ -163,8 +158,8 @@ def _listed(owner: Owner, target: Path) -> set[str]:
         return set()
     try:
         return {str(p) for p in owner.listed(target)}
-    except (OSError, ValueError, TypeError, KeyError, AttributeError):
-        return set()
+    except (NidarError, OSError, ValueError, TypeError, KeyError, AttributeError):
+        return set()  # no index of the command's: nothing there is its own by name
 
 
 def check_owner(target: Path, owner: Owner, *, overwrite: bool) -> dict | None:
@@ -192,7 +187,9 @@ def check_owner(target: Path, owner: Owner, *, overwrite: bool) -> dict | None:
             "command's output; choose another folder"
         )
     listed = set(rec["files"]) if rec is not None else _listed(owner, target)
-    by_name = rec is None or not owner.whole
+    # an unrecorded folder is the command's by name only if its own index, when the command
+    # writes one, reads as one (a web app's manifest.json is no render's)
+    by_name = (rec is None and (owner.listed is None or bool(listed))) or not owner.whole
     foreign = [
         f for f in files if f not in listed and f != RECORD and not (by_name and owner.writes(f))
     ]

@@ -360,7 +360,8 @@ _ACTION_WORDS = {
 
 def _publish_index(folder) -> dict:
     """Write the folder's ``index.json`` and its record (:mod:`nidar_mi.io.ownership`)."""
-    from ..io.ownership import folder_files, write_record
+    from ..io.atomic import write_record
+    from ..io.ownership import folder_files
 
     index = folder.write_index()
     write_record(

@@ -39,7 +39,7 @@ BAD_POSES = {
     "scale 2": ('<scale value="2"/><translate z="1"/>', "scales by 2"),
     "scale 0": ('<scale value="0"/>', "collapses space (scale 0)"),
     "mirror": ('<scale x="-1"/><translate z="1"/>', "mirrors (det -1)"),
-    "nan": ('<matrix value="nan 0 0 0 0 1 0 0 0 0 1 1 0 0 0 1"/>', "NaN or infinite"),
+    "nan": ('<matrix value="nan 0 0 0 0 1 0 0 0 0 1 1 0 0 0 1"/>', "holds NaN or infinite values"),
     "shear": ('<matrix value="1 0.5 0 0 0 1 0 0 0 0 1 1 0 0 0 1"/>', "shears or scales unevenly"),
 }
 
@@ -289,7 +289,7 @@ _DISK_FULL = """
 import resource, signal, sys
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
-from nidar_mi.render import main
+from nidar_mi.cli.render import main
 sys.exit(main(sys.argv[1:]))
 """
 

@@ -15,9 +15,15 @@ import sys
 
 import pytest
 
-from nidar_mi.io.ownership import RECORD, read_record
-
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+#: The record's file name (:data:`nidar_mi.io.ownership.RECORD`), spelled out for the tests.
+RECORD = ".nidar_mi-output.json"
+
+
+def read_record(folder):
+    from nidar_mi.io.ownership import read_record
+
+    return read_record(folder)
 
 
 def _render(call, scene, out, *extra):

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from nidar_mi.eval.suite import OWNER
-from nidar_mi.io.ownership import RECORD, write_record
+from nidar_mi.io.atomic import write_record
+from nidar_mi.io.ownership import RECORD
 from tests.helpers.synthetic_kitti import make_kitti
 
 # ------------------------------------------------------------------ outputs that hold inputs

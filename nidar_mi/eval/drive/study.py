@@ -410,8 +410,7 @@ def run_study(
     else there is touched), another command's output always (:data:`OWNER`,
     :func:`nidar_mi.io.ownership.check_owner`).
     """
-    from ...io.atomic import check_output_folder
-    from ...io.ownership import write_record
+    from ...io.atomic import check_output_folder, write_record
     from .frames import nidar_columns, render_drive
     from .report import write_report
 
