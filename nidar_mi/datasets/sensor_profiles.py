@@ -110,11 +110,8 @@ def _sim_profile(model: NidarModel) -> SensorProfile:
 
 
 def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfile:
-    from ..io.atomic import atomic_write_json
-    from ..io.cache_key import cache_key
     from .kitti_frames import default_kitti_dirs, kitti_training_data
-    from .paths import cache_dir, data_root
-    from .profile_fitting import fit_scan_profile
+    from .paths import data_root
     from .scans import frames_from_data
 
     dirs = [Path(d) for d in kitti_dirs] if kitti_dirs else default_kitti_dirs()
@@ -124,36 +121,46 @@ def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfi
             f"not shipped: KITTI is non-commercial data) and none were found under {data_root()}; "
             "set NIDAR_MI_DATA, or fit one with python -m nidar_mi.calibrate and pass --profile FILE"
         )
-    key = cache_key(
-        {
-            "model": model.identity(),
-            "dirs": [str(d.resolve()) for d in dirs],
-            "form": KITTI_PROFILE_FORM,
-            "incidence": KITTI_PROFILE_INCIDENCE,
-            "version": _FIT_VERSION,
-        }
+    data = {"dirs": [str(d.resolve()) for d in dirs]}
+    where = f"the KITTI frames in {', '.join(map(str, dirs))}"
+    return _cached_fit(
+        model,
+        data,
+        where,
+        lambda: frames_from_data(kitti_training_data(dirs, progress=progress)),
+        progress,
     )
+
+
+def _cached_fit(model: NidarModel, data: dict, where: str, scans, progress: bool) -> SensorProfile:
+    """``kitti-hdl64e`` fitted on ``scans()`` (the frames ``data`` names, ``where`` in words),
+    cached in the user's cache folder under a key of ``data``, the weights, the form and the
+    fitting version; one warning when it is fitted."""
+    from ..io.atomic import atomic_write_json
+    from ..io.cache_key import cache_key
+    from .paths import cache_dir
+    from .profile_fitting import fit_scan_profile
+
+    settings = {"form": KITTI_PROFILE_FORM, "incidence": KITTI_PROFILE_INCIDENCE}
+    key = cache_key({"model": model.identity(), **data, **settings, "version": _FIT_VERSION})
     path = cache_dir("profiles", f"{DEFAULT_KITTI_PROFILE}-{key}.json")
     if path.is_file():
         return load_profile(path)
     warnings.warn(
-        f"fitting the {DEFAULT_KITTI_PROFILE} profile on the KITTI frames in "
-        f"{', '.join(map(str, dirs))} (once; cached in {path})",
-        stacklevel=3,
+        f"fitting the {DEFAULT_KITTI_PROFILE} profile on {where} (once; cached in {path})",
+        stacklevel=4,
     )
-    scans = frames_from_data(kitti_training_data(dirs, progress=progress))
     profile = fit_scan_profile(
         model,
-        scans,
+        scans(),
         name=DEFAULT_KITTI_PROFILE,
         sensor=_KITTI_SENSOR,
         form=KITTI_PROFILE_FORM,
         branch="R",
-        provenance={"data": [str(d.resolve()) for d in dirs], "cache": str(path)},
+        provenance={**data, "cache": str(path)},
         progress=progress,
         incidence=KITTI_PROFILE_INCIDENCE,
     )
-    os.makedirs(path.parent, exist_ok=True)
     atomic_write_json(path, profile.to_dict())
     return profile
 
@@ -188,12 +195,8 @@ def kitti_frame_profile(
     Raises:
         NidarError: the folder holds no other frame.
     """
-    from ..io.atomic import atomic_write_json
-    from ..io.cache_key import cache_key
     from .kitti import frame_ids, load_frame
     from .kitti_frames import kitti_training_frame
-    from .paths import cache_dir
-    from .profile_fitting import fit_scan_profile
     from .scans import scan_frame
 
     folder = Path(kitti_dir).resolve()
@@ -208,41 +211,17 @@ def kitti_frame_profile(
         i: [(f.stat().st_size, f.stat().st_mtime_ns) for f in sorted(folder.glob(f"*/{i}.*"))]
         for i in chosen
     }
-    key = cache_key(
-        {
-            "model": model.identity(),
-            "folder": str(folder),
-            "frames": stamps,
-            "form": KITTI_PROFILE_FORM,
-            "incidence": KITTI_PROFILE_INCIDENCE,
-            "version": _FIT_VERSION,
-        }
-    )
-    path = cache_dir("profiles", f"{DEFAULT_KITTI_PROFILE}-{key}.json")
-    if path.is_file():
-        return load_profile(path)
-    warnings.warn(
-        f"fitting the {DEFAULT_KITTI_PROFILE} profile on {len(chosen)} other frames of "
-        f"{kitti_dir} (not on {frame_id}; once: cached in {path})",
-        stacklevel=3,
-    )
-    scans = []
-    for fid in chosen:
-        frame, _ = kitti_training_frame(load_frame(folder, fid))
-        scans.append(scan_frame(frame, fid, str(folder), 1.0, lambda f=frame: [f["rgb"]]))
-    profile = fit_scan_profile(
-        model,
-        scans,
-        name=DEFAULT_KITTI_PROFILE,
-        sensor=_KITTI_SENSOR,
-        form=KITTI_PROFILE_FORM,
-        branch="R",
-        provenance={"data": str(folder), "frames": chosen, "cache": str(path)},
-        progress=progress,
-        incidence=KITTI_PROFILE_INCIDENCE,
-    )
-    atomic_write_json(path, profile.to_dict())
-    return profile
+
+    def scans():
+        out = []
+        for fid in chosen:
+            frame, _ = kitti_training_frame(load_frame(folder, fid))
+            out.append(scan_frame(frame, fid, str(folder), 1.0, lambda f=frame: [f["rgb"]]))
+        return out
+
+    data = {"data": str(folder), "frames": chosen, "stamps": stamps}
+    where = f"{len(chosen)} other frames of {kitti_dir} (not on {frame_id})"
+    return _cached_fit(model, data, where, scans, progress)
 
 
 def generic_profile(name: str) -> SensorProfile:

@@ -101,19 +101,33 @@ def test_assign_into_a_render_folder_is_refused(
     one_error_line(status, err, "nothing is written into another output")
 
 
-def test_a_single_render_does_not_replace_a_sequence(
-    tmp_path, call, one_error_line, snapshot, tiny_scene, variant
+#: Folders a render replaces only with --overwrite: how each is made, and the words refusing it.
+NEEDS_OVERWRITE = {
+    "a sequence": ("is the output of 'render' (sequence), another kind of run"),
+    "nidar_mi 0.1.0": ("holds no record of what wrote it (nidar_mi 0.1.0 wrote none)"),
+}
+
+
+@pytest.mark.parametrize("earlier", list(NEEDS_OVERWRITE))
+def test_a_render_replaces_only_with_overwrite(
+    earlier, tmp_path, call, one_error_line, snapshot, tiny_scene, variant
 ):
-    seq = tmp_path / "seq"
-    traj = _trajectory(tmp_path / "drive.tum")
-    assert _render(call, tiny_scene, seq, "--trajectory", traj)[0] == 0
-    assert read_record(seq)["kind"] == "sequence"
-    before = snapshot(seq)
-    status, _, err = _render(call, tiny_scene, seq)
-    one_error_line(status, err, "is the output of 'render' (sequence), another kind of run")
-    assert "--overwrite" in err and snapshot(seq) == before
-    assert _render(call, tiny_scene, seq, "--overwrite")[0] == 0
-    assert read_record(seq)["kind"] == "scene"
+    """A single render used to replace a sequence folder ("the same command"); a folder of the
+    previous version (no record) is replaced only with ``--overwrite``, and the message says so."""
+    out = tmp_path / "out"
+    if earlier == "a sequence":
+        traj = _trajectory(tmp_path / "drive.tum")
+        assert _render(call, tiny_scene, out, "--trajectory", traj)[0] == 0
+        assert read_record(out)["kind"] == "sequence"
+    else:
+        assert _render(call, tiny_scene, out)[0] == 0
+        (out / RECORD).unlink()
+    before = snapshot(out)
+    status, _, err = _render(call, tiny_scene, out)
+    one_error_line(status, err, NEEDS_OVERWRITE[earlier])
+    assert "--overwrite" in err and snapshot(out) == before
+    assert _render(call, tiny_scene, out, "--overwrite")[0] == 0
+    assert read_record(out)["kind"] == "scene"
 
 
 def test_an_earlier_render_is_replaced_and_listed(tmp_path, call, tiny_scene, variant):
@@ -125,21 +139,6 @@ def test_an_earlier_render_is_replaced_and_listed(tmp_path, call, tiny_scene, va
     assert (rec["command"], rec["kind"]) == ("render", "scene")
     assert rec["files"] == sorted(manifest["files"])  # every file it wrote, nothing else
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "scenes"]
-
-
-def test_an_output_of_the_previous_version_needs_overwrite(
-    tmp_path, call, one_error_line, snapshot, tiny_scene, variant
-):
-    """A render folder of nidar_mi 0.1.0 has no record: replaced only with ``--overwrite``."""
-    out = tmp_path / "out"
-    assert _render(call, tiny_scene, out)[0] == 0
-    (out / RECORD).unlink()
-    before = snapshot(out)
-    status, _, err = _render(call, tiny_scene, out)
-    one_error_line(status, err, "holds no record of what wrote it (nidar_mi 0.1.0 wrote none)")
-    assert "--overwrite" in err and snapshot(out) == before
-    assert _render(call, tiny_scene, out, "--overwrite")[0] == 0
-    assert read_record(out)["command"] == "render"
 
 
 @pytest.mark.parametrize("target", ["mine.png", "spectra.png"])
