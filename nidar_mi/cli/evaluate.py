@@ -51,7 +51,7 @@ def _parser():
         "evaluate",
         "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, real "
         "RGB/NIR photos, and the ablations.",
-        verbose="one per frame scored (its returns)",
+        verbose="one per rendered frame scored (its returns)",
     )
     p.add_argument("--data", help="dataset folder (meta.json, renders/, splits)")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
