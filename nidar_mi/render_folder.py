@@ -49,8 +49,9 @@ __all__ = [
     "write_manifest",
 ]
 
-#: Point-cloud formats a LiDAR folder can hold.
-FORMATS = ("npz", "ply", "las", "bin", "pcd")
+#: Point-cloud formats a LiDAR folder can hold (``laz``: LAS compressed by laspy's lazrs back
+#: end, the ``laz`` extra).
+FORMATS = ("npz", "ply", "las", "laz", "bin", "pcd")
 #: The formats written when none are asked for.
 DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
 #: ``bin_intensity`` values: KITTI's [0, 1] convention, or the simulator's own intensity.
@@ -114,6 +115,8 @@ class RenderRequest:
             None: the weights' own ``sim-905``).
         bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
         layout: :data:`LAYOUT_VERSION` of the folder.
+        weather: the weather set for the render (:meth:`nidar_mi.weather.Weather.to_dict`);
+            None (and absent from :meth:`to_dict`, as before weather existed): the scene's own.
     """
 
     scene: str
@@ -131,6 +134,7 @@ class RenderRequest:
     profile: str | None = None
     bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
+    weather: dict | None = None
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
@@ -155,6 +159,8 @@ class RenderRequest:
         """JSON-safe dict (what the manifest stores under ``request``)."""
         d = asdict(self)
         d["formats"] = list(self.formats)
+        if d["weather"] is None:
+            del d["weather"]
         return d
 
 
@@ -212,8 +218,9 @@ def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
 # --------------------------------------------------------------------------- size
 
 #: Bytes per point of each format, the simulator's columns (:mod:`nidar_mi.io.points`), rounded
-#: up; LAS adds its point record, ``bin`` holds x, y, z and intensity only.
-POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "bin": 16}
+#: up; LAS adds its point record (LAZ, compressed, is counted as LAS), ``bin`` holds x, y, z and
+#: intensity only.
+POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "laz": 80, "bin": 16}
 #: Bytes per point of ``xyz_deskewed`` (every format but ``bin``).
 DESKEW_BYTES = 12
 #: Bytes per beam of ``range_image.exr`` (4 float32 channels, uncompressed).
@@ -334,6 +341,7 @@ def write_lidar(
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
+        "laz": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
         "bin": lambda p: write_kitti_bin(p, pts["xyz"], bin_i),
         "pcd": lambda p: write_pcd(p, pts),
     }

@@ -72,6 +72,9 @@ class RenderOptions:
         deskew: add ``xyz_deskewed`` to the points (equal to ``xyz`` for a scan from one pose).
             Not part of the cache key.
         progress: show a progress bar on stderr. Not part of the cache key.
+        weather: a :class:`nidar_mi.weather.Weather` for every LiDAR (their ``fog``, ``rain``,
+            ``snow`` replaced) and the cameras; None: the scene's own. Not with ``intensity``
+            nidar.
     """
 
     scene: str
@@ -89,6 +92,7 @@ class RenderOptions:
     max_memory: int | None = None
     deskew: bool = False
     progress: bool = True
+    weather: Any = None
 
     def branch(self) -> str:
         """The NIDAR branch read: ``nidar_branch``, else the profile's, else ``R``."""
@@ -111,6 +115,7 @@ class RenderOptions:
             nidar_branch=self.branch(),
             profile=profile_key(self.profile),
             bin_intensity=self.bin_intensity,
+            weather=None if self.weather is None else self.weather.to_dict(),
         )
 
 
@@ -145,9 +150,24 @@ def check_options(options: RenderOptions) -> rf.RenderRequest:
         from .lidar.memory import default_limit
 
         default_limit()  # a bad NIDAR_MAX_MEMORY is named before anything loads
+    _check_weather(options.intensity, options.weather)
     req = options.key()
     _check_request(req)
     return req
+
+
+def _check_weather(intensity: str, weather) -> None:
+    """Weather must be possible, and cannot go with NIDAR's intensity."""
+    if weather is None:
+        return
+    from .weather import check_weather
+
+    check_weather(weather)
+    if intensity == "nidar" and not weather.clear:
+        raise NidarError(
+            "`intensity` nidar reads the surfaces from the camera images, which the weather "
+            "veils (NIDAR learned clear days): render weather with `intensity` physics"
+        )
 
 
 def _check_request(req: rf.RenderRequest) -> None:
@@ -238,6 +258,10 @@ class RenderSession:
         request = check_options(options) if request is None else request
         t0 = time.perf_counter()
         loaded = _load_checked(request)
+        if options.weather is not None:  # the render's weather replaces the LiDARs' own
+            for sensor in loaded.lidars:
+                sensor.weather = None if options.weather.clear else options.weather
+        _check_weather(options.intensity, loaded.weather)  # one weather, which NIDAR cannot see
         return cls(options=options, request=request, loaded=loaded, load_s=time.perf_counter() - t0)
 
     @property

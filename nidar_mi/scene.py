@@ -50,6 +50,25 @@ class LoadedScene:
     rgb_twin: bool = False
     labels: SceneLabels = field(default_factory=SceneLabels)
 
+    @property
+    def weather(self):
+        """The weather the scene's LiDARs scan in (their ``fog``, ``rain``, ``snow``, or what a
+        render set on them), which its cameras render through: a
+        :class:`nidar_mi.weather.Weather`, or None when clear.
+
+        Raises:
+            NidarError: the LiDARs disagree (the cameras need one weather).
+        """
+        seen = {s.id(): getattr(s, "weather", None) for s in self.lidars}
+        kinds = {w for w in seen.values()}
+        if len(kinds) > 1:
+            said = ", ".join(f"'{k}' {w.describe() if w else 'clear'}" for k, w in seen.items())
+            raise NidarError(
+                f"{self.path}: the lidars see different weather ({said}); the cameras need one: "
+                "give every lidar the same fog, rain and snow, or set them for all (`weather`)"
+            )
+        return next(iter(kinds), None)
+
     def rgb_only_emitters(self) -> list[str]:
         """Ids of emitters whose radiance is RGB/float (nothing meaningful past 830 nm)."""
         out = []

@@ -41,6 +41,7 @@ import logging
 import os
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -104,13 +105,15 @@ class SequenceOptions:
         progress: show a progress bar on stderr.
         previews: range previews of ``all`` frames, the ``first`` only or ``none``
             (:data:`PREVIEWS`).
+        weather: the weather of every frame (:attr:`RenderOptions.weather`); None: the
+            scene's own.
     """
 
     scene: str
     trajectory: str
     rate: float | None = None
     frames: int | None = None
-    formats: tuple[str, ...] = rf.FORMATS
+    formats: tuple[str, ...] = tuple(f for f in rf.FORMATS if f != "laz")  # laz: an extra
     sequence_formats: tuple[str, ...] = ()
     bin_intensity: str = "unit"
     seed: int | None = None
@@ -123,6 +126,7 @@ class SequenceOptions:
     max_disk: int | None = None
     progress: bool = True
     previews: str = "first"
+    weather: Any = None
 
     def frame_options(self) -> RenderOptions:
         """The options every frame is rendered with (physics intensity, the scene itself)."""
@@ -137,6 +141,7 @@ class SequenceOptions:
             max_memory=self.max_memory,
             deskew=self.deskew,
             progress=self.progress,
+            weather=self.weather,
         )
 
 
@@ -300,7 +305,7 @@ def _open(options: SequenceOptions):
     request = check_sequence(options)
     session = RenderSession.open(options.frame_options(), request)
     lidars = session.lidars
-    rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
+    rate = float(options.rate if options.rate is not None else lidars[0].config.frame_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
     times = _frame_times(traj, rate, options.frames, sweep_s, options.max_frames)

@@ -100,6 +100,8 @@ def _scan_lidars(run: _Run, session: RenderSession, bar) -> None:
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
         }
+        if result.weather is not None:
+            run.lidars[sensor.id()]["weather"] = result.weather.to_dict()
         bar.update(1)
 
 
@@ -224,7 +226,9 @@ def _write_lidars(run: _Run, options: RenderOptions, extra: dict[str, dict]) -> 
 def _manifest(session: RenderSession, run: _Run, total_s: float) -> dict:
     """The render folder's ``manifest.json``: request, provenance, sensors, timings, files."""
     opts, req = session.options, session.request
+    weather = session.loaded.weather
     return {
+        **({} if weather is None else {"weather": weather.to_dict()}),
         "request": req.to_dict(),
         "scene": req.scene,
         "scene_sha256": req.scene_sha256,

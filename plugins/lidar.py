@@ -6,9 +6,14 @@ Executed once per Mitsuba variant by :func:`nidar_mi.plugins.register_all`; see
 
 from __future__ import annotations
 
+import re
+
 import mitsuba as mi
 
+from nidar_mi.errors import NidarError
 from nidar_mi.lidar.config import PARAMETERS, LidarConfig
+from nidar_mi.weather.conditions import PARAMETERS as WEATHER_PARAMETERS
+from nidar_mi.weather.conditions import Weather
 
 from . import PluginParameterError
 
@@ -32,8 +37,16 @@ class LidarSensor(mi.Sensor):
          - Default
        * - ``preset``
          - string
-         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top`` (tables and
-           sources in :mod:`nidar_mi.lidar.pattern` and :mod:`nidar_mi.lidar.layouts`)
+         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``,
+           ``vlp32c``, ``vls128``, ``os0_128``, ``os2_128``, ``pandar64``, ``xt32``, ``at128``,
+           ``livox_mid40`` (tables and sources in :mod:`nidar_mi.lidar.pattern` and
+           :mod:`nidar_mi.lidar.layouts`); a preset also sets the defaults of
+           ``horizontal_resolution``, ``range_min``, ``range_max`` and, for ``at128``,
+           ``fov_h`` (120), ``fov_h_centred``, ``rotation_rate`` and ``scan_start_azimuth``;
+           ``livox_mid40``: one laser behind two Risley prisms (:mod:`nidar_mi.lidar.risley`),
+           ``horizontal_resolution`` shots per sweep, ``rotation_rate`` sweeps per second
+           (their product the point rate), ``fov_h``, ``spin`` and ``scan_start_azimuth``
+           unused
          - ``vlp16``
        * - ``layout``
          - string
@@ -62,16 +75,18 @@ class LidarSensor(mi.Sensor):
          - float
          - horizontal field of view in degrees, (0, 360]; column j points at azimuth
            a0 + (j + 0.5)·fov_h/cols from +x, counter-clockwise
-         - 360
+         - 360 (``at128``: 120)
        * - ``fov_h_centred``
          - boolean
          - ``true``: a0 = -fov_h/2, the columns span ±fov_h/2 around +x (forward);
            ``false``: a0 = 0, they span 0..fov_h
-         - ``false``
+         - ``false`` (``at128``: ``true``)
        * - ``rotation_rate``
          - float
-         - spin rate in Hz, (0, 100]; one sweep takes 1/rotation_rate s
-         - 10
+         - spin rate in Hz, (0, 100]; a 360° turn takes 1/rotation_rate s, a sweep of
+           ``fov_h`` fov_h/360 of it; a sequence's default frame rate (one frame per turn;
+           ``at128``: one mirror facet, 240° of beam, so 1.5 · rotation_rate)
+         - 10 (``at128``: 6.67, its beam's turn rate: 120° in 50 ms, 10 frames/s)
        * - ``spin``
          - string
          - ``cw`` (clockwise seen from above, as Velodyne and Ouster sensors spin) or ``ccw``
@@ -79,7 +94,7 @@ class LidarSensor(mi.Sensor):
        * - ``scan_start_azimuth``
          - float
          - azimuth in degrees where a sweep starts (firing time 0), [-360, 360]
-         - 180
+         - 180 (``at128``: 60)
        * - ``wavelength``
          - float
          - laser wavelength in nm, [360, 1700]
@@ -155,6 +170,24 @@ class LidarSensor(mi.Sensor):
          - integer
          - seed of the noise and dropout draws, >= 0
          - 0
+       * - ``fog``
+         - float
+         - fog by its meteorological optical range in m, [5, 100000] (α at 550 nm = ln 20 /
+           MOR; droplets by ``fog_type``): attenuation, the fog's own soft return
+           (:mod:`nidar_mi.lidar.weather`, docs/WEATHER.md)
+         - none
+       * - ``fog_type``
+         - string
+         - ``advection`` or ``radiation`` (droplet sizes, :mod:`nidar_mi.weather.particles`)
+         - ``advection``
+       * - ``rain``
+         - float
+         - rain rate in mm/h, [0, 300]: attenuation, drops in the beam
+         - none
+       * - ``snow``
+         - float
+         - snowfall rate as melted water in mm/h, [0, 50]; not with ``rain``
+         - none
        * - ``to_world``
          - transform
          - pose; LiDAR frame x forward, y left, z up
@@ -183,10 +216,18 @@ class LidarSensor(mi.Sensor):
         if "calibration_file" in values:  # relative to the scene file
             path = str(values["calibration_file"])
             values["calibration_file"] = str(mi.file_resolver().resolve(path))
+        name = props.id() or "lidar"
         try:
-            self.config = LidarConfig.from_mapping(props.id() or "lidar", values)
+            self.config = LidarConfig.from_mapping(name, values)
         except ValueError as e:
             raise PluginParameterError(str(e)) from None
+        weather = {k: props.get(k) for k in WEATHER_PARAMETERS if k in props}
+        try:
+            #: the sensor's own weather (None: clear), what a scan uses unless told otherwise
+            self.weather = Weather.from_mapping(weather)
+        except NidarError as e:
+            message = re.sub(r"`(\w+)`", r"parameter '\1'", str(e))
+            raise PluginParameterError(f"lidar '{name}': {message}") from None
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"

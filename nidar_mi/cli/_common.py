@@ -8,7 +8,8 @@ status:
 status  meaning
 ======  ====================================================================================
 0       success
-2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file)
+2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file,
+        a module of an optional extra that is not installed: :mod:`nidar_mi.extras`)
 130     interrupted by Ctrl-C (SIGINT)
 143     terminated (SIGTERM)
 ======  ====================================================================================
@@ -39,6 +40,7 @@ import warnings
 from collections.abc import Callable, Mapping
 
 from ..errors import MAX_SEED, NidarError, check_seed, flag_message
+from ..extras import extra_of, missing_extra
 from ..progress import bars_allowed, stderr_is_terminal
 
 __all__ = [
@@ -55,6 +57,8 @@ __all__ = [
     "scene_inputs",
     "seed_arg",
     "show_progress",
+    "add_weather_args",
+    "weather_of",
 ]
 
 EXIT_OK = 0
@@ -292,6 +296,13 @@ def run(
     except KeyboardInterrupt:
         print(f"interrupted; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except ModuleNotFoundError as e:  # a module of an extra that is not installed
+        extra = extra_of(e.name or "")
+        if extra is None:
+            raise
+        message = missing_extra(extra, "this command", ((e.name or "").split(".")[0],))
+        print(f"error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
     except OSError as e:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"error: {where}{_one_line(e.strerror or e)}", file=sys.stderr)
@@ -299,3 +310,54 @@ def run(
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def add_weather_args(p: argparse.ArgumentParser, *, what: str) -> None:
+    """``--fog``, ``--fog-type``, ``--rain`` and ``--snow`` (:mod:`nidar_mi.weather`) in one
+    group; ``what`` says what they apply to."""
+    g = p.add_argument_group("weather (docs/WEATHER.md)")
+    g.add_argument(
+        "--fog",
+        type=float,
+        default=None,
+        metavar="MOR_M",
+        help=f"fog of this meteorological optical range in m (5 .. 100000) {what}",
+    )
+    g.add_argument(
+        "--fog-type",
+        default=None,
+        choices=("advection", "radiation"),
+        help="the fog's droplets: advection (default) or radiation fog",
+    )
+    g.add_argument(
+        "--rain", type=float, default=None, metavar="MM_PER_H", help=f"rain, mm/h (0 .. 300) {what}"
+    )
+    g.add_argument(
+        "--snow",
+        type=float,
+        default=None,
+        metavar="MM_PER_H",
+        help=f"snowfall as melted water, mm/h (0 .. 50; not with --rain) {what}",
+    )
+
+
+def weather_of(args: argparse.Namespace):
+    """The :class:`nidar_mi.weather.Weather` of the weather flags (checked), or None when no
+    flag was given.
+
+    Raises:
+        NidarError: an impossible value, or ``--fog-type`` without ``--fog``.
+    """
+    from ..weather import Weather, check_weather
+
+    if args.fog_type is not None and args.fog is None:
+        raise NidarError("`fog_type` needs `fog`")
+    if args.fog is None and args.rain is None and args.snow is None:
+        return None
+    from ..extras import require
+
+    w = check_weather(
+        Weather(fog=args.fog, fog_type=args.fog_type or "advection", rain=args.rain, snow=args.snow)
+    )
+    require("weather", "fog, rain and snow")
+    return w

@@ -40,6 +40,7 @@ from __future__ import annotations
 import os
 
 from ..errors import NidarError
+from ..extras import require
 from ._common import out_path, parser, run
 
 __all__ = ["main", "build_parser"]
@@ -96,7 +97,12 @@ def build_parser():
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _assign(args), flags=FLAGS, args=args)
+
+    def work():
+        require("nidar", "assign")
+        _assign(args)
+
+    return run(work, flags=FLAGS, args=args)
 
 
 def _formats(text: str) -> list[str]:

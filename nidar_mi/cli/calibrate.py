@@ -40,6 +40,7 @@ import sys
 
 from ..datasets.sensor_profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
 from ..errors import NidarError
+from ..extras import require
 from ._common import out_path, parser, run, show_progress
 
 __all__ = ["build_parser", "main"]
@@ -133,7 +134,12 @@ def _check_target(path: str, overwrite: bool, inputs: list) -> str:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _calibrate(args, argv), args=args)
+
+    def work():
+        require("nidar", "calibrate")
+        _calibrate(args, argv)
+
+    return run(work, args=args)
 
 
 def _calibrate(args, argv) -> None:

@@ -8,6 +8,7 @@ NIDAR's columns and the analysis).
 
 from __future__ import annotations
 
+from ..extras import require
 from ._common import out_path, parser, run, show_progress
 
 __all__ = ["main", "build_parser"]
@@ -96,6 +97,9 @@ def main(argv=None) -> int:
             body_motion=not args.no_body_motion,
         )
         cfg.check()  # bad options are named before the variant starts
+        require("drive", "drive")
+        if "nidar" in cfg.sources:
+            require("nidar", "drive --sources nidar")
         set_variant()
         results = run_study(args.out, cfg, progress=show_progress(args), overwrite=args.overwrite)
         if not args.quiet:

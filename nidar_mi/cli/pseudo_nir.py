@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import require
 from ..io.ownership import Owner
 from ._common import out_path, parser, run, show_progress
 
@@ -263,7 +264,12 @@ def build_parser():
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _convert(args), args=args)
+
+    def work():
+        require("nidar", "pseudo_nir")
+        _convert(args)
+
+    return run(work, args=args)
 
 
 def _convert(args) -> None:

@@ -16,6 +16,7 @@ from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ..sequence import MAX_FRAMES
 from ._common import (
+    add_weather_args,
     out_path,
     parse_defines,
     parser,
@@ -23,6 +24,7 @@ from ._common import (
     scene_inputs,
     seed_arg,
     show_progress,
+    weather_of,
 )
 
 __all__ = ["main", "build_parser"]
@@ -131,6 +133,7 @@ def build_parser():
         help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
         "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
     )
+    add_weather_args(p, what="for every lidar and camera (replacing the scene's own)")
     _add_sequence_args(p)
     p.add_argument(
         "--deskew",
@@ -189,7 +192,8 @@ def _add_sequence_args(p) -> None:
         "--rate",
         type=float,
         default=None,
-        help="frames per second (default: the first lidar's rotation_rate); also the sample "
+        help="frames per second (default: the first lidar's frame rate, its rotation_rate but "
+        "for the at128's 10 Hz); also the sample "
         "rate of KITTI odometry poses",
     )
     seq.add_argument(
@@ -272,6 +276,7 @@ def _sequence_options(args):
         max_disk=_memory(args.max_disk, "--max-disk"),
         progress=show_progress(args),
         previews=args.previews or "first",
+        weather=weather_of(args),
     )
 
 
@@ -282,6 +287,12 @@ def _render_options(args):
 
     if args.intensity == "nidar" and args.no_cameras:
         raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
+    weather = weather_of(args)
+    if weather is not None and not weather.clear and args.intensity == "nidar":
+        raise NidarError(
+            "--intensity nidar reads the surfaces from the camera images, which the weather "
+            "veils (NIDAR learned clear days): render weather with --intensity physics"
+        )
     profile = None
     if args.intensity == "nidar":
         from ..datasets.sensor_profiles import profile_line
@@ -311,7 +322,21 @@ def _render_options(args):
         max_memory=_memory(args.max_memory),
         deskew=args.deskew,
         progress=show_progress(args),
+        weather=weather,
     )
+
+
+def _require_extras(args) -> None:
+    """The optional dependencies the options need (:mod:`nidar_mi.extras`), checked before any
+    work."""
+    from ..extras import require
+
+    if args.intensity == "nidar" or args.profile is not None:
+        require("nidar", "--intensity nidar")
+    if "laz" in _parse_formats(args.formats):
+        require("laz", "--formats laz")
+    if "rosbag" in args.sequence_formats.lower():
+        require("ros", "--sequence-formats rosbag")
 
 
 def main(argv=None) -> int:
@@ -328,6 +353,7 @@ def main(argv=None) -> int:
         inputs = [*scene_inputs(args.scene), args.trajectory, args.weights, args.profile]
         owner = RENDER_OWNER if args.trajectory is None else SEQUENCE_OWNER
         check_output_folder(out, owner=owner, overwrite=args.overwrite, inputs=inputs)
+        _require_extras(args)
         if args.trajectory is None and (
             any(v is not None for v in sequence_only)
             or args.sequence_formats

@@ -38,6 +38,7 @@ import shutil
 from pathlib import Path
 
 from ..errors import NidarError
+from ..extras import require
 from ..io.ownership import Owner
 from ._common import out_path, parser, run, seed_arg, show_progress
 
@@ -209,6 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     def work():
         from ..io.atomic import check_output_folder, write_record
 
+        require("nidar", "train")
         cfg = build_config(args)
         if args.overwrite and args.resume:
             raise NidarError("--overwrite replaces the run that --resume continues: give one")

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import missing_extra
 from .atomic import atomic_path, reading
 from .points import (
     _PLY_TYPES,
@@ -59,7 +60,7 @@ def _intensity_scale(intensity: np.ndarray | None, scale: float | None) -> float
 
 def _laz_hint(e: Exception) -> str:
     """laspy's message, plus the fix when LAZ support is missing."""
-    hint = " (.laz files need the lazrs package: pip install lazrs)"
+    hint = f" ({missing_extra('laz', '.laz files', ('lazrs',))})"
     return f"{e}{hint if 'LazBackend' in str(e) else ''}"
 
 

@@ -43,6 +43,12 @@ name                 dtype      shape   unit  meaning
                                               at the point (the camera's per-surface cue), 0
                                               where no camera sees the point
 ``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
+``scatterer``        uint8      (N,)    --    in weather (``--fog``, ``--rain``, ``--snow``):
+                                              what the return came from, an index into
+                                              ``scatterer_names``: 0 surface, 1 fog (the medium's
+                                              own return), 2 drop, 3 flake (docs/WEATHER.md)
+``scatterer_names``  str (U)    (4,)    --    in weather: ``surface``, ``fog``, ``drop``,
+                                              ``flake``
 ===================  =========  ======  ====  ==================================================
 
 Other entries are carried generically by every writer:
@@ -89,7 +95,7 @@ _KNOWN_SHAPES = {
     "t": None,
     "return_index": None,
     **dict.fromkeys(("range", "intensity", "reflectance", "cos_incidence"), None),
-    **dict.fromkeys(("ring", "column", "material", "label", "instance"), None),
+    **dict.fromkeys(("ring", "column", "material", "label", "instance", "scatterer"), None),
 }
 
 

@@ -28,7 +28,7 @@ from pydantic import (
 
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
-from .pattern import PRESETS, BeamPattern, parse_angles
+from .pattern import PRESETS, BeamPattern, RisleyPattern, parse_angles
 from .return_model import INTENSITY_MODES
 
 __all__ = [
@@ -124,6 +124,14 @@ class LidarConfig:
     @property
     def pattern(self) -> BeamPattern:
         """The beams of one sweep (directions, origins, firing times)."""
+        prisms = PRESETS[self.preset].risley if self.preset is not None else None
+        if prisms is not None and self.table is None:
+            return RisleyPattern(
+                self.laser_table,
+                self.horizontal_resolution,
+                rotation_rate=self.rotation_rate,
+                prisms=prisms,
+            )
         return BeamPattern(
             self.laser_table,
             self.horizontal_resolution,
@@ -133,6 +141,14 @@ class LidarConfig:
             spin=-1 if self.spin == "cw" else 1,
             scan_start_azimuth=self.scan_start_azimuth,
         )
+
+    @property
+    def frame_rate(self) -> float:
+        """Frames per second, Hz: ``rotation_rate`` for a spinning head (one frame per turn) and
+        a Risley sweep; ``rotation_rate · 360° / frame_sweep_deg`` for a preset whose frame is
+        part of a beam turn (the ``at128``'s mirror facet: 6.67 Hz · 360 / 240 = 10 Hz)."""
+        sweep = PRESETS[self.preset].frame_sweep_deg if self.preset is not None else 360.0
+        return self.rotation_rate * 360.0 / sweep
 
     @property
     def subrays(self) -> int:
@@ -373,6 +389,10 @@ class LayoutParameters(BaseModel):
             "detection_threshold": p.detection_threshold if p and raw else 0.0,
             # the receiver noise belongs to the preset's receiver: kept when the threshold is set
             "receiver_noise_std": p.receiver_noise_std if p and raw else 0.0,
+            "fov_h": p.fov_h if p else 360.0,
+            "fov_h_centred": p.fov_h_centred if p else False,
+            "rotation_rate": p.rotation_rate if p else 10.0,
+            "scan_start_azimuth": p.scan_start_azimuth if p else 180.0,
         }
 
 

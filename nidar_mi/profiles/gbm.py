@@ -54,6 +54,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import missing_extra
 
 __all__ = [
     "DEFAULT_LEAVES",
@@ -103,10 +104,8 @@ _FEATURE_SETS = (
 def _lgb():
     try:
         import lightgbm
-    except ImportError:  # pragma: no cover - a dependency of the package
-        raise NidarError(
-            "the gbm profile form needs LightGBM (pip install lightgbm==4.7.0)"
-        ) from None
+    except ImportError:  # the `nidar` extra
+        raise NidarError(missing_extra("nidar", "the gbm profile form", ("lightgbm",))) from None
     return lightgbm
 
 

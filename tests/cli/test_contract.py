@@ -53,6 +53,7 @@ def _argv(command, out, tiny_scene, assign_inputs, synthetic_data, tmp_path):
         ],
         "pseudo_nir": [assign_inputs[5], "-o", out, "-q"],
         "calibrate": [synthetic_data, "-o", out, "-q"],
+        "weather": [assign_inputs[1], "-o", out, "--fog", "50", "-q"],
     }[command]
 
 
@@ -115,6 +116,10 @@ def test_output_path_problems_are_one_line(
         ("train", ["--max-steps", "0"], "max_steps"),
         ("scenegen", ["--seed", "-1"], "--seed"),
         ("render", ["--no-such-option"], "unrecognized arguments"),
+        ("weather", ["--seed", "-1"], "--seed"),
+        ("weather", ["--fog", "0"], "--fog"),
+        ("weather", ["--snow", "-2"], "--snow"),
+        ("render", ["--rain", "301"], "--rain"),
     ],
 )
 def test_bad_seeds_and_parameters_are_one_line(

@@ -273,6 +273,7 @@ def test_a_mount_point_as_the_output_is_refused_before_work(
         ("drive", ["-o", ""]),
         ("train", ["S", ""]),
         ("materials", ["--plot", "grass", "-o", ""]),
+        ("weather", ["IN", "--fog", "100", "-o", ""]),
     ],
 )
 def test_an_empty_output_path_is_an_error(
