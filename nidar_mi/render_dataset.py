@@ -25,6 +25,7 @@ is shared across splits.
 from __future__ import annotations
 
 import glob
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,9 +33,11 @@ from pathlib import Path
 import numpy as np
 
 from .errors import NidarError, check_seed
+from .io.ownership import Owner
 from .training_frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
 
 __all__ = [
+    "OWNER",
     "DatasetOptions",
     "build_dataset",
     "find_scenes",
@@ -42,6 +45,26 @@ __all__ = [
     "scene_params",
     "split_scenes",
 ]
+
+log = logging.getLogger("nidar_mi.dataset")
+
+#: Who writes a dataset folder (:mod:`nidar_mi.io.ownership`): the frames and ``meta.json``,
+#: the render cache, the evaluation's default cache, and the staging of an unfinished build.
+OWNER = Owner(
+    "dataset",
+    "scenes",
+    names=(
+        "meta.json",
+        *(f"{s}/*" for s in SPLITS),
+        "renders/*",
+        "cache/*",
+        ".partial-*",
+        ".*.old-*",
+        ".meta.json.tmp-*",
+    ),
+    label="dataset --scenes",
+    whole=False,
+)
 
 # --------------------------------------------------------------------------- scenes and splits
 
@@ -260,15 +283,15 @@ def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, 
     for name in names:
         cameras, wavelength = _scene_entry(os.path.join(out_dir, "renders", name), lidar_id)
         frames[split_of[name]] += [f"{name}__{c}" for c in cameras]
+        log.debug("%s: %d frame(s) in %s", name, len(cameras), split_of[name])
     for split in SPLITS:  # what a worker killed while writing a frame left
         for _, path in leftovers(os.path.join(stage, split)):
             path.unlink(missing_ok=True)
     return frames, wavelength
 
 
-def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
-    """Drop cached renders of scenes no longer in the dataset and, with ``foreign`` (an
-    ``--overwrite`` of a folder that was no dataset), every other entry."""
+def _remove_leftovers(out_dir: str, names: list[str]) -> None:
+    """Drop cached renders of scenes no longer in the dataset."""
     import shutil
 
     renders = Path(out_dir) / "renders"
@@ -276,10 +299,15 @@ def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
     for d in renders.iterdir() if renders.is_dir() else ():
         if d.is_dir() and not d.name.startswith(".") and d.name not in keep:
             shutil.rmtree(d, ignore_errors=True)
-    if foreign:
-        for entry in Path(out_dir).iterdir():
-            if entry.name not in {"renders", "meta.json", *SPLITS}:
-                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+
+
+def _record(out_dir: str) -> None:
+    """The dataset folder's record: what the dataset wrote there, by name."""
+    from .io.atomic import write_record
+    from .io.ownership import folder_files
+
+    os.makedirs(out_dir, exist_ok=True)
+    write_record(out_dir, OWNER, [f for f in folder_files(out_dir) if OWNER.writes(f)])
 
 
 @dataclass(frozen=True)
@@ -295,7 +323,8 @@ class DatasetOptions:
         lidar_id: the LiDAR whose returns supervise (None: the first by id).
         intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
         progress: show a progress bar.
-        overwrite: accept a non-empty ``out_dir`` that is no dataset.
+        overwrite: the user passed ``overwrite`` (an unrecorded dataset of nidar_mi 0.1.0, a
+            dataset of KITTI frames: :func:`~nidar_mi.io.ownership.check_owner`).
         workers: scenes at once on a local Ray runtime (None: one after the other, in this
             process); see :mod:`nidar_mi.tasks`.
         ray_address: run the scenes on this Ray cluster instead.
@@ -327,8 +356,9 @@ def build_dataset(scene_dir: str, out_dir: str, **options) -> dict:
 
     Args:
         scene_dir: folder of scene XML files.
-        out_dir: the dataset folder; a non-empty folder that is no dataset is refused unless
-            ``overwrite`` (its other entries are then removed once the dataset is published).
+        out_dir: the dataset folder; an earlier dataset of rendered scenes is updated, any
+            other folder as :func:`nidar_mi.io.ownership.check_owner` says (a file the dataset
+            did not write is never removed: such a folder is refused).
         **options: the fields of :class:`DatasetOptions`.
 
     Each scene is one task: render (unless cached), then write its frames into the staging
@@ -344,21 +374,24 @@ def build_dataset(scene_dir: str, out_dir: str, **options) -> dict:
     o = DatasetOptions(**options)
     _check_dataset_options(o)
     scenes = _scene_set(scene_dir, o)
-    old = _read_meta(out_dir)
-    earlier = old is not None or os.path.isdir(os.path.join(out_dir, "renders"))
-    check_output_folder(
-        out_dir, overwrite=o.overwrite or earlier, inputs=[scene_dir, *scenes.files]
+    out_dir = str(
+        check_output_folder(
+            out_dir, owner=OWNER, overwrite=o.overwrite, inputs=[scene_dir, *scenes.files]
+        )
     )
+    old = _read_meta(out_dir)
     request = _dataset_request(scenes, o)
     renders = {
         n: _render_request(f, scenes.used[f], o.seed, o.spp)
         for f, n in zip(scenes.files, scenes.names)
     }
+    _record(out_dir)  # known as a dataset from here on, interrupted or not
     if _published(out_dir, old, request, renders):
         return old
     out_dir = os.path.abspath(out_dir)
     meta = _publish(out_dir, scenes, o, request, withdraw=old is not None)
-    _remove_leftovers(out_dir, scenes.names, foreign=o.overwrite and not earlier)
+    _remove_leftovers(out_dir, scenes.names)
+    _record(out_dir)
     return meta
 
 
@@ -391,10 +424,14 @@ class _Scenes:
 def _scene_set(scene_dir: str, o: DatasetOptions) -> _Scenes:
     """The scenes of ``scene_dir``, checked: unique names, every ``-D`` parameter used by some
     scene, the LiDAR asked for in every scene."""
+    from .scene import read_scene_xml
+
     files = [os.path.abspath(f) for f in find_scenes(scene_dir)]
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
         raise NidarError(f"{scene_dir}: scene file names must be unique")
+    for path in files:  # every scene file is checked before any is rendered
+        read_scene_xml(path)
     used = {path: scene_params(path, o.params) for path in files}
     unused = sorted(set(o.params or {}) - {k for u in used.values() for k in u})
     if unused:

@@ -28,12 +28,15 @@ import numpy as np
 
 from .errors import NidarError
 from .io.cache_key import file_sha256
+from .io.ownership import Owner
 
 __all__ = [
     "BIN_INTENSITY",
     "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
+    "RENDER_OWNER",
+    "SEQUENCE_OWNER",
     "RenderRequest",
     "RenderedCamera",
     "RenderedScan",
@@ -134,9 +137,12 @@ class RenderRequest:
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
         """The request for a scene file (hashes the file); ``options`` are the fields."""
+        from .io.atomic import file_problem
+
         path = os.path.abspath(scene_path)
-        if not os.path.isfile(path):
-            raise NidarError(f"{scene_path}: no such scene file")
+        problem = file_problem(path, "scene file")
+        if problem:
+            raise NidarError(f"{scene_path}: {problem}")
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
@@ -163,6 +169,20 @@ def write_manifest(folder: str | os.PathLike, manifest: dict) -> None:
     from .io.atomic import atomic_write_json
 
     atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+
+
+def _manifest_files(folder) -> list[str]:
+    """The files a render or sequence folder of nidar_mi 0.1.0 (no record) lists."""
+    manifest = read_manifest(folder)
+    return [MANIFEST, *manifest["files"]]
+
+
+#: Who writes a render folder (one render) and a sequence folder (``render --trajectory``):
+#: :mod:`nidar_mi.io.ownership`; an unrecorded folder of either is recognised by its manifest.
+RENDER_OWNER = Owner("render", "scene", names=(MANIFEST,), listed=_manifest_files)
+SEQUENCE_OWNER = Owner(
+    "render", "sequence", names=(MANIFEST,), listed=_manifest_files, label="render --trajectory"
+)
 
 
 def read_manifest(folder: str | os.PathLike) -> dict:

@@ -41,6 +41,7 @@ t, label, instance of the first LiDAR) and camera images are written when the fr
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -64,6 +65,8 @@ __all__ = [
     "render_sequence",
     "sequence_bytes",
 ]
+
+log = logging.getLogger("nidar_mi.sequence")
 
 #: Whole-sequence outputs beside the frame folders.
 SEQUENCE_FORMATS = ("kitti", "rosbag")
@@ -202,9 +205,9 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
 
     Args:
         options: what to render (:class:`SequenceOptions`).
-        out_dir: the sequence folder (replaced whole; a non-empty folder that is not an earlier
-            sequence needs ``overwrite``).
-        overwrite: replace a non-empty ``out_dir``.
+        out_dir: the sequence folder (an earlier sequence folder is replaced whole, any other
+            folder as :func:`nidar_mi.io.ownership.check_owner` says).
+        overwrite: the user passed ``overwrite`` (:func:`~nidar_mi.io.ownership.check_owner`).
 
     Returns:
         The sequence manifest.
@@ -219,7 +222,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     session.check_memory()
     _check_bounds(session, options, len(times), out_dir)
     rig = _rig(session)
-    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
+    with staged_directory(out_dir, owner=rf.SEQUENCE_OWNER, overwrite=overwrite) as stage:
         frames = _render_frames(stage, session, options, traj, times, rig)
         frames.written += _write_poses_and_times(stage, frames.start_poses, times)
         request = _sequence_request(session, options, rate, len(times))
@@ -385,6 +388,9 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
                 frames.start_poses.append(rendered.lidar_start_pose)
                 writer.submit(_write_frame, rendered, stage, frames, outputs)
                 loop.append(time.perf_counter() - t0)
+                log.debug(
+                    "frame %d/%d (t = %.3f s) rendered in %.2f s", k + 1, len(times), t_k, loop[-1]
+                )
                 bar.update(1)
             t0 = time.perf_counter()
             poses = np.asarray(frames.start_poses)

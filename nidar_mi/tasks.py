@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import sys
 import time
 import traceback
@@ -204,8 +203,9 @@ def _execute(fn, args, kwargs, setup, threads, capture_warnings: bool) -> _Outco
 
 
 def _sweep(tasks: Sequence[Task]) -> None:
-    """Remove what killed writers left beside the tasks' outputs (one listing per folder)."""
-    from .io.atomic import leftovers
+    """Remove what killed writers left beside the tasks' outputs (one listing per folder); a
+    staging folder a live writer still holds stays (:func:`nidar_mi.io.atomic.remove_stale`)."""
+    from .io.atomic import leftovers, remove_stale
 
     by_dir: dict[Path, set[str]] = {}
     for t in tasks:
@@ -216,7 +216,7 @@ def _sweep(tasks: Sequence[Task]) -> None:
         for name, path in leftovers(folder):
             if name in names:
                 if path.is_dir() and not path.is_symlink():
-                    shutil.rmtree(path, ignore_errors=True)
+                    remove_stale(path, str(folder / name))
                 else:
                     path.unlink(missing_ok=True)
 

@@ -174,7 +174,8 @@ class LidarSensor(mi.Sensor):
        * - ``return_mode``
          - string
          - ``strongest``, ``first``, ``last`` or ``dual`` (strongest and last; the second
-           strongest when they coincide); several returns need ``beam_divergence`` > 0
+           strongest when they coincide); ``dual`` needs ``beam_divergence`` > 0 (refused
+           without: a beam of no width has one return)
          - ``strongest``
        * - ``return_separation``
          - float

@@ -125,5 +125,6 @@ def test_a_folder_of_something_else_is_refused(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert main(["-o", str(tmp_path), *REDUCED]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and "is not empty" in err and err.count("\n") == 1
+    assert err.startswith("error: ") and err.count("\n") == 1
+    assert "holds 1 file(s) that 'drive' did not write (notes.txt)" in err and "--overwrite" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

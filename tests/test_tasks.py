@@ -58,8 +58,9 @@ def _setup_seen() -> tuple[int, str]:
 def _die_once(marker: str, out: str) -> str:
     """SIGKILL this worker in the middle of writing ``out`` the first time; write it the next."""
     from nidar_mi.io.atomic import staged_directory
+    from nidar_mi.io.ownership import Owner
 
-    with staged_directory(out) as stage:
+    with staged_directory(out, owner=Owner("test", "run")) as stage:
         (stage / "data.txt").write_text("half")
         if not os.path.exists(marker):
             open(marker, "w").close()

@@ -40,7 +40,7 @@ import sys
 from ..datasets.sensor_profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
 from ..errors import NidarError
 from ..extras import require
-from ._common import parser, run, show_progress
+from ._common import out_path, parser, run, show_progress
 
 __all__ = ["build_parser", "main"]
 
@@ -50,11 +50,14 @@ def build_parser():
         "calibrate",
         "Fit a sensor profile (its response to the value and the return's geometry) on a "
         "sensor's own scans.",
+        verbose="the frames read and the returns each gives, the fit's summary",
     )
     p.add_argument(
         "scans", nargs="+", metavar="SCANS", help="scan folders (KITTI, data or generic)"
     )
-    p.add_argument("-o", "--out", required=True, help="profile file to write (.json)")
+    p.add_argument(
+        "-o", "--out", required=True, type=out_path, help="profile file to write (.json)"
+    )
     p.add_argument("--name", help="profile name (default: the output file's stem)")
     p.add_argument("--sensor", default="", help="what the sensor is, free text")
     p.add_argument(
@@ -100,24 +103,23 @@ def build_parser():
     return p
 
 
-def _check_target(path: str, overwrite: bool, inputs: list) -> None:
-    from ..io.atomic import check_output_folder, check_outside_inputs
-
-    check_outside_inputs(path, inputs)
-    if os.path.isdir(path):
-        raise NidarError(f"{path} is a folder; give a file name for the profile")
-    check_output_folder(os.path.dirname(os.path.abspath(path)), overwrite=True)
-    if not os.path.exists(path) or overwrite:
-        return
+def _is_profile(path) -> bool:
+    """Whether ``path`` holds a sensor profile (an earlier output of this command)."""
     try:
         with open(path, encoding="utf-8") as f:
-            is_profile = json.load(f).get("schema", "").startswith("nidar_mi.sensor_profile/")
+            return json.load(f).get("schema", "").startswith("nidar_mi.sensor_profile/")
     except (OSError, ValueError, AttributeError, UnicodeDecodeError):
-        is_profile = False
-    if not is_profile:
-        raise NidarError(
-            f"{path} exists and is not a sensor profile; pass --overwrite to replace it"
-        )
+        return False
+
+
+def _check_target(path: str, overwrite: bool, inputs: list) -> str:
+    """The profile file to write (a link's target; :func:`nidar_mi.io.atomic.check_output_file`)."""
+    from ..io.atomic import check_output_file
+
+    checked = check_output_file(
+        path, overwrite=overwrite, inputs=inputs, earlier=_is_profile, kind="a sensor profile"
+    )
+    return str(checked)
 
 
 def main(argv=None) -> int:
@@ -149,7 +151,7 @@ def _calibrate(args, argv) -> None:
         )
     if args.no_geometry and args.form != "gbm":
         raise NidarError(f"--no-geometry needs --form gbm (got --form {args.form})")
-    _check_target(args.out, args.overwrite, [*args.scans, args.weights])
+    target = _check_target(args.out, args.overwrite, [*args.scans, args.weights])
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
     scans = load_scans(
@@ -173,7 +175,7 @@ def _calibrate(args, argv) -> None:
         incidence=incidence,
         **({"use_geometry": False} if args.no_geometry else {}),
     )
-    profile.save(args.out)
+    profile.save(target)
     if not args.quiet:
         prov = profile.provenance
         print(

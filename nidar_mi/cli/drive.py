@@ -10,7 +10,7 @@ and the analysis).
 from __future__ import annotations
 
 from ..extras import require
-from ._common import parser, run, show_progress
+from ._common import out_path, parser, run, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -24,8 +24,9 @@ def build_parser():
         "Render a drive through a generated city, run KISS-ICP on it (ATE/RPE against the true "
         "poses) and detect its loops with scan context for each intensity source "
         f"({', '.join(SOURCES)}); pose-graph correction with the verified loops.",
+        verbose="one per step of the study (frames, odometry and loops per source) with its time",
     )
-    p.add_argument("-o", "--out", required=True, help="output and cache folder")
+    p.add_argument("-o", "--out", required=True, type=out_path, help="output and cache folder")
     p.add_argument("--kind", choices=("city", "suburb"), default=d.kind, help="layout kind")
     p.add_argument("--seed", type=int, default=d.seed, help="scene seed (default 0)")
     p.add_argument("--blocks", default="4,3", metavar="NX,NY", help="blocks of the layout (4,3)")
@@ -54,7 +55,8 @@ def build_parser():
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="write into OUT even when it holds files of something else (none is removed)",
+        help="write into OUT even when it holds files of something else (none is removed; "
+        "another command's output is refused)",
     )
     return p
 

@@ -26,6 +26,7 @@ def build_parser():
         "image_2/ and calib/): surfaces meshed from the scans, their reflectance and the "
         "sensor's response fitted by differentiable inversion, held-out frames re-simulated "
         "and scored against their real scans.",
+        verbose="one line per step (read, poses, mesh, fit, write, evaluate) with its wall time",
     )
     p.add_argument("drive", help="drive folder (velodyne/<id>.bin, >= 2 scans)")
     p.add_argument("-o", "--out", required=True, help="output folder")
@@ -68,7 +69,10 @@ def build_parser():
         help=f"the most scans a drive may have ({MAX_FRAMES}); more are refused before any work",
     )
     p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT written by nidar_mi 0.1.0 (no record of its files); a file "
+        "reconstruct did not write is never removed",
     )
     return p
 

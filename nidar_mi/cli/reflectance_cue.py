@@ -14,13 +14,16 @@ when it is an earlier output of this command, any other file only with ``--overw
 from __future__ import annotations
 
 import json
-import os
+import logging
+import time
 from pathlib import Path
 
 from ..errors import NidarError
 from ._common import parser, run, show_progress
 
 __all__ = ["build_parser", "main"]
+
+log = logging.getLogger("nidar_mi.reflectance_cue")
 
 
 def build_parser():
@@ -31,6 +34,7 @@ def build_parser():
         "Score how well image values (luminance, pseudo-NIR, NIDAR's R) rank the true "
         "reflectance at the LiDAR returns of rendered frames, and what the image adds to a "
         "profile of the geometry.",
+        verbose="one line per score (the cues, each image gain, each truth gain) with its time",
     )
     p.add_argument("--test", required=True, help="dataset of rendered test frames (every split)")
     p.add_argument("--train", help="dataset whose train split fits the image-gain profile")
@@ -67,33 +71,28 @@ def _is_earlier_output(path: Path) -> bool:
     return isinstance(data, dict) and {"test_frames", "cue"} <= set(data)
 
 
-def _check_out(out: str, inputs: list, overwrite: bool) -> None:
-    """Refuse, before any work, a JSON path ``out`` that is an input, holds one, would replace
-    a file inside an input folder (a dataset's ``meta.json`` or frames, a weights file) or a
-    file that is not an earlier output (without ``overwrite``), or whose folder cannot be
-    written."""
-    from ..io.atomic import check_output_folder, check_outside_inputs
+def _check_out(out: str, inputs: list, overwrite: bool) -> str:
+    """The JSON file to write (a link's target), refused before any work when it is an input,
+    holds one, would replace a file inside an input folder (a dataset's ``meta.json`` or
+    frames, a weights file) or a file that is not an earlier output (without ``overwrite``),
+    or cannot be written (:func:`nidar_mi.io.atomic.check_output_file`)."""
+    from ..io.atomic import check_output_file
 
-    check_outside_inputs(out, inputs)
     target = Path(out).resolve()
     for item in inputs:
-        if (
-            item
-            and target.exists()
-            and Path(item).is_dir()
-            and Path(item).resolve() in target.parents
-        ):
+        if item and Path(item).is_dir() and Path(item).resolve() in target.parents:
             raise NidarError(
                 f"cannot write `out` {out}: it would replace a file of the input {item}; "
                 "choose another path"
             )
-    if target.is_dir():
-        raise NidarError(f"`out` {out} is a folder; give a file name for the JSON")
-    check_output_folder(os.path.dirname(target), overwrite=True)
-    if target.exists() and not overwrite and not _is_earlier_output(target):
-        raise NidarError(
-            f"`out` {out} exists and is not an earlier output; pass --overwrite to replace it"
-        )
+    checked = check_output_file(
+        out,
+        overwrite=overwrite,
+        inputs=inputs,
+        earlier=_is_earlier_output,
+        kind="an earlier reflectance_cue result",
+    )
+    return str(checked)
 
 
 def _requests(args) -> list[str]:
@@ -136,17 +135,23 @@ def _score(args, truths: list[str]) -> dict:
     gains = bool(args.train) and not args.no_gain
     steps = 1 + (len(models) + len(truths) if gains else 0)
     with progress_bar(total=steps, show=show_progress(args), desc="scores", unit="score") as bar:
+        t0 = time.perf_counter()
         cues = cue.score_cues(test, models, stn, wavelength)
+        log.debug("cues: %.1f s", time.perf_counter() - t0)
         bar.update(1)
         result: dict = {"test_frames": len(test), "cue": cues}
         if gains:
             train = cue.dataset_frames(args.train, ("train",))
             result["gain"], result["truth_gain"] = {}, {}
             for name, m in models.items():
+                t0 = time.perf_counter()
                 result["gain"][name] = cue.image_gain(train, test, *m)
+                log.debug("image gain of %s: %.1f s", name, time.perf_counter() - t0)
                 bar.update(1)
             for key in truths:
+                t0 = time.perf_counter()
                 result["truth_gain"][key] = cue.truth_gain(train, test, key)
+                log.debug("truth gain of %s: %.1f s", key, time.perf_counter() - t0)
                 bar.update(1)
     return result
 
@@ -186,11 +191,11 @@ def main(argv=None) -> int:
         truths = _requests(args)
         if args.out:
             inputs = [args.test, args.train, args.stn, *(w.partition("=")[2] for w in args.weights)]
-            _check_out(args.out, inputs, args.overwrite)
+            target = _check_out(args.out, inputs, args.overwrite)
         result = _score(args, truths)
         if not args.quiet:
             print(_table(result))
         if args.out:
-            write_json(args.out, result)  # NaN (a flat value, too few returns) as null
+            write_json(target, result)  # NaN (a flat value, too few returns) as null
 
     return run(work, args=args)

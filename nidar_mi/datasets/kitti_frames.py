@@ -26,6 +26,7 @@ the project: KITTI is non-commercial data.
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
 from pathlib import Path
@@ -34,6 +35,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..io.cache_key import cache_key
+from ..io.ownership import Owner
 from .kitti_objects import KittiFrame, frame_ids, load_kitti_frame
 from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
 from .paths import cache_dir, data_root
@@ -42,12 +44,15 @@ __all__ = [
     "DEFAULT_HELD_OUT",
     "DEFAULT_SOURCES",
     "KITTI_FRAMES_VERSION",
+    "OWNER",
     "build_kitti_frames",
     "default_kitti_dirs",
     "frame_name",
     "kitti_training_data",
     "kitti_training_frame",
 ]
+
+log = logging.getLogger("nidar_mi.dataset")
 
 #: Version of the frames this module writes (part of the cache key).
 KITTI_FRAMES_VERSION = 1
@@ -122,12 +127,23 @@ def _source_mtime(kitti_dir: Path, fid: str) -> float:
     )
 
 
+#: Who writes a dataset folder of KITTI frames (:mod:`nidar_mi.io.ownership`).
+OWNER = Owner(
+    "dataset",
+    "kitti",
+    names=("meta.json", "train/*", "val/*", "test/*", "*.tmp-*"),
+    label="dataset --kitti",
+    whole=False,
+)
+
+
 def build_kitti_frames(
     kitti_dirs,
     out_dir: str | os.PathLike,
     *,
     held_out: dict[str, tuple[str, ...]] | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> dict:
     """Write every frame of ``kitti_dirs`` into ``out_dir`` (cached) and its ``meta.json``.
 
@@ -138,20 +154,31 @@ def build_kitti_frames(
         held_out: split name -> frame names held out of ``train`` (default
             :data:`DEFAULT_HELD_OUT`); names not present are ignored.
         progress: show a progress bar.
+        overwrite: the user passed ``overwrite`` (``out_dir`` is another kind of dataset, or
+            one of nidar_mi 0.1.0: :func:`nidar_mi.io.ownership.check_owner`).
 
     Returns:
         The meta dict (also written to ``out_dir/meta.json``).
 
     Raises:
-        NidarError: no frames, clashing folder names, or a malformed frame.
+        NidarError: no frames, clashing folder names, a malformed frame (nothing this build
+            wrote is left then), or an output folder :data:`OWNER` may not write.
     """
-    from ..io.atomic import atomic_write_json, check_outside_inputs
+    from ..io.atomic import atomic_write_json, check_output_folder, write_record
+    from ..io.ownership import folder_files
+    from ..training_frames import SPLITS
 
     dirs = [Path(d) for d in kitti_dirs]
-    check_outside_inputs(out_dir, dirs)
     names, held, jobs = _kitti_jobs(dirs, held_out)
-    out = Path(out_dir)
-    splits, info = _write_frames(jobs, held, out, progress)
+    out = check_output_folder(out_dir, owner=OWNER, overwrite=overwrite, inputs=dirs)
+    made = [p for p in (out, *(out / s for s in SPLITS)) if not p.exists()]
+    try:
+        splits, info = _write_frames(jobs, held, out, progress)
+    except BaseException:
+        for folder in reversed(made):  # the folders this build made, when left empty
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
     _drop_moved_frames(out, splits)
     short = _warn_about_scans(info)
     meta = {
@@ -167,6 +194,7 @@ def build_kitti_frames(
         "short_scans": short,
     }
     atomic_write_json(out / "meta.json", meta)
+    write_record(out, OWNER, [f for f in folder_files(out) if OWNER.writes(f)])
     return meta
 
 
@@ -225,6 +253,13 @@ def _write_frames(jobs, held: dict[str, set], out: Path, progress: bool):
                 write_frame(target, frame)
             info[name] = prev
             splits[split].append(name)
+            log.debug(
+                "%s: %d points, %d seen by camera 2 (%s)",
+                name,
+                prev["points"],
+                prev["visible"],
+                split,
+            )
     except BaseException:
         for path in added:
             path.unlink(missing_ok=True)
@@ -286,5 +321,5 @@ def kitti_training_data(kitti_dirs=None, *, progress: bool = True) -> Path:
         )
     key = cache_key([str(d.resolve()) for d in dirs] + [KITTI_FRAMES_VERSION])
     out = cache_dir("kitti_frames", key)
-    build_kitti_frames(dirs, out, progress=progress)
+    build_kitti_frames(dirs, out, progress=progress, overwrite=True)  # the package's own cache
     return out

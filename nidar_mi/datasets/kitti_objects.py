@@ -25,10 +25,14 @@ import numpy as np
 
 from nidar_mi.errors import NidarError
 from nidar_mi.geometry.camera_model import CameraModel
-from nidar_mi.io.images import read_png
+from nidar_mi.io.images import read_rgb8
 from nidar_mi.io.kitti import load_kitti_calib, read_kitti_bin
 
-__all__ = ["KittiFrame", "frame_ids", "load_kitti_frame"]
+__all__ = ["CENTRE_TOLERANCE", "KittiFrame", "frame_ids", "load_kitti_frame"]
+
+#: How far from the image centre camera 2's principal point may lie, as a fraction of the
+#: image's width and height (KITTI's lie within 4 %; a half-size image puts it at ~48 %).
+CENTRE_TOLERANCE = 0.2
 
 
 def _frame_paths(kitti_dir: str | os.PathLike[str], frame_id: str) -> dict[str, str]:
@@ -96,6 +100,14 @@ def load_kitti_frame(kitti_dir: str | os.PathLike[str], frame_id: str) -> KittiF
         if not os.path.isfile(p):
             raise NidarError(f"KITTI frame {frame_id}: missing {what} file {p}")
     xyz, intensity = read_kitti_bin(paths["velodyne"])
-    rgb = read_png(paths["image"])[..., :3]
+    rgb = read_rgb8(paths["image"])
     cam = load_kitti_calib(paths["calib"], "P2", width=rgb.shape[1], height=rgb.shape[0])
+    cx, cy = float(cam.K[0, 2]), float(cam.K[1, 2])
+    h, w = rgb.shape[:2]
+    if abs(cx - w / 2) > CENTRE_TOLERANCE * w or abs(cy - h / 2) > CENTRE_TOLERANCE * h:
+        raise NidarError(
+            f"KITTI frame {frame_id}: {paths['image']} is {w}x{h} but calib P2's principal "
+            f"point ({cx:.0f}, {cy:.0f}) is far from its centre: the image does not match the "
+            "calibration (resized or cropped?)"
+        )
     return KittiFrame(xyz=xyz, intensity=intensity, rgb=rgb, camera=cam, frame_id=frame_id)

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Sequence
 
@@ -34,6 +35,8 @@ __all__ = [
     "render_scenes",
     "twin_prediction",
 ]
+
+log = logging.getLogger("nidar_mi.evaluate")
 
 
 def fit_class_constant(
@@ -196,6 +199,7 @@ def evaluate_renders(
                 twin_pred=tp,
             )
             res = evaluate_frame(frame, pred, lpips=lpips)
+            log.debug("%s: %d returns scored", getattr(frame, "name", rdir), frame.gt.size)
             if on_frame is not None:
                 on_frame(res)
             results.append(res)

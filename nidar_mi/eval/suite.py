@@ -22,8 +22,14 @@ import os
 import time
 
 from ..errors import NidarError
+from ..io.ownership import Owner
 
-__all__ = ["EvaluateOptions", "run_evaluation", "evaluation_cache"]
+__all__ = ["EvaluateOptions", "OWNER", "run_evaluation", "evaluation_cache"]
+
+#: Who writes an evaluation's output folder (:mod:`nidar_mi.io.ownership`).
+OWNER = Owner(
+    "evaluate", "results", names=("results.md", "results.csv", "results.json", "figures/*")
+)
 
 log = logging.getLogger("nidar_mi.evaluate")
 
@@ -102,7 +108,7 @@ def run_evaluation(options: EvaluateOptions) -> dict:
 
     t0 = time.perf_counter()
     out = options.out
-    publish = dict(overwrite=options.overwrite, marker="results.json", inputs=_inputs(options))
+    publish = dict(owner=OWNER, overwrite=options.overwrite, inputs=_inputs(options))
     check_output_folder(out, **publish)
     meta = _check_inputs(options)
     _check_environment(options)

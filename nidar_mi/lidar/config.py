@@ -227,6 +227,12 @@ class LidarConfig:
             v = SensorParameters.model_validate(given)
         except ValidationError as e:
             raise _first_error(e, fail) from None
+        if v.return_mode == "dual" and v.beam_divergence <= 0.0:
+            raise fail(
+                "return_mode",
+                "'dual' needs beam_divergence > 0 (a beam of no width has one return); set "
+                "beam_divergence or choose strongest, first or last",
+            )
         if table is not None:
             elevations = table.elevation_deg
         elif v.elevation_angles is not None:

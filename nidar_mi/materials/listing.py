@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from ..io.atomic import atomic_path
@@ -14,6 +16,8 @@ __all__ = ["format_table", "plot_spectra", "list_materials"]
 #: Wavelengths of the table columns and of the plot markers, nm.
 TABLE_WAVELENGTHS_NM = (550.0, 905.0, 1550.0)
 LIDAR_WAVELENGTHS_NM = (905.0, 1550.0)
+
+log = logging.getLogger(__name__)
 
 
 def format_table(names: list[str]) -> str:
@@ -40,7 +44,8 @@ def plot_spectra(names: list[str], out_path: str) -> None:
     from matplotlib.figure import Figure
 
     for name in names:
-        get_material(name)  # fail on a bad name before drawing anything
+        m = get_material(name)  # fail on a bad name before drawing anything
+        log.debug("%s: %s spectrum from %s", name, m.kind, m.source)
     fig = Figure(figsize=(11, 5), dpi=120)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)

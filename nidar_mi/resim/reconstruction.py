@@ -1,7 +1,7 @@
 """``reconstruct``: a recorded drive in, a re-simulation folder out (the steps of
 :mod:`nidar_mi.resim`, in order).
 
-Output folder (published whole; ``report.json`` marks it)::
+Output folder (published whole, with the record of :data:`OWNER`)::
 
     OUT/scene.xml, sensor_*.xml, surfaces.ply, layout.yaml    the scene (:mod:`.scene_files`)
     OUT/poses.txt          every frame's LiDAR pose in frame 0's LiDAR frame (KITTI format)
@@ -18,14 +18,33 @@ mesh, the prior and the fit see the training frames alone.
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass
 
 from ..errors import NidarError
+from ..io.ownership import Owner
 from .drive_folder import Drive, open_drive
 
-__all__ = ["ReconstructOptions", "check", "reconstruct", "MAX_FRAMES"]
+__all__ = ["ReconstructOptions", "OWNER", "check", "reconstruct", "MAX_FRAMES"]
+
+log = logging.getLogger("nidar_mi.reconstruct")
+
+#: Who writes a re-simulation folder (:mod:`nidar_mi.io.ownership`): it replaces it whole.
+OWNER = Owner(
+    "reconstruct",
+    "drive",
+    names=(
+        "scene.xml",
+        "sensor_*.xml",
+        "surfaces.ply",
+        "layout.yaml",
+        "poses.txt",
+        "heldout/*",
+        "report.json",
+    ),
+)
 
 #: The most frames a drive may have (bounds memory and time before any work).
 MAX_FRAMES = 400
@@ -66,7 +85,7 @@ def check(options: ReconstructOptions) -> Drive:
             f"({options.max_frames})"
         )
     check_output_folder(
-        options.out, overwrite=options.overwrite, marker="report.json", inputs=[options.drive]
+        options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
     )
     return drive
 
@@ -77,7 +96,7 @@ def reconstruct(options: ReconstructOptions) -> dict:
 
     drive = check(options)
     with staged_directory(
-        options.out, overwrite=options.overwrite, marker="report.json", inputs=[options.drive]
+        options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
     ) as stage:
         report = _run(drive, options, str(stage))
     return report
@@ -94,6 +113,7 @@ class _Clock:
         now = time.perf_counter()
         self.times[name] = round(now - self._t, 3)
         self._t = now
+        log.debug("%s: %.1f s", name, self.times[name])
 
 
 def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:

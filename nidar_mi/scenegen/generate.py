@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import NidarError
+from ..io.ownership import Owner
 from .city import sample_city
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
@@ -37,6 +39,7 @@ __all__ = [
     "INDEX_NAME",
     "KINDS",
     "MAX_SCENES",
+    "OWNER",
     "SCENE_OPTIONS",
     "generate",
     "generate_scene",
@@ -47,7 +50,17 @@ __all__ = [
     "scene_rng",
 ]
 
+log = logging.getLogger("nidar_mi.scenegen")
+
 INDEX_NAME = "index.json"
+#: Who writes a scenegen folder (:mod:`nidar_mi.io.ownership`): it adds scenes to it.
+OWNER = Owner(
+    "scenegen",
+    "scenes",
+    names=(INDEX_NAME, "scene_*", ".scene_*.tmp-*"),
+    replaces=False,
+    whole=False,
+)
 #: Every kind of scene: the street and path layouts (:mod:`.layout`), then cities (:mod:`.city`).
 KINDS = LAYOUT_KINDS + CITY_KINDS
 
@@ -341,6 +354,26 @@ def _write(folder: _Folder, scene: _Scene, seed: int, options: dict) -> None:
         atomic_write_text(scene.path, scene.text)
 
 
+#: How ``-v`` names what happened to a scene.
+_ACTION_WORDS = {
+    "write": "written",
+    "skip": "already there, skipped",
+    "keep": "edited by hand, kept",
+}
+
+
+def _publish_index(folder) -> dict:
+    """Write the folder's ``index.json`` and its record (:mod:`nidar_mi.io.ownership`)."""
+    from ..io.atomic import write_record
+    from ..io.ownership import folder_files
+
+    index = folder.write_index()
+    write_record(
+        folder.out_dir, OWNER, [f for f in folder_files(folder.out_dir) if OWNER.writes(f)]
+    )
+    return index
+
+
 #: What every scene of a run is drawn with (:func:`generate`'s scene options), and the defaults.
 SCENE_OPTIONS = {
     "kind": None,
@@ -353,7 +386,14 @@ SCENE_OPTIONS = {
 
 
 def generate(
-    out_dir: str, count: int, seed: int, *, progress: bool = True, overwrite: bool = False, **scene
+    out_dir: str,
+    count: int,
+    seed: int,
+    *,
+    progress: bool = True,
+    overwrite: bool = False,
+    nested: bool = False,
+    **scene,
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -371,6 +411,7 @@ def generate(
         seed: run seed (>= 0).
         progress: show a progress bar on stderr.
         overwrite: replace scene files that differ from this run's.
+        nested: ``out_dir`` is inside an output of the caller's own (the drive study's scene).
         **scene: what every scene is drawn with (:data:`SCENE_OPTIONS`): ``kind``
             (:data:`KINDS`, None for a mix of urban and vegetated), ``blocks`` ((nx, ny) blocks
             of ``city`` and ``suburb`` layouts, None: the default), ``materials``,
@@ -396,7 +437,8 @@ def generate(
         raise TypeError(f"generate() got unknown scene option(s) {', '.join(unknown)}")
     options = SCENE_OPTIONS | scene
     _check_run(out_dir, count, seed, options["kind"], options["blocks"], options["drive"])
-    check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
+    # scenes are added to it: a folder of other files is refused unless `overwrite`
+    out_dir = str(check_output_folder(out_dir, owner=OWNER, overwrite=overwrite, nested=nested))
     folder = _Folder.read(out_dir)
     bar = progress_bar(total=count, show=progress, desc="scenegen", unit="scene")
     written = skipped = 0
@@ -416,13 +458,14 @@ def generate(
                 scene = _plan(folder, seed, k, options, overwrite)
                 bar.update(1)
             _write(folder, scene, seed, options)
+            log.debug("%s: %s", scene_id(seed, k), _ACTION_WORDS.get(scene.action, scene.action))
             written += scene.action == "write"
             skipped += scene.action != "write"
     except BaseException:  # interrupted or failed: the index lists the scenes written so far
         if written:
-            folder.write_index()
+            _publish_index(folder)
         raise
     finally:
         bar.close()
-    index = folder.write_index()
+    index = _publish_index(folder)
     return index | {"run": {"seed": seed, "count": count, "written": written, "skipped": skipped}}

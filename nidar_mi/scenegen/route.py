@@ -37,11 +37,52 @@ __all__ = [
     "ROLL_PER_MS2",
     "TURN_RADIUS_M",
     "DrivePoses",
+    "MAX_DRIVE_FRAMES",
+    "MAX_DRIVE_LENGTH_M",
+    "MAX_DRIVE_RATE_HZ",
+    "MAX_DRIVE_SPEED",
+    "check_drive",
     "route_start",
     "route_polyline",
     "drive",
     "revisits",
 ]
+
+#: The most poses of one drive (1000 s at 10 Hz): the route is laid out lap by lap, and a
+#: drive of more frames is refused before any work.
+MAX_DRIVE_FRAMES = 10_000
+#: The longest drive, m: its duration times the cruising speed (the route's length is at most
+#: that; turns are slower). 10 km, some 35 laps of a 4 x 3 city, laid out in a few seconds.
+MAX_DRIVE_LENGTH_M = 10_000.0
+#: The highest frame rate, Hz (a spinning LiDAR's highest rotation rate).
+MAX_DRIVE_RATE_HZ = 100.0
+#: The highest cruising speed, m/s (250 km/h).
+MAX_DRIVE_SPEED = 70.0
+
+
+def check_drive(frames: int, rate_hz: float, speed: float) -> None:
+    """Refuse a drive that cannot be laid out, or not in bounded work: ``frames`` in
+    [2, :data:`MAX_DRIVE_FRAMES`], ``rate_hz`` in (0, :data:`MAX_DRIVE_RATE_HZ`], ``speed`` in
+    (0, :data:`MAX_DRIVE_SPEED`], all finite, and a length (``(frames - 1) / rate_hz · speed``)
+    of at most :data:`MAX_DRIVE_LENGTH_M`.
+
+    Raises:
+        NidarError: one line naming the parameter (``frames``, ``rate``, ``speed``).
+    """
+    if not 2 <= frames <= MAX_DRIVE_FRAMES:
+        raise NidarError(f"`frames` must lie in [2, {MAX_DRIVE_FRAMES}] (got {frames})")
+    if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_DRIVE_RATE_HZ):
+        raise NidarError(f"`rate` must lie in (0, {MAX_DRIVE_RATE_HZ:g}] Hz (got {rate_hz})")
+    if not (math.isfinite(speed) and 0 < speed <= MAX_DRIVE_SPEED):
+        raise NidarError(f"`speed` must lie in (0, {MAX_DRIVE_SPEED:g}] m/s (got {speed})")
+    length = (frames - 1) / rate_hz * speed
+    if length > MAX_DRIVE_LENGTH_M:
+        raise NidarError(
+            f"`frames` {frames} at `rate` {rate_hz:g} Hz and `speed` {speed:g} m/s make a drive "
+            f"of {length / 1000:.4g} km, longer than {MAX_DRIVE_LENGTH_M / 1000:g} km; fewer "
+            "frames, a higher rate or a lower speed"
+        )
+
 
 #: Radius of the arcs that round the turns, m.
 TURN_RADIUS_M = 8.0
@@ -167,9 +208,9 @@ def drive(
 
     Args:
         g: the street grid of the layout.
-        frames: number of poses (>= 2).
-        rate_hz: frame rate, Hz (> 0).
-        speed: cruising speed, m/s (> 0; slower in the turns).
+        frames: number of poses (:func:`check_drive` bounds the three).
+        rate_hz: frame rate, Hz.
+        speed: cruising speed, m/s (slower in the turns).
         seed: draws the phases of the body's oscillations.
         body_motion: roll, pitch and heave of the body (module docstring); False: the LiDAR stays
             level at a constant height.
@@ -178,10 +219,7 @@ def drive(
         The trajectory, starting under way (at the speed the next turn allows) at
         :func:`route_start`.
     """
-    if frames < 2:
-        raise NidarError(f"a drive needs at least 2 frames (got {frames})")
-    if not rate_hz > 0 or not speed > 0:
-        raise NidarError(f"rate and speed must be > 0 (got {rate_hz} Hz, {speed} m/s)")
+    check_drive(frames, rate_hz, speed)
     duration = (frames - 1) / rate_hz
     laps = 1
     while True:

@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nidar_mi.io.images import read_exr
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.io.points import read_npz, read_ply
 from nidar_mi.nidar.pipeline import shipped_weights_dir
 
@@ -183,7 +184,7 @@ def _render(call, scene_xml: str, argv: list[str], earlier: Path, then=None) -> 
         if ok:
             _assert_finite_render(out)
             manifest = json.loads((out / "manifest.json").read_text())
-            listed = sorted(manifest["files"])
+            listed = sorted([*manifest["files"], RECORD])
             assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == listed
             if then is not None:
                 then(out)

@@ -30,7 +30,7 @@ def _eye(n):
         ("no velodyne", "no velodyne/"),
         ("pose count", "3 poses for 4 scans"),
         ("nan pose", "poses.txt:2: a value is not finite"),
-        ("not rigid", "line 1 is not a rotation"),
+        ("not rigid", "poses.txt:1: the 3x3 part is not a rotation"),
         ("unknown holdout", "--holdout names frames that are not in"),
         ("all held out", "--holdout holds out every frame"),
         ("bad range", "not a range"),

@@ -82,10 +82,29 @@ def test_tum_files_round_trip(grid, tmp_path):
 
 
 def test_bad_input(grid):
-    with pytest.raises(NidarError, match="at least 2 frames"):
+    with pytest.raises(NidarError, match=r"`frames` must lie in \[2, 10000\] \(got 1\)"):
         drive(grid, 1)
-    with pytest.raises(NidarError, match="must be > 0"):
+    with pytest.raises(NidarError, match=r"`rate` must lie in \(0, 100\] Hz \(got 0\)"):
         drive(grid, 10, rate_hz=0)
+
+
+@pytest.mark.parametrize(
+    "frames, rate, speed, words",
+    [
+        (100_000_000, 10.0, 10.0, "`frames` must lie in [2, 10000]"),
+        (20, 0.0001, 10.0, "a drive of 1900 km, longer than 10 km"),
+        (500, 10.0, float("nan"), "`speed` must lie in (0, 70] m/s (got nan)"),
+        (500, float("inf"), 10.0, "`rate` must lie in (0, 100] Hz (got inf)"),
+    ],
+)
+def test_a_drive_is_bounded_before_it_is_laid_out(frames, rate, speed, words):
+    """20 frames at 0.0001 Hz used to lay out a 1900 km route lap by lap for minutes."""
+    from nidar_mi.scenegen.route import check_drive
+
+    with pytest.raises(NidarError) as info:
+        check_drive(frames, rate, speed)
+    assert words in str(info.value)
+    check_drive(10_000, 10.0, 10.0)  # the longest drive allowed: 10 km
 
 
 def test_body_leans_out_of_turns_and_pitches_when_braking(grid):

@@ -28,6 +28,7 @@ NIDAR weights ship recomputes only NIDAR's columns and the steps after them.
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import time
@@ -36,6 +37,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from ...errors import NidarError
+from ...io.ownership import Owner
 
 __all__ = [
     "GROUND_REMOVED",
@@ -46,6 +48,8 @@ __all__ = [
     "run_study",
     "gt_at_mid_sweep",
 ]
+
+log = logging.getLogger("nidar_mi.drive")
 
 #: Intensity sources: the per-point value each puts into the descriptor.
 SOURCES = {
@@ -118,8 +122,11 @@ class StudyConfig:
             raise NidarError(
                 f"`sources`: unknown '{','.join(bad)}' (choose from {', '.join(SOURCES)})"
             )
+        from ...scenegen.route import check_drive
+
         if self.frames < 10:
             raise NidarError(f"`frames` must be >= 10 (got {self.frames})")
+        check_drive(self.frames, self.rate_hz, self.speed)
         if self.cols < 16 or self.width < 16 or self.height < 16 or self.spp < 1:
             raise NidarError("`cols`, `width` and `height` must be >= 16 and `spp` >= 1")
 
@@ -205,6 +212,7 @@ def _drive(out: str, cfg: StudyConfig) -> _Drive:
             "speed": cfg.speed,
             "body_motion": cfg.body_motion,
         },
+        nested=True,
     )
     sid = scene_id(cfg.seed, 0)
     entry = next(e for e in index["scenes"] if e["id"] == sid)
@@ -250,12 +258,14 @@ def _render(out: str, cfg: StudyConfig, drive: _Drive, timings: dict, progress: 
         sweeps.folders[kind] = render_sweeps(request, folder, progress=progress)
         sweeps.loads[kind] = read_sequence(folder)[2]
         timings[f"frames_{kind}"] = time.perf_counter() - t0
+        log.debug("frames_%s: %.1f s", kind, timings[f"frames_{kind}"])
     if "nidar" in cfg.sources:
         t0 = time.perf_counter()
         sweeps.nidar = nidar_intensity(
             sweeps.folders["physics"], os.path.join(out, "frames"), cfg.weights, progress=progress
         )
         timings["nidar"] = time.perf_counter() - t0
+        log.debug("nidar: %.1f s", timings["nidar"])
     return sweeps
 
 
@@ -453,8 +463,15 @@ def _verified_loops(cfg: StudyConfig, load, kind: str, m, cache: dict) -> list:
     return found
 
 
-#: A folder holding this file (the scene index, written first) is an earlier study's output.
-MARKER = os.path.join("scene", "index.json")
+#: Who writes a study's folder (:mod:`nidar_mi.io.ownership`): it adds to it (the scene, the
+#: frames and NIDAR's columns are its cache), and its files are those below.
+OWNER = Owner(
+    "drive",
+    "study",
+    names=("scene/*", "frames/*", "kitti/*", "results.json", "report.md", "*.png", "*.tmp-*"),
+    replaces=False,
+    whole=False,
+)
 
 
 def run_study(
@@ -462,35 +479,53 @@ def run_study(
 ) -> dict:
     """Run every step into ``out`` and return the results.
 
-    ``out`` is created; an earlier study's folder (:data:`MARKER`) is reused as the cache, any
-    other non-empty folder is refused unless ``overwrite`` (then the study's files are added to
-    it; nothing else there is touched).
+    ``out`` is created; an earlier study's folder is reused as the cache, any other non-empty
+    folder is refused unless ``overwrite`` (then the study's files are added to it; nothing
+    else there is touched), another command's output always (:data:`OWNER`,
+    :func:`nidar_mi.io.ownership.check_owner`).
     """
-    from ...io.atomic import check_output_folder
+    from ...io.atomic import check_output_folder, write_record
 
     cfg.check()
-    check_output_folder(out, overwrite=overwrite, marker=MARKER, inputs=[cfg.weights, cfg.sequence])
+    out = str(
+        check_output_folder(
+            out, owner=OWNER, overwrite=overwrite, inputs=[cfg.weights, cfg.sequence]
+        )
+    )
     os.makedirs(out, exist_ok=True)
+    write_record(out, OWNER, [])  # an interrupted study is known as one
     timings = {}
     t0 = time.perf_counter()
     drive = _drive(out, cfg)
     timings["drive"] = time.perf_counter() - t0
+    log.debug("drive: %.1f s", timings["drive"])
     sweeps = _render(out, cfg, drive, timings, progress)
     t0 = time.perf_counter()
     odometry = _odometry_runs(cfg, out, sweeps, drive.gt, progress)
     timings["odometry"] = time.perf_counter() - t0
+    log.debug("odometry: %.1f s", timings["odometry"])
     odo = odometry[GROUND_REMOVED]["poses"]
     t0 = time.perf_counter()
     desc = _descriptors(cfg, sweeps, progress)
     loops = _loops(cfg, desc, drive.gt, odo)
     timings["loops"] = time.perf_counter() - t0
+    log.debug("loops: %.1f s", timings["loops"])
     t0 = time.perf_counter()
     graphs = _pose_graphs(cfg, sweeps, loops, odo, drive.gt)
     timings["pose_graph"] = time.perf_counter() - t0
+    log.debug("pose_graph: %.1f s", timings["pose_graph"])
     cfg.timings = timings
     results = _results(out, cfg, drive, sweeps, odometry, loops, graphs)
     _report(out, cfg, results, drive, odometry, loops, graphs, desc)
+    write_record(out, OWNER, _own_files(out))
     return results
+
+
+def _own_files(out: str) -> list[str]:
+    """The files of ``out`` the study wrote (by name; any other file there is not listed)."""
+    from ...io.ownership import folder_files
+
+    return [f for f in folder_files(out) if OWNER.writes(f)]
 
 
 def _results(out, cfg, drive: _Drive, sweeps: _Sweeps, odometry, loops, graphs) -> dict:
