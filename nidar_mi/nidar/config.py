@@ -6,8 +6,8 @@ pydantic ``Field`` for an interval; a ``model_validator`` for a rule between fie
 :class:`TrainConfig` gathers them, converts to and from JSON-compatible dicts (validated by
 pydantic against the type hints: unknown keys, values of the wrong type and values outside
 their range are errors, one line naming each; the resolved configuration is written next to
-every set of weights), checks one it was given as Python objects (:meth:`TrainConfig.validate`) and offers :meth:`TrainConfig.reduced`,
-a tiny configuration that runs the real training loop in seconds on a CPU (used by the tests).
+every set of weights), checks one built in Python (:meth:`TrainConfig.validate`) and offers
+:meth:`TrainConfig.reduced`, a tiny configuration that runs the real training loop in seconds on a CPU (used by the tests).
 
 Defaults follow the paper (Sec. IV, "Implementation Details") where it states a value: Adam,
 learning rate 1e-4, weight decay 1e-5, batch 8, 10 epochs, loss weights
