@@ -20,7 +20,7 @@ in one run:
 * **Open3D** (optional, when importable): ``RaycastingScene.cast_rays`` on a prepared (N, 6)
   float32 tensor of the same rays.
 * **weather** (``--weather``): the full scan of the same rays in fog (MOR 100 m), rain
-  (20 mm/h) and snow (2 mm/h) (:mod:`nidar_mi.lidar.weather`: extinction, soft return, sampled
+  (20 mm/h) and snow (2 mm/h) (:mod:`nidar_mi.lidar.weather_returns`: extinction, soft return, sampled
   particles, their detection), reported as the ratio **weather / clear scan** (seconds).
 
 Every method is warmed up (Dr.Jit compiles its kernels on the first call, Open3D builds its BVH

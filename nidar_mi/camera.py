@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import NidarError
+from .geometry.se3 import transform_matrix
 from .io.images import REC709_LUMA, linear_to_srgb
 
 __all__ = [
@@ -139,10 +140,6 @@ def nir_response(wavelength: float) -> tuple[list[tuple[float, float]], float]:
     return pts, 2.0 * a + r
 
 
-def _matrix(T) -> np.ndarray:
-    return np.array(T.matrix.numpy(), dtype=np.float64).reshape(4, 4)
-
-
 def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """OpenCV intrinsics, camera-to-world pose and (W, H) of a Mitsuba perspective camera.
 
@@ -153,7 +150,7 @@ def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]
     import mitsuba as mi
 
     W, H = (int(v) for v in camera.film().size())
-    T_world_cam = _matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    T_world_cam = transform_matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
     R_cw = T_world_cam[:3, :3].T
     # film positions (fractions): centre, +1 px in x, +1 px in y
     fx_pos = np.array([0.5, 0.5 + 1.0 / W, 0.5])
@@ -316,7 +313,7 @@ def _twin(camera, film: dict, band: float | None, spp: int, medium=None):
         if len(_TWINS) >= _TWINS_MAX:
             _TWINS.pop(next(iter(_TWINS)))
         _TWINS[key] = twin
-    T = mi.AffineTransform4f(_matrix(camera.world_transform()).astype(np.float32))
+    T = mi.AffineTransform4f(transform_matrix(camera.world_transform()).astype(np.float32))
     dr.make_opaque(T)  # the pose is data: a moved camera reuses the render kernels
     params = mi.traverse(twin[0])
     params["to_world"] = T
@@ -489,7 +486,7 @@ def render_camera(
             that training frames carry; False: both None).
 
     In the scene's weather (:attr:`nidar_mi.scene.LoadedScene.weather`, its LiDARs'), the RGB
-    and NIR images are rendered through its medium (:mod:`nidar_mi.weather.camera`); depth,
+    and NIR images are rendered through its medium (:mod:`nidar_mi.weather.camera_medium`); depth,
     reflectance and albedo stay the surfaces' own.
     """
     scene = loaded.scene
@@ -566,14 +563,14 @@ _WEATHER_SCENES: dict = {}
 
 
 def _weather_scene(loaded, weather, bands):
-    """The scene's weather twin (:func:`nidar_mi.weather.camera.weather_scene`), cached: a
+    """The scene's weather twin (:func:`nidar_mi.weather.camera_medium.weather_scene`), cached: a
     sequence renders every frame in the same one."""
-    from .weather.camera import weather_scene
+    from .weather.camera_medium import weather_scene
 
     key = (id(loaded.scene), weather, tuple(bands))
     if key not in _WEATHER_SCENES:
         if len(_WEATHER_SCENES) >= 4:
             _WEATHER_SCENES.pop(next(iter(_WEATHER_SCENES)))
-        eyes = [_matrix(c.world_transform())[:3, 3] for c in loaded.cameras]
+        eyes = [transform_matrix(c.world_transform())[:3, 3] for c in loaded.cameras]
         _WEATHER_SCENES[key] = (weather_scene(loaded.scene, weather, bands, eyes), loaded.scene)
     return _WEATHER_SCENES[key][0]

@@ -1,6 +1,6 @@
 """Weather on real point clouds: fog, rain and snow added to scans recorded in clear air, as
 the fog and snowfall simulations on real clouds do (Hahner et al., ICCV 2021 and CVPR 2022;
-LISA, Kilic et al. 2021), with the simulator's own physics (:mod:`nidar_mi.lidar.weather`).
+LISA, Kilic et al. 2021), with the simulator's own physics (:mod:`nidar_mi.lidar.weather_returns`).
 
 A cloud holds the returns of a sensor in its own frame: each point ``p`` with its clear-air
 intensity ``i``. What the weather needs of the sensor is a :class:`CloudSensor`: its wavelength,
@@ -15,7 +15,7 @@ Per point, at range ``d`` along its beam:
 * the hard return ``E_h = E_c exp(-2 α d) Π(1-f)²`` (the medium's extinction, the particles
   sampled in the beam in front of it);
 * the soft return of the medium and the sampled drops or flakes are candidates beside it
-  (:func:`nidar_mi.lidar.weather.candidates`), each detected in its own receiver noise;
+  (:func:`nidar_mi.lidar.weather_returns.candidates`), each detected in its own receiver noise;
 * the hard return was detected in clear air, so its receiver noise ``n`` is drawn *given* that
   (``E_c + σ_n n >= T``: a normal truncated below at ``(T - E_c)/σ_n``) and it is detected in
   weather when ``E_h + σ_n n >= T``: weather only ever removes a return the attenuation
@@ -38,7 +38,7 @@ import numpy as np
 
 from .errors import NidarError
 from .lidar.pattern import PRESETS
-from .lidar.weather import (
+from .lidar.weather_returns import (
     Candidates,
     SensorTerms,
     candidates,
@@ -97,7 +97,7 @@ class CloudSensor:
     return_mode: str = "strongest"
 
     def terms(self) -> SensorTerms:
-        """The sensor as :mod:`nidar_mi.lidar.weather` reads it (raw, gain 1)."""
+        """The sensor as :mod:`nidar_mi.lidar.weather_returns` reads it (raw, gain 1)."""
         return SensorTerms(
             self.wavelength,
             1.0,

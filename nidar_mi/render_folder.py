@@ -27,12 +27,16 @@ from typing import Any
 import numpy as np
 
 from .errors import NidarError
+from .io.cache_key import file_sha256
+from .io.ownership import Owner
 
 __all__ = [
     "BIN_INTENSITY",
     "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
+    "RENDER_OWNER",
+    "SEQUENCE_OWNER",
     "RenderRequest",
     "RenderedCamera",
     "RenderedScan",
@@ -58,12 +62,6 @@ MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
 #: without ``reflectance.exr`` or ``albedo.exr``) are rendered again.
 LAYOUT_VERSION = 3
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()
 
 
 #: The files of a NIDAR weights folder that decide its output (those present are hashed).
@@ -114,6 +112,8 @@ class RenderRequest:
         layout: :data:`LAYOUT_VERSION` of the folder.
         weather: the weather set for the render (:meth:`nidar_mi.weather.Weather.to_dict`);
             None (and absent from :meth:`to_dict`, as before weather existed): the scene's own.
+        labels: whether the shapes' labels were read; recorded only when False, so that the
+            requests of renders with labels read as they always did.
     """
 
     scene: str
@@ -132,13 +132,17 @@ class RenderRequest:
     bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
     weather: dict | None = None
+    labels: bool = True
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
         """The request for a scene file (hashes the file); ``options`` are the fields."""
+        from .io.atomic import file_problem
+
         path = os.path.abspath(scene_path)
-        if not os.path.isfile(path):
-            raise NidarError(f"{scene_path}: no such scene file")
+        problem = file_problem(path, "scene file")
+        if problem:
+            raise NidarError(f"{scene_path}: {problem}")
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
@@ -155,6 +159,8 @@ class RenderRequest:
         d["formats"] = list(self.formats)
         if d["weather"] is None:
             del d["weather"]
+        if self.labels:
+            del d["labels"]
         return d
 
 
@@ -163,6 +169,20 @@ def write_manifest(folder: str | os.PathLike, manifest: dict) -> None:
     from .io.atomic import atomic_write_json
 
     atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+
+
+def _manifest_files(folder) -> list[str]:
+    """The files a render or sequence folder of nidar_mi 0.1.0 (no record) lists."""
+    manifest = read_manifest(folder)
+    return [MANIFEST, *manifest["files"]]
+
+
+#: Who writes a render folder (one render) and a sequence folder (``render --trajectory``):
+#: :mod:`nidar_mi.io.ownership`; an unrecorded folder of either is recognised by its manifest.
+RENDER_OWNER = Owner("render", "scene", names=(MANIFEST,), listed=_manifest_files)
+SEQUENCE_OWNER = Owner(
+    "render", "sequence", names=(MANIFEST,), listed=_manifest_files, label="render --trajectory"
+)
 
 
 def read_manifest(folder: str | os.PathLike) -> dict:
@@ -542,7 +562,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     Raises:
         NidarError: missing or malformed manifest, or an unknown LiDAR id.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
     from .io.images import read_exr
     from .io.points import read_npz
     from .lidar.return_model import compensate
@@ -561,7 +581,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     cameras = []
     for cam_id, cam in sorted(manifest.get("cameras", {}).items()):
         cam_dir = os.path.join(folder, cam_id)
-        model = render_camera(cam, cam_id, lid, f"{folder}: camera {cam_id}")
+        model = render_calib_model(cam, cam_id, lid, f"{folder}: camera {cam_id}")
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
         cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)

@@ -13,6 +13,7 @@ renders only when the folder does not already hold the same request
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import time
@@ -26,6 +27,8 @@ from .errors import NidarError
 from .render_session import RenderOptions, RenderSession, profile_key
 
 __all__ = ["render_scene", "ensure_rendered", "nidar_columns"]
+
+log = logging.getLogger("nidar_mi.render")
 
 
 @dataclass
@@ -161,14 +164,14 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
         "nidar_observed": (N,) bool}``, one value
         per valid return.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
 
     maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in renders.items()}
     out = {}
     for lid, result in results.items():
         cams, depth, cam_maps = [], [], []
         for cid, (r, calib) in renders.items():
-            cams.append(render_camera(calib, cid, lid))
+            cams.append(render_calib_model(calib, cid, lid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
         pts = result.points()
@@ -197,7 +200,7 @@ def _nidar_step(run: _Run, options: RenderOptions) -> dict[str, dict]:
     from .nidar.pipeline import NidarModel
 
     model = NidarModel.load(options.weights)
-    branch = options.nidar_branch or "R"
+    branch = options.branch()
     applied = options.profile or (model.default_profile() if branch == "R" else None)
     run.profile = profile_key(applied)
     return nidar_columns(model, run.results, run.renders, branch, options.profile)
@@ -250,15 +253,18 @@ def _manifest(session: RenderSession, run: _Run, total_s: float) -> dict:
     }
 
 
-def render_scene(options: RenderOptions, out_dir: str, *, overwrite: bool = False) -> dict:
+def render_scene(
+    options: RenderOptions, out_dir: str, *, overwrite: bool = False, nested: bool = False
+) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`), in the active
     Mitsuba variant (:func:`nidar_mi.backend.set_variant`).
 
     Args:
         options: what to render (:class:`~nidar_mi.render_session.RenderOptions`).
-        out_dir: the render folder; a non-empty folder that is not an earlier render folder is
-            refused unless ``overwrite``; an earlier render folder is replaced whole.
-        overwrite: replace a non-empty ``out_dir``.
+        out_dir: the render folder; an earlier render folder is replaced whole, any other
+            folder as :func:`nidar_mi.io.ownership.check_owner` says.
+        overwrite: the user passed ``overwrite`` (:func:`~nidar_mi.io.ownership.check_owner`).
+        nested: ``out_dir`` is a cache inside the caller's own output (a dataset's renders).
 
     Returns:
         The manifest (also written to ``out_dir/manifest.json``).
@@ -271,7 +277,8 @@ def render_scene(options: RenderOptions, out_dir: str, *, overwrite: bool = Fals
     t_start = time.perf_counter()
     session = RenderSession.open(options)
     session.check_memory()
-    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
+    publish = dict(owner=rf.RENDER_OWNER, overwrite=overwrite, nested=nested)
+    with staged_directory(out_dir, **publish) as stage:
         run = _Run(stage=str(stage), timings={"load": session.load_s})
         _sense(run, session)
         extra = {}
@@ -282,6 +289,12 @@ def render_scene(options: RenderOptions, out_dir: str, *, overwrite: bool = Fals
         _write_lidars(run, options, extra)
         manifest = _manifest(session, run, time.perf_counter() - t_start)
         rf.write_manifest(stage, manifest)
+    for name, e in manifest["lidars"].items():
+        t = e["timings_s"]["scan_total"]
+        log.debug("lidar %s: %d rays, %d returns, %.2f s", name, e["rays"], e["returns"], t)
+    for name, e in manifest["cameras"].items():
+        t = e["timings_s"]["render_total"]
+        log.debug("camera %s: %dx%d pixels, %.2f s", name, e["width"], e["height"], t)
     return manifest
 
 
@@ -294,4 +307,4 @@ def ensure_rendered(options: RenderOptions, out_dir: str) -> dict:
     """
     if rf.is_current(out_dir, options.key()):
         return rf.read_manifest(out_dir)
-    return render_scene(options, out_dir, overwrite=True)
+    return render_scene(options, out_dir, overwrite=True, nested=True)

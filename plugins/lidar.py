@@ -15,8 +15,6 @@ from nidar_mi.lidar.config import PARAMETERS, LidarConfig
 from nidar_mi.weather.conditions import PARAMETERS as WEATHER_PARAMETERS
 from nidar_mi.weather.conditions import Weather
 
-from . import PluginParameterError
-
 __all__ = ["VARIANT", "LidarSensor"]
 
 #: The Mitsuba variant this module's class belongs to.
@@ -103,6 +101,23 @@ class LidarSensor(mi.Sensor):
          - float
          - g in I = g·ρ·T²·a(d,θ) + η, > 0
          - 1
+       * - ``laser_gains``
+         - string
+         - comma-separated per-laser gains G_r, one per ring (ring 0 the highest), each > 0:
+           a return of ring r is G_r·g·ρ·T²·a(d,θ) (a real unit's lasers differ; recovered by
+           ``python -m nidar_mi.reconstruct``)
+         - all 1
+       * - ``range_response``
+         - string
+         - comma-separated ``d:f`` pairs (ranges in m, strictly increasing; factors >= 0): the
+           expected intensity is multiplied by r(d), linear between the pairs and constant
+           outside (a receiver's range-dependent gain, e.g. a sensor's own range compensation)
+         - none (r = 1)
+       * - ``intensity_offset``
+         - float
+         - b >= 0: the reported intensity is max(output - b, 0) (an encoding that reads 0 for
+           weak returns it still detects, as KITTI's HDL-64E does); detection is unchanged
+         - 0
        * - ``range_min``
          - float
          - minimum range in m, >= 0
@@ -159,7 +174,8 @@ class LidarSensor(mi.Sensor):
        * - ``return_mode``
          - string
          - ``strongest``, ``first``, ``last`` or ``dual`` (strongest and last; the second
-           strongest when they coincide); several returns need ``beam_divergence`` > 0
+           strongest when they coincide); ``dual`` needs ``beam_divergence`` > 0 (refused
+           without: a beam of no width has one return)
          - ``strongest``
        * - ``return_separation``
          - float
@@ -173,7 +189,7 @@ class LidarSensor(mi.Sensor):
          - float
          - fog by its meteorological optical range in m, [5, 100000] (α at 550 nm = ln 20 /
            MOR; droplets by ``fog_type``): attenuation, the fog's own soft return
-           (:mod:`nidar_mi.lidar.weather`, docs/WEATHER.md)
+           (:mod:`nidar_mi.lidar.weather_returns`, docs/WEATHER.md)
          - none
        * - ``fog_type``
          - string
@@ -192,7 +208,7 @@ class LidarSensor(mi.Sensor):
          - pose; LiDAR frame x forward, y left, z up
          - identity
 
-    An invalid value fails the scene load with :class:`nidar_mi.plugins.PluginParameterError`:
+    An invalid value fails the scene load with :class:`nidar_mi.errors.NidarError`:
     one line naming the sensor and the parameter.
 
     .. code-block:: xml
@@ -216,17 +232,14 @@ class LidarSensor(mi.Sensor):
             path = str(values["calibration_file"])
             values["calibration_file"] = str(mi.file_resolver().resolve(path))
         name = props.id() or "lidar"
-        try:
-            self.config = LidarConfig.from_mapping(name, values)
-        except ValueError as e:
-            raise PluginParameterError(str(e)) from None
+        self.config = LidarConfig.from_mapping(name, values)
         weather = {k: props.get(k) for k in WEATHER_PARAMETERS if k in props}
         try:
             #: the sensor's own weather (None: clear), what a scan uses unless told otherwise
             self.weather = Weather.from_mapping(weather)
         except NidarError as e:
             message = re.sub(r"`(\w+)`", r"parameter '\1'", str(e))
-            raise PluginParameterError(f"lidar '{name}': {message}") from None
+            raise NidarError(f"lidar '{name}': {message}") from None
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"

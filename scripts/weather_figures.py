@@ -4,7 +4,7 @@
 
 Writes ``street_clear.png``, ``street_fog.png`` and ``street_rain.png`` (default into
 ``docs/figures/weather/``): left, the forward camera's image (RGB through the medium,
-``nidar_mi.weather.camera``; auto exposure of the clear image for all three, so the fog's own
+``nidar_mi.weather.camera_medium``; auto exposure of the clear image for all three, so the fog's own
 light shows; a 3 x 3 median filter on every image takes out the isolated bright pixels of the
 sun's light scattered by the medium, the path tracer's variance at this sample count); right, the HDL-64E's points seen from above, coloured by what they came from
 (surface by intensity, fog, drop). Fog: MOR 50 m (advection); rain: 25 mm/h. Simulated data

@@ -213,3 +213,36 @@ def test_physics_render_needs_no_optional_extra(tmp_path):
     assert r.stdout.strip().splitlines()[-1] == "loaded: []"
     assert (tmp_path / "out" / "lidar_top" / "points.las").is_file()
     assert (tmp_path / "out" / "cam_front" / "rgb.png").is_file()
+
+
+def _environment_reads() -> dict[str, set[str]]:
+    """The package's own environment variables (``NIDAR*``) read by the package, the notebooks
+    and the scripts: name -> the files that read it."""
+    import json
+    import re
+    from pathlib import Path
+
+    read = re.compile(r"""(?:environ\.get\(|environ\[|getenv\()\s*["'](NIDAR[A-Z0-9_]*)["']""")
+    found: dict[str, set[str]] = {}
+    root = Path(REPO)
+    files = [*root.glob("nidar_mi/**/*.py"), *root.glob("scripts/*.py"), *root.glob("plugins/*.py")]
+    for path in [*files, *root.glob("notebooks/*.ipynb")]:
+        text = path.read_text(encoding="utf-8")
+        if path.suffix == ".ipynb":
+            cells = json.loads(text)["cells"]
+            text = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
+        for name in read.findall(text):
+            found.setdefault(name, set()).add(str(path.relative_to(root)))
+    return found
+
+
+def test_every_environment_variable_read_is_documented():
+    """Notebook 05 used to read ``NIDAR_KITTI_DIR``, which the README never named: every
+    variable of the package that code, notebooks or scripts read is in the README's table."""
+    with open(os.path.join(REPO, "README.md"), encoding="utf-8") as f:
+        readme = f.read()
+    table = readme[readme.index("### Environment variables") :]
+    reads = _environment_reads()
+    assert {"NIDAR_MI_DATA", "NIDAR_MAX_MEMORY"} <= set(reads)  # the scan finds them
+    missing = {name: sorted(files) for name, files in reads.items() if f"`{name}`" not in table}
+    assert not missing, f"read but not in the README's environment table: {missing}"

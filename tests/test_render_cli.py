@@ -9,6 +9,8 @@ import laspy
 import numpy as np
 import pytest
 
+from nidar_mi.io.ownership import RECORD
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STREET = os.path.join(REPO, "scenes", "street.xml")
 SMALL = ["-D", "width=48", "-D", "height=27", "-D", "cols=256", "--spp", "2"]
@@ -53,7 +55,7 @@ def test_every_file_is_written(street_out):
         "cam_front/calib.json",
     }
     found = {str(p.relative_to(street_out)) for p in street_out.rglob("*") if p.is_file()}
-    assert found == expected
+    assert found == expected | {RECORD}
     assert not [p for p in street_out.parent.iterdir() if ".partial-" in p.name]
 
 

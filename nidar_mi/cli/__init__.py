@@ -24,7 +24,9 @@ COMMANDS = {
     "assign": "NIDAR intensity for a point cloud from camera images (or a KITTI frame)",
     "weather": "add fog, rain or snow to point clouds recorded in clear air",
     "evaluate": "score NIDAR and the baselines (tables, figures)",
+    "reflectance_cue": "how well image values rank the true reflectance; what the image adds",
     "drive": "odometry and loop closure per intensity source on a simulated drive",
+    "reconstruct": "re-simulate a recorded drive: scene, reflectance and sensor from its scans",
 }
 
 

@@ -22,9 +22,11 @@ interrupted or failed command leaves nothing behind. Warnings are printed as one
 ``warning: ...`` line each.
 
 Every command takes ``-q``/``--quiet`` (warnings and errors only, no summary) and
-``-v``/``--verbose`` (debug lines too, e.g. one per training epoch); the package's log lines go
-to stderr at that level while :func:`run` runs. Progress bars (:func:`show_progress`) show on
-a terminal only, unless ``--progress`` or ``--no-progress`` says otherwise.
+``-v``/``--verbose`` (debug lines too; each command's ``--help`` says which: one per frame
+rendered, per scene, per epoch, ...); the package's log lines go to stderr at that level while
+:func:`run` runs. Progress bars (:func:`show_progress`) show on a terminal only, unless
+``--progress`` or ``--no-progress`` says otherwise; ``-q`` hides them, and no bar of the
+command's work shows where it decided on none (:func:`nidar_mi.progress.bars_allowed`).
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from collections.abc import Callable, Mapping
 
 from ..errors import MAX_SEED, NidarError, check_seed, flag_message
 from ..extras import extra_of, missing_extra
-from ..progress import stderr_is_terminal
+from ..progress import bars_allowed, stderr_is_terminal
 
 __all__ = [
     "EXIT_OK",
@@ -48,6 +50,7 @@ __all__ = [
     "EXIT_TERMINATED",
     "Terminated",
     "flag_message",
+    "out_path",
     "parser",
     "parse_defines",
     "run",
@@ -85,11 +88,18 @@ class _Parser(argparse.ArgumentParser):
 
 
 def parser(
-    command: str, description: str, *, progress: bool = True, **kwargs
+    command: str, description: str, *, verbose: str, progress: bool = True, **kwargs
 ) -> argparse.ArgumentParser:
     """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``, ``-q`` and
     ``-v`` (and ``--progress``/``--no-progress`` where the command shows ``progress`` bars); a
-    usage error (unknown option, a value of the wrong type) is one line on stderr and status 2."""
+    usage error (unknown option, a value of the wrong type) is one line on stderr and status 2.
+
+    Args:
+        command: the command's name.
+        description: what it does, for ``--help``.
+        verbose: what ``-v`` adds for this command (its debug lines), for ``--help``.
+        progress: the command shows progress bars.
+    """
     from .. import __version__
 
     p = _Parser(prog=f"python -m nidar_mi.{command}", description=description, **kwargs)
@@ -98,9 +108,7 @@ def parser(
     level.add_argument(
         "-q", "--quiet", action="store_true", help="warnings and errors only (no summary, no bars)"
     )
-    level.add_argument(
-        "-v", "--verbose", action="store_true", help="debug lines too (e.g. one per epoch)"
-    )
+    level.add_argument("-v", "--verbose", action="store_true", help=f"debug lines too: {verbose}")
     if progress:
         bars = p.add_mutually_exclusive_group()
         bars.add_argument(
@@ -113,6 +121,13 @@ def parser(
             "--no-progress", dest="progress", action="store_false", help="no progress bars"
         )
     return p
+
+
+def out_path(text: str) -> str:
+    """argparse ``type`` of an output path: any path but an empty one."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path; name the output")
+    return text
 
 
 def show_progress(args: argparse.Namespace) -> bool:
@@ -179,13 +194,18 @@ def parse_defines(items: list[str]) -> dict[str, str]:
     """``-D NAME=VALUE`` options as a dict (later ones win).
 
     Raises:
-        NidarError: an item without ``=`` or with an empty name.
+        NidarError: an item without ``=``, with an empty name or an empty value.
     """
     out = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise NidarError(f"-D expects NAME=VALUE (got '{item}')")
+        if not value.strip():
+            raise NidarError(
+                f"-D {name.strip()}= has no value: give NAME=VALUE (leave -D {name.strip()} out "
+                "to keep the scene's own value)"
+            )
         out[name.strip()] = value.strip()
     return out
 
@@ -198,7 +218,11 @@ def scene_inputs(scene: str, depth: int = 8) -> list[str]:
     import os
     import xml.etree.ElementTree as ET
 
+    from ..io.atomic import file_problem
+
     found = [scene]
+    if file_problem(scene):  # a pipe or a device is never opened here; the scene's checks say
+        return found
     try:
         root = ET.parse(scene).getroot()
     except (OSError, ET.ParseError):
@@ -257,7 +281,8 @@ def run(
     except ValueError:  # not the main thread: leave SIGTERM alone
         previous = None
     try:
-        with warnings.catch_warnings(), _log_level(args):
+        bars = show_progress(args) if args is not None else stderr_is_terminal()
+        with warnings.catch_warnings(), _log_level(args), bars_allowed(bars):
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning
             status = work()

@@ -17,6 +17,7 @@ from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ..sequence import MAX_FRAMES
 from ._common import (
     add_weather_args,
+    out_path,
     parse_defines,
     parser,
     run,
@@ -82,9 +83,13 @@ def build_parser():
         "render",
         "Scan every lidar sensor of a scene (points with NIR intensity) and render every "
         "camera (RGB, NIR band at the LiDAR wavelength, depth).",
+        verbose="one per sensor scanned or rendered, and with --trajectory one per frame, each "
+        "with its time",
     )
     p.add_argument("scene", help="scene XML file")
-    p.add_argument("-o", "--out", help="output directory (default: out/<scene name>)")
+    p.add_argument(
+        "-o", "--out", type=out_path, help="output directory (default: out/<scene name>)"
+    )
     p.add_argument(
         "--formats",
         default=",".join(DEFAULT_FORMATS),
@@ -115,7 +120,11 @@ def build_parser():
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
     p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT of the other kind of render (one scene / --trajectory) or one "
+        "written by nidar_mi 0.1.0 (no record of its files); a file render did not write is "
+        "never removed",
     )
     p.add_argument(
         "--max-memory",
@@ -156,7 +165,7 @@ def _add_intensity_args(p) -> None:
     )
     p.add_argument(
         "--bin-intensity",
-        default="unit",
+        default=None,
         choices=BIN_INTENSITY,
         help="intensity in points.bin: unit, KITTI's [0, 1] (intensity / the sensor's full "
         "scale, clipped; default); raw, the simulated intensity as it is",
@@ -221,9 +230,25 @@ def _add_sequence_args(p) -> None:
     )
 
 
+def _bin_intensity(args) -> str:
+    """``--bin-intensity``, refused where no ``.bin`` is written (default ``unit``)."""
+    from ..errors import NidarError
+
+    if args.bin_intensity is None:
+        return "unit"
+    bins = "bin" in _parse_formats(args.formats) or "kitti" in args.sequence_formats.lower()
+    if not bins:
+        raise NidarError(
+            "--bin-intensity applies to the .bin points: add bin to --formats (or, with "
+            "--trajectory, kitti to --sequence-formats)"
+        )
+    return args.bin_intensity
+
+
 def _sequence_options(args):
     """The :class:`~nidar_mi.sequence.SequenceOptions` of ``--trajectory``."""
     from ..errors import NidarError
+    from ..render_session import RenderOptions
     from ..sequence import SequenceOptions
 
     if args.intensity != "physics" or args.rgb_twin:
@@ -232,27 +257,30 @@ def _sequence_options(args):
         raise NidarError(
             "--weights, --nidar-branch and --profile are used only with --intensity nidar"
         )
-    return SequenceOptions(
+    frame = RenderOptions(
         args.scene,
-        args.trajectory,
-        rate=args.rate,
-        frames=args.frames,
         formats=tuple(_parse_formats(args.formats)),
-        sequence_formats=tuple(
-            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
-        ),
-        bin_intensity=args.bin_intensity,
         seed=args.seed,
         spp=args.spp,
         params=parse_defines(args.params),
         cameras=not args.no_cameras,
-        deskew=args.deskew,
+        bin_intensity=_bin_intensity(args),
         max_memory=_memory(args.max_memory),
+        deskew=args.deskew,
+        progress=show_progress(args),
+        weather=weather_of(args),
+    )
+    return SequenceOptions(
+        frame,
+        args.trajectory,
+        rate=args.rate,
+        frames=args.frames,
+        sequence_formats=tuple(
+            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
+        ),
         max_frames=MAX_FRAMES if args.max_frames is None else args.max_frames,
         max_disk=_memory(args.max_disk, "--max-disk"),
-        progress=show_progress(args),
         previews=args.previews or "first",
-        weather=weather_of(args),
     )
 
 
@@ -294,7 +322,7 @@ def _render_options(args):
         weights=args.weights,
         nidar_branch=args.nidar_branch,
         profile=profile,
-        bin_intensity=args.bin_intensity,
+        bin_intensity=_bin_intensity(args),
         max_memory=_memory(args.max_memory),
         deskew=args.deskew,
         progress=show_progress(args),
@@ -322,11 +350,13 @@ def main(argv=None) -> int:
     def work():
         from ..backend import set_variant
         from ..errors import NidarError
-        from ..io.atomic import check_outside_inputs
+        from ..io.atomic import check_output_folder
+        from ..render_folder import RENDER_OWNER, SEQUENCE_OWNER
 
         sequence_only = (args.rate, args.frames, args.max_frames, args.max_disk)
         inputs = [*scene_inputs(args.scene), args.trajectory, args.weights, args.profile]
-        check_outside_inputs(out, inputs)
+        owner = RENDER_OWNER if args.trajectory is None else SEQUENCE_OWNER
+        check_output_folder(out, owner=owner, overwrite=args.overwrite, inputs=inputs)
         _require_extras(args)
         if args.trajectory is None and (
             any(v is not None for v in sequence_only)

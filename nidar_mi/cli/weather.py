@@ -5,7 +5,7 @@ IN is a point cloud (KITTI ``.bin``, ``.pcd``, ``.ply``, ``.las``/``.laz``, ``.n
 folder of them (not its subfolders); OUT is a folder that receives each cloud under its own
 name and format, with ``weather.json`` (the weather, the sensor, the seed and, per cloud, the
 points kept, moved to the fog or a particle, and lost). OUT is published whole when every cloud
-succeeded (a non-empty OUT that is not an earlier output needs ``--overwrite``).
+succeeded (who may replace a non-empty OUT: :mod:`nidar_mi.io.ownership`).
 
 The sensor (``--sensor``, a LiDAR preset; ``hdl64e``, KITTI's, by default) gives the range
 window and, for ``hdl64e``, the detection threshold and receiver noise of the datasheet's link
@@ -19,10 +19,15 @@ line and writes the outputs.
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 from pathlib import Path
 
-from ._common import add_weather_args, parser, run, seed_arg, show_progress, weather_of
+from ..io.ownership import Owner
+from ._common import add_weather_args, out_path, parser, run, seed_arg, show_progress, weather_of
+
+log = logging.getLogger("nidar_mi.weather")
 
 __all__ = ["main", "build_parser", "EXTENSIONS", "MAX_POINTS"]
 
@@ -32,6 +37,18 @@ EXTENSIONS = (".bin", ".pcd", ".ply", ".las", ".laz", ".npz")
 MAX_POINTS = 20_000_000
 #: The flags of the library's parameters where the two names differ.
 FLAGS = {"threshold": "--threshold", "intensity_scale": "--intensity-scale"}
+#: The report of an output folder (the weather, the sensor, the clouds).
+REPORT = "weather.json"
+
+
+def _reported(folder: Path) -> list[str]:
+    """The files an output folder of nidar_mi 0.1.0 (no record) lists in its report."""
+    with open(folder / REPORT, encoding="utf-8") as f:
+        return [REPORT, *json.load(f)["clouds"]]
+
+
+#: Who writes a weather output folder (:mod:`nidar_mi.io.ownership`).
+OWNER = Owner("weather", "clouds", names=(REPORT, *(f"*{e}" for e in EXTENSIONS)), listed=_reported)
 
 
 def build_parser():
@@ -39,9 +56,10 @@ def build_parser():
         "weather",
         "Add fog, rain or snow to point clouds recorded in clear air (KITTI .bin, PCD, PLY, "
         "LAS, npz; a file or a folder of them).",
+        verbose="one per cloud (its points in and out)",
     )
     p.add_argument("input", metavar="IN", help="point cloud file, or a folder of them")
-    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("-o", "--out", required=True, type=out_path, help="output folder")
     add_weather_args(p, what="to add")
     s = p.add_argument_group("the sensor that recorded the clouds")
     s.add_argument("--sensor", default="hdl64e", help="LiDAR preset (default hdl64e: KITTI's)")
@@ -69,7 +87,10 @@ def build_parser():
     )
     p.add_argument("--seed", type=seed_arg, default=0, help="seed of the draws (default 0)")
     p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT written by nidar_mi 0.1.0 (no record of its files); a file "
+        "weather did not write is never removed",
     )
     return p
 
@@ -89,8 +110,11 @@ def _clouds(path: str) -> list[Path]:
         if not found:
             raise NidarError(f"{path}: no point cloud ({' '.join(EXTENSIONS)}) in the folder")
         return found
-    if not p.is_file():
-        raise NidarError(f"{path}: no such file or folder")
+    from ..io.atomic import file_problem
+
+    problem = file_problem(p, "file or folder")
+    if problem:
+        raise NidarError(f"{path}: {problem}")
     if p.suffix.lower() not in EXTENSIONS:
         raise NidarError(
             f"{path}: unknown point cloud format {p.suffix or '(none)'!r} "
@@ -123,7 +147,7 @@ def _weather(args) -> None:
         raise NidarError("give the weather to add: `fog`, `rain` or `snow`")
     sensor = _sensor(args)
     clouds = _clouds(args.input)
-    publish = dict(overwrite=args.overwrite, marker="weather.json", inputs=[args.input])
+    publish = dict(owner=OWNER, overwrite=args.overwrite, inputs=[args.input])
     check_output_folder(args.out, **publish)
     names = [c.name for c in clouds]
     with staged_directory(args.out, **publish) as stage:
@@ -131,7 +155,7 @@ def _weather(args) -> None:
         from ..io.atomic import atomic_write_json
 
         atomic_write_json(
-            os.path.join(stage, "weather.json"),
+            os.path.join(stage, REPORT),
             {
                 "weather": weather.to_dict(),
                 "sensor": sensor.__dict__,
@@ -170,6 +194,7 @@ def _augment(clouds: list[Path], stage, setting, progress: bool) -> dict:
             out = add_weather(points, weather, sensor, rng)
             _write(Path(stage) / path.name, out)
             kinds = np.bincount(out["scatterer"], minlength=4)
+            log.debug("%s: %d points in, %d out", path.name, n, len(out["xyz"]))
             report[path.name] = {
                 "points_in": n,
                 "points_out": int(len(out["xyz"])),

@@ -46,6 +46,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..geometry.se3 import transform_matrix
 from ..labels import SceneLabels, shape_labels
 from .config import LidarConfig
 from .echoes import group_echoes, select_returns
@@ -60,10 +61,11 @@ from .return_model import (
     box_muller,
     detect,
     expected_intensity,
+    range_response,
     received,
 )
 from .scene_tables import SceneTables, material_table, scene_tables, shape_table
-from .weather import device_tables, range_jitter, weather_model
+from .weather_returns import device_tables, range_jitter, weather_model
 
 __all__ = ["ScanResult", "ReturnLayer", "scan", "material_table", "shape_table"]
 
@@ -297,8 +299,10 @@ def _scan_block(ctx: _Context, start: int, stop: int) -> None:
             cfg.intensity_mode,
             beams.two_way_transmittance,
         )
+        laser = _laser_gain(cfg, first, stop - start, 1 if subrays is None else cfg.subrays)
+        expected = expected * laser * _range_factor(cfg, d)
     draws = _draws(cfg, stop - start, inputs, first)
-    shading = _Shading(rho, cos_t, bsdf, d, expected)
+    shading = _Shading(rho, cos_t, bsdf, d, expected, laser)
     if subrays is None and ctx.weather is not None:
         _ideal_weather_block(ctx, beams, shading, draws, (start, stop, first))
     elif subrays is None:
@@ -316,6 +320,36 @@ class _Shading(NamedTuple):
     bsdf: Any
     d: Any
     expected: Any
+    laser_gain: Any = 1.0
+
+
+def _laser_gain(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
+    """Each ray's per-laser gain (``laser_gains`` of its ring; 1.0 when the sensor has none).
+
+    Args:
+        first_beam: opaque ``mi.UInt32`` flat index of the block's first beam.
+        beams: beams in the block; per_beam: rays per beam (sub-rays).
+    """
+    if cfg.laser_gains is None:
+        return 1.0
+    import drjit as dr
+    import mitsuba as mi
+
+    gains = _cached(
+        _jit_cache,
+        ("laser_gains", cfg.laser_gains, mi.variant()),
+        lambda: jit_float(np.asarray(cfg.laser_gains, dtype=np.float32)),
+    )
+    beam = dr.arange(mi.UInt32, beams * per_beam) // per_beam + first_beam
+    return dr.gather(mi.Float, gains, beam // cfg.horizontal_resolution)
+
+
+def _range_factor(cfg: LidarConfig, d):
+    """The sensor's ``range_response`` at range ``d`` (1.0 when it has none)."""
+    if cfg.range_response is None:
+        return 1.0
+    knots, values = zip(*cfg.range_response)
+    return range_response(d, knots, values)
 
 
 def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: int) -> None:
@@ -323,7 +357,7 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
     columns in one kernel, then one synchronisation and the columns' read-back."""
     import drjit as dr
 
-    inputs, tables = ctx.inputs, ctx.tables
+    inputs, tables, cfg = ctx.inputs, ctx.tables, ctx.cfg
     with _timed(ctx.timings, "detect"):
         u_dropout, normal_intensity, normal_range = draws.returns[0]
         valid = detect(
@@ -339,7 +373,9 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
             normal=draws.receiver,
         )
         output = received(sh.expected, inputs.receiver_noise, draws.receiver)
-        intensity = add_noise(output, inputs.noise_intensity, normal_intensity)
+        intensity = add_noise(
+            output - cfg.intensity_offset, inputs.noise_intensity, normal_intensity
+        )
         range_m = add_noise(sh.d, inputs.noise_range, normal_range)
         hit = beams.hit
         material = dr.select(hit, tables.material_index(sh.bsdf), -1)
@@ -366,7 +402,7 @@ def _ideal_weather_block(ctx: _Context, beams, sh: _Shading, draws, span) -> Non
     clear weather."""
     import drjit as dr
 
-    from .weather import candidates, choose, detect_candidates, range_jitter
+    from .weather_returns import candidates, choose, detect_candidates, range_jitter
 
     (model, tables), inputs, cfg = ctx.weather, ctx.inputs, ctx.cfg
     start, stop, first = span
@@ -529,7 +565,11 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
                 start,
                 stop,
                 valid=valid,
-                intensity=np.where(valid, add_noise(e, cfg.noise_intensity_std, normal_i), 0.0),
+                intensity=np.where(
+                    valid,
+                    add_noise(e - cfg.intensity_offset, cfg.noise_intensity_std, normal_i),
+                    0.0,
+                ),
                 range=np.where(valid, add_noise(r, cfg.noise_range_std, normal_r), 0.0),
                 reflectance=np.where(has, attrs["reflectance"][rows, src], 0.0),
                 cos=np.where(has, attrs["cos"][rows, src], 0.0),
@@ -553,7 +593,7 @@ def _with_weather(ctx: _Context, beams, sh: _Shading, contributions, start: int)
     import drjit as dr
     import mitsuba as mi
 
-    from .weather import candidates
+    from .weather_returns import candidates
 
     (model, tables), cfg = ctx.weather, ctx.cfg
     contrib_range, contrib_energy, attrs = contributions
@@ -627,6 +667,8 @@ def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
         * attenuation(
             dr.select(glass.hit, glass.path_m, 1.0), 1.0, inputs.alpha, cfg.intensity_mode
         )
+        * sh.laser_gain
+        * _range_factor(cfg, dr.select(glass.hit, glass.path_m, 1.0))
     )
     surface = {
         "hit": beams.hit,
@@ -760,7 +802,7 @@ def _pattern(cfg: LidarConfig):
 def _pose(sensor, to_world) -> np.ndarray:
     """(4, 4) float64 pose: ``to_world`` when given, else the sensor's own."""
     if to_world is None:
-        return np.array(sensor.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
+        return transform_matrix(sensor.world_transform())
     return np.asarray(to_world, dtype=np.float64).reshape(4, 4)
 
 

@@ -94,7 +94,7 @@ def test_the_camera_medium_has_the_lidars_extinction(variant):
     import mitsuba as mi
 
     from nidar_mi.weather import Weather
-    from nidar_mi.weather.camera import medium_dict
+    from nidar_mi.weather.camera_medium import medium_dict
     from nidar_mi.weather.media import medium_optics
 
     w = Weather(fog=80.0, rain=10.0)
@@ -115,7 +115,7 @@ def test_the_camera_medium_has_the_lidars_extinction(variant):
 def test_fog_phase_table_is_the_droplets_phase_function():
     """The tabulated phase function integrates to 1 over the sphere and has the asymmetry g of
     the fog's droplets at 550 nm (:func:`nidar_mi.weather.media.bulk_optics`)."""
-    from nidar_mi.weather.camera import fog_phase_table
+    from nidar_mi.weather.camera_medium import fog_phase_table
     from nidar_mi.weather.media import bulk_optics
     from nidar_mi.weather.particles import fog_distribution
 
