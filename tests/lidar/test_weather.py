@@ -311,7 +311,9 @@ def test_weather_in_the_sensor_xml(variant, write_scene):
 def test_no_nan_at_the_extremes(variant, write_scene, weather, divergence):
     extra = '<float name="receiver_noise_std" value="1e-5"/>'
     mode = "dual" if divergence > 0 else "strongest"  # a beam of no width has one return
-    extra += f'<float name="noise_range_std" value="0.02"/><string name="return_mode" value="{mode}"/>'
+    extra += (
+        f'<float name="noise_range_std" value="0.02"/><string name="return_mode" value="{mode}"/>'
+    )
     r = _scan(_wall_scene(write_scene, extra, divergence=divergence), weather)
     pts = r.points()
     for key, v in pts.items():
