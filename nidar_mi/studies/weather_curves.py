@@ -112,7 +112,7 @@ SENSORS = {
         0.1 / 40.0**2 / (1.0 + 1.2816 / _K),
         0.1 / 40.0**2 / (1.0 + 1.2816 / _K) / _K,
         2.0,
-        "assumed: a 10 % target detected to 40 m nine times in ten (OS1 gen-1 figure)",
+        "OS1 datasheet (early revision): a 10 % target to 40 m, read as nine times in ten",
     ),
 }
 

@@ -261,6 +261,45 @@ def test_dense_fog_returns_from_the_fog_near_the_sensor(variant, write_scene):
     assert set(np.unique(pts["scatterer"])) == {0, 1}
 
 
+def test_sky_beams_return_the_fog_with_the_closed_form_probability(variant, write_scene):
+    """Beams that meet nothing in fog of MOR 500 m: the HDL-64E receiver (ξ = (r/F)² from R1)
+    makes the soft return's peak the pulse wholly past R1, E = π β/F² e^(-2αR1) ∫ e^(-2αx)
+    cos²(π(x - L/2)/L) dx over [0, L] = π β/F² e^(-2α(R1 + L/2)) sinh(αL) ω²/(2α(4α² + ω²)),
+    ω = 2π/L, L = c τ_H; with the threshold near that E and σ_n = E/4, P = Φ((E - T)/σ_n) of
+    the beams report the fog (a closed form, not the module's table)."""
+    from scipy.stats import norm
+
+    fog = Weather(fog=500.0)
+    o = medium_optics(fog, 905.0)
+    a, b, r1 = o.alpha, o.backscatter, 0.9
+    L, F = C * 4e-9, 8.0
+    w = 2 * math.pi / L
+    peak = math.pi * b / F**2 * math.exp(-2 * a * (r1 + L / 2))
+    peak *= math.sinh(a * L) * w * w / (2 * a * (4 * a * a + w * w))
+    threshold = peak * 0.98  # Φ(0.08) = 0.53: the slope's middle, where P is most sensitive
+    path = write_scene(f"""
+    <sensor type="lidar" id="lidar">
+        <string name="elevation_angles" value="{", ".join(str(e) for e in range(5, 85, 4))}"/>
+        <integer name="horizontal_resolution" value="720"/>
+        <float name="range_min" value="{r1}"/>
+        <float name="range_max" value="120"/>
+        <float name="detection_threshold" value="{threshold}"/>
+        <float name="receiver_noise_std" value="{peak / 4}"/>
+    </sensor>
+    """)
+    r = _scan(path, fog, seed=5)
+    assert (r.shape_index < 0).all()
+    expected = norm.sf((threshold - peak) / (peak / 4))
+    assert r.valid.mean() == pytest.approx(expected, abs=0.02)
+    assert np.all(r.scatterer[r.valid] == 1)
+    # at the peak's range: a pulse's leading edge cut by δ before R1 loses ∝ δ³ (2π²δ³/(3L³) of
+    # its integral) while its fog is nearer by δ (gain 2αδ): the peak lies δ = √(αL³)/π before
+    # R1 + L/2; timed to c τ_H σ_n / (π E) (the noise over the pulse's steepest slope)
+    peak_range = r1 + L / 2 - math.sqrt(a * L**3) / math.pi
+    assert r.range[r.valid].mean() == pytest.approx(peak_range, abs=0.01)
+    assert r.range[r.valid].std() == pytest.approx(L / (4 * math.pi), rel=0.1)
+
+
 def test_rain_drops_in_the_beam_are_deterministic(variant, write_scene):
     extra = '<float name="detection_threshold" value="1e-4"/>'
     extra += '<float name="receiver_noise_std" value="2e-5"/>'
