@@ -349,7 +349,7 @@ def test_weather_in_the_sensor_xml(variant, write_scene):
 )
 def test_no_nan_at_the_extremes(variant, write_scene, weather, divergence):
     extra = '<float name="receiver_noise_std" value="1e-5"/>'
-    mode = "dual" if divergence > 0 else "strongest"  # a beam of no width has one return
+    mode = "dual" if divergence > 0 else "strongest"  # dual needs a beam of some width
     extra += (
         f'<float name="noise_range_std" value="0.02"/><string name="return_mode" value="{mode}"/>'
     )
