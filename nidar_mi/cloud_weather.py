@@ -106,6 +106,7 @@ class CloudSensor:
             self.receiver_noise_std,
             self.beam_divergence,
             self.range_max,
+            self.range_min,
         )
 
 

@@ -426,7 +426,7 @@ def _ideal_weather_block(ctx: _Context, beams, sh: _Shading, draws, span) -> Non
                 out = dr.select(pick == i, v, out)
             return out
 
-        clear = sh.expected * dr.exp(2.0 * model.alpha * sh.d)  # the same return in clear air
+        clear = sh.expected * dr.exp(2.0 * tables["alpha"] * sh.d)  # the same return, clear air
         energy = picked([hard, *cands.energy], 0.0)
         jitter = range_jitter(model, energy, picked([clear], float("inf"))) * normal()
         surface = pick <= 0

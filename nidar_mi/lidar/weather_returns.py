@@ -15,13 +15,28 @@ receiver sees the medium's backscatter along the beam, convolved with the pulse:
     E_s(R) = g ∫₀^d π β ξ(r) exp(-2 α_w r) / r² · s(R - r) dr
 
 with β the medium's backscatter coefficient (1/(m sr); a slab of thickness Δ with π β Δ = ρ
-returns like a surface of reflectance ρ), ``s(x) = cos²(π x / (c τ_H))`` for ``|x| <= c τ_H / 2``
-the pulse in range (peak 1 at the echo's range, half-power width τ_H in time), ``ξ(r)`` the
-overlap of the transmitter's beam with the receiver's field of view of a biaxial sensor (0
-before ``overlap_start`` R1, rising linearly to 1 at ``overlap_full`` R2: :class:`ReceiverOptics`),
-and ``d`` the hard target's range (the medium behind it is hidden). Its peak (range ``R_s``,
-value ``E_s``) is tabulated once per scan against ``d`` (:class:`SoftReturnTable`) and read by
-every beam: a candidate echo like the hard one.
+returns like a surface of reflectance ρ: the hard target's ``g ρ / d²`` is ``g π f_r / d²``
+with the same gain ``g``), ``s(x) = cos²(π x / (c τ_H))`` for ``|x| <= c τ_H / 2`` the pulse in
+range (peak 1 at the echo's range, half-power width τ_H in time, ``∫ s = c τ_H / 2``), ``ξ(r)``
+the receiver's near-field response (:func:`overlap`) and ``d`` the hard target's range (the
+medium behind it is hidden). Its peak (range ``R_s``, value ``E_s``) is tabulated once per scan
+against ``d`` (:class:`SoftReturnTable`) and read by every beam: a candidate echo like the
+hard one.
+
+**The receiver's near field** (:class:`ReceiverOptics`, :func:`receiver_optics`). A sensor
+reports nothing before its minimum range R1 (``overlap_start``). Beyond it, the ``defocus``
+response (the default) is that of a receiver whose full sensitivity starts at ``F``
+(``overlap_full``): ``ξ(r) = min(1, (r / F)²)``. A point nearer than the range the receiver is
+focused for images as a blur circle whose diameter grows as ``1/r``; the detector collects
+``(r / F)²`` of it, so ``ξ / r²`` stays at ``1 / F²`` up to ``F`` and falls as ``1 / r²``
+beyond. It is also the largest response under which no target returns more than at ``F``
+(``ξ(r)/r² <= ξ(F)/F²``): Velodyne calibrates each HDL-64E laser's "focal distance", its
+"maximum intensity distance" (HDL-64E S3 manual, 63-HDL64ES3 rev. K, p. 10), and the default
+``F`` is the median of the 64 lasers of the S2.1 unit whose table the ``hdl64e`` preset uses.
+The ``linear`` response is Rasshofer et al.'s biaxial ramp (0 at R1, 1 at R2; their eqs. 11,
+12), for optics given as such. The hard target keeps the clear model (no ``ξ``): its link
+budget is what the threshold was set on, and a target of reflectance ``ρ >= T F²`` (0.26 % for
+the ``hdl64e`` preset) is detected near the sensor either way.
 
 **Drops and flakes** (:class:`ParticleTable`). The particles of the precipitation that a beam
 could detect are sampled per beam: a Poisson number in the cone of the beam (a disk of radius
@@ -69,7 +84,11 @@ __all__ = [
     "SPEED_OF_LIGHT",
     "LATERAL_EXTENT",
     "MAX_SLOTS",
+    "HDL64E_PULSE_WIDTH",
+    "HDL64E_FOCAL_DISTANCE",
+    "OVERLAP_SHAPES",
     "ReceiverOptics",
+    "receiver_optics",
     "SoftReturnTable",
     "ParticleTable",
     "WeatherModel",
@@ -100,27 +119,47 @@ DETECTION_MARGIN = 2.0
 _QUANTILES = 257
 
 
+#: The HDL-64E's pulse: "a short duration (typically 4 nanoseconds)" (Velodyne, "HDL-64E:
+#: Concept", velodyne.com/lidar/technology/concept.aspx), read as the half-power width τ_H, s.
+HDL64E_PULSE_WIDTH = 4e-9
+#: The median "focal distance" (maximum intensity distance) of the 64 lasers of the HDL-64E S2.1
+#: unit of the ``hdl64e`` preset's table (ros-drivers/velodyne ``64e_s2.1-sztaki.xml``,
+#: ``focalDistance_`` in cm: 1.5 to 20 m), m.
+HDL64E_FOCAL_DISTANCE = 8.0
+#: Near-field responses of :class:`ReceiverOptics`.
+OVERLAP_SHAPES = ("defocus", "linear")
+
+
 @dataclass(frozen=True)
 class ReceiverOptics:
-    """What of the sensor's optics and pulse the weather needs.
+    """What of the sensor's receiver and pulse the weather needs (module docstring).
 
-    The overlap ranges follow Rasshofer et al.'s biaxial geometry (their eqs. 11 and 12,
-    ``R1 = (D - ρ_T - ρ_R) / (tan(γ_T/2) + tan(γ_R/2))``,
-    ``R2 = (D - ρ_R + ρ_T) / (tan(γ_R/2) - tan(γ_T/2))``) with the optics Hahner et al.'s fog
-    simulation states (apertures 10 mm apart by D = 0.1 m, beam 2°, receiver 3.5°): R1 = 1.67 m,
-    R2 = 7.64 m. (Hahner et al. then set 0.9 and 1.0 m, a nearly coaxial sensor, the case most
-    exposed to near returns; pass those for it.)
+    The defaults are the HDL-64E's documented figures (:data:`HDL64E_PULSE_WIDTH`,
+    :data:`HDL64E_FOCAL_DISTANCE`, its manual's minimum return distance "approximately 3 feet
+    (0.9 meters)"); :func:`receiver_optics` gives a sensor its own minimum range. Rasshofer et
+    al.'s biaxial ramp with the optics Hahner et al.'s fog simulation states (apertures 10 mm
+    apart by D = 0.1 m, beam 2°, receiver field of view 3.5°; their eqs. 11 and 12) is
+    ``ReceiverOptics(10e-9, 1.67, 7.64, "linear")``; Hahner et al. then simulate a nearly
+    coaxial ``ReceiverOptics(20e-9, 0.9, 1.0, "linear")``.
 
     Attributes:
-        pulse_width: half-power pulse width τ_H, s (10 ns: the HDL-64E S1 figure Hahner et
-            al. 2022 use).
-        overlap_start: range R1 where the receiver's view starts to meet the beam, m.
-        overlap_full: range R2 of full overlap, m (>= ``overlap_start``).
+        pulse_width: half-power pulse width τ_H, s.
+        overlap_start: range R1 before which the receiver reports nothing, m.
+        overlap_full: range where the receiver reaches full sensitivity (``F`` of the
+            ``defocus`` response, R2 of the ``linear`` one), m (>= ``overlap_start``).
+        overlap_shape: ``defocus`` (``ξ = (r / F)²`` from R1) or ``linear`` (0 at R1 to 1 at R2).
     """
 
-    pulse_width: float = 10e-9
-    overlap_start: float = 1.67
-    overlap_full: float = 7.64
+    pulse_width: float = HDL64E_PULSE_WIDTH
+    overlap_start: float = 0.9
+    overlap_full: float = HDL64E_FOCAL_DISTANCE
+    overlap_shape: str = "defocus"
+
+    def __post_init__(self) -> None:
+        if self.overlap_shape not in OVERLAP_SHAPES:
+            raise ValueError(f"unknown overlap shape '{self.overlap_shape}'")
+        if not (self.pulse_width > 0 and 0 <= self.overlap_start <= self.overlap_full):
+            raise ValueError(f"inconsistent receiver optics {self}")
 
     @property
     def pulse_length(self) -> float:
@@ -128,11 +167,23 @@ class ReceiverOptics:
         return SPEED_OF_LIGHT * self.pulse_width
 
 
+def receiver_optics(cfg) -> ReceiverOptics:
+    """The receiver of a sensor (anything with a ``range_min``, m): the HDL-64E's documented
+    pulse and near field (:class:`ReceiverOptics`), its own minimum range. The other presets'
+    datasheets publish neither a pulse width nor a near-field response."""
+    r1 = max(float(cfg.range_min), 0.0)
+    return ReceiverOptics(overlap_start=r1, overlap_full=max(HDL64E_FOCAL_DISTANCE, r1))
+
+
 def overlap(r, optics: ReceiverOptics):
-    """ξ(r): 0 before ``overlap_start``, linear to 1 at ``overlap_full`` (NumPy or Dr.Jit)."""
+    """ξ(r), the receiver's near-field response (module docstring); NumPy or Dr.Jit."""
     xp = array_module(r)
-    span = max(optics.overlap_full - optics.overlap_start, 1e-9)
-    return xp.minimum(xp.maximum((r - optics.overlap_start) / span, 0.0), 1.0)
+    r1, full = optics.overlap_start, optics.overlap_full
+    if optics.overlap_shape == "linear":
+        span = max(full - r1, 1e-9)
+        return xp.minimum(xp.maximum((r - r1) / span, 0.0), 1.0)
+    inv = 1.0 / max(full * full, 1e-18)
+    return _where(xp, r >= r1, xp.minimum(r * r * inv, 1.0), 0.0)
 
 
 # ---------------------------------------------------------------- soft return
@@ -377,6 +428,7 @@ class SensorTerms(NamedTuple):
     receiver_noise_std: float
     beam_divergence: float
     range_max: float
+    range_min: float = 0.0
 
     @classmethod
     def of(cls, cfg) -> SensorTerms:
@@ -386,8 +438,10 @@ class SensorTerms(NamedTuple):
 def weather_model(weather: Weather, cfg, receiver: ReceiverOptics | None = None) -> WeatherModel:
     """The :class:`WeatherModel` of ``weather`` for a sensor ``cfg`` (a
     :class:`~.config.LidarConfig`, or anything with the fields of :class:`SensorTerms`), built
-    once per weather, sensor and optics (cached: a sequence of scans builds it once)."""
-    return _weather_model(weather, SensorTerms.of(cfg), receiver or ReceiverOptics())
+    once per weather, sensor and optics (cached: a sequence of scans builds it once); the
+    receiver is the sensor's own (:func:`receiver_optics`) unless given."""
+    terms = SensorTerms.of(cfg)
+    return _weather_model(weather, terms, receiver or receiver_optics(terms))
 
 
 @lru_cache(maxsize=16)
@@ -443,7 +497,8 @@ def candidates(model: WeatherModel, limit, tables: dict, uniforms) -> Candidates
         model: the scan's weather.
         limit: per beam, the hard target's range (m), or the sensor's ``range_max`` plus a
             pulse where the beam hit nothing.
-        tables: the model's tables as arrays of the backend (:func:`device_tables`).
+        tables: the model's tables and per-weather scalars as values of the backend
+            (:func:`device_tables`).
         uniforms: a function ``u()`` returning one uniform draw in [0, 1) per beam (the
             backend's arrays); called in a fixed order.
 
@@ -466,8 +521,9 @@ def candidates(model: WeatherModel, limit, tables: dict, uniforms) -> Candidates
     q = _QUANTILES
     k = LATERAL_EXTENT * p.half_angle
     occlusion = 1.0 + 0.0 * limit
+    alpha, count_cdf = tables["alpha"], tables["count_cdf"]
     for slot in range(p.slots):
-        present = u_count > float(p.count_cdf[slot])  # the count N exceeds this slot
+        present = u_count > count_cdf[slot]  # the count N exceeds this slot
         qpos = uniforms() * (q - 1)
         diameter, reach, rho_p = (
             _lerp(tables[name], qpos, q, xp, present)
@@ -483,9 +539,7 @@ def candidates(model: WeatherModel, limit, tables: dict, uniforms) -> Candidates
             r = xp.maximum(uniforms() * reach, 1e-3)
             f = 1.0
         f = _where(xp, present & (r < limit), f, 0.0)
-        energy = (
-            model.gain * rho_p * f * overlap(r, model.receiver) * xp.exp(-2.0 * model.alpha * r)
-        )
+        energy = model.gain * rho_p * f * overlap(r, model.receiver) * xp.exp(-2.0 * alpha * r)
         energy = energy if model.mode == "compensated" else energy / (r * r)
         out.energy.append(energy)
         out.range_m.append(r)
@@ -504,14 +558,24 @@ def _where(xp, cond, a, b):
 
 
 def device_tables(model: WeatherModel, backend) -> dict:
-    """The model's tables as arrays of ``backend``: ``np`` or a Dr.Jit float array type."""
+    """The model's tables as arrays of ``backend`` (``np`` or a Dr.Jit float array type), and
+    the values that change with the weather (``alpha``, the extinction; ``count_cdf``, the
+    particle count's slots) as scalars: opaque for Dr.Jit, so a scan in other weather of the
+    same kind launches the kernels of the first (the tables' sizes and the number of particle
+    slots are the only weather-dependent structure)."""
     t = {"soft_value": model.soft.peak_value, "soft_range": model.soft.peak_range}
-    if model.particles is not None:
-        p = model.particles
+    p = model.particles
+    if p is not None:
         t |= {"diameter": p.diameter, "reach": p.reach, "reflectance": p.reflectance}
+    cdf = [] if p is None else [float(c) for c in p.count_cdf]
     if backend is np:
-        return {k: np.asarray(v, dtype=np.float64) for k, v in t.items()}
-    return {k: backend(np.asarray(v, dtype=np.float32)) for k, v in t.items()}
+        out = {k: np.asarray(v, dtype=np.float64) for k, v in t.items()}
+        return out | {"alpha": float(model.alpha), "count_cdf": cdf}
+    import drjit as dr
+
+    out = {k: backend(np.asarray(v, dtype=np.float32)) for k, v in t.items()}
+    scalars = {"alpha": dr.opaque(backend, model.alpha)}
+    return out | scalars | {"count_cdf": [dr.opaque(backend, c) for c in cdf]}
 
 
 def range_jitter(model: WeatherModel, energy, clear_energy):

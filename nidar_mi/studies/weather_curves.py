@@ -10,6 +10,13 @@
 * :func:`hahner_fog_points`: the share of a clear scan's returns that Hahner et al.'s fog
   simulation on real clouds (ICCV 2021; their published code's constants) turns into fog
   points: the published model beside ours on the same scan.
+* :func:`stf_fog`: what Bijelic et al.'s fog-chamber fit for the HDL64-S3D (the Seeing Through
+  Fog code, CVPR 2020) does to the same clear scan: the measured counterpart of the points lost
+  and of the fog points on beams that returned in clear air; :func:`stf_max_viewing_distance`
+  beside :func:`max_viewing_distance`, the model's.
+* :func:`sky_fog_probability`: how often a beam that meets no surface returns the fog.
+
+The measured and published values are in ``docs/data/weather_references.csv``.
 """
 
 from __future__ import annotations
@@ -32,6 +39,12 @@ __all__ = [
     "street_lidar",
     "street_sweep",
     "hahner_fog_points",
+    "STF_FIT",
+    "stf_max_viewing_distance",
+    "stf_fog",
+    "max_viewing_distance",
+    "sky_fog_probability",
+    "RAIN_RANGE_VARIATION",
     "REFERENCES",
 ]
 
@@ -44,7 +57,21 @@ REFERENCES = {
     "oconnor": "O'Connor et al. 2004: lidar ratio of liquid water clouds α/β = 18.8 sr",
     "kim": "Kim et al. 2001: α(λ) ∝ λ^-q, q = 0 below 500 m visibility (α(1550) = α(905))",
     "mp": "geometric optics of Marshall-Palmer drops: α = π N0 / Λ³",
+    "stf": "Bijelic et al. 2020 (SeeingThroughFog code): fog-chamber fit of the HDL64-S3D",
+    "pierce": "Pierce et al. 2001: fog attenuation κ/V dB/km, 8.5 < κ < 17 dB, ∝ λ⁰",
+    "filgueira": "Filgueira et al. 2017: in rain, range variations always below 20 cm",
 }
+
+#: Bijelic et al.'s fog-chamber fit (``lidar_foggification.py``): a point of intensity ``i``
+#: (0-1) stays visible to ``ln((i + g)/n) / (2 α)``; ``n``, ``g`` per sensor, ``d_min`` its
+#: minimal detectable distance (m), ``scatter`` the share of the points left that also scatter
+#: a point between ``d_min`` and themselves ("found empirically").
+STF_FIT = {
+    "HDL64-S3D": {"n": 0.04, "g": 0.45, "d_min": 2.0, "scatter": 0.05},
+    "HDL64-S2": {"n": 0.05, "g": 0.35, "d_min": 2.0, "scatter": 0.05},
+}
+#: Filgueira et al. 2017 (VLP-16 in natural rain): range variations always below this, m.
+RAIN_RANGE_VARIATION = 0.20
 
 
 @dataclass(frozen=True)
@@ -85,7 +112,7 @@ SENSORS = {
         0.1 / 40.0**2 / (1.0 + 1.2816 / _K),
         0.1 / 40.0**2 / (1.0 + 1.2816 / _K) / _K,
         2.0,
-        "assumed: a 10 % target detected to 40 m nine times in ten (OS1 gen-1 figure)",
+        "OS1 datasheet (early revision): a 10 % target to 40 m, read as nine times in ten",
     ),
 }
 
@@ -133,6 +160,9 @@ class SweepPoint:
         lost: share of the clear scan's surface returns not returned from a surface.
         false: returns from fog, drops or flakes per clear surface return.
         fog, drop, flake: those false returns by scatterer, per clear surface return.
+        false_on_returns: the false returns of the beams that returned a surface in clear air,
+            per clear surface return (what a simulation on recorded clouds can produce).
+        range_rms: root mean square change of range of the surface returns kept, m.
     """
 
     weather: Weather
@@ -141,6 +171,8 @@ class SweepPoint:
     fog: float
     drop: float
     flake: float
+    false_on_returns: float = 0.0
+    range_rms: float = 0.0
 
 
 def street_lidar(sensor: SensorSpec, wavelength: float, cols: int):
@@ -184,6 +216,7 @@ def street_sweep(
         r = scan(loaded.scene, lidar, weather=w)
         kinds = np.bincount(r.scatterer[r.valid], minlength=4) / n
         kept = surface & r.valid & (r.scatterer == 0)
+        shift = r.range[kept] - clear.range[kept]
         out.append(
             SweepPoint(
                 weather=w,
@@ -192,6 +225,8 @@ def street_sweep(
                 fog=float(kinds[1]),
                 drop=float(kinds[2]),
                 flake=float(kinds[3]),
+                false_on_returns=float((surface & r.valid & (r.scatterer > 0)).sum() / n),
+                range_rms=float(np.sqrt(np.mean(shift**2))) if shift.size else 0.0,
             )
         )
     return out
@@ -228,3 +263,77 @@ def hahner_fog_points(range_m: np.ndarray, intensity: np.ndarray, mor: float) ->
     soft = np.interp(range_m, grid, peaks) * intensity * range_m**2 * beta / beta0
     hard = intensity * np.exp(-2 * alpha * range_m)
     return float(np.mean(soft > hard))
+
+
+def stf_max_viewing_distance(intensity, mor: float, sensor: str = "HDL64-S3D"):
+    """The fog-chamber fit's visibility of a point of intensity ``i`` (0-1) in fog of MOR
+    ``mor`` (m): ``ln((i + g)/n) / (2 α)``, α = ln 20 / MOR (:data:`STF_FIT`), m."""
+    fit = STF_FIT[sensor]
+    alpha = math.log(20.0) / mor
+    return np.log((np.asarray(intensity, dtype=np.float64) + fit["g"]) / fit["n"]) / (2 * alpha)
+
+
+def stf_fog(range_m, intensity, mor: float, sensor: str = "HDL64-S3D") -> tuple[float, float]:
+    """What the fog-chamber fit does to a clear scan's returns (its ``haze_point_cloud``,
+    expected values, no draws): the share lost (beyond :func:`stf_max_viewing_distance`) and the
+    fog points per return: those lost points whose fog echo the fit keeps (probability
+    ``exp(-α d_max)``, placed at ``ln 2 / α``: counted where that lies within the point's
+    range and past ``d_min``), and the ``scatter`` share of the points left, scattered nearer.
+
+    Args:
+        range_m: (N,) the clear returns' ranges, m.
+        intensity: (N,) their intensities, 0-1 (the HDL64's 8-bit intensity / 255; here the
+            compensated ρ cos θ).
+        mor: the fog's MOR, m.
+        sensor: a key of :data:`STF_FIT`.
+
+    Returns:
+        ``(lost, fog_points)``, both per clear return.
+    """
+    fit = STF_FIT[sensor]
+    d = np.asarray(range_m, dtype=np.float64)
+    alpha = math.log(20.0) / mor
+    d_max = stf_max_viewing_distance(intensity, mor, sensor)
+    lost = d > d_max
+    cloud = lost & (math.log(2.0) / alpha < d) & (math.log(2.0) / alpha > fit["d_min"])
+    kept_fog = np.exp(-alpha * d_max)  # the fit's 1 - P(lost)
+    near = (~lost) & (np.minimum(d_max, d) > fit["d_min"])
+    fog_points = (cloud * kept_fog).sum() + fit["scatter"] * (near * kept_fog).sum()
+    return float(lost.mean()), float(fog_points / max(d.size, 1))
+
+
+def max_viewing_distance(spec: SensorSpec, rho: float, mor: float, wavelength: float) -> float:
+    """Where the model detects a target of reflectance ``rho`` at normal incidence half the
+    time in fog of MOR ``mor`` (m): ``ρ exp(-2 α d) / d² = T``, α the fog's at ``wavelength``;
+    ``inf`` beyond 1 km."""
+    from scipy.optimize import brentq
+
+    alpha = medium_optics(Weather(fog=mor), wavelength).alpha
+
+    def excess(d):
+        return math.log(rho) - 2 * alpha * d - 2 * math.log(d) - math.log(spec.threshold)
+
+    return brentq(excess, 1e-3, 1e3) if excess(1e3) < 0 else math.inf
+
+
+def sky_fog_probability(spec: SensorSpec, mor: float, wavelength: float) -> float:
+    """The probability that a beam meeting no surface returns the fog: its soft return's
+    peak ``E_s`` (the sensor's receiver, :func:`nidar_mi.lidar.weather_returns.receiver_optics`)
+    detected in receiver noise, ``Φ((E_s - T) / σ_n)``."""
+    from scipy.stats import norm
+
+    from ..lidar.pattern import PRESETS
+    from ..lidar.weather_returns import SensorTerms, weather_model
+
+    terms = SensorTerms(
+        wavelength,
+        1.0,
+        "raw",
+        spec.threshold,
+        spec.noise,
+        spec.divergence,
+        120.0,
+        PRESETS[spec.preset].range_min,
+    )
+    peak = weather_model(Weather(fog=mor), terms).soft.peak_value[-1]
+    return float(norm.sf((spec.threshold - peak) / spec.noise))

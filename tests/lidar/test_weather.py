@@ -11,11 +11,14 @@ import numpy as np
 import pytest
 
 from nidar_mi.lidar.weather_returns import (
+    HDL64E_FOCAL_DISTANCE,
+    HDL64E_PULSE_WIDTH,
     ReceiverOptics,
     SensorTerms,
     candidates,
     device_tables,
     intercepted_fraction,
+    receiver_optics,
     soft_return_table,
     soft_waveform,
     weather_model,
@@ -24,7 +27,35 @@ from nidar_mi.weather import Weather
 from nidar_mi.weather.media import medium_optics
 from nidar_mi.weather.particles import marshall_palmer
 
-SHORT = ReceiverOptics(pulse_width=10e-9, overlap_start=0.5, overlap_full=0.5)
+SHORT = ReceiverOptics(
+    pulse_width=10e-9, overlap_start=0.5, overlap_full=0.5, overlap_shape="linear"
+)
+C = 299_792_458.0
+
+
+def _soft_by_quadrature(R: float, alpha: float, beta: float, optics, limit=np.inf) -> float:
+    """E_s(R)/g = ∫ π β ξ(r) exp(-2αr)/r² cos²(π(R-r)/L) dr over the pulse's support, by
+    adaptive quadrature of the defining integral (ξ written out here, not the module's)."""
+    from scipy.integrate import quad
+
+    L, r1, full = optics.pulse_length, optics.overlap_start, optics.overlap_full
+
+    def xi(r):
+        if r < r1:
+            return 0.0
+        if optics.overlap_shape == "linear":
+            return min((r - r1) / max(full - r1, 1e-12), 1.0)
+        return min((r / full) ** 2, 1.0)
+
+    def f(r):
+        s = math.cos(math.pi * (R - r) / L) ** 2
+        return math.pi * beta * xi(r) * math.exp(-2 * alpha * r) / (r * r) * s
+
+    lo, hi = max(R - L / 2, r1, 1e-9), min(R + L / 2, limit)
+    if hi <= lo:
+        return 0.0
+    inner = [x for x in (r1, full) if lo < x < hi]
+    return quad(f, lo, hi, points=inner or None, limit=200, epsabs=0.0, epsrel=1e-9)[0]
 
 
 # ------------------------------------------------------------------ closed forms
@@ -42,6 +73,75 @@ def test_soft_return_far_from_the_sensor(alpha):
     # order in L/R, the nearer half weighs 1 + 2<x>/R more)
     half = soft_waveform(np.array([R]), alpha, beta, SHORT, limit=R)[0]
     assert half / e == pytest.approx(0.5, rel=0.03)
+
+
+@pytest.mark.parametrize(
+    "optics",
+    [
+        ReceiverOptics(),  # defocus: the HDL-64E's pulse and near field
+        ReceiverOptics(10e-9, 1.67, 7.64, "linear"),  # Rasshofer's ramp, Hahner et al.'s optics
+        ReceiverOptics(20e-9, 0.9, 1.0, "linear"),  # Hahner et al.'s simulated receiver
+    ],
+)
+@pytest.mark.parametrize("mor", [20.0, 200.0])
+def test_soft_return_against_quadrature(optics, mor):
+    """The tabulated waveform and its peak against an independent adaptive quadrature of the
+    defining integral, fog behind the sensor's whole range and cut by a target at 5 m."""
+    from scipy.optimize import minimize_scalar
+
+    o = medium_optics(Weather(fog=mor), 905.0)
+    a, b = o.alpha, o.backscatter
+    for R in (1.0, 1.5, 3.0, 7.9, 12.0, 40.0):
+        e = soft_waveform(np.array([R]), a, b, optics)[0]
+        assert e == pytest.approx(_soft_by_quadrature(R, a, b, optics), rel=2e-3, abs=1e-12)
+    table = soft_return_table(a, b, optics, 120.0)
+    for limit in (5.0, 120.0):
+        best = minimize_scalar(
+            lambda R, lim=limit: -_soft_by_quadrature(R, a, b, optics, lim),
+            bounds=(optics.overlap_start, min(limit, 30.0) + optics.pulse_length / 2),
+            method="bounded",
+            options={"xatol": 1e-4},
+        )
+        assert np.interp(limit, table.limits, table.peak_value) == pytest.approx(
+            -best.fun, rel=3e-3
+        )
+        assert np.interp(limit, table.limits, table.peak_range) == pytest.approx(best.x, abs=0.03)
+
+
+def test_defocus_near_field_is_flat_to_the_focal_distance():
+    """With ξ = (r/F)², the 1/r² of the lidar equation cancels up to F: where the whole pulse
+    lies in [R1, F] the clear-medium (α = 0) soft return is π β (c τ_H / 2) / F², the same at
+    every range, and a target there returns g ρ / F² at most (the documented maximum-intensity
+    distance)."""
+    optics = ReceiverOptics()
+    beta, L, F = 1e-3, optics.pulse_length, optics.overlap_full
+    plateau = math.pi * beta * (L / 2) / F**2
+    R = np.linspace(optics.overlap_start + L / 2 + 0.05, F - L / 2 - 0.05, 7)
+    np.testing.assert_allclose(soft_waveform(R, 0.0, beta, optics), plateau, rtol=2e-3)
+    far = 60.0  # beyond F: π β (L/2) / R², as for a receiver at full overlap
+    e = soft_waveform(np.array([far]), 0.0, beta, optics)[0]
+    assert e == pytest.approx(math.pi * beta * (L / 2) / far**2, rel=5e-3)
+
+
+def test_the_receiver_is_the_documented_hdl64e_one():
+    """Pulse 4 ns (Velodyne), full sensitivity at the median focal distance of the preset's
+    S2.1 unit, the sensor's own minimum range; the values the references table cites."""
+    import csv
+    from pathlib import Path
+
+    refs = Path(__file__).resolve().parents[2] / "docs" / "data" / "weather_references.csv"
+    with open(refs, encoding="utf-8") as f:
+        rows = {r["quantity"]: r for r in csv.DictReader(f) if r["condition"] == "hdl64e"}
+    assert float(rows["pulse_half_power_width"]["value"]) * 1e-9 == pytest.approx(
+        HDL64E_PULSE_WIDTH
+    )
+    assert float(rows["focal_distance_median"]["value"]) == HDL64E_FOCAL_DISTANCE
+    assert float(rows["minimum_return_distance"]["value"]) == ReceiverOptics().overlap_start
+    terms = SensorTerms(905.0, 1.0, "raw", 4e-5, 1e-5, 2.0, 120.0, range_min=0.9)
+    optics = receiver_optics(terms)
+    assert optics == ReceiverOptics()
+    assert weather_model(Weather(fog=50.0), terms).receiver == optics
+    assert optics.pulse_length == pytest.approx(C * 4e-9)
 
 
 def test_soft_return_table_holds_the_waveform_peaks():
@@ -161,6 +261,45 @@ def test_dense_fog_returns_from_the_fog_near_the_sensor(variant, write_scene):
     assert set(np.unique(pts["scatterer"])) == {0, 1}
 
 
+def test_sky_beams_return_the_fog_with_the_closed_form_probability(variant, write_scene):
+    """Beams that meet nothing in fog of MOR 500 m: the HDL-64E receiver (ξ = (r/F)² from R1)
+    makes the soft return's peak the pulse wholly past R1, E = π β/F² e^(-2αR1) ∫ e^(-2αx)
+    cos²(π(x - L/2)/L) dx over [0, L] = π β/F² e^(-2α(R1 + L/2)) sinh(αL) ω²/(2α(4α² + ω²)),
+    ω = 2π/L, L = c τ_H; with the threshold near that E and σ_n = E/4, P = Φ((E - T)/σ_n) of
+    the beams report the fog (a closed form, not the module's table)."""
+    from scipy.stats import norm
+
+    fog = Weather(fog=500.0)
+    o = medium_optics(fog, 905.0)
+    a, b, r1 = o.alpha, o.backscatter, 0.9
+    L, F = C * 4e-9, 8.0
+    w = 2 * math.pi / L
+    peak = math.pi * b / F**2 * math.exp(-2 * a * (r1 + L / 2))
+    peak *= math.sinh(a * L) * w * w / (2 * a * (4 * a * a + w * w))
+    threshold = peak * 0.98  # Φ(0.08) = 0.53: the slope's middle, where P is most sensitive
+    path = write_scene(f"""
+    <sensor type="lidar" id="lidar">
+        <string name="elevation_angles" value="{", ".join(str(e) for e in range(5, 85, 4))}"/>
+        <integer name="horizontal_resolution" value="720"/>
+        <float name="range_min" value="{r1}"/>
+        <float name="range_max" value="120"/>
+        <float name="detection_threshold" value="{threshold}"/>
+        <float name="receiver_noise_std" value="{peak / 4}"/>
+    </sensor>
+    """)
+    r = _scan(path, fog, seed=5)
+    assert (r.shape_index < 0).all()
+    expected = norm.sf((threshold - peak) / (peak / 4))
+    assert r.valid.mean() == pytest.approx(expected, abs=0.02)
+    assert np.all(r.scatterer[r.valid] == 1)
+    # at the peak's range: a pulse's leading edge cut by δ before R1 loses ∝ δ³ (2π²δ³/(3L³) of
+    # its integral) while its fog is nearer by δ (gain 2αδ): the peak lies δ = √(αL³)/π before
+    # R1 + L/2; timed to c τ_H σ_n / (π E) (the noise over the pulse's steepest slope)
+    peak_range = r1 + L / 2 - math.sqrt(a * L**3) / math.pi
+    assert r.range[r.valid].mean() == pytest.approx(peak_range, abs=0.01)
+    assert r.range[r.valid].std() == pytest.approx(L / (4 * math.pi), rel=0.1)
+
+
 def test_rain_drops_in_the_beam_are_deterministic(variant, write_scene):
     extra = '<float name="detection_threshold" value="1e-4"/>'
     extra += '<float name="receiver_noise_std" value="2e-5"/>'
@@ -221,3 +360,49 @@ def test_no_nan_at_the_extremes(variant, write_scene, weather, divergence):
             assert np.all(np.isfinite(v)), key
     assert (pts["range"] >= 0).all() and len(pts["range"]) > 0
     assert set(np.unique(pts["scatterer"])) <= {0, 1, 2, 3}
+
+
+def _kernels_per_weather(path, conditions, divergence_free=True):
+    """The kernel hashes each scan of ``path`` in ``conditions`` launched (after two warm-up
+    scans in the first condition: the first scans of a scene build one-time state)."""
+    import gc
+
+    import drjit as dr
+
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+
+    L = load_scene(path)
+    gc.collect()
+    gc.disable()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        for _ in range(2):
+            scan(L.scene, L.lidars[0], weather=conditions[0], seed=3)
+        hashes = []
+        for w in conditions:
+            dr.kernel_history()  # clear
+            scan(L.scene, L.lidars[0], weather=w, seed=3)
+            hashes.append({k["hash"] for k in dr.kernel_history() if "hash" in k})
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+        gc.enable()
+    return L.lidars[0].config, hashes
+
+
+def test_other_weather_of_the_same_kind_compiles_nothing(variant, write_scene):
+    """The weather's values enter the scan's kernels as data (opaque scalars, tables): a sweep
+    over fog densities, or over rain rates whose particle counts take as many slots, launches
+    only the kernels of its first condition."""
+    extra = '<float name="detection_threshold" value="4e-5"/>'
+    extra += '<float name="receiver_noise_std" value="1.08e-5"/>'
+    path = _wall_scene(write_scene, extra)
+    fogs = [Weather(fog=50.0), Weather(fog=200.0), Weather(fog=1000.0)]
+    _, hashes = _kernels_per_weather(path, fogs)
+    assert hashes[0] and hashes[1] <= hashes[0] and hashes[2] <= hashes[0]
+    cfg, _ = _kernels_per_weather(path, [Weather(rain=40.0)])
+    rains = [Weather(rain=40.0), Weather(rain=45.0)]
+    slots = {weather_model(w, cfg).particles.slots for w in rains}
+    assert len(slots) == 1  # the same structure: one more slot would be another kernel
+    _, hashes = _kernels_per_weather(path, rains)
+    assert hashes[0] and hashes[1] <= hashes[0]
