@@ -200,6 +200,21 @@ def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = np.abs(cov).max(axis=0)
     s[s <= 0] = 1.0
     a00, a11, a22, a01, a02, a12 = cov / s
+    q, top, low = _trig_eigenvalues(a00, a11, a22, a01, a02, a12)
+    for _ in range(2):  # Newton on det(A - λI), whose derivative is minus the minors' sum
+        m00, m11, m22 = a00 - low, a11 - low, a22 - low
+        slope = -(m11 * m22 - a12 * a12 + m00 * m22 - a02 * a02 + m00 * m11 - a01 * a01)
+        f = _det(m00, m11, m22, a01, a02, a12)
+        low = low - np.divide(f, slope, out=np.zeros_like(f), where=slope != 0)
+    second = (3.0 * q - top - low) * s
+    return second, _null_vector(a00 - low, a11 - low, a22 - low, a01, a02, a12)
+
+
+def _trig_eigenvalues(a00, a11, a22, a01, a02, a12):
+    """``(q, top, low)``: the mean of the three eigenvalues, the largest and the smallest, of
+    symmetric 3×3 matrices given by their (n,) entries, by the trigonometric solution of the
+    characteristic cubic (exact to rounding where the eigenvalues are apart; about 1e-8 of the
+    largest where two coincide)."""
     q = (a00 + a11 + a22) / 3.0
     off = a01 * a01 + a02 * a02 + a12 * a12
     p2 = ((a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * off) / 6.0
@@ -209,13 +224,7 @@ def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     phi = np.arccos(r) / 3.0
     top = q + 2.0 * pp * np.cos(phi)
     low = q + 2.0 * pp * np.cos(phi + 2.0 * np.pi / 3.0)
-    for _ in range(2):  # Newton on det(A - λI), whose derivative is minus the minors' sum
-        m00, m11, m22 = a00 - low, a11 - low, a22 - low
-        slope = -(m11 * m22 - a12 * a12 + m00 * m22 - a02 * a02 + m00 * m11 - a01 * a01)
-        f = _det(m00, m11, m22, a01, a02, a12)
-        low = low - np.divide(f, slope, out=np.zeros_like(f), where=slope != 0)
-    second = (3.0 * q - top - low) * s
-    return second, _null_vector(a00 - low, a11 - low, a22 - low, a01, a02, a12)
+    return q, top, low
 
 
 def _null_vector(m00, m11, m22, m01, m02, m12) -> np.ndarray:
