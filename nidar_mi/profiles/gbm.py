@@ -584,8 +584,9 @@ def _numbers(text: str, pattern: re.Pattern, what: str) -> list[float]:
     return vals
 
 
-def _check_tree(block: str, k: int, n_features: int) -> None:
-    """Checks one ``Tree=k`` block: every field, lengths, a proper binary tree."""
+def _check_tree(block: str, k: int, n_features: int, missing: bool = False) -> None:
+    """Checks one ``Tree=k`` block: every field, lengths, a proper binary tree; ``missing``:
+    numerical splits may send missing values (NaN) one way (LightGBM's missing type)."""
     lines = block.rstrip("\n").split("\n")
     if lines[0] != f"Tree={k}" or len(lines) != len(_TREE_KEYS) + 1:
         raise NidarError(f"gbm: tree {k} is malformed")
@@ -620,7 +621,8 @@ def _check_tree(block: str, k: int, n_features: int) -> None:
         raise NidarError(f"gbm: tree {k}: one split per internal node expected")
     if any(not 0 <= int(j) < n_features for j in ints["split_feature"]):
         raise NidarError(f"gbm: tree {k}: split on a feature the model does not have")
-    if any(int(t) not in (0, 2) for t in ints["decision_type"]):
+    kinds = (0, 2, 8, 10) if missing else (0, 2)  # bit 1: default left; bits 2-3: NaN missing
+    if any(int(t) not in kinds for t in ints["decision_type"]):
         raise NidarError(f"gbm: tree {k}: only numerical splits without missing values")
     # every node but the root, and every leaf, is a child exactly once, of an earlier node
     seen_nodes, seen_leaves = set(), set()
@@ -638,8 +640,9 @@ def _check_tree(block: str, k: int, n_features: int) -> None:
         raise NidarError(f"gbm: tree {k}: not a binary tree")
 
 
-def _check_model_text(text: Any, features: tuple[str, ...]) -> str:
-    """The header and trees of a LightGBM text model, after checking every line of them.
+def _check_model_text(text: Any, features: tuple[str, ...], missing: bool = False) -> str:
+    """The header and trees of a LightGBM text model, after checking every line of them
+    (``missing``: splits may route missing values, :func:`_check_tree`).
 
     LightGBM's own parser can abort the process on a malformed text, so nothing reaches it
     that is not, line by line, a regression model of numerical splits on ``features``.
@@ -690,14 +693,15 @@ def _check_model_text(text: Any, features: tuple[str, ...]) -> str:
         raise NidarError("gbm: the trees do not match the model's tree_sizes")
     pos = 0
     for k, n in enumerate(sizes):
-        _check_tree(trees[pos : pos + n], k, len(features))
+        _check_tree(trees[pos : pos + n], k, len(features), missing)
         pos += n
     return body + sep
 
 
-def _load_booster(text: Any, features: tuple[str, ...]):
-    """LightGBM booster of a model text, after checks that it is one this module could write."""
-    checked = _check_model_text(text, features)
+def _load_booster(text: Any, features: tuple[str, ...], missing: bool = False):
+    """LightGBM booster of a model text, after checks that it is one this module could write
+    (``missing``: or one whose splits route missing values, the ``context`` form's)."""
+    checked = _check_model_text(text, features, missing)
     lgb = _lgb()
     try:
         booster = lgb.Booster(model_str=checked)
