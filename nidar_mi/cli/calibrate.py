@@ -1,7 +1,8 @@
 """``python -m nidar_mi.calibrate``: fit a sensor profile on a sensor's own scans.
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
-                                 [--form gbm|range_ring|distance_quantile|physical] [--branch R|I_hat]
+                                 [--form gbm|context|range_ring|distance_quantile|physical]
+                                 [--inputs GROUP,...] [--branch R|I_hat]
                                  [--incidence [--no-geometry] | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
@@ -24,7 +25,11 @@ incidence only, not the range and elevation: the form of a range-compensated int
 ``--max-frames K`` fits on K of the frames, evenly spaced over their order
 (:func:`nidar_mi.datasets.profile_fitting.select_frames`): one to ten frames of a sensor already
 beat the generic profiles (docs/NIDAR.md, "Calibrating from a few frames"). ``--form physical``
-fits the closed form of the generic profiles (gain and range exponent). The profile file
+fits the closed form of the generic profiles (gain and range exponent). ``--form context`` reads
+each return's named inputs (:mod:`nidar_mi.profiles.inputs`): range, elevation and incidence,
+the laser index, the local geometry of the scan around it, the image around its pixel and all
+of NIDAR's maps there; ``--inputs`` names the groups (default all: ``return,ring,geometry,
+image,nidar``; without ``image`` and ``nidar`` the profile needs no image). The profile file
 (:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -60,9 +65,10 @@ def build_parser():
     p.add_argument(
         "--form",
         default=KITTI_PROFILE_FORM,
-        choices=("gbm", "range_ring", "distance_quantile", "physical"),
+        choices=("gbm", "context", "range_ring", "distance_quantile", "physical"),
         help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
-        "value (default); range_ring: monotone map per range bin + ring gains; "
+        "value; context: gradient-boosted regression on the return's inputs (--inputs); "
+        "range_ring: monotone map per range bin + ring gains; "
         "distance_quantile: the paper's distance encoding + quantile map; physical: "
         "gain * R * |cos θ| / d^p, the generic profiles' closed form",
     )
@@ -85,6 +91,12 @@ def build_parser():
         action="store_true",
         help="gbm: read the value and the incidence only, not the range and elevation (a "
         "range-compensated sensor; carries over to other layouts)",
+    )
+    p.add_argument(
+        "--inputs",
+        metavar="GROUP,...",
+        help="context: the input groups read, of return, ring, geometry, image, nidar "
+        "(default: all)",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -142,6 +154,7 @@ def _calibrate(args, argv) -> None:
     if args.incidence is not None and args.form not in ("gbm", "physical"):
         flag = "--incidence" if args.incidence else "--no-incidence"
         raise NidarError(f"{flag} needs --form gbm or physical (got --form {args.form})")
+    options = _context_options(args)
     if args.max_frames is not None and args.max_frames < 1:
         raise NidarError(f"--max-frames must be at least 1 (got {args.max_frames})")
     incidence = args.form in ("gbm", "physical") and (
@@ -177,6 +190,7 @@ def _calibrate(args, argv) -> None:
         progress=show_progress(args),
         incidence=incidence,
         **({"use_geometry": False} if args.no_geometry else {}),
+        **options,
     )
     profile.save(args.out)
     if not args.quiet:
@@ -188,8 +202,25 @@ def _calibrate(args, argv) -> None:
         )
 
 
+def _context_options(args) -> dict:
+    """The ``context`` form's options from ``--inputs`` (``features``: the groups' inputs)."""
+    if args.inputs is None:
+        return {}
+    if args.form != "context":
+        raise NidarError(f"--inputs needs --form context (got --form {args.form})")
+    from ..profiles.inputs import GROUPS
+
+    groups = [g.strip() for g in args.inputs.split(",") if g.strip()]
+    bad = [g for g in groups if g not in GROUPS]
+    if bad or not groups:
+        raise NidarError(f"--inputs: groups of {', '.join(GROUPS)} (got {args.inputs!r})")
+    return {"features": tuple(f for g in GROUPS if g in groups for f in GROUPS[g])}
+
+
 def _reads(profile) -> str:
-    """What the summary line adds about the incidence."""
+    """What the summary line adds about the incidence (or the inputs of a context profile)."""
+    if profile.form == "context":
+        return f" (inputs: {', '.join(profile.mapping.groups)})"
     if not profile.uses_incidence:
         return ""
     if profile.form == "physical":
