@@ -41,9 +41,11 @@ import numpy as np
 from ..errors import NidarError
 from .ground import ground_height
 from .normals import (
+    BLOCK,
     DEFAULT_NEIGHBOURS,
     DEGENERATE,
     MAX_COORDINATE,
+    WORKERS,
     _covariances,
     _neighbours,
     _plane_eigen,
@@ -176,16 +178,35 @@ def local_geometry(
     return LocalGeometry(normals=normals, cos_incidence=cos, features=feats)
 
 
+def _query(q: np.ndarray, k: int) -> np.ndarray:
+    """(M, k) indices of the ``k`` nearest of the (M, 3) points ``q`` to each of them, nearest
+    first; the queries split over :data:`~nidar_mi.geometry.normals.WORKERS` threads (each
+    point's neighbours do not depend on the split)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    tree = _tree(q)
+    cuts = np.linspace(0, len(q), min(WORKERS, -(-len(q) // BLOCK)) + 1).astype(int)
+    shares = [q[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    if len(shares) == 1:
+        return _neighbours(tree, q, k)
+    with ThreadPoolExecutor(len(shares)) as pool:
+        return np.concatenate(list(pool.map(lambda share: _neighbours(tree, share, k), shares)))
+
+
 def _fill(q, near, ks, feats, normals, notes) -> None:
     """:func:`local_geometry`'s descriptors of the (M, 3) usable points ``q`` (rows ``near``
     of the scan), written into ``feats`` and ``normals``."""
     kmax = min(max(*ks, DEFAULT_NEIGHBOURS), len(q))
-    idx = _neighbours(_tree(q), q, kmax)
+    idx = _query(q, kmax)
+    shapes = {min(k, kmax): None for k in (*ks, DEFAULT_NEIGHBOURS)}
+    for k in shapes:
+        shapes[k] = _shape(q, idx[:, :k])
     for k in ks:
-        lam, _, _ = _shape(q, idx[:, : min(k, kmax)])
+        lam = shapes[min(k, kmax)][0]
         for name, values in zip(SHAPES, _descriptors(lam), strict=True):
             feats[f"{name}_k{k}"][near] = values
-    _, vec, flat = _shape(q, idx[:, : min(DEFAULT_NEIGHBOURS, kmax)])
+    _, vec, flat = shapes[min(DEFAULT_NEIGHBOURS, kmax)]
+    vec = vec.copy()
     flip = (vec * q.T).sum(axis=0) > 0
     vec[:, flip] *= -1.0
     normals[near] = vec.T
