@@ -303,14 +303,18 @@ def per_group(per_seed: list[dict]) -> str:
     return "; ".join(f"{g} {r:.3f}/{b:.3f}" for g, (r, b) in zip(groups, a))
 
 
-def _record(path: str | None, row: str, runs: list[dict], wall: float) -> None:
-    """Add a row's per-seed, per-group scores and wall time to the JSON file at ``path``."""
+def _record(path: str | None, row: str, runs: list[dict], wall: float, seeds) -> None:
+    """Add a row's per-group scores of each seed, and its wall time, to the JSON file at
+    ``path`` (rows of other runs and other seeds kept)."""
     if path is None:
         return
     import json
 
     data = json.loads(Path(path).read_text()) if Path(path).is_file() else {}
-    data[row] = {"runs": [{g: list(v) for g, v in r.items()} for r in runs], "wall_s": wall}
+    entry = data.setdefault(row, {"runs": {}, "wall_s": {}})
+    for seed, r in zip(seeds, runs, strict=True):
+        entry["runs"][str(seed)] = {g: list(v) for g, v in r.items()}
+        entry["wall_s"][str(seed)] = wall / len(runs)
     Path(path).write_text(json.dumps(data, indent=1))
 
 
@@ -323,6 +327,7 @@ def _parse(argv):
         help=f"rows: {', '.join([*ROWS, *BASELINES])}",
     )
     ap.add_argument("--seeds", type=int, default=1, help="seeds of each row")
+    ap.add_argument("--seed-start", type=int, default=0, help="the first seed")
     ap.add_argument("--ks", default="", help="K frames for the context row, e.g. 3,10")
     ap.add_argument("--cache", default=None, help="folder of the per-frame inputs")
     ap.add_argument("--weights", default=None, help="NIDAR weights (default: the shipped)")
@@ -363,6 +368,7 @@ def main(argv=None) -> int:
         flush=True,
     )
     by_name = {s.name: s for s in scans}
+    seeds = range(args.seed_start, args.seed_start + args.seeds)
     results = {}
     print("| row | inputs | Spearman | range-binned | seeds | wall s | per group (raw/binned) |")
     print("| --- | --- | --- | --- | --- | ---: | --- |")
@@ -370,15 +376,13 @@ def main(argv=None) -> int:
         t = time.perf_counter()
         if row in ROWS:
             label, names, target, *kind = ROWS[row]
-            runs = [
-                logo(groups, names, target, s, kind=(kind or ["gbm"])[0]) for s in range(args.seeds)
-            ]
+            runs = [logo(groups, names, target, s, kind=(kind or ["gbm"])[0]) for s in seeds]
         else:
             label = BASELINES[row]
-            runs = [baseline_logo(groups, by_name, row, s) for s in range(args.seeds)]
+            runs = [baseline_logo(groups, by_name, row, s) for s in seeds]
         results[row] = runs
         wall = time.perf_counter() - t
-        _record(args.json, row, runs, wall)
+        _record(args.json, row, runs, wall, seeds)
         print(
             f"| {row} | {label} | {summary(runs)} | {len(runs)} | {wall:.0f} | {per_group(runs)} |",
             flush=True,
@@ -386,9 +390,10 @@ def main(argv=None) -> int:
     for k in args.ks:
         t = time.perf_counter()
         _, names, target = ROWS["context"][:3]
-        runs = [logo(groups, names, target, s, k=k) for s in range(max(args.seeds, 3))]
+        k_seeds = range(args.seed_start, args.seed_start + max(args.seeds, 3))
+        runs = [logo(groups, names, target, s, k=k) for s in k_seeds]
         wall = time.perf_counter() - t
-        _record(args.json, f"context_k{k}", runs, wall)
+        _record(args.json, f"context_k{k}", runs, wall, k_seeds)
         print(
             f"| context K={k} | {k} frames drawn from the other groups | {summary(runs)} | {len(runs)} | {wall:.0f} | {per_group(runs)} |",
             flush=True,

@@ -54,8 +54,12 @@ MAX_UNITS = 1024
 
 
 def _standardise(x: np.ndarray, mean: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    z = (x - mean) / scale
-    return np.clip(np.nan_to_num(z, nan=0.0), -CLIP, CLIP).astype(np.float32)
+    """(N, F) float32 ``clip((x - mean) / scale, ±CLIP)``, NaN at 0 (in place on one copy)."""
+    z = np.array(x, dtype=np.float32)
+    z -= mean.astype(np.float32)
+    z *= (1.0 / scale).astype(np.float32)
+    np.nan_to_num(z, copy=False, nan=0.0)
+    return np.clip(z, -CLIP, CLIP, out=z)
 
 
 def fit_head(x: np.ndarray, y: np.ndarray, *, seed: int = 0, threads: int = 1) -> dict:
