@@ -40,11 +40,11 @@ __all__ = [
 #: Units of each hidden layer.
 HIDDEN = 64
 #: Passes over the training rows.
-EPOCHS = 20
+EPOCHS = 8
 #: Rows per step.
-BATCH = 1024
+BATCH = 2048
 #: Adam's learning rate.
-LEARNING_RATE = 1e-3
+LEARNING_RATE = 2e-3
 #: Adam's (decoupled) weight decay.
 WEIGHT_DECAY = 1e-4
 #: Bound of a standardised input.
