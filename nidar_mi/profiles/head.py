@@ -10,8 +10,8 @@ profile fit its time budget (docs/BENCHMARKS.md).
 
 Fitting (:func:`fit_head`, settings fixed beforehand, not tuned on held-out data): least
 squares, Adam (learning rate :data:`LEARNING_RATE`, weight decay :data:`WEIGHT_DECAY`),
-:data:`EPOCHS` passes over the rows in seeded mini-batches of :data:`BATCH`, in torch on the
-CPU; the same rows, seed and thread count give the same head. The head is stored as JSON
+:data:`STEPS` steps on seeded mini-batches of :data:`BATCH` rows (passes over the rows, each a
+new permutation), in torch on the CPU; the same rows, seed and thread count give the same head. The head is stored as JSON
 numbers (:func:`head_to_dict`), checked on reading (:func:`head_from_dict`); nothing pickled.
 """
 
@@ -27,7 +27,7 @@ from ..errors import NidarError
 __all__ = [
     "BATCH",
     "CLIP",
-    "EPOCHS",
+    "STEPS",
     "HIDDEN",
     "LEARNING_RATE",
     "WEIGHT_DECAY",
@@ -39,8 +39,9 @@ __all__ = [
 
 #: Units of each hidden layer.
 HIDDEN = 64
-#: Passes over the training rows.
-EPOCHS = 8
+#: Optimiser steps (the rows drawn in seeded passes, each pass a new permutation): the same
+#: work for a frame or a hundred.
+STEPS = 2000
 #: Rows per step.
 BATCH = 2048
 #: Adam's learning rate.
@@ -92,12 +93,14 @@ def fit_head(x: np.ndarray, y: np.ndarray, *, seed: int = 0, threads: int = 1) -
             )
             opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
             gen = torch.Generator().manual_seed(int(seed))
-            for _ in range(EPOCHS):
-                for batch in torch.randperm(len(z), generator=gen).split(BATCH):
+            steps = 0
+            while steps < STEPS:
+                for batch in torch.randperm(len(z), generator=gen).split(BATCH)[: STEPS - steps]:
                     opt.zero_grad()
                     loss = torch.nn.functional.mse_loss(net(z[batch]), t[batch])
                     loss.backward()
                     opt.step()
+                    steps += 1
     finally:
         torch.set_num_threads(previous)
     linear = [m for m in net if isinstance(m, torch.nn.Linear)]
