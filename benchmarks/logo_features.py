@@ -57,11 +57,11 @@ from calibrate_frames import FOLDERS, group_of  # noqa: E402
 from nidar_mi.eval.metrics import spearman  # noqa: E402
 from nidar_mi.eval.scan_metrics import binned_spearman  # noqa: E402
 from nidar_mi.geometry.local_features import GEOMETRY_FEATURES  # noqa: E402
-from nidar_mi.profiles.image_context import IMAGE_FEATURES  # noqa: E402
+from nidar_mi.profiles.image_context import IMAGE_FEATURES, RELATIVE_FEATURES  # noqa: E402
 from nidar_mi.profiles.inputs import NIDAR_MAPS, RETURN_FEATURES  # noqa: E402
 
 #: Version of the cached inputs (bump when an input's definition changes).
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 #: The independent study's geometry inputs.
 STUDY_GEOMETRY = (
     "z",
@@ -72,6 +72,8 @@ STUDY_GEOMETRY = (
     "spacing",
     "spacing_rel",
 )
+#: The image inputs that do not scale with the exposure.
+INVARIANT_IMAGE = ("lum_log", "chroma_r", "chroma_g", "hue", "sat", "contrast")
 #: Row -> (label, inputs, target[, kind]) of the rows of inputs (kind: ``gbm`` unless given).
 ROWS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "return": ("range, elevation, incidence", RETURN_FEATURES, "intensity"),
@@ -114,6 +116,18 @@ ROWS: dict[str, tuple[str, tuple[str, ...], str]] = {
         "same, trained on the per-frame rank",
         (*RETURN_FEATURES, "ring", *GEOMETRY_FEATURES, *IMAGE_FEATURES, *NIDAR_MAPS),
         "rank",
+    ),
+    "context_rel": (
+        "every input, the image's exposure divided out",
+        (
+            *RETURN_FEATURES,
+            "ring",
+            *GEOMETRY_FEATURES,
+            *INVARIANT_IMAGE,
+            *RELATIVE_FEATURES,
+            *NIDAR_MAPS,
+        ),
+        "intensity",
     ),
     "geometry_mlp": (
         "geometry only, the small head in place of the trees",
@@ -210,7 +224,7 @@ def frame_scores(pred: np.ndarray, frame: dict) -> tuple[float, float]:
 THREADS = 1
 
 
-def fit_rows(train: Sequence[dict], names, target: str, seed: int, kind: str = "gbm"):
+def fit_rows(train: Sequence[dict], names, target: str, seed: int, kind: str = "gbm", points=None):
     """The ``context`` form's model (:mod:`nidar_mi.profiles.context`: its trees, or the
     small head of :mod:`nidar_mi.profiles.head`) fitted on ``train`` frames: a predictor of a
     frame's (N, F) design matrix."""
@@ -218,6 +232,10 @@ def fit_rows(train: Sequence[dict], names, target: str, seed: int, kind: str = "
     from nidar_mi.profiles.head import fit_head, head_predict
 
     o = ContextFitOptions(seed=seed, target=target, kind=kind, threads=THREADS)
+    if points is not None:
+        o = ContextFitOptions(
+            seed=seed, target=target, kind=kind, threads=THREADS, points_per_frame=points
+        )
     x, y = training_rows([design(f, names) for f in train], [f["intensity"] for f in train], o)
     if kind == "mlp":
         head = fit_head(x, y, seed=seed, threads=THREADS)
@@ -233,6 +251,7 @@ def logo(
     seed: int,
     k: int | None = None,
     kind: str = "gbm",
+    points: int | None = None,
 ) -> dict[str, tuple[float, float]]:
     """Held-out group -> (Spearman, binned) of the inputs' regression fitted on the other
     groups (``k`` frames of them drawn with ``seed``; None: all)."""
@@ -243,7 +262,7 @@ def logo(
             rng = np.random.default_rng(seed)
             pool = [pool[i] for i in rng.permutation(len(pool))[:k]]
         t = time.perf_counter()
-        predict = fit_rows(pool, names, target, seed, kind)
+        predict = fit_rows(pool, names, target, seed, kind, points)
         per = [frame_scores(predict(design(f, names)), f) for f in groups[g]]
         out[g] = tuple(np.nanmean(per, axis=0))
         print(
@@ -252,6 +271,32 @@ def logo(
             flush=True,
         )
     return out
+
+
+def nested(groups, candidates: Sequence[str], seed: int, inner_points: int) -> tuple[dict, dict]:
+    """Leave one group out with the inputs chosen inside each fold: for every held-out group,
+    each candidate row (:data:`ROWS`) is scored by leave one group out over the other seven
+    groups alone (fits on ``inner_points`` returns per frame), and the best by the mean of
+    Spearman and range-binned Spearman over those inner groups is fitted on all seven
+    (:data:`~nidar_mi.profiles.context.POINTS_PER_FRAME` per frame) and scored on the held-out
+    group. Returns ``(held-out group -> scores, held-out group -> chosen row)``."""
+    out, chosen = {}, {}
+    for g in sorted(groups):
+        train = {h: v for h, v in groups.items() if h != g}
+        inner = {}
+        for c in candidates:
+            _, names, target, *kind = ROWS[c]
+            per = logo(train, names, target, seed, kind=(kind or ["gbm"])[0], points=inner_points)
+            inner[c] = float(np.mean([np.mean(v) for v in per.values()]))
+        best = max(candidates, key=lambda c: inner[c])
+        chosen[g] = best
+        print(f"  {g}: inner {inner} -> {best}", file=sys.stderr, flush=True)
+        _, names, target, *kind = ROWS[best]
+        pool = [f for h in sorted(train) for f in train[h]]
+        predict = fit_rows(pool, names, target, seed, (kind or ["gbm"])[0])
+        per = [frame_scores(predict(design(f, names)), f) for f in groups[g]]
+        out[g] = tuple(np.nanmean(per, axis=0))
+    return out, chosen
 
 
 def baseline_logo(groups, scans_by_name, row: str, seed: int) -> dict[str, tuple]:
@@ -338,6 +383,15 @@ def _parse(argv):
     ap.add_argument("--ks", default="", help="K frames for the context row, e.g. 3,10")
     ap.add_argument("--cache", default=None, help="folder of the per-frame inputs")
     ap.add_argument("--weights", default=None, help="NIDAR weights (default: the shipped)")
+    ap.add_argument(
+        "--select",
+        default="",
+        help="rows to choose from inside each fold (nested leave one group out), e.g. "
+        "context,context_rel",
+    )
+    ap.add_argument(
+        "--inner-points", type=int, default=1000, help="returns per frame in the inner fits"
+    )
     ap.add_argument("--json", default=None, help="also write every row's per-group scores here")
     args = ap.parse_args(argv)
     args.rows = [r.strip() for r in args.rows.split(",") if r.strip()]
@@ -345,6 +399,9 @@ def _parse(argv):
     if bad:
         ap.error(f"--rows: unknown {bad}")
     args.ks = [int(k) for k in args.ks.split(",") if k.strip()]
+    args.select = [r.strip() for r in args.select.split(",") if r.strip()]
+    if any(r not in ROWS for r in args.select):
+        ap.error(f"--select: rows of {', '.join(ROWS)}")
     return args
 
 
@@ -403,6 +460,18 @@ def main(argv=None) -> int:
         _record(args.json, f"context_k{k}", runs, wall, k_seeds)
         print(
             f"| context K={k} | {k} frames drawn from the other groups | {summary(runs)} | {len(runs)} | {wall:.0f} | {per_group(runs)} |",
+            flush=True,
+        )
+    if args.select:
+        t = time.perf_counter()
+        picked = [nested(groups, args.select, s, args.inner_points) for s in seeds]
+        runs = [r for r, _ in picked]
+        wall = time.perf_counter() - t
+        name = "nested:" + "|".join(args.select)
+        _record(args.json, name, runs, wall, seeds)
+        choice = "; ".join(f"{g} {c}" for g, c in sorted(picked[0][1].items()))
+        print(
+            f"| {name} | chosen per fold: {choice} | {summary(runs)} | {len(runs)} | {wall:.0f} | {per_group(runs)} |",
             flush=True,
         )
     for plus, minus in (

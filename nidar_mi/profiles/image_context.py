@@ -17,7 +17,12 @@ gives, per position, the features of :data:`IMAGE_FEATURES`:
 * ``sobel``, ``laplacian``: the 3 × 3 Sobel gradient magnitude and the 4-neighbour Laplacian of
   ``Y`` at the pixel (edge pixels repeated beyond the image);
 * ``contrast``: ``log((Ȳ_5 + ε) / (Ȳ_61 + ε))``, the 5-pixel window's luminance against the
-  61-pixel one (local contrast).
+  61-pixel one (local contrast);
+* the same with the exposure divided out (:data:`RELATIVE_FEATURES`): ``{r,g,b}_rel``,
+  ``{r,g,b}_rel{w}``, ``lum_rel_sd{w}``, ``sobel_rel`` and ``laplacian_rel`` are the pixel's
+  linear colour, the window means, the spreads and the texture over the image's mean
+  luminance ``Ȳ + ε`` (a camera's gain or exposure time scales them all alike; chromaticity,
+  hue, saturation, ``lum_log`` and ``contrast`` do not depend on it already).
 
 The windows are box sums of summed-area tables (one per linear channel and ``Y²``, float64) over the image rows the positions reach, so a window costs four look-ups per position
 whatever its size: the features of ~20 000 returns in a 1242 × 375 image take a few
@@ -32,7 +37,7 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["EPS", "IMAGE_FEATURES", "SD_WINDOWS", "WINDOWS", "image_context"]
+__all__ = ["EPS", "IMAGE_FEATURES", "RELATIVE_FEATURES", "SD_WINDOWS", "WINDOWS", "image_context"]
 
 #: Side lengths of the windows of the mean colour, pixels (odd).
 WINDOWS = (5, 15, 31, 61)
@@ -56,6 +61,33 @@ IMAGE_FEATURES = (
     "sobel",
     "laplacian",
     "contrast",
+)
+#: The exposure-free counterparts of the features that scale with the exposure (module
+#: docstring), in order; :func:`image_context` gives them after :data:`IMAGE_FEATURES`.
+RELATIVE_FEATURES = (
+    "r_rel",
+    "g_rel",
+    "b_rel",
+    *(f"{c}_rel{w}" for w in WINDOWS for c in "rgb"),
+    *(f"lum_rel_sd{w}" for w in SD_WINDOWS),
+    "sobel_rel",
+    "laplacian_rel",
+)
+#: Each relative feature's absolute one.
+_ABSOLUTE = dict(
+    zip(
+        RELATIVE_FEATURES,
+        (
+            "r_lin",
+            "g_lin",
+            "b_lin",
+            *(f"{c}_mean{w}" for w in WINDOWS for c in "rgb"),
+            *(f"lum_sd{w}" for w in SD_WINDOWS),
+            "sobel",
+            "laplacian",
+        ),
+        strict=True,
+    )
 )
 _LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709, as nidar_mi.io.images.REC709_LUMA
 
@@ -136,7 +168,8 @@ def _texture(y: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, n
 
 
 def image_context(rgb, uv) -> dict[str, np.ndarray]:
-    """The image features of :data:`IMAGE_FEATURES` at pixel positions (module docstring).
+    """The image features of :data:`IMAGE_FEATURES` and :data:`RELATIVE_FEATURES` at pixel
+    positions (module docstring).
 
     Args:
         rgb: (H, W, 3) uint8 sRGB image.
@@ -167,7 +200,7 @@ def image_context(rgb, uv) -> dict[str, np.ndarray]:
         raise NidarError("image_context: pixel positions outside the image")
     u = np.clip(np.rint(pos[:, 0]).astype(np.int64), 0, w - 1)
     v = np.clip(np.rint(pos[:, 1]).astype(np.int64), 0, h - 1)
-    names = IMAGE_FEATURES
+    names = (*IMAGE_FEATURES, *RELATIVE_FEATURES)
     if not len(u):
         return {k: np.zeros(0) for k in names}
     reach = max(max(WINDOWS), max(SD_WINDOWS)) // 2 + 1
@@ -188,6 +221,8 @@ def image_context(rgb, uv) -> dict[str, np.ndarray]:
         out[f"lum_sd{side}"] = np.sqrt(np.maximum(m[4] - m[3] ** 2, 0.0))
     out["sobel"], out["laplacian"] = _texture(tables.y, u, v)
     out["contrast"] = np.log((windows[5][3] + EPS) / (windows[61][3] + EPS))
+    for rel, absolute in _ABSOLUTE.items():
+        out[rel] = out[absolute] / (mean_y + EPS)
     return {k: out[k] for k in names}
 
 

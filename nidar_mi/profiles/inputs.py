@@ -12,7 +12,8 @@ place in the scan (the local geometry). Each input has a name; the names fall in
   (multi-scale linearity / planarity / scatter, ``|n_z|``, height in the sensor frame and above
   the ground, neighbour spacing raw and over the range);
 * ``image``: colour, chromaticity, HSV, window means, texture and contrast at the return's
-  pixel (:mod:`nidar_mi.profiles.image_context`); needs the camera image;
+  pixel, and those that scale with the exposure over the image's mean luminance
+  (:mod:`nidar_mi.profiles.image_context`); needs the camera image;
 * ``nidar``: NIDAR's maps ``R``, ``S``, ``pseudo_nir`` and ``I_hat`` at the return (bilinear,
   as :func:`nidar_mi.geometry.sample_cameras` samples ``R``); needs the image and the networks.
 
@@ -31,7 +32,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..geometry.local_features import GEOMETRY_FEATURES, LocalGeometry, local_geometry
-from .image_context import IMAGE_FEATURES, image_context
+from .image_context import IMAGE_FEATURES, RELATIVE_FEATURES, image_context
 
 __all__ = [
     "GROUPS",
@@ -52,7 +53,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "return": RETURN_FEATURES,
     "ring": ("ring",),
     "geometry": GEOMETRY_FEATURES,
-    "image": IMAGE_FEATURES,
+    "image": (*IMAGE_FEATURES, *RELATIVE_FEATURES),
     "nidar": NIDAR_MAPS,
 }
 #: The groups that need the camera image.
@@ -128,7 +129,7 @@ def camera_inputs(
     if cam.shape != (n,) or len(images) != len(sightings.per_camera):
         raise NidarError("camera_inputs: one image per camera and one camera index per point")
     keys = [k for k in NIDAR_MAPS if maps is not None and all(k in m for m in maps)]
-    out = {k: np.full(n, np.nan) for k in (*IMAGE_FEATURES, *keys)}
+    out = {k: np.full(n, np.nan) for k in (*IMAGE_FEATURES, *RELATIVE_FEATURES, *keys)}
     from ..geometry import bilinear_sample
 
     for c, (index, uv, _) in enumerate(sightings.per_camera):

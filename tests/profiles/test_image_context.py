@@ -10,7 +10,12 @@ import pytest
 
 from nidar_mi.errors import NidarError
 from nidar_mi.io.images import srgb_to_linear
-from nidar_mi.profiles.image_context import IMAGE_FEATURES, WINDOWS, image_context
+from nidar_mi.profiles.image_context import (
+    IMAGE_FEATURES,
+    RELATIVE_FEATURES,
+    WINDOWS,
+    image_context,
+)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -23,7 +28,7 @@ def test_a_uniform_image():
     img = np.broadcast_to(code, (40, 70, 3)).copy()
     uv = np.array([[0.0, 0.0], [69.0, 39.0], [35.2, 20.4], [-0.4, 39.4]])
     f = image_context(img, uv)
-    assert list(f) == list(IMAGE_FEATURES)
+    assert list(f) == [*IMAGE_FEATURES, *RELATIVE_FEATURES]
     lin = srgb_to_linear(code / 255.0)
     for i, c in enumerate("rgb"):
         np.testing.assert_allclose(f[f"{c}_lin"], lin[i], rtol=1e-12)
@@ -34,6 +39,24 @@ def test_a_uniform_image():
     np.testing.assert_allclose([f["hue"][0], f["sat"][0], f["val"][0]], [h, s, v], rtol=1e-12)
     for name in ("lum_sd5", "lum_sd15", "sobel", "laplacian", "contrast", "lum_log"):
         np.testing.assert_allclose(f[name], 0.0, atol=1e-6)
+    y = lin @ LUMA
+    np.testing.assert_allclose(f["g_rel"], lin[1] / (y + 1e-3), rtol=1e-9)
+    np.testing.assert_allclose(f["b_rel61"], lin[2] / (y + 1e-3), rtol=1e-9)
+
+
+def test_the_relative_features_do_not_depend_on_the_exposure():
+    """Twice the exposure (linear values doubled, re-encoded to 8 bits): the relative features
+    stay within the 8-bit rounding, the absolute ones double."""
+    from nidar_mi.io.images import linear_to_srgb
+
+    rng = np.random.default_rng(5)
+    lin = rng.uniform(0.02, 0.45, (60, 80, 3))
+    a, b = (np.rint(linear_to_srgb(k * lin) * 255).astype(np.uint8) for k in (1.0, 2.0))
+    uv = np.stack([rng.uniform(0, 79, 50), rng.uniform(0, 59, 50)], axis=1)
+    fa, fb = image_context(a, uv), image_context(b, uv)
+    for name in ("r_rel", "g_rel15", "lum_rel_sd15", "chroma_r", "lum_log"):
+        np.testing.assert_allclose(fb[name], fa[name], rtol=0.02, atol=0.02)
+    np.testing.assert_allclose(fb["g_mean15"], 2 * fa["g_mean15"], rtol=0.02)
 
 
 def test_a_vertical_step_edge():
