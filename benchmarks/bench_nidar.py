@@ -175,8 +175,9 @@ def _context_stages(xyz, cam, maps, out: dict, profile, rgb) -> int:
     observed points' local geometry, their image inputs and maps, the profile."""
     from nidar_mi.geometry import locate_in_cameras, sample_cameras
     from nidar_mi.geometry.local_features import local_geometry
-    from nidar_mi.profiles.inputs import NIDAR_MAPS, camera_inputs, return_inputs
+    from nidar_mi.profiles.inputs import NIDAR_MAPS, camera_inputs, return_inputs, scales_read
 
+    scales = scales_read(profile.mapping.features)
     host = [
         {k: np.asarray(v.detach().cpu() if hasattr(v, "detach") else v) for k, v in maps.items()}
     ]
@@ -188,13 +189,13 @@ def _context_stages(xyz, cam, maps, out: dict, profile, rgb) -> int:
     wall, cpu, (sightings, (values, observed, cam_idx)) = _time(sample)
     out["sampling"] = (wall, cpu)
     p = xyz[observed]
-    wall, cpu, geo = _time(lambda: local_geometry(p, notes=[]))
+    wall, cpu, geo = _time(lambda: local_geometry(p, scales, notes=[]))
     out["normals"] = (wall, cpu)
     keys = [{k: host[0][k] for k in NIDAR_MAPS}]
     run = lambda: camera_inputs(sightings, [rgb], np.where(observed, cam_idx, -1), keys)  # noqa: E731
     wall, cpu, pics = _time(run)
     out["image"] = (wall, cpu)
-    named = return_inputs(p, None, geo) | {k: v[observed] for k, v in pics.items()}
+    named = return_inputs(p, None, geo, scales) | {k: v[observed] for k, v in pics.items()}
     out["profile"] = _time(lambda: profile(values[observed], named["range_m"], context=named))[:2]
     return int(observed.sum())
 

@@ -21,7 +21,8 @@ pykdtree search the normals use:
 * ``nz``: ``|n_z|``, the vertical component of the unit normal (1 on level ground, 0 on a wall);
 * ``z``: the point's height in the sensor frame, m; ``height``: above the ground
   (:func:`nidar_mi.geometry.ground.ground_height`), m;
-* ``spacing``: the mean distance to the other points of the smallest neighbourhood, m, and
+* ``spacing``: the mean distance to the other :data:`SPACING_NEIGHBOURS` − 1 points of the
+  point's nearest :data:`SPACING_NEIGHBOURS` (itself included), m, and
   ``spacing_rel``: that over the point's range (the scan's angular sampling, about constant
   on one surface; larger where the ray grazes it or the surface is sparse).
 
@@ -58,6 +59,7 @@ __all__ = [
     "GEOMETRY_FEATURES",
     "SCALES",
     "SHAPES",
+    "SPACING_NEIGHBOURS",
     "LocalGeometry",
     "geometry_feature_names",
     "local_geometry",
@@ -67,6 +69,8 @@ __all__ = [
 SCALES = (10, 20, 50)
 #: The shape descriptors per neighbourhood size.
 SHAPES = ("linearity", "planarity", "scatter")
+#: Neighbours (the point itself included) whose mean distance is the ``spacing``.
+SPACING_NEIGHBOURS = 10
 
 
 def geometry_feature_names(scales: tuple[int, ...] = SCALES) -> tuple[str, ...]:
@@ -220,7 +224,7 @@ def _fill(q, near, ks, feats, normals, notes) -> None:
         else:
             notes.append(message)
     feats["nz"][near] = np.abs(vec[2])
-    k0 = min(ks[0], kmax)
+    k0 = min(SPACING_NEIGHBOURS, kmax)
     gap = np.linalg.norm(q[idx[:, 1:k0]] - q[:, None, :], axis=2).mean(axis=1)
     feats["spacing"][near] = gap
     rng = np.linalg.norm(q, axis=1)

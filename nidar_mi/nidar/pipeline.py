@@ -356,9 +356,10 @@ class NidarModel:
         ``(seen, cos, notes)``, (N,) bool, the cosines of ``xyz[seen]`` and the messages of
         the estimate's warnings (warned only if the cosines are used), else None. Both halves
         release the GIL for most of their work, so on a CPU of two or more cores they overlap
-        (docs/BENCHMARKS.md); the results are those of running them in turn. ``wants_cos``
-        ``"geometry"``: ``seen_cos`` holds the seen points'
-        :func:`~nidar_mi.geometry.local_features.local_geometry` in place of the cosines."""
+        (docs/BENCHMARKS.md); the results are those of running them in turn. ``wants_cos`` a
+        tuple of neighbourhood sizes: ``seen_cos`` holds the seen points'
+        :func:`~nidar_mi.geometry.local_features.local_geometry` at them in place of the
+        cosines."""
         from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(1) as pool:
@@ -370,10 +371,14 @@ class NidarModel:
             try:
                 sightings = locate_in_cameras(xyz, cameras, **opts)
                 seen_cos = None
-                if wants_cos:  # "geometry": every descriptor, incidence among them
+                if wants_cos:  # scales: the local geometry at them, incidence among it
                     seen, notes = sightings.seen, []
-                    est = local_geometry if wants_cos == "geometry" else incidence_cosine
-                    seen_cos = (seen, est(xyz[seen], notes=notes), notes)
+                    p = xyz[seen]
+                    if wants_cos is True:
+                        est = incidence_cosine(p, notes=notes)
+                    else:
+                        est = local_geometry(p, wants_cos, notes=notes)
+                    seen_cos = (seen, est, notes)
             except BaseException:
                 if pending is not None:
                     pending.cancel()  # leaving the pool waits for a running one
@@ -391,15 +396,16 @@ class NidarModel:
         Raises:
             NidarError: a profile that reads the image given no image (``images`` of None).
         """
-        from ..profiles.inputs import camera_inputs, return_inputs
+        from ..profiles.inputs import camera_inputs, return_inputs, scales_read
 
         if profile.needs_image and any(im is None for im in images):
             raise NidarError(
                 f"profile {profile.name} reads the camera image at the returns; give the images"
             )
         keys = tuple(dict.fromkeys((profile.branch, "R", *_nidar_inputs(profile))))
+        scales = scales_read(profile.mapping.features)  # only the sizes it reads
         maps, sightings, seen_geo = self._maps_beside_geometry(
-            xyz, cameras, images, maps, keys, opts, "geometry"
+            xyz, cameras, images, maps, keys, opts, scales
         )
         values, observed, cam_idx = sample_cameras(
             xyz, cameras, [_array(m[profile.branch]) for m in maps], sightings=sightings
@@ -411,7 +417,7 @@ class NidarModel:
         for message in notes:
             warnings.warn(message, stacklevel=3)
         rings = None if ring is None else np.asarray(ring).reshape(-1)[observed]
-        named = return_inputs(xyz[observed], rings, geo)
+        named = return_inputs(xyz[observed], rings, geo, scales)
         if profile.needs_image:
             cam = np.where(observed, cam_idx, -1)
             pics = camera_inputs(sightings, images, cam, [{k: m[k] for k in keys} for m in maps])

@@ -31,7 +31,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..errors import NidarError
-from ..geometry.local_features import GEOMETRY_FEATURES, LocalGeometry, local_geometry
+from ..geometry.local_features import (
+    GEOMETRY_FEATURES,
+    SCALES,
+    LocalGeometry,
+    geometry_feature_names,
+    local_geometry,
+)
 from .image_context import IMAGE_FEATURES, RELATIVE_FEATURES, image_context
 
 __all__ = [
@@ -42,6 +48,7 @@ __all__ = [
     "camera_inputs",
     "feature_group",
     "return_inputs",
+    "scales_read",
 ]
 
 #: The per-return inputs every profile form reads.
@@ -72,21 +79,24 @@ def feature_group(name: str) -> str:
     raise NidarError(f"unknown profile input {name!r}")
 
 
-def return_inputs(xyz, ring=None, geometry: LocalGeometry | None = None) -> dict[str, np.ndarray]:
+def return_inputs(
+    xyz, ring=None, geometry: LocalGeometry | None = None, scales: tuple[int, ...] = SCALES
+) -> dict[str, np.ndarray]:
     """The ``return``, ``ring`` and ``geometry`` inputs of a scan's returns.
 
     Args:
         xyz: (N, 3) returns in the sensor frame, m (the sensor at the origin, ``z`` up): the
             returns the profile applies to, as it was fitted (a scan's camera-visible ones).
         ring: optional (N,) laser index, -1 unknown (missing).
-        geometry: the returns' :func:`~nidar_mi.geometry.local_features.local_geometry`, when
-            computed already; None: computed here.
+        geometry: the returns' :func:`~nidar_mi.geometry.local_features.local_geometry` at
+            ``scales``, when computed already; None: computed here.
+        scales: the neighbourhood sizes of the shape descriptors (:func:`scales_read`).
 
     Returns:
         name -> (N,) float64, the names of those groups.
     """
     p = np.asarray(xyz, dtype=np.float64)
-    geo = local_geometry(p) if geometry is None else geometry
+    geo = local_geometry(p, scales) if geometry is None else geometry
     if len(geo.cos_incidence) != len(p):
         raise NidarError(f"{len(geo.cos_incidence)} descriptors for {len(p)} returns")
     out = {
@@ -101,7 +111,18 @@ def return_inputs(xyz, ring=None, geometry: LocalGeometry | None = None) -> dict
             raise NidarError(f"{r.size} rings for {len(p)} returns")
         r = np.where(r >= 0, r, np.nan)
     out["ring"] = r
-    return out | {k: geo.features[k] for k in GEOMETRY_FEATURES}
+    return out | {k: geo.features[k] for k in geometry_feature_names(scales)}
+
+
+def scales_read(features) -> tuple[int, ...]:
+    """The neighbourhood sizes of the shape descriptors among input names (``planarity_k20``:
+    20), rising; the normals' own size alone when none is read (the incidence needs it)."""
+    import re
+
+    from ..geometry.normals import DEFAULT_NEIGHBOURS
+
+    ks = {int(m.group(1)) for f in features if (m := re.search(r"_k(\d+)$", f))}
+    return tuple(sorted(ks)) or (DEFAULT_NEIGHBOURS,)
 
 
 def camera_inputs(

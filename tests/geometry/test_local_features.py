@@ -60,16 +60,18 @@ def test_a_line_has_linearity_one_and_the_three_descriptors_sum_to_one():
 
 
 def test_spacing_nz_and_incidence_on_level_ground():
-    """A level lattice of step s 1.7 m under the sensor: the 5 nearest points of an interior
-    point are itself and its 4 neighbours at s (mean spacing s); the normal is vertical
-    (|n_z| = 1); the incidence equals the normals' own estimate."""
+    """A level lattice of step s 1.7 m under the sensor: the 10 nearest points of an interior
+    point are itself, its 4 neighbours at s, the 4 diagonal ones at s·√2 and one of the 4 at
+    2s (mean spacing (4 + 4√2 + 2)·s / 9); the normal is vertical (|n_z| = 1); the incidence
+    equals the normals' own estimate."""
     s = 0.1
     p = _lattice(31, s) + np.array([10.0, 2.0, -1.7])
     g = local_geometry(p, scales=(5, 20))
     inner = _interior(p - [10.0, 2.0, 0.0], 1.0)
-    np.testing.assert_allclose(g.features["spacing"][inner], s, rtol=1e-9)
+    gap = (4 + 4 * np.sqrt(2) + 2) * s / 9
+    np.testing.assert_allclose(g.features["spacing"][inner], gap, rtol=1e-9)
     rng = np.linalg.norm(p, axis=1)
-    np.testing.assert_allclose(g.features["spacing_rel"][inner], s / rng[inner], rtol=1e-9)
+    np.testing.assert_allclose(g.features["spacing_rel"][inner], gap / rng[inner], rtol=1e-9)
     np.testing.assert_allclose(g.features["nz"], 1.0, atol=1e-9)
     np.testing.assert_allclose(g.features["z"], -1.7)
     np.testing.assert_allclose(g.cos_incidence, incidence_cosine(p), atol=1e-12)
