@@ -7,17 +7,18 @@
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
 
-A ``gbm`` profile reads the incidence by default (``--incidence`` says so explicitly).
+The default form is ``kitti-hdl64e``'s, ``context`` (below). A ``gbm`` profile reads the
+incidence by default (``--incidence`` says so explicitly).
 
 ``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
 ``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with
 ``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
 ``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
 its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
-(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default
-form) also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
-(:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
-``kitti-hdl64e``. ``--incidence`` asks for that default and changes nothing (kept for existing
+(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile also reads each
+return's ``|cos θ|``, from normals estimated on the scan's own points
+(:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence`` (the former recipe of
+``kitti-hdl64e``). ``--incidence`` asks for that default and changes nothing (kept for existing
 scripts). ``assign`` and ``render`` then estimate it the same way on the clouds they are
 given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
@@ -45,7 +46,11 @@ import json
 import os
 import sys
 
-from ..datasets.sensor_profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
+from ..datasets.sensor_profiles import (
+    KITTI_PROFILE_FORM,
+    KITTI_PROFILE_INCIDENCE,
+    KITTI_PROFILE_OPTIONS,
+)
 from ..errors import NidarError
 from ._common import parser, run, show_progress
 
@@ -68,8 +73,9 @@ def build_parser():
         "--form",
         default=KITTI_PROFILE_FORM,
         choices=("gbm", "context", "range_ring", "distance_quantile", "physical"),
-        help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
-        "value; context: gradient-boosted regression on the return's inputs (--inputs); "
+        help="context: gradient-boosted regression on the return's inputs (--inputs; the "
+        "default, the recipe of kitti-hdl64e); gbm: gradient-boosted regression on value, range "
+        "and elevation, monotone in the value; "
         "range_ring: monotone map per range bin + ring gains; "
         "distance_quantile: the paper's distance encoding + quantile map; physical: "
         "gain * R * |cos θ| / d^p, the generic profiles' closed form",
@@ -103,7 +109,8 @@ def build_parser():
     p.add_argument(
         "--kind",
         choices=("gbm", "mlp"),
-        help="context: LightGBM's trees (default) or the small learned head",
+        help="context: LightGBM's trees or the small learned head (default: kitti-hdl64e's, "
+        f"{KITTI_PROFILE_OPTIONS.get('kind', 'gbm')})",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -215,7 +222,9 @@ def _context_options(args) -> dict:
     given = [f for f, v in (("--inputs", args.inputs), ("--kind", args.kind)) if v is not None]
     if given and args.form != "context":
         raise NidarError(f"{given[0]} needs --form context (got --form {args.form})")
-    options = {"kind": args.kind} if args.kind is not None else {}
+    options = {}
+    if args.form == "context":
+        options["kind"] = args.kind or KITTI_PROFILE_OPTIONS.get("kind", "gbm")
     if args.inputs is None:
         return options
     from ..profiles.inputs import GROUPS

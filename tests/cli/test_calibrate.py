@@ -17,7 +17,7 @@ from tests.helpers.synthetic_kitti import make_kitti
 def test_kitti_folder_to_profile(tmp_path, capsys):
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "hdl.json"
-    argv = [str(kitti), "-o", str(out), "--sensor", "my HDL-64E", "--no-incidence"]
+    argv = [str(kitti), "-o", str(out), "--sensor", "my HDL-64E", "--form", "gbm", "--no-incidence"]
     assert main(argv) == 0
     p = load_profile(out)
     assert (p.name, p.form, p.input, p.sensor) == ("hdl", "gbm", "nidar:R", "my HDL-64E")
@@ -38,19 +38,19 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
     assert load_profile(out).form == "distance_quantile"
     other = tmp_path / "notes.json"
     other.write_text('{"a": 1}')
-    assert main([str(kitti), "-o", str(other), "-q"]) == 2
+    assert main([str(kitti), "-o", str(other), "-q", "--form", "gbm"]) == 2
     assert "not a sensor profile" in capsys.readouterr().err and json.loads(other.read_text()) == {
         "a": 1
     }
-    assert main([str(kitti), "-o", str(other), "-q", "--overwrite"]) == 0
+    assert main([str(kitti), "-o", str(other), "-q", "--overwrite", "--form", "gbm"]) == 0
 
 
 def test_incidence_aware_profile(tmp_path, capsys):
-    """The gbm form reads |cos θ| (estimated on the scans' points) by default, as
-    kitti-hdl64e does, and is non-decreasing in it; --incidence only with the gbm form."""
+    """The gbm form reads |cos θ| (estimated on the scans' points) by default, as the former
+    kitti-hdl64e did, and is non-decreasing in it; --incidence only with the gbm form."""
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "inc.json"
-    assert main([str(kitti), "-o", str(out)]) == 0
+    assert main([str(kitti), "-o", str(out), "--form", "gbm"]) == 0
     assert "(with incidence) fitted on 2 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.uses_incidence and p.mapping.features[-1] == "cos_incidence"
@@ -61,7 +61,7 @@ def test_incidence_aware_profile(tmp_path, capsys):
     assert "--incidence needs --form gbm" in capsys.readouterr().err
     assert load_profile(out).uses_incidence  # the earlier file is untouched
     # --no-geometry: the value and the incidence only; range and elevation are not read
-    assert main([str(kitti), "-o", str(out), "--incidence", "--no-geometry"]) == 0
+    assert main([str(kitti), "-o", str(out), "--form", "gbm", "--incidence", "--no-geometry"]) == 0
     assert "(value and incidence only) fitted on 2 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.mapping.features == ("v", "cos_incidence") and not p.mapping.uses_geometry
@@ -70,8 +70,8 @@ def test_incidence_aware_profile(tmp_path, capsys):
         p(v, np.full(9, 5.0), cos_incidence=np.full(9, 0.7)),
         p(v, np.full(9, 50.0), elevation_deg=np.full(9, -20.0), cos_incidence=np.full(9, 0.7)),
     )
-    for bad in (["--no-incidence"], ["--form", "range_ring"]):
-        assert main([str(kitti), "-o", str(out), "--no-geometry", "-q", *bad]) == 2
+    for bad in (["--no-incidence"], ["--form", "range_ring"]):  # the last --form wins
+        assert main([str(kitti), "-o", str(out), "--form", "gbm", "--no-geometry", "-q", *bad]) == 2
         assert "--no-geometry needs the incidence" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
         main([str(kitti), "-o", str(out), "--incidence", "--no-incidence", "-q"])
@@ -336,5 +336,6 @@ def test_a_context_profile_reads_the_image_where_the_intensity_comes_from(tmp_pa
     p = profiles["return,ring,geometry,image,nidar"]
     with pytest.raises(NidarError, match="reads the camera image"):
         model.point_intensity(test.xyz, test.cameras, [None], maps=maps, profile=p)
-    assert main([str(train), "-o", str(tmp_path / "x.json"), "--inputs", "image", "-q"]) == 2
+    x = str(tmp_path / "x.json")
+    assert main([str(train), "-o", x, "--form", "gbm", "--inputs", "image", "-q"]) == 2
     assert "--inputs needs --form context" in capsys.readouterr().err
