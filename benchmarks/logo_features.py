@@ -72,6 +72,8 @@ STUDY_GEOMETRY = (
     "spacing",
     "spacing_rel",
 )
+#: The geometry inputs without the 50-neighbour shapes (what one 20-neighbour query gives).
+FAST_GEOMETRY = tuple(f for f in GEOMETRY_FEATURES if not f.endswith("_k50"))
 #: The image inputs that do not scale with the exposure.
 INVARIANT_IMAGE = ("lum_log", "chroma_r", "chroma_g", "hue", "sat", "contrast")
 #: Row -> (label, inputs, target[, kind]) of the rows of inputs (kind: ``gbm`` unless given).
@@ -128,6 +130,17 @@ ROWS: dict[str, tuple[str, tuple[str, ...], str]] = {
             *NIDAR_MAPS,
         ),
         "intensity",
+    ),
+    "context_fast": (
+        "every input but the 50-neighbour shapes (one 20-neighbour query)",
+        (*RETURN_FEATURES, "ring", *FAST_GEOMETRY, *IMAGE_FEATURES, *NIDAR_MAPS),
+        "intensity",
+    ),
+    "context_fast_mlp": (
+        "the same, the small head in place of the trees",
+        (*RETURN_FEATURES, "ring", *FAST_GEOMETRY, *IMAGE_FEATURES, *NIDAR_MAPS),
+        "intensity",
+        "mlp",
     ),
     "geometry_mlp": (
         "geometry only, the small head in place of the trees",
