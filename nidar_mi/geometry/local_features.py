@@ -110,16 +110,18 @@ def _checked(xyz, scales) -> tuple[np.ndarray, tuple[int, ...]]:
     return p, ks
 
 
-def _shape(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _shape(p: np.ndarray, idx: np.ndarray, normal: bool = True) -> tuple:
     """``(eigenvalues, normal, flat)`` of (n, k) neighbourhoods of (N, 3) points ``p``: (3, n)
     ``λ1 ≥ λ2 ≥ λ3 ≥ 0`` of each covariance, m² (the trigonometric solution, without the
     normals' Newton refinement of the smallest, which a double root throws off), and (3, n)
     the normals' unit eigenvector of the smallest (zero where ``flat``: the points coincide or
-    lie on one line)."""
+    lie on one line); without ``normal`` the last two are None."""
     cov, scale = _covariances(p, idx)
-    second, vec = _plane_eigen(cov)
-    flat = ~(second > DEGENERATE * scale)
-    vec[:, flat] = 0.0
+    vec = flat = None
+    if normal:
+        second, vec = _plane_eigen(cov)
+        flat = ~(second > DEGENERATE * scale)
+        vec[:, flat] = 0.0
     s = np.abs(cov).max(axis=0)
     s[s <= 0] = 1.0
     q, top, low = _trig_eigenvalues(*(cov / s))
@@ -203,13 +205,14 @@ def _fill(q, near, ks, feats, normals, notes) -> None:
     kmax = min(max(*ks, DEFAULT_NEIGHBOURS), len(q))
     idx = _query(q, kmax)
     shapes = {min(k, kmax): None for k in (*ks, DEFAULT_NEIGHBOURS)}
+    k_normal = min(DEFAULT_NEIGHBOURS, kmax)
     for k in shapes:
-        shapes[k] = _shape(q, idx[:, :k])
+        shapes[k] = _shape(q, idx[:, :k], normal=k == k_normal)
     for k in ks:
         lam = shapes[min(k, kmax)][0]
         for name, values in zip(SHAPES, _descriptors(lam), strict=True):
             feats[f"{name}_k{k}"][near] = values
-    _, vec, flat = shapes[min(DEFAULT_NEIGHBOURS, kmax)]
+    _, vec, flat = shapes[k_normal]
     vec = vec.copy()
     flip = (vec * q.T).sum(axis=0) > 0
     vec[:, flip] *= -1.0
