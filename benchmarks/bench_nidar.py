@@ -17,12 +17,13 @@ the same machine load; medians of the wall time and of the process CPU time):
   only the maps it samples, and on the CPU they run beside the assignment's geometry
   (locating the points in the camera, their incidence); the figure a frame costs;
 * ``assign``: :meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps,
-  timed in its stages (``assign`` is their sum): ``sampling`` (the point cloud projected
-  into the camera, the occlusion test against the cloud's own z-buffer and bilinear sampling of
-  R; in torch on the device when it is not the CPU), ``normals`` (the incidence cosines of the
-  observed points, :func:`nidar_mi.geometry.incidence_cosine`; for a ``context`` profile their
-  whole local geometry, :func:`nidar_mi.geometry.local_features.local_geometry`), ``image``
-  (a ``context`` profile's image inputs and NIDAR's maps at the observed points,
+  timed in its stages (``assign`` is their sum): ``sampling`` (R brought to the host, the
+  point cloud projected into the camera, the occlusion test against the cloud's own z-buffer
+  and bilinear sampling of R: :func:`nidar_mi.geometry.sample_cameras`), ``normals`` (the
+  incidence cosines of the observed points, :func:`nidar_mi.geometry.incidence_cosine`; for a
+  ``context`` profile their whole local geometry,
+  :func:`nidar_mi.geometry.local_features.local_geometry`), ``image`` (a ``context`` profile's
+  image inputs and NIDAR's maps at the observed points,
   :func:`nidar_mi.profiles.inputs.camera_inputs`; 0 for another profile) and ``profile`` (the
   profile at the observed points).
 
@@ -145,17 +146,21 @@ def _time(fn, sync=None) -> tuple[float, float, object]:
 
 def _assign_stages(model, xyz, cam, maps, out: dict, profile=None, rgb=None):
     """:meth:`NidarModel.point_intensity` of ``profile`` (None: the default one), stage by
-    stage, timed into ``out``; ``maps`` on the networks' device (with ``pseudo_nir``; ``rgb``
-    the image, for a ``context`` profile). Returns the number of observed points."""
-    from nidar_mi.geometry import incidence_cosine
-    from nidar_mi.nidar.pipeline import _assignment_device, _sample
+    stage, timed into ``out``; ``maps`` on the networks' device (``sampling`` brings R to the
+    host; with ``pseudo_nir``; ``rgb`` the image, for a ``context`` profile). Returns the number
+    of observed points."""
+    from nidar_mi.geometry import incidence_cosine, sample_cameras
 
     profile = profile or model.default_profile()
     if profile.reads_context:
         return _context_stages(xyz, cam, maps, out, profile, rgb)
-    device = _assignment_device(model)
-    sample = lambda: _sample(device, xyz, [cam], [maps], "R")  # noqa: E731
-    wall, cpu, (values, observed, _, _) = _time(sample)
+
+    def sample():
+        r = maps["R"]
+        r = r.detach().cpu().numpy() if hasattr(r, "detach") else r
+        return sample_cameras(xyz, [cam], [r])
+
+    wall, cpu, (values, observed, _) = _time(sample)
     out["sampling"] = (wall, cpu)
     observed = observed & np.isfinite(values)
     p = xyz[observed]

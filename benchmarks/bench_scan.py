@@ -19,6 +19,9 @@ in one run:
   barycentrics evaluated and the distance read back to NumPy.
 * **Open3D** (optional, when importable): ``RaycastingScene.cast_rays`` on a prepared (N, 6)
   float32 tensor of the same rays.
+* **weather** (``--weather``): the full scan of the same rays in fog (MOR 100 m), rain
+  (20 mm/h) and snow (2 mm/h) (:mod:`nidar_mi.lidar.weather_returns`: extinction, soft return, sampled
+  particles, their detection), reported as the ratio **weather / clear scan** (seconds).
 
 Every method is warmed up (Dr.Jit compiles its kernels on the first call, Open3D builds its BVH
 on the first cast), then timed ``repeats`` times, interleaved so that all see the same machine
@@ -103,8 +106,18 @@ def _time_interleaved(methods: dict, repeats: int) -> tuple[dict, dict, dict]:
     return first, secs, stages
 
 
+#: The weather of ``--weather``: one condition of each kind.
+WEATHER = {"fog": {"fog": 100.0}, "rain": {"rain": 20.0}, "snow": {"snow": 2.0}}
+
+
 def run_benchmark(
-    *, repeats: int = 9, rings: int = 128, cols: int = 2048, grid: int = 241, variant: str
+    *,
+    repeats: int = 9,
+    rings: int = 128,
+    cols: int = 2048,
+    grid: int = 241,
+    variant: str,
+    weather: bool = False,
 ) -> dict:
     """Build the city, scan it and cast the same rays bare (and with Open3D when importable).
 
@@ -113,6 +126,7 @@ def run_benchmark(
         rings, cols: the LiDAR's beam grid.
         grid: terrain vertices per side (see :func:`city_mesh`).
         variant: Mitsuba variant for nidar_mi.
+        weather: also time the scan in each of :data:`WEATHER` (the ratio weather / clear).
 
     Returns:
         A JSON-safe dict: rays, triangles, median seconds and rays/s of each method, the ratio
@@ -142,6 +156,14 @@ def run_benchmark(
         return pi.t.numpy()
 
     methods = {"scan": run_scan, "bare": run_bare}
+    if weather:
+        from nidar_mi.weather import Weather
+
+        def in_weather(values: dict):
+            w = Weather(**values)
+            return lambda: scan(scene, sensor, weather=w)
+
+        methods |= {name: in_weather(values) for name, values in WEATHER.items()}
     run_o3d = _open3d_caster(meshes, rays_np)
     if run_o3d is not None:
         methods["open3d"] = run_o3d
@@ -174,6 +196,9 @@ def _summary(secs: dict[str, list[float]], n: int) -> dict:
     }
     if "open3d" in med:
         out["ratio_scan_over_open3d"] = med["open3d"] / med["scan"]
+    weather = {k: med[k] / med["scan"] for k in WEATHER if k in med}
+    if weather:
+        out["ratio_weather_over_clear"] = weather
     return out
 
 
@@ -241,7 +266,14 @@ def _machine() -> dict:
     }
 
 
-_LABELS = {"scan": "full scan", "bare": "bare cast", "open3d": "Open3D cast_rays"}
+_LABELS = {
+    "scan": "full scan",
+    "bare": "bare cast",
+    "open3d": "Open3D cast_rays",
+    "fog": "scan in fog",
+    "rain": "scan in rain",
+    "snow": "scan in snow",
+}
 
 
 def _report_run(r: dict) -> list[str]:
@@ -259,6 +291,8 @@ def _report_run(r: dict) -> list[str]:
     ]
     if "ratio_scan_over_open3d" in r:
         lines.append(f"  ratio full scan / Open3D (rays/s): {r['ratio_scan_over_open3d']:.2f}")
+    for name, ratio in r.get("ratio_weather_over_clear", {}).items():
+        lines.append(f"  ratio scan in {name} / clear scan (s): {ratio:.2f}")
     lines += [
         "  scan stages (median ms): "
         + ", ".join(f"{k} {v * 1e3:.1f}" for k, v in r["scan_stage_median_s"].items()),
@@ -302,6 +336,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=["llvm_ad_spectral"],
         help="Mitsuba variants (default: llvm_ad_spectral)",
     )
+    p.add_argument(
+        "--weather",
+        action="store_true",
+        help="also time the scan in fog, rain and snow (ratio weather / clear)",
+    )
     p.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     return p
 
@@ -335,6 +374,7 @@ def main(argv=None) -> int:
             repeats=args.repeats,
             rings=args.rings,
             grid=args.grid,
+            weather=args.weather,
         )
         if args.json:
             from nidar_mi.io.atomic import atomic_write_json

@@ -148,13 +148,15 @@ def _sequence(options, out_dir: str) -> tuple[dict, dict]:
 def _lidar_setup(tmp: str, scene: str, traj_path: str, frames: int, cols: int, variant: str):
     """One LiDAR set-up: the scan without files, the sequence with files with and without
     previews."""
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions
 
     out = _scan_frames(scene, traj_path, frames, cols, variant)
+    frame = RenderOptions(scene, formats=("npz",), params={"cols": str(cols)}, cameras=False,
+                          progress=False)  # fmt: skip
     for previews, key in (("none", "sequence"), ("all", "sequence_previews")):
-        options = SequenceOptions(scene, traj_path, rate=10.0, frames=frames + 1,
-                                  formats=("npz",), params={"cols": str(cols)}, cameras=False,
-                                  progress=False, previews=previews)  # fmt: skip
+        options = SequenceOptions(frame, traj_path, rate=10.0, frames=frames + 1,
+                                  previews=previews)  # fmt: skip
         _, r = _sequence(options, tempfile.mkdtemp(dir=tmp))
         out |= {f"{key}_{k}": v for k, v in r.items()}
     return out
@@ -189,10 +191,13 @@ def _camera_sequence(tmp: str, traj_path: str, frames: int, cols: int) -> dict:
     """The street sequence with its camera (the command's defaults): frames/s, CPU s per frame,
     seconds per stage, and the kernels compiled after its first frame (hashes frame 0 did not
     launch)."""
+    from nidar_mi import render_folder as rf
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions
 
-    options = SequenceOptions(STREET, traj_path, rate=10.0, frames=frames,
-                              params={"cols": str(cols)}, progress=False)  # fmt: skip
+    formats = tuple(f for f in rf.FORMATS if f != "laz")  # laz: an extra
+    frame = RenderOptions(STREET, formats=formats, params={"cols": str(cols)}, progress=False)
+    options = SequenceOptions(frame, traj_path, rate=10.0, frames=frames)
     with _kernels_per_frame() as hashes:
         m, r = _sequence(options, tempfile.mkdtemp(dir=tmp))
     stages = {"render": [], "write": []}

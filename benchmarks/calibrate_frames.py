@@ -23,10 +23,10 @@ the same K frames of each seed and the same recipe:
 
 * ``nidar``: NIDAR's R map of the camera image;
 * ``geometry``: R of a uniform grey image of the same size (8-bit level
-  :data:`~nidar_mi.eval.reflectance_cue.GREY_LEVEL`): the profile keeps the range, incidence
+  :data:`~nidar_mi.eval.image_cues.GREY_LEVEL`): the profile keeps the range, incidence
   and ring, but no image information;
 * ``luminance``: Rec. 709 luminance of the image's linear RGB
-  (:func:`nidar_mi.eval.reflectance_cue.luminance`);
+  (:func:`nidar_mi.eval.image_cues.luminance`);
 * ``linnir``: baseline (i), the 4-parameter linear RGB -> NIR map
   (:class:`~nidar_mi.eval.baselines.LinearNIR`) fitted once on the non-test RGB/NIR photo pairs
   of ``<data>/rgbnir`` (:func:`nidar_mi.eval.real.fit_linear_nir`), applied to the image;
@@ -79,9 +79,9 @@ from nidar_mi.datasets.sensor_profiles import (
     GENERIC_RAW_PROFILE,
     generic_profile,
 )
+from nidar_mi.eval.image_cues import GREY_LEVEL, luminance
 from nidar_mi.eval.loo import colour_at_returns, linear_colour_distance_method
 from nidar_mi.eval.metrics import spearman
-from nidar_mi.eval.reflectance_cue import GREY_LEVEL, luminance
 from nidar_mi.eval.scan_metrics import binned_spearman
 from nidar_mi.nidar.pipeline import NidarModel
 

@@ -37,7 +37,7 @@ def returns(path: Path) -> dict[str, np.ndarray]:
     Pixel ``(u, v)`` has its centre at ``(u, v)`` in the OpenCV convention of ``K``
     (:mod:`nidar_mi.camera`).
     """
-    from nidar_mi.frames import load_frame
+    from nidar_mi.training_frames import load_frame
 
     z = load_frame(path, ("R_true", "mask", "range", "depth", "K", "T_cam_lidar", "intensity"))
     depth, k = z["depth"].astype(np.float64), z["K"]
@@ -71,8 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     from scipy.stats import spearmanr
 
     from nidar_mi.errors import NidarError
-    from nidar_mi.frames import SPLITS, list_frames, load_meta
     from nidar_mi.profiles import fit
+    from nidar_mi.training_frames import SPLITS, list_frames, load_meta
 
     try:
         train = [returns(f) for f in list_frames(args.train_data, "train")]

@@ -170,7 +170,7 @@ def frame_inputs(model, scan, grey: dict) -> dict[str, np.ndarray]:
     """Every input of :mod:`nidar_mi.profiles.inputs` at a scan's returns, with the
     intensity, R of a grey image (``grey_R``; ``grey`` caches it by image size) and the
     luminance: name -> (N,) float32 (NaN where missing)."""
-    from nidar_mi.eval.reflectance_cue import GREY_LEVEL
+    from nidar_mi.eval.image_cues import GREY_LEVEL
     from nidar_mi.geometry import locate_in_cameras, sample_cameras
     from nidar_mi.profiles.inputs import camera_inputs, return_inputs
 
@@ -241,7 +241,7 @@ def fit_rows(train: Sequence[dict], names, target: str, seed: int, kind: str = "
     """The ``context`` form's model (:mod:`nidar_mi.profiles.context`: its trees, or the
     small head of :mod:`nidar_mi.profiles.head`) fitted on ``train`` frames: a predictor of a
     frame's (N, F) design matrix."""
-    from nidar_mi.profiles.context import ContextFitOptions, train_booster, training_rows
+    from nidar_mi.profiles.context import ContextFitOptions, train_context_booster, training_rows
     from nidar_mi.profiles.head import fit_head, head_predict
 
     o = ContextFitOptions(seed=seed, target=target, kind=kind, threads=THREADS)
@@ -253,7 +253,7 @@ def fit_rows(train: Sequence[dict], names, target: str, seed: int, kind: str = "
     if kind == "mlp":
         head = fit_head(x, y, seed=seed, threads=THREADS)
         return lambda x: head_predict(head, x)
-    booster = train_booster(x, y, tuple(names), o)
+    booster = train_context_booster(x, y, tuple(names), o)
     return lambda x: booster.predict(x, num_threads=o.threads)
 
 

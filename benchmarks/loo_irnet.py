@@ -13,7 +13,7 @@ when given, e.g. weights pretrained on renders, and mixes the train frames of ``
 its crops to supervise R and S with their true maps); with ``--baselines`` also the image-free
 profiles (``range_only``; ``geometry_gbm``, range and elevation) and luminance through each
 form. Prints the per-fold and mean table
-(:func:`nidar_mi.eval.report.loo_markdown`), the training time of each fold and, per fold, the
+(:func:`nidar_mi.eval.tables.loo_markdown`), the training time of each fold and, per fold, the
 correlation of the R and S maps over the test image (how much shading R still carries);
 ``--json`` writes the whole result. Folds run one after the other; run it under ``nice``.
 """
@@ -46,9 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     from nidar_mi.datasets.scans import frames_from_data
     from nidar_mi.eval.loo import leave_one_out, standard_methods
     from nidar_mi.eval.loo_irnet import FoldModels, irnet_methods
-    from nidar_mi.eval.report import loo_markdown
-    from nidar_mi.frames import list_frames, load_meta
+    from nidar_mi.eval.tables import loo_markdown
     from nidar_mi.nidar.config import TrainConfig
+    from nidar_mi.training_frames import list_frames, load_meta
 
     cfg = TrainConfig.from_dict(json.loads(args.config.read_text()))
     cfg.validate()

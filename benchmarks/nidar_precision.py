@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import spearmanr
 
-from nidar_mi.datasets.kitti import frame_ids, load_frame
+from nidar_mi.datasets.kitti_objects import frame_ids, load_kitti_frame
 from nidar_mi.nidar.pipeline import NidarModel
 from nidar_mi.nidar.precision import emulated_convolutions
 
@@ -45,7 +45,7 @@ def measure(model: NidarModel, frames) -> dict[str, dict[str, float]]:
     """Per format: max |ΔR|, mean / max |Δ intensity| at the points, median Spearman."""
     rows = {f: {"dR_max": 0.0, "dI_mean": [], "dI_max": 0.0, "spearman": []} for f in FORMATS}
     for d, fid in frames:
-        fr = load_frame(d, fid)
+        fr = load_kitti_frame(d, fid)
         ref = None
         for fmt in FORMATS:
             with emulated_convolutions(fmt):

@@ -61,3 +61,15 @@ def test_main_rejects_unknown_variant(capsys):
     assert (
         err.startswith("error: variant 'no_such_variant' is not available") and err.count("\n") == 1
     )
+
+
+def test_weather_runs_time_each_condition_on_the_same_rays(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "open3d", None)
+    out = tmp_path / "r.json"
+    assert bench.main([*_SMALL, "--cols", "32", "--weather", "--json", str(out)]) == 0
+    r = json.loads(out.read_text())["runs"][0]
+    assert set(r["rays_per_s"]) == {"scan", "bare", "fog", "rain", "snow"}
+    ratios = r["ratio_weather_over_clear"]
+    assert set(ratios) == {"fog", "rain", "snow"}
+    assert ratios["fog"] == pytest.approx(r["median_s"]["fog"] / r["median_s"]["scan"])
+    assert "ratio scan in snow / clear scan (s)" in capsys.readouterr().out

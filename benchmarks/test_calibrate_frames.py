@@ -71,7 +71,7 @@ def test_sources_sample_the_maps_at_the_returns_and_grey_is_the_constant_image()
     values = bench.source_values(model, scans, list(bench.VALUE_SOURCES), linear_nir=blue)
     v = np.arange(2, H - 2)
     u = v + 3
-    from nidar_mi.eval.reflectance_cue import GREY_LEVEL, luminance
+    from nidar_mi.eval.image_cues import GREY_LEVEL, luminance
 
     a = {s: values[s]["kitti__a"] for s in bench.VALUE_SOURCES}
     n = len(v) + 1

@@ -15,7 +15,7 @@ import heldout_bound as bench  # noqa: E402
 
 
 def test_cos_incidence_of_a_fronto_parallel_plane(tmp_path):
-    from nidar_mi.frames import list_frames
+    from nidar_mi.training_frames import list_frames
     from tests.helpers.synthetic_frames import write_synthetic_dataset
 
     data = write_synthetic_dataset(tmp_path / "d", height=24, width=32)

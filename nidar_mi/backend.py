@@ -9,7 +9,8 @@ imported, before Dr.Jit initialises its LLVM back end.
 ``llvm_ad_spectral``, and registers this package's Mitsuba plugins for that variant
 (Python plugin classes are bound to the variant active when they are defined; see
 :mod:`nidar_mi.plugins`). Only entry points (commands, workers' set-up, test fixtures) call it;
-library code reads the variant they chose with :func:`active_variant`.
+library code reads the variant they chose with :func:`active_variant`, and hands it to the
+worker processes of a parallel job with :func:`worker_setup`.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ __all__ = [
     "set_variant",
     "active_variant",
     "prepare_worker",
+    "worker_setup",
     "SUPPORTED_VARIANTS",
 ]
 
@@ -186,12 +188,16 @@ def prepare_worker(threads: int | None = None, variant: str | None = None) -> st
 
     The set-up of every task of :func:`nidar_mi.tasks.run_tasks` that renders (plugins register
     per variant per process, so each worker process sets the variant itself). Cheap when
-    repeated.
+    repeated. A process that has a spectral variant active keeps it unless ``variant`` names
+    another: a serial job runs its tasks in the caller's process, whose variant its entry point
+    chose. Callers pass their own variant (:func:`worker_setup`) so that the workers of a
+    parallel job render in it too.
 
     Args:
         threads: CPU threads Dr.Jit may use in this process (None: leave Dr.Jit's default,
             every core).
-        variant: as for :func:`set_variant`.
+        variant: as for :func:`set_variant`; None: the active spectral variant, else the
+            default one (a fresh worker process).
 
     Returns:
         The variant now active.
@@ -202,7 +208,29 @@ def prepare_worker(threads: int | None = None, variant: str | None = None) -> st
 
         if dr.thread_count() != threads:
             dr.set_thread_count(threads)
-    return set_variant(variant)
+    return set_variant(variant or _active_spectral())
+
+
+def worker_setup():
+    """The ``setup`` of a job whose tasks render: :func:`prepare_worker` with the caller's
+    variant (:func:`active_variant`), so that workers render in the variant the entry point
+    chose and a serial job leaves it as it was.
+
+    Raises:
+        NidarError: no spectral variant is active.
+    """
+    import functools
+
+    return functools.partial(prepare_worker, variant=active_variant())
+
+
+def _active_spectral() -> str | None:
+    """The active Mitsuba variant when it is a spectral one, else None."""
+    configure_llvm()
+    import mitsuba as mi
+
+    variant = mi.variant()
+    return variant if variant is not None and "spectral" in variant else None
 
 
 if sys.platform == "darwin":  # pragma: no cover

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import NidarError
+from .geometry.se3 import transform_matrix
 from .io.images import REC709_LUMA, linear_to_srgb
 
 __all__ = [
@@ -139,10 +140,6 @@ def nir_response(wavelength: float) -> tuple[list[tuple[float, float]], float]:
     return pts, 2.0 * a + r
 
 
-def _matrix(T) -> np.ndarray:
-    return np.array(T.matrix.numpy(), dtype=np.float64).reshape(4, 4)
-
-
 def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """OpenCV intrinsics, camera-to-world pose and (W, H) of a Mitsuba perspective camera.
 
@@ -153,7 +150,7 @@ def camera_calibration(camera) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]
     import mitsuba as mi
 
     W, H = (int(v) for v in camera.film().size())
-    T_world_cam = _matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    T_world_cam = transform_matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
     R_cw = T_world_cam[:3, :3].T
     # film positions (fractions): centre, +1 px in x, +1 px in y
     fx_pos = np.array([0.5, 0.5 + 1.0 / W, 0.5])
@@ -267,19 +264,18 @@ def _albedo(scene, camera, W: int, H: int, wavelength: float) -> tuple[np.ndarra
     return rgb.astype(np.float32), rho[..., -1]
 
 
-#: NIR twins of cameras, by variant, lens, film, band and spp (a few at most): a sequence moves
-#: its twin with the camera instead of loading a new sensor (and its kernels) every frame.
-_NIR_CAMERAS: dict = {}
-_NIR_CAMERAS_MAX = 8
+#: Twins of cameras (the NIR bands; the RGB image in weather), by variant, lens, film, band,
+#: spp and medium (a few at most): a sequence moves its twin with the camera instead of loading
+#: a new sensor (and its kernels) every frame.
+_TWINS: dict = {}
+_TWINS_MAX = 8
 
 
-def _nir_camera(camera, wavelength: float, spp: int):
-    """The camera's NIR twin (module docstring) at the camera's current pose."""
-    import drjit as dr
+def _lens(camera) -> dict:
+    """The camera's lens as a ``mi.load_dict`` entry (pose aside)."""
     import mitsuba as mi
 
     params = mi.traverse(camera)
-    W, H = (int(v) for v in camera.film().size())
     if camera.class_name() == "ThinLensCamera":
         lens = {
             "type": "thinlens",
@@ -292,34 +288,45 @@ def _nir_camera(camera, wavelength: float, spp: int):
             "principal_point_offset_x": float(params["principal_point_offset_x"][0]),
             "principal_point_offset_y": float(params["principal_point_offset_y"][0]),
         }
-    lens |= {
+    return lens | {
         "fov": float(params["x_fov"][0]),
         "fov_axis": "x",
         "near_clip": float(params["near_clip"]),
         "far_clip": float(params["far_clip"]),
     }
-    to_world = _matrix(camera.world_transform())
-    key = (mi.variant(), tuple(lens.items()), W, H, float(wavelength), int(spp))
-    nir = _NIR_CAMERAS.get(key)
-    if nir is None:
-        pts, _ = nir_response(wavelength)
-        film = {"type": "specfilm", "width": W, "height": H}
-        nir = mi.load_dict(
-            lens
-            | {
-                "film": film | {"nir": {"type": "spectrum", "value": pts}},
-                "sampler": {"type": "independent", "sample_count": spp},
-            }
-        )
-        if len(_NIR_CAMERAS) >= _NIR_CAMERAS_MAX:
-            _NIR_CAMERAS.pop(next(iter(_NIR_CAMERAS)))
-        _NIR_CAMERAS[key] = nir
-    T = mi.AffineTransform4f(to_world.astype(np.float32))
+
+
+def _twin(camera, film: dict, band: float | None, spp: int, medium=None):
+    """A twin of the camera with another ``film`` (``band``: what sets it apart in the cache)
+    and, in weather, inside ``medium``, at the camera's current pose."""
+    import drjit as dr
+    import mitsuba as mi
+
+    lens = _lens(camera)
+    W, H = (int(v) for v in camera.film().size())
+    key = (mi.variant(), tuple(lens.items()), W, H, film["type"], band, int(spp), id(medium))
+    twin = _TWINS.get(key)
+    if twin is None:
+        extra = {} if medium is None else {"medium": medium}
+        spec = {"film": film, "sampler": {"type": "independent", "sample_count": spp}}
+        twin = (mi.load_dict(lens | spec | extra), medium)  # the medium lives as long as the twin
+        if len(_TWINS) >= _TWINS_MAX:
+            _TWINS.pop(next(iter(_TWINS)))
+        _TWINS[key] = twin
+    T = mi.AffineTransform4f(transform_matrix(camera.world_transform()).astype(np.float32))
     dr.make_opaque(T)  # the pose is data: a moved camera reuses the render kernels
-    twin = mi.traverse(nir)
-    twin["to_world"] = T
-    twin.update()
-    return nir
+    params = mi.traverse(twin[0])
+    params["to_world"] = T
+    params.update()
+    return twin[0]
+
+
+def _nir_camera(camera, wavelength: float, spp: int, medium=None):
+    """The camera's NIR twin (module docstring) at the camera's current pose."""
+    W, H = (int(v) for v in camera.film().size())
+    pts, _ = nir_response(wavelength)
+    film = {"type": "specfilm", "width": W, "height": H, "nir": {"type": "spectrum", "value": pts}}
+    return _twin(camera, film, float(wavelength), spp, medium)
 
 
 #: Peak memory of a render per pixel (RGB and NIR films, depth, the images written), bytes, and
@@ -477,27 +484,18 @@ def render_camera(
         nir: render the NIR bands (False: ``nir`` is all zeros; NIDAR needs only RGB).
         albedo: also give the surfaces' albedo colour and their reflectance at λ (the true maps
             that training frames carry; False: both None).
-    """
-    import mitsuba as mi
 
+    In the scene's weather (:attr:`nidar_mi.scene.LoadedScene.weather`, its LiDARs'), the RGB
+    and NIR images are rendered through its medium (:mod:`nidar_mi.weather.camera_medium`); depth,
+    reflectance and albedo stay the surfaces' own.
+    """
     scene = loaded.scene
     _warn_rgb_emitters(loaded)
     timings = {}
-    integrator = scene.integrator() or mi.load_dict(
-        {"type": "path", "max_depth": DEFAULT_MAX_DEPTH}
-    )
-    what = f"camera '{camera.id()}'"
-    t0 = time.perf_counter()
-    rgb = _render(scene, camera, integrator, spp, seed, what)[..., :3]
-    timings["rgb"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    bands = {}
-    for wl in dict.fromkeys([float(wavelength), *map(float, other_wavelengths)]) if nir else ():
-        _, integral = nir_response(wl)
-        nir_img = _render(scene, _nir_camera(camera, wl, spp), integrator, spp, seed, what)
-        bands[wl] = (nir_img[..., 0] / integral).astype(np.float32)
+    bands = list(dict.fromkeys([float(wavelength), *map(float, other_wavelengths)]))
+    request = (bands if nir else [], spp, seed)
+    rgb, bands = _radiance(loaded, camera, request, loaded.weather, timings)
     nir = bands.pop(float(wavelength)) if nir else np.zeros(rgb.shape[:2], dtype=np.float32)
-    timings["nir"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     K, T_world_cam, (W, H) = camera_calibration(camera)
     depth = _depth(scene, camera, W, H, T_world_cam)
@@ -526,3 +524,53 @@ def render_camera(
         albedo=colour,
         surface_reflectance=surface,
     )
+
+
+def _radiance(loaded, camera, request, weather, timings: dict):
+    """The RGB image and the NIR band images (band nm -> (H, W) float32) of one camera; in
+    ``weather``, through its medium (the scene's weather twin, the camera's twins in it).
+
+    Args:
+        request: ``(bands, spp, seed)``, the bands in nm (none: no NIR image).
+    """
+    import mitsuba as mi
+
+    bands, spp, seed = request
+    scene, medium, rgb_camera = loaded.scene, None, camera
+    integrator = scene.integrator() or mi.load_dict(
+        {"type": "path", "max_depth": DEFAULT_MAX_DEPTH}
+    )
+    if weather is not None and not weather.clear:
+        scene, medium, integrator = _weather_scene(loaded, weather, bands)
+        W, H = (int(v) for v in camera.film().size())
+        rgb_camera = _twin(camera, {"type": "hdrfilm", "width": W, "height": H}, None, spp, medium)
+    what = f"camera '{camera.id()}'"
+    t0 = time.perf_counter()
+    rgb = _render(scene, rgb_camera, integrator, spp, seed, what)[..., :3]
+    timings["rgb"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    images = {}
+    for wl in bands:
+        _, integral = nir_response(wl)
+        img = _render(scene, _nir_camera(camera, wl, spp, medium), integrator, spp, seed, what)
+        images[wl] = (img[..., 0] / integral).astype(np.float32)
+    timings["nir"] = time.perf_counter() - t0
+    return rgb, images
+
+
+#: Weather twins of scenes (a few at most), by scene, weather and bands.
+_WEATHER_SCENES: dict = {}
+
+
+def _weather_scene(loaded, weather, bands):
+    """The scene's weather twin (:func:`nidar_mi.weather.camera_medium.weather_scene`), cached: a
+    sequence renders every frame in the same one."""
+    from .weather.camera_medium import weather_scene
+
+    key = (id(loaded.scene), weather, tuple(bands))
+    if key not in _WEATHER_SCENES:
+        if len(_WEATHER_SCENES) >= 4:
+            _WEATHER_SCENES.pop(next(iter(_WEATHER_SCENES)))
+        eyes = [transform_matrix(c.world_transform())[:3, 3] for c in loaded.cameras]
+        _WEATHER_SCENES[key] = (weather_scene(loaded.scene, weather, bands, eyes), loaded.scene)
+    return _WEATHER_SCENES[key][0]

@@ -11,14 +11,17 @@ columns of :func:`assign_intensity`; :func:`write_points` publishes the result w
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import warnings
 
 import numpy as np
 
 from .errors import NidarError
+from .io.ownership import Owner
 
 __all__ = [
+    "ASSIGN_OWNER",
     "FORMATS",
     "CloudInputs",
     "assign_cloud",
@@ -30,8 +33,12 @@ __all__ = [
     "write_points",
 ]
 
+log = logging.getLogger("nidar_mi.assign")
+
 #: Output formats of :func:`write_points`: ``points.<format>``.
 FORMATS = ("npz", "ply", "las")
+#: Who writes an assign output folder (:mod:`nidar_mi.io.ownership`).
+ASSIGN_OWNER = Owner("assign", "points", names=tuple(f"points.{f}" for f in FORMATS))
 
 
 @dataclasses.dataclass
@@ -54,21 +61,30 @@ class CloudInputs:
     simulator: bool = False
     """The cloud is a render of the simulator (its calibration is a renderer ``calib.json``; its
     sensor profile is the weights' own, ``sim-905``)."""
+    kitti_frame: tuple[str, str] | None = None
+    """``(folder, frame id)`` of a KITTI frame: its ``kitti-hdl64e`` profile is fitted on the
+    folder's other frames, never on this one."""
 
 
 def kitti_inputs(folder: str, frame: str) -> CloudInputs:
     """KITTI ``velodyne/ID.bin``, ``image_2/ID.png`` and ``calib/ID.txt`` (camera P2); the rings
     recovered from the storage order (:func:`nidar_mi.datasets.kitti_rings.checked_rings`)."""
-    from .datasets.kitti import load_frame
+    from .datasets.kitti_objects import load_kitti_frame
     from .datasets.kitti_rings import checked_rings
 
-    f = load_frame(folder, frame)
+    f = load_kitti_frame(folder, frame)
     points = {"xyz": f.xyz, "intensity": f.intensity}
     ring = checked_rings(f.xyz)
     if ring is not None:
         points["ring"] = ring
     return CloudInputs(
-        points, [f.camera], [f.rgb], f"kitti_{frame}", f"KITTI frame {frame}", kitti=True
+        points,
+        [f.camera],
+        [f.rgb],
+        f"kitti_{frame}",
+        f"KITTI frame {frame}",
+        kitti=True,
+        kitti_frame=(folder, frame),
     )
 
 
@@ -111,19 +127,27 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
 
 
 def assign_intensity(
-    xyz, cameras, images, *, weights=None, occlusion=True, branch=None, profile=None, ring=None
+    xyz,
+    cameras,
+    images,
+    *,
+    weights=None,
+    occlusion=True,
+    branch=None,
+    profile=None,
+    ring=None,
 ) -> dict[str, np.ndarray]:
     """Per-point NIDAR intensity: ``{"intensity_nidar", "reflectance_nidar", "nidar_observed"}``.
 
     Args:
         xyz: (N, 3) points in the LiDAR frame (m).
         cameras: the cameras; ``images`` one (H, W, 3) uint8 image each.
-        weights: NIDAR weights folder (None: the shipped model).
+        weights: NIDAR weights folder (None: the shipped model), or the loaded model.
         occlusion: drop points another point hides from the camera.
         branch: ``R`` or ``I_hat``; None: the profile's branch (``R`` without a profile). A
             branch the profile was not fitted on is an error.
-        profile: a profile name or file (None: ``branch`` with the weights' own calibration,
-            or raw for ``I_hat``).
+        profile: a profile name or file, or the profile itself (None: ``branch`` with the
+            weights' own calibration, or raw for ``I_hat``).
         ring: (N,) the points' rings for the profile (-1 unknown), or None.
 
     Returns:
@@ -133,9 +157,12 @@ def assign_intensity(
     """
     from .datasets.sensor_profiles import resolve_profile
     from .nidar.pipeline import NidarModel
+    from .profiles import SensorProfile
 
-    model = NidarModel.load(weights)
-    prof = resolve_profile(profile, model) if profile is not None else None
+    model = weights if isinstance(weights, NidarModel) else NidarModel.load(weights)
+    prof = profile
+    if profile is not None and not isinstance(profile, SensorProfile):
+        prof = resolve_profile(profile, model)
     if (
         prof is not None
         and branch is not None
@@ -187,7 +214,9 @@ def check_observed(xyz, cameras) -> None:
     seen = np.zeros(n, dtype=bool)
     for cam in cameras:
         uv, _, front = project(xyz, cam)
-        seen[front] |= in_image(uv[front], cam)
+        inside = in_image(uv[front], cam)
+        seen[front] |= inside
+        log.debug("camera '%s': %d of %d points fall inside its image", cam.name, inside.sum(), n)
         cx, cy = cam.K[0, 2], cam.K[1, 2]
         if not (0 <= cx <= cam.width and 0 <= cy <= cam.height):
             warnings.warn(
@@ -244,7 +273,12 @@ def assign_cloud(
     warning (an unknown sensor); on ``I_hat`` the raw head. The cloud's ``ring`` column, when
     present, gives the profile its rings.
     """
+    from .datasets.sensor_profiles import DEFAULT_KITTI_PROFILE
+
     points = dict(finite_points(inputs.points, inputs.where))
+    log.debug(
+        "%s: %d points read, %d finite", inputs.where, len(inputs.points["xyz"]), len(points["xyz"])
+    )
     check_observed(points["xyz"], inputs.cameras)
     if profile is None and branch in (None, "R"):
         from .datasets.sensor_profiles import default_profile, warn_unknown_sensor
@@ -253,6 +287,12 @@ def assign_cloud(
         if not (inputs.kitti or inputs.simulator):
             warn_unknown_sensor()
     ring = np.asarray(points["ring"], dtype=np.int64) if "ring" in points else None
+    if inputs.kitti_frame is not None and str(profile) == DEFAULT_KITTI_PROFILE:
+        from .datasets.sensor_profiles import resolve_profile
+        from .nidar.pipeline import NidarModel
+
+        weights = NidarModel.load(weights)  # kitti-hdl64e of the frame's own folder, not of it
+        profile = resolve_profile(profile, weights, kitti_frame=inputs.kitti_frame)
     points.update(
         assign_intensity(
             points["xyz"],
@@ -279,7 +319,7 @@ def write_points(out_dir: str, points: dict, formats, overwrite: bool = False) -
     from .io.points import write_npz, write_ply
 
     writers = {"npz": write_npz, "ply": write_ply, "las": write_las}
-    with staged_directory(out_dir, overwrite=overwrite, marker="points.npz") as stage:
+    with staged_directory(out_dir, owner=ASSIGN_OWNER, overwrite=overwrite) as stage:
         for fmt in formats:
             writers[fmt](os.path.join(stage, f"points.{fmt}"), points)
     return [os.path.join(out_dir, f"points.{fmt}") for fmt in formats]

@@ -9,10 +9,34 @@ and ``--no-progress`` / ``-q`` to hide them.
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["progress_bar", "stderr_is_terminal"]
+__all__ = ["bars_allowed", "progress_bar", "shown", "stderr_is_terminal"]
+
+#: Whether the running command allows bars (None: no command decided; :func:`bars_allowed`).
+_allowed: bool | None = None
+
+
+@contextmanager
+def bars_allowed(allowed: bool) -> Iterator[None]:
+    """Within the block no bar shows unless ``allowed``, whatever a caller's ``progress`` flag
+    says: a command decides once (``-q``, a log file, ``--no-progress``) for every bar of its
+    work, those of library functions called with their default included."""
+    global _allowed
+    previous, _allowed = _allowed, bool(allowed)
+    try:
+        yield
+    finally:
+        _allowed = previous
+
+
+def shown(show: bool | None) -> bool:
+    """Whether a bar asked for with ``show`` (None: on a terminal) shows (:func:`bars_allowed`)."""
+    if _allowed is False:
+        return False
+    return stderr_is_terminal() if show is None else bool(show)
 
 
 def stderr_is_terminal() -> bool:
@@ -29,7 +53,8 @@ def progress_bar(iterable: Iterable | None = None, *, show: bool | None = True, 
     Args:
         iterable: what to iterate over, or None for a bar advanced by ``update``.
         show: True shows the bar, False makes a silent one (same interface), None shows it only
-            when stderr is a terminal.
+            when stderr is a terminal; no bar shows where the command allows none
+            (:func:`bars_allowed`).
         **kwargs: tqdm's options (``total``, ``desc``, ``unit``, ``initial``, ...).
 
     Returns:
@@ -37,7 +62,5 @@ def progress_bar(iterable: Iterable | None = None, *, show: bool | None = True, 
     """
     from tqdm.auto import tqdm
 
-    if show is None:
-        show = stderr_is_terminal()
     kwargs.setdefault("file", sys.stderr)
-    return tqdm(iterable, disable=not show, **kwargs)
+    return tqdm(iterable, disable=not shown(show), **kwargs)

@@ -7,7 +7,7 @@ Layout::
     DATA/renders/<scene>/                each scene's render folder (nidar_mi.render_folder): a
                                          cache, reused while the scene's render request holds
     DATA/{train,val,test}/<frame>.npz    one frame per (scene, camera), in the format of
-                                         :mod:`nidar_mi.frames` (source ``"render"``)
+                                         :mod:`nidar_mi.training_frames` (source ``"render"``)
 
 The splits and ``meta.json`` are published together when the whole build succeeded; the renders
 are a cache that an interrupted build leaves for the next one (:func:`build_dataset`).
@@ -25,21 +25,46 @@ is shared across splits.
 from __future__ import annotations
 
 import glob
+import logging
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import NidarError, check_seed
-from .frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
+from .io.ownership import Owner
+from .training_frames import R_TRUE_MIN, SPLITS, load_meta, write_frame
 
 __all__ = [
+    "OWNER",
+    "DatasetOptions",
     "build_dataset",
     "find_scenes",
     "frames_of_render",
     "scene_params",
     "split_scenes",
 ]
+
+log = logging.getLogger("nidar_mi.dataset")
+
+#: Who writes a dataset folder (:mod:`nidar_mi.io.ownership`): the frames and ``meta.json``,
+#: the render cache, the evaluation's default cache, and the staging of an unfinished build.
+OWNER = Owner(
+    "dataset",
+    "scenes",
+    names=(
+        "meta.json",
+        *(f"{s}/*" for s in SPLITS),
+        "renders/*",
+        "cache/*",
+        ".partial-*",
+        ".*.old-*",
+        ".meta.json.tmp-*",
+    ),
+    label="dataset --scenes",
+    whole=False,
+)
 
 # --------------------------------------------------------------------------- scenes and splits
 
@@ -231,7 +256,7 @@ def _scene_entry(render_dir: str, lidar_id: str | None) -> tuple[list[str], floa
 def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, parallel):
     """Run every scene's task (:func:`_scene_frames`) on :mod:`nidar_mi.tasks` (``parallel``:
     its ``workers``, ``address``, ``progress``); the frame ids per split and the wavelength."""
-    from .backend import prepare_worker
+    from .backend import worker_setup
     from .io.atomic import leftovers
     from .tasks import Task, run_tasks
 
@@ -246,7 +271,7 @@ def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, 
         tasks,
         workers=parallel["workers"],
         address=parallel["address"],
-        setup=prepare_worker,
+        setup=worker_setup(),
         progress=parallel["progress"],
         desc="dataset",
         unit="scene",
@@ -258,15 +283,15 @@ def _build_frames(files, names, out_dir, stage, split_of, used, lidar_id, opts, 
     for name in names:
         cameras, wavelength = _scene_entry(os.path.join(out_dir, "renders", name), lidar_id)
         frames[split_of[name]] += [f"{name}__{c}" for c in cameras]
+        log.debug("%s: %d frame(s) in %s", name, len(cameras), split_of[name])
     for split in SPLITS:  # what a worker killed while writing a frame left
         for _, path in leftovers(os.path.join(stage, split)):
             path.unlink(missing_ok=True)
     return frames, wavelength
 
 
-def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
-    """Drop cached renders of scenes no longer in the dataset and, with ``foreign`` (an
-    ``--overwrite`` of a folder that was no dataset), every other entry."""
+def _remove_leftovers(out_dir: str, names: list[str]) -> None:
+    """Drop cached renders of scenes no longer in the dataset."""
     import shutil
 
     renders = Path(out_dir) / "renders"
@@ -274,27 +299,50 @@ def _remove_leftovers(out_dir: str, names: list[str], foreign: bool) -> None:
     for d in renders.iterdir() if renders.is_dir() else ():
         if d.is_dir() and not d.name.startswith(".") and d.name not in keep:
             shutil.rmtree(d, ignore_errors=True)
-    if foreign:
-        for entry in Path(out_dir).iterdir():
-            if entry.name not in {"renders", "meta.json", *SPLITS}:
-                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
 
 
-def build_dataset(
-    scene_dir: str,
-    out_dir: str,
-    *,
-    fractions=(0.8, 0.1, 0.1),
-    seed: int = 0,
-    spp: int = 16,
-    params: dict[str, str] | None = None,
-    lidar_id: str | None = None,
-    intensity_scale: float = 1.0,
-    progress: bool = True,
-    overwrite: bool = False,
-    workers: int | None = None,
-    ray_address: str | None = None,
-) -> dict:
+def _record(out_dir: str) -> None:
+    """The dataset folder's record: what the dataset wrote there, by name."""
+    from .io.atomic import write_record
+    from .io.ownership import folder_files
+
+    os.makedirs(out_dir, exist_ok=True)
+    write_record(out_dir, OWNER, [f for f in folder_files(out_dir) if OWNER.writes(f)])
+
+
+@dataclass(frozen=True)
+class DatasetOptions:
+    """How :func:`build_dataset` builds a dataset from rendered scenes.
+
+    Attributes:
+        fractions: train/val/test fractions of the scenes.
+        seed: split seed, scan seed and sampler seed, in [0, 2**32).
+        spp: camera samples per pixel (>= 1).
+        params: scene parameters (``-D``); each scene gets those it uses; a name no scene uses
+            is an error.
+        lidar_id: the LiDAR whose returns supervise (None: the first by id).
+        intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
+        progress: show a progress bar.
+        overwrite: the user passed ``overwrite`` (an unrecorded dataset of nidar_mi 0.1.0, a
+            dataset of KITTI frames: :func:`~nidar_mi.io.ownership.check_owner`).
+        workers: scenes at once on a local Ray runtime (None: one after the other, in this
+            process); see :mod:`nidar_mi.tasks`.
+        ray_address: run the scenes on this Ray cluster instead.
+    """
+
+    fractions: tuple[float, ...] = (0.8, 0.1, 0.1)
+    seed: int = 0
+    spp: int = 16
+    params: dict[str, str] | None = None
+    lidar_id: str | None = None
+    intensity_scale: float = 1.0
+    progress: bool = True
+    overwrite: bool = False
+    workers: int | None = None
+    ray_address: str | None = None
+
+
+def build_dataset(scene_dir: str, out_dir: str, **options) -> dict:
     """Render every scene (cached per request) and publish the frames and ``meta.json``.
 
     ``DATA`` holds a render cache (``renders/``, one complete render folder per scene, reused
@@ -308,20 +356,10 @@ def build_dataset(
 
     Args:
         scene_dir: folder of scene XML files.
-        out_dir: the dataset folder; a non-empty folder that is no dataset is refused unless
-            ``overwrite`` (its other entries are then removed once the dataset is published).
-        fractions: train/val/test fractions of the scenes.
-        seed: split seed, scan seed and sampler seed, in [0, 2**32).
-        spp: camera samples per pixel (>= 1).
-        params: scene parameters (``-D``); each scene gets those it uses; a name no scene uses
-            is an error.
-        lidar_id: the LiDAR whose returns supervise (None: the first by id).
-        intensity_scale: recorded in ``meta.json`` (training divides intensity by it).
-        progress: show a progress bar.
-        overwrite: accept a non-empty ``out_dir`` that is no dataset.
-        workers: scenes at once on a local Ray runtime (None: one after the other, in this
-            process); see :mod:`nidar_mi.tasks`.
-        ray_address: run the scenes on this Ray cluster instead.
+        out_dir: the dataset folder; an earlier dataset of rendered scenes is updated, any
+            other folder as :func:`nidar_mi.io.ownership.check_owner` says (a file the dataset
+            did not write is never removed: such a folder is refused).
+        **options: the fields of :class:`DatasetOptions`.
 
     Each scene is one task: render (unless cached), then write its frames into the staging
     folder. A scene that fails is reported by name while the others complete; then
@@ -331,67 +369,128 @@ def build_dataset(
     Returns:
         The meta dict (also written to ``DATA/meta.json``).
     """
-    from .io.atomic import atomic_write_json, check_output_folder, staged_entries
-    from .render_folder import file_sha256
+    from .io.atomic import check_output_folder
+
+    o = DatasetOptions(**options)
+    _check_dataset_options(o)
+    scenes = _scene_set(scene_dir, o)
+    out_dir = str(
+        check_output_folder(
+            out_dir, owner=OWNER, overwrite=o.overwrite, inputs=[scene_dir, *scenes.files]
+        )
+    )
+    old = _read_meta(out_dir)
+    request = _dataset_request(scenes, o)
+    renders = {
+        n: _render_request(f, scenes.used[f], o.seed, o.spp)
+        for f, n in zip(scenes.files, scenes.names)
+    }
+    _record(out_dir)  # known as a dataset from here on, interrupted or not
+    if _published(out_dir, old, request, renders):
+        return old
+    out_dir = os.path.abspath(out_dir)
+    meta = _publish(out_dir, scenes, o, request, withdraw=old is not None)
+    _remove_leftovers(out_dir, scenes.names)
+    _record(out_dir)
+    return meta
+
+
+def _check_dataset_options(o: DatasetOptions) -> None:
+    """Refuse a bad intensity scale, seed or spp, or workers without Ray (before any work)."""
     from .tasks import check_parallel
 
-    if not (isinstance(intensity_scale, (int, float)) and np.isfinite(intensity_scale)):
-        raise NidarError(f"`intensity_scale` must be a positive number (got {intensity_scale})")
-    if not intensity_scale > 0:
-        raise NidarError(f"`intensity_scale` must be > 0 (got {intensity_scale})")
-    check_seed(seed)
-    if spp < 1:
-        raise NidarError(f"`spp` must be >= 1 (got {spp})")
-    check_parallel(workers, ray_address)
-    files = [os.path.abspath(f) for f in find_scenes(scene_dir)]  # workers may run elsewhere
+    scale = o.intensity_scale
+    if not (isinstance(scale, (int, float)) and np.isfinite(scale)):
+        raise NidarError(f"`intensity_scale` must be a positive number (got {scale})")
+    if not scale > 0:
+        raise NidarError(f"`intensity_scale` must be > 0 (got {scale})")
+    check_seed(o.seed)
+    if o.spp < 1:
+        raise NidarError(f"`spp` must be >= 1 (got {o.spp})")
+    check_parallel(o.workers, o.ray_address)
+
+
+@dataclass
+class _Scenes:
+    """The scenes of a dataset: files (absolute: workers may run elsewhere), names, the
+    parameters each uses, the split of the names."""
+
+    files: list[str]
+    names: list[str]
+    used: dict[str, dict[str, str]]
+    splits: dict[str, list[str]]
+
+
+def _scene_set(scene_dir: str, o: DatasetOptions) -> _Scenes:
+    """The scenes of ``scene_dir``, checked: unique names, every ``-D`` parameter used by some
+    scene, the LiDAR asked for in every scene."""
+    from .scene import read_scene_xml
+
+    files = [os.path.abspath(f) for f in find_scenes(scene_dir)]
     names = [os.path.splitext(os.path.basename(f))[0] for f in files]
     if len(set(names)) != len(names):
         raise NidarError(f"{scene_dir}: scene file names must be unique")
-    used = {path: scene_params(path, params) for path in files}
-    unused = sorted(set(params or {}) - {k for u in used.values() for k in u})
+    for path in files:  # every scene file is checked before any is rendered
+        read_scene_xml(path)
+    used = {path: scene_params(path, o.params) for path in files}
+    unused = sorted(set(o.params or {}) - {k for u in used.values() for k in u})
     if unused:
         raise NidarError(f"-D {', '.join(unused)}: no scene in {scene_dir} has such a parameter")
-    splits = split_scenes(names, fractions, seed)
-    if lidar_id is not None:
+    splits = split_scenes(names, o.fractions, o.seed)
+    if o.lidar_id is not None:
         for path, name in zip(files, names):
-            _check_lidar(path, name, lidar_id)
-    old = _read_meta(out_dir)
-    earlier = old is not None or os.path.isdir(os.path.join(out_dir, "renders"))
-    check_output_folder(out_dir, overwrite=overwrite or earlier, inputs=[scene_dir, *files])
-    request = {
-        "scenes": {n: file_sha256(f) for f, n in zip(files, names)},
-        "params": dict(sorted((params or {}).items())),
-        "seed": seed,
-        "spp": spp,
-        "lidar": lidar_id,
-        "split": [float(f) for f in fractions],
-        "intensity_scale": float(intensity_scale),
+            _check_lidar(path, name, o.lidar_id)
+    return _Scenes(files, names, used, splits)
+
+
+def _dataset_request(scenes: _Scenes, o: DatasetOptions) -> dict:
+    """Every input that decides the dataset (``meta.json``'s ``request``)."""
+    from .io.cache_key import file_sha256
+
+    return {
+        "scenes": {n: file_sha256(f) for f, n in zip(scenes.files, scenes.names)},
+        "params": dict(sorted((o.params or {}).items())),
+        "seed": o.seed,
+        "spp": o.spp,
+        "lidar": o.lidar_id,
+        "split": [float(f) for f in o.fractions],
+        "intensity_scale": float(o.intensity_scale),
     }
-    renders = {n: _render_request(f, used[f], seed, spp) for f, n in zip(files, names)}
-    if _published(out_dir, old, request, renders):
-        return old
-    split_of = {n: s for s, ns in splits.items() for n in ns}
-    opts = dict(formats=("npz",), seed=seed, spp=spp, progress=False)
-    parallel = dict(workers=workers, address=ray_address, progress=progress)
-    # the old dataset is withdrawn only once the tasks can run (a Ray cluster answered)
-    parallel["started"] = (lambda: _withdraw(out_dir)) if old is not None else None
-    out_dir = os.path.abspath(out_dir)
+
+
+def _publish(out_dir: str, scenes: _Scenes, o: DatasetOptions, request: dict, withdraw: bool):
+    """Build the frames of every scene in a staging area and publish them with ``meta.json``
+    (last); the published dataset is withdrawn (``withdraw``) only once the tasks can run (a
+    Ray cluster answered). The meta dict."""
+    from .io.atomic import atomic_write_json, staged_entries
+
+    split_of = {n: s for s, ns in scenes.splits.items() for n in ns}
+    opts = dict(formats=("npz",), seed=o.seed, spp=o.spp, progress=False)
+    parallel = dict(workers=o.workers, address=o.ray_address, progress=o.progress)
+    parallel["started"] = (lambda: _withdraw(out_dir)) if withdraw else None
     with staged_entries(out_dir, [*SPLITS, "meta.json"], last="meta.json") as stage:
         frames, wavelength = _build_frames(
-            files, names, out_dir, str(stage), split_of, used, lidar_id, opts, parallel
+            scenes.files,
+            scenes.names,
+            out_dir,
+            str(stage),
+            split_of,
+            scenes.used,
+            o.lidar_id,
+            opts,
+            parallel,
         )
         meta = {
             "source": "render",
-            "scenes": splits,
+            "scenes": scenes.splits,
             "frames": frames,
             "wavelength_nm": wavelength,
             "intensity": "range-compensated g·rho·cos(theta)·exp(-2 alpha d)",
-            "intensity_scale": float(intensity_scale),
-            "seed": seed,
-            "spp": spp,
-            "params": dict(params or {}),
+            "intensity_scale": float(o.intensity_scale),
+            "seed": o.seed,
+            "spp": o.spp,
+            "params": dict(o.params or {}),
             "request": request,
         }
         atomic_write_json(os.path.join(stage, "meta.json"), meta)
-    _remove_leftovers(out_dir, names, foreign=overwrite and not earlier)
     return meta

@@ -27,12 +27,16 @@ from typing import Any
 import numpy as np
 
 from .errors import NidarError
+from .io.cache_key import file_sha256
+from .io.ownership import Owner
 
 __all__ = [
     "BIN_INTENSITY",
     "DEFAULT_FORMATS",
     "FORMATS",
     "MANIFEST",
+    "RENDER_OWNER",
+    "SEQUENCE_OWNER",
     "RenderRequest",
     "RenderedCamera",
     "RenderedScan",
@@ -46,8 +50,9 @@ __all__ = [
     "write_manifest",
 ]
 
-#: Point-cloud formats a LiDAR folder can hold.
-FORMATS = ("npz", "ply", "las", "bin", "pcd")
+#: Point-cloud formats a LiDAR folder can hold (``laz``: LAS compressed by laspy's lazrs back
+#: end, the ``laz`` extra).
+FORMATS = ("npz", "ply", "las", "laz", "bin", "pcd")
 #: The formats written when none are asked for.
 DEFAULT_FORMATS = ("npz", "ply", "las", "bin")
 #: ``bin_intensity`` values: KITTI's [0, 1] convention, or the simulator's own intensity.
@@ -57,12 +62,6 @@ MANIFEST = "manifest.json"
 #: Version of the folder layout; part of the cache key, so folders of an older layout (e.g.
 #: without ``reflectance.exr`` or ``albedo.exr``) are rendered again.
 LAYOUT_VERSION = 3
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()
 
 
 #: The files of a NIDAR weights folder that decide its output (those present are hashed).
@@ -111,6 +110,10 @@ class RenderRequest:
             None: the weights' own ``sim-905``).
         bin_intensity: intensity convention of ``points.bin`` (:data:`BIN_INTENSITY`).
         layout: :data:`LAYOUT_VERSION` of the folder.
+        weather: the weather set for the render (:meth:`nidar_mi.weather.Weather.to_dict`);
+            None (and absent from :meth:`to_dict`, as before weather existed): the scene's own.
+        labels: whether the shapes' labels were read; recorded only when False, so that the
+            requests of renders with labels read as they always did.
     """
 
     scene: str
@@ -128,13 +131,18 @@ class RenderRequest:
     profile: str | None = None
     bin_intensity: str = "unit"
     layout: int = LAYOUT_VERSION
+    weather: dict | None = None
+    labels: bool = True
 
     @classmethod
     def of(cls, scene_path: str | os.PathLike, **options: Any) -> RenderRequest:
         """The request for a scene file (hashes the file); ``options`` are the fields."""
+        from .io.atomic import file_problem
+
         path = os.path.abspath(scene_path)
-        if not os.path.isfile(path):
-            raise NidarError(f"{scene_path}: no such scene file")
+        problem = file_problem(path, "scene file")
+        if problem:
+            raise NidarError(f"{scene_path}: {problem}")
         params = {str(k): str(v) for k, v in sorted((options.pop("params", None) or {}).items())}
         options["formats"] = tuple(options.get("formats", DEFAULT_FORMATS))
         if options.get("intensity", "physics") != "nidar":
@@ -149,6 +157,10 @@ class RenderRequest:
         """JSON-safe dict (what the manifest stores under ``request``)."""
         d = asdict(self)
         d["formats"] = list(self.formats)
+        if d["weather"] is None:
+            del d["weather"]
+        if self.labels:
+            del d["labels"]
         return d
 
 
@@ -157,6 +169,20 @@ def write_manifest(folder: str | os.PathLike, manifest: dict) -> None:
     from .io.atomic import atomic_write_json
 
     atomic_write_json(os.path.join(folder, MANIFEST), manifest)
+
+
+def _manifest_files(folder) -> list[str]:
+    """The files a render or sequence folder of nidar_mi 0.1.0 (no record) lists."""
+    manifest = read_manifest(folder)
+    return [MANIFEST, *manifest["files"]]
+
+
+#: Who writes a render folder (one render) and a sequence folder (``render --trajectory``):
+#: :mod:`nidar_mi.io.ownership`; an unrecorded folder of either is recognised by its manifest.
+RENDER_OWNER = Owner("render", "scene", names=(MANIFEST,), listed=_manifest_files)
+SEQUENCE_OWNER = Owner(
+    "render", "sequence", names=(MANIFEST,), listed=_manifest_files, label="render --trajectory"
+)
 
 
 def read_manifest(folder: str | os.PathLike) -> dict:
@@ -192,8 +218,9 @@ def is_current(folder: str | os.PathLike, request: RenderRequest) -> bool:
 # --------------------------------------------------------------------------- size
 
 #: Bytes per point of each format, the simulator's columns (:mod:`nidar_mi.io.points`), rounded
-#: up; LAS adds its point record, ``bin`` holds x, y, z and intensity only.
-POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "bin": 16}
+#: up; LAS adds its point record (LAZ, compressed, is counted as LAS), ``bin`` holds x, y, z and
+#: intensity only.
+POINT_BYTES = {"npz": 64, "ply": 64, "pcd": 64, "las": 80, "laz": 80, "bin": 16}
 #: Bytes per point of ``xyz_deskewed`` (every format but ``bin``).
 DESKEW_BYTES = 12
 #: Bytes per beam of ``range_image.exr`` (4 float32 channels, uncompressed).
@@ -314,6 +341,7 @@ def write_lidar(
         "npz": lambda p: pio.write_npz(p, pts),
         "ply": lambda p: pio.write_ply(p, pts),
         "las": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
+        "laz": lambda p: write_las(p, pts, intensity_scale=65535.0 / full),
         "bin": lambda p: write_kitti_bin(p, pts["xyz"], bin_i),
         "pcd": lambda p: write_pcd(p, pts),
     }
@@ -534,7 +562,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     Raises:
         NidarError: missing or malformed manifest, or an unknown LiDAR id.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
     from .io.images import read_exr
     from .io.points import read_npz
     from .lidar.return_model import compensate
@@ -553,7 +581,7 @@ def read_render(folder: str | os.PathLike, lidar_id: str | None = None) -> Rende
     cameras = []
     for cam_id, cam in sorted(manifest.get("cameras", {}).items()):
         cam_dir = os.path.join(folder, cam_id)
-        model = render_camera(cam, cam_id, lid, f"{folder}: camera {cam_id}")
+        model = render_calib_model(cam, cam_id, lid, f"{folder}: camera {cam_id}")
         depth = _single_channel(read_exr(os.path.join(cam_dir, "depth.exr")))
         cameras.append(RenderedCamera(cam_id, cam_dir, model, depth, cam))
     return RenderedScan(folder, manifest, lid, params, pts, comp, cameras)

@@ -58,8 +58,8 @@ class RenderOptions:
         intensity: ``physics``, or ``nidar`` to add NIDAR's intensity from the cameras
             (:data:`INTENSITY_SOURCES`).
         weights: NIDAR weights folder (None: the shipped model); ``nidar`` only.
-        nidar_branch: ``R`` (None: the default) or ``I_hat``; ``nidar`` only (without a
-            profile).
+        nidar_branch: ``R`` or ``I_hat`` (None: the profile's branch, ``R`` without one);
+            ``nidar`` only; another branch than the profile's is refused.
         profile: a :class:`~nidar_mi.profiles.SensorProfile` for NIDAR's intensity
             (:func:`nidar_mi.datasets.sensor_profiles.resolve_profile` turns a name or file into one);
             None: the weights' own ``sim-905`` (``profiles/sim-905.json``, else
@@ -72,6 +72,12 @@ class RenderOptions:
         deskew: add ``xyz_deskewed`` to the points (equal to ``xyz`` for a scan from one pose).
             Not part of the cache key.
         progress: show a progress bar on stderr. Not part of the cache key.
+        weather: a :class:`nidar_mi.weather.Weather` for every LiDAR (their ``fog``, ``rain``,
+            ``snow`` replaced) and the cameras; None: the scene's own. Not with ``intensity``
+            nidar.
+        labels: read the shapes' semantic labels (:func:`nidar_mi.scene.load_scene`). False:
+            every point ``unlabeled``, and Mitsuba merges the meshes that share a BSDF (a
+            generated city scans ~7x faster, the same returns).
     """
 
     scene: str
@@ -89,6 +95,14 @@ class RenderOptions:
     max_memory: int | None = None
     deskew: bool = False
     progress: bool = True
+    weather: Any = None
+    labels: bool = True
+
+    def branch(self) -> str:
+        """The NIDAR branch read: ``nidar_branch``, else the profile's, else ``R``."""
+        if self.nidar_branch is not None:
+            return self.nidar_branch
+        return getattr(self.profile, "branch", None) or "R"
 
     def key(self) -> rf.RenderRequest:
         """The cache key of this render (hashes the scene file; NidarError when it is missing)."""
@@ -102,9 +116,11 @@ class RenderOptions:
             rgb_twin=self.rgb_twin,
             intensity=self.intensity,
             weights=self.weights,
-            nidar_branch=self.nidar_branch or "R",
+            nidar_branch=self.branch(),
             profile=profile_key(self.profile),
             bin_intensity=self.bin_intensity,
+            weather=None if self.weather is None else self.weather.to_dict(),
+            labels=self.labels,
         )
 
 
@@ -128,9 +144,35 @@ def check_options(options: RenderOptions) -> rf.RenderRequest:
         raise NidarError("`weights` is used only with `intensity` nidar")
     if options.intensity != "nidar" and options.nidar_branch is not None:
         raise NidarError("`nidar_branch` is used only with `intensity` nidar")
+    fitted = getattr(options.profile, "branch", None)
+    if options.nidar_branch is not None and fitted is not None and options.nidar_branch != fitted:
+        b = options.nidar_branch
+        raise NidarError(
+            f"`nidar_branch` {b}: profile {options.profile.name} maps the {fitted} branch; leave "
+            f"out `nidar_branch` or fit a profile on {b} (calibrate --branch {b})"
+        )
+    if options.max_memory is None:
+        from .lidar.memory import default_limit
+
+        default_limit()  # a bad NIDAR_MAX_MEMORY is named before anything loads
+    _check_weather(options.intensity, options.weather)
     req = options.key()
     _check_request(req)
     return req
+
+
+def _check_weather(intensity: str, weather) -> None:
+    """Weather must be possible, and cannot go with NIDAR's intensity."""
+    if weather is None:
+        return
+    from .weather import check_weather
+
+    check_weather(weather)
+    if intensity == "nidar" and not weather.clear:
+        raise NidarError(
+            "`intensity` nidar reads the surfaces from the camera images, which the weather "
+            "veils (NIDAR learned clear days): render weather with `intensity` physics"
+        )
 
 
 def _check_request(req: rf.RenderRequest) -> None:
@@ -162,7 +204,7 @@ def _load_checked(req: rf.RenderRequest):
     """The scene of a request, in the active variant; it must have a LiDAR and unique ids."""
     from .scene import load_scene
 
-    loaded = load_scene(req.scene, rgb_twin=req.rgb_twin, params=req.params)
+    loaded = load_scene(req.scene, rgb_twin=req.rgb_twin, params=req.params, labels=req.labels)
     if not loaded.lidars:
         raise NidarError(f'{req.scene}: no lidar sensor (add <sensor type="lidar">)')
     names = [s.id() for s in loaded.lidars + loaded.cameras]
@@ -221,6 +263,10 @@ class RenderSession:
         request = check_options(options) if request is None else request
         t0 = time.perf_counter()
         loaded = _load_checked(request)
+        if options.weather is not None:  # the render's weather replaces the LiDARs' own
+            for sensor in loaded.lidars:
+                sensor.weather = None if options.weather.clear else options.weather
+        _check_weather(options.intensity, loaded.weather)  # one weather, which NIDAR cannot see
         return cls(options=options, request=request, loaded=loaded, load_s=time.perf_counter() - t0)
 
     @property

@@ -6,8 +6,12 @@ starts at ``t_k = t_0 + k / rate``. Each LiDAR sweeps from ``t_k`` on: column ``
 ``t_k + t_j`` (:class:`nidar_mi.lidar.pattern.BeamPattern`) and is cast from the rig pose
 SE(3)-interpolated at that time (motion distortion; ``t`` per point). Each camera is exposed
 when the first LiDAR's sweep points along the camera's optical axis (how KITTI triggers its
-cameras), from the rig pose of that time. Poses enter the kernels as data: after the first frame
-no kernel is compiled again, for any sensor.
+cameras), from the rig pose of that time. Without ``motion`` every sweep is cast from the
+frame's start pose (an instantaneous sweep; the points keep their firing times ``t``) and every
+camera is exposed at ``t_k``. Poses enter the kernels as data: after the first frame no kernel
+is compiled again, for any sensor.
+
+:func:`ensure_sequence` renders only when ``OUT`` does not hold the same request already.
 
 Frame ``k`` is written on a background thread (:class:`nidar_mi.io.background.BackgroundWriter`,
 two frames queued at most) while frame ``k + 1`` is rendered; the sequence outputs are written
@@ -37,6 +41,7 @@ t, label, instance of the first LiDAR) and camera images are written when the fr
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -45,6 +50,8 @@ import numpy as np
 
 from . import render_folder as rf
 from .errors import NidarError
+from .geometry.se3 import transform_matrix
+from .io.cache_key import file_sha256
 from .render_session import RenderOptions, RenderSession, check_options
 
 __all__ = [
@@ -54,9 +61,12 @@ __all__ = [
     "SequenceOptions",
     "camera_trigger_time",
     "check_sequence",
+    "ensure_sequence",
     "render_sequence",
     "sequence_bytes",
 ]
+
+log = logging.getLogger("nidar_mi.sequence")
 
 #: Whole-sequence outputs beside the frame folders.
 SEQUENCE_FORMATS = ("kitti", "rosbag")
@@ -79,62 +89,34 @@ class SequenceOptions:
     """What to render of a scene along a trajectory, and how.
 
     Attributes:
-        scene: scene XML path.
+        frame: what every frame renders, and how
+            (:class:`~nidar_mi.render_session.RenderOptions`: the scene, its parameters and
+            twin, point formats, seed, spp, cameras, labels, ``bin_intensity``, ``deskew``,
+            ``max_memory``, ``progress``); the physics intensity only. Frame ``k`` uses
+            ``seed + k`` modulo 2³² (each LiDAR's own seed + k without one; the camera sampler
+            ``k``).
         trajectory: KITTI odometry, TUM or CSV poses of the rig.
         rate: frames per second, Hz (None: the first LiDAR's rotation rate); also the sample
             rate of a KITTI odometry pose file.
         frames: number of frames (None: as many as the trajectory holds).
-        formats: point formats of each frame (:data:`nidar_mi.render_folder.FORMATS`).
         sequence_formats: whole-sequence outputs, from :data:`SEQUENCE_FORMATS`.
-        bin_intensity: ``unit`` or ``raw`` KITTI ``.bin`` intensity of each frame
-            (:func:`nidar_mi.render_folder.write_lidar`).
-        seed: base seed; frame ``k`` uses ``seed + k`` modulo 2³² (each LiDAR's own seed + k
-            without it; the camera sampler ``k`` without it).
-        spp: camera samples per pixel.
-        params: the scene's ``<default>`` values (None: none).
-        cameras: render the cameras.
-        deskew: add ``xyz_deskewed`` (points in the LiDAR frame at the sweep's start) to every
-            frame's points.
-        max_memory: bytes one scan or camera render may use (None: the default limit).
         max_frames: the most frames the sequence may have (:data:`MAX_FRAMES`).
         max_disk: bytes the sequence may take on disk (None: the free space of its filesystem).
-        progress: show a progress bar on stderr.
         previews: range previews of ``all`` frames, the ``first`` only or ``none``
             (:data:`PREVIEWS`).
+        motion: sweeps and exposures along the trajectory (module docstring); False: each
+            frame from its start pose, so the last frame may start at the trajectory's end.
     """
 
-    scene: str
+    frame: RenderOptions
     trajectory: str
     rate: float | None = None
     frames: int | None = None
-    formats: tuple[str, ...] = rf.FORMATS
     sequence_formats: tuple[str, ...] = ()
-    bin_intensity: str = "unit"
-    seed: int | None = None
-    spp: int = 16
-    params: dict[str, str] | None = None
-    cameras: bool = True
-    deskew: bool = False
-    max_memory: int | None = None
     max_frames: int = MAX_FRAMES
     max_disk: int | None = None
-    progress: bool = True
     previews: str = "first"
-
-    def frame_options(self) -> RenderOptions:
-        """The options every frame is rendered with (physics intensity, the scene itself)."""
-        return RenderOptions(
-            self.scene,
-            formats=tuple(self.formats),
-            seed=self.seed,
-            spp=self.spp,
-            params=self.params,
-            cameras=self.cameras,
-            bin_intensity=self.bin_intensity,
-            max_memory=self.max_memory,
-            deskew=self.deskew,
-            progress=self.progress,
-        )
+    motion: bool = True
 
 
 @dataclass
@@ -179,10 +161,6 @@ def camera_trigger_time(lidar_config, T_lidar_mount: np.ndarray, T_camera_mount:
     return float(np.mod(turn, 1.0) / pattern.rotation_rate)
 
 
-def _matrix(T) -> np.ndarray:
-    return np.array(T.matrix.numpy(), dtype=np.float64).reshape(4, 4)
-
-
 def _set_camera_pose(camera, pose: np.ndarray) -> None:
     """Move a camera to ``pose`` (an opaque value: the render kernels are kept)."""
     import drjit as dr
@@ -217,7 +195,8 @@ def _frame_times(
             f"`frames` {frames}: the trajectory ({t1 - t0:.3g} s) holds {fit} frames at "
             f"{rate:g} Hz (each needs its whole sweep of {sweep_s:.3g} s inside it)"
         )
-    return t0 + np.arange(frames) / rate
+    # at most the last time that fits: t0 + k / rate may round past it by an ulp
+    return np.minimum(t0 + np.arange(frames) / rate, t1 - sweep_s)
 
 
 def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool = False) -> dict:
@@ -226,9 +205,9 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
 
     Args:
         options: what to render (:class:`SequenceOptions`).
-        out_dir: the sequence folder (replaced whole; a non-empty folder that is not an earlier
-            sequence needs ``overwrite``).
-        overwrite: replace a non-empty ``out_dir``.
+        out_dir: the sequence folder (an earlier sequence folder is replaced whole, any other
+            folder as :func:`nidar_mi.io.ownership.check_owner` says).
+        overwrite: the user passed ``overwrite`` (:func:`~nidar_mi.io.ownership.check_owner`).
 
     Returns:
         The sequence manifest.
@@ -243,7 +222,7 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     session.check_memory()
     _check_bounds(session, options, len(times), out_dir)
     rig = _rig(session)
-    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
+    with staged_directory(out_dir, owner=rf.SEQUENCE_OWNER, overwrite=overwrite) as stage:
         frames = _render_frames(stage, session, options, traj, times, rig)
         frames.written += _write_poses_and_times(stage, frames.start_poses, times)
         request = _sequence_request(session, options, rate, len(times))
@@ -251,6 +230,34 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
         manifest["timings_s"]["total"] = time.perf_counter() - t_start
         rf.write_manifest(stage, manifest)
     return manifest
+
+
+def ensure_sequence(options: SequenceOptions, out_dir: str) -> dict:
+    """The manifest of ``out_dir`` when it holds this sequence complete, else
+    :func:`render_sequence` (replacing ``out_dir`` whole, as ``overwrite``).
+
+    The request of the manifest is compared with that of ``options``: the frames' cache key
+    (the scene file's hash included), the trajectory file's hash and every sequence option; a
+    rate or frame count left to the scene and the trajectory is taken as recorded (the scene
+    and the trajectory decide it, and their hashes are compared).
+    """
+    request = check_sequence(options).to_dict()
+    try:
+        manifest = rf.read_manifest(out_dir)
+    except NidarError:
+        manifest = {}
+    recorded = manifest.get("request") or {}
+    rate = options.rate if options.rate is not None else recorded.get("rate_hz")
+    frames = options.frames if options.frames is not None else recorded.get("frames")
+    want = request | _sequence_fields(options, rate, frames)
+    files = manifest.get("files", [])
+    if (
+        manifest.get("kind") == "sequence"
+        and recorded == want
+        and all(os.path.isfile(os.path.join(out_dir, f)) for f in files)
+    ):
+        return manifest
+    return render_sequence(options, out_dir, overwrite=True)
 
 
 def check_sequence(options: SequenceOptions):
@@ -283,7 +290,11 @@ def check_sequence(options: SequenceOptions):
             f"`sequence_formats`: unknown '{','.join(bad)}' "
             f"(choose from {', '.join(SEQUENCE_FORMATS)})"
         )
-    request = check_options(options.frame_options())
+    if options.frame.intensity != "physics":
+        raise NidarError(
+            f"`intensity`: a sequence renders the physics intensity (got '{options.frame.intensity}')"
+        )
+    request = check_options(options.frame)
     if not os.path.isfile(options.trajectory):
         raise NidarError(f"{options.trajectory}: no such trajectory file")
     return request
@@ -295,11 +306,12 @@ def _open(options: SequenceOptions):
     from .io.trajectory import read_trajectory
 
     request = check_sequence(options)
-    session = RenderSession.open(options.frame_options(), request)
+    session = RenderSession.open(options.frame, request)
     lidars = session.lidars
-    rate = float(options.rate if options.rate is not None else lidars[0].config.rotation_rate)
+    rate = float(options.rate if options.rate is not None else lidars[0].config.frame_rate)
     traj = read_trajectory(options.trajectory, rate=rate)
     sweep_s = max(float(s.config.pattern.column_time_s().max()) for s in lidars)
+    sweep_s = sweep_s if options.motion else 0.0
     times = _frame_times(traj, rate, options.frames, sweep_s, options.max_frames)
     return session, traj, rate, times
 
@@ -312,7 +324,7 @@ def sequence_bytes(session: RenderSession, options: SequenceOptions, frames: int
     cameras = [tuple(int(v) for v in c.film().size()) for c in session.cameras]
     bands = len(session.nir_wavelengths)
     per_frame = rf.folder_bytes(
-        lidars, cameras, options.formats, deskew=options.deskew, bands=bands
+        lidars, cameras, options.frame.formats, deskew=options.frame.deskew, bands=bands
     )
     lead = lidars[0].rings * lidars[0].horizontal_resolution * lidars[0].max_returns
     pixels = sum(w * h for w, h in cameras)
@@ -336,8 +348,8 @@ def _check_bounds(session: RenderSession, options: SequenceOptions, frames: int,
 def _rig(session: RenderSession) -> _Rig:
     """Every sensor's scene pose as its mounting on the rig; each camera's trigger time."""
     lidars, cams = session.lidars, session.cameras
-    mounts = {s.id(): _matrix(s.world_transform()) for s in lidars}
-    cam_mounts = {c.id(): _matrix(c.world_transform()) for c in cams}
+    mounts = {s.id(): transform_matrix(s.world_transform()) for s in lidars}
+    cam_mounts = {c.id(): transform_matrix(c.world_transform()) for c in cams}
     lead = lidars[0]
     cam_offsets = {
         c.id(): camera_trigger_time(lead.config, mounts[lead.id()], cam_mounts[c.id()])
@@ -362,19 +374,23 @@ def _render_frames(stage, session, options: SequenceOptions, traj, times, rig: _
         stage,
         options.sequence_formats,
         rig.lead,
-        lambda i: rf.bin_intensity_values(i, lead, options.bin_intensity),
+        lambda i: rf.bin_intensity_values(i, lead, options.frame.bin_intensity),
     )
-    bar = progress_bar(total=len(times), show=options.progress, desc="sequence", unit="frame")
+    show = options.frame.progress
+    bar = progress_bar(total=len(times), show=show, desc="sequence", unit="frame")
     loop = []
     try:
         with BackgroundWriter(depth=WRITE_QUEUE, on_abort=outputs.discard) as writer:
             for k, t_k in enumerate(times):
                 t0 = time.perf_counter()
-                shot = _FrameShot(session, traj, rig, k, float(t_k))
+                shot = _FrameShot(session, traj, rig, k, float(t_k), options.motion)
                 rendered = _render_frame(shot, _previews(options.previews, k))
                 frames.start_poses.append(rendered.lidar_start_pose)
                 writer.submit(_write_frame, rendered, stage, frames, outputs)
                 loop.append(time.perf_counter() - t0)
+                log.debug(
+                    "frame %d/%d (t = %.3f s) rendered in %.2f s", k + 1, len(times), t_k, loop[-1]
+                )
                 bar.update(1)
             t0 = time.perf_counter()
             poses = np.asarray(frames.start_poses)
@@ -406,12 +422,18 @@ def _write_poses_and_times(stage, start_poses: list, times: np.ndarray) -> list[
 
 def _sequence_request(session: RenderSession, options: SequenceOptions, rate, frames) -> dict:
     """The request a sequence manifest records: the frames' cache key and the trajectory."""
-    return session.request.to_dict() | {
+    return session.request.to_dict() | _sequence_fields(options, rate, frames)
+
+
+def _sequence_fields(options: SequenceOptions, rate, frames) -> dict:
+    """The sequence's own part of its request (:func:`_sequence_request`)."""
+    return {
         "trajectory": os.path.abspath(options.trajectory),
-        "trajectory_sha256": rf.file_sha256(options.trajectory),
+        "trajectory_sha256": file_sha256(options.trajectory),
         "rate_hz": rate,
         "frames": frames,
-        "deskew": options.deskew,
+        "deskew": options.frame.deskew,
+        "motion": options.motion,
         "sequence_formats": list(options.sequence_formats),
         "previews": options.previews,
     }
@@ -504,6 +526,7 @@ class _FrameShot:
         rig: the sensors' mountings and camera trigger times.
         k: frame index.
         t_k: the frame's start time on the trajectory, s.
+        motion: sweeps and exposures along the trajectory (:attr:`SequenceOptions.motion`).
     """
 
     session: RenderSession
@@ -511,6 +534,7 @@ class _FrameShot:
     rig: _Rig
     k: int
     t_k: float
+    motion: bool = True
 
     def seed(self, base: int) -> int:
         """``base + k`` modulo 2³²: the seed of this frame."""
@@ -562,8 +586,10 @@ def _scan_frame(shot: _FrameShot):
     for sensor in session.lidars:
         lid = sensor.id()
         cfg = sensor.config
-        columns = traj.at(t_k + cfg.pattern.column_time_s()) @ shot.rig.mounts[lid]
         start = traj.at(t_k)[0] @ shot.rig.mounts[lid]
+        columns = None
+        if shot.motion:
+            columns = traj.at(t_k + cfg.pattern.column_time_s()) @ shot.rig.mounts[lid]
         frame_seed = shot.seed(cfg.seed if opts.seed is None else opts.seed)
         ts = time.perf_counter()
         result = scan(
@@ -600,7 +626,7 @@ def _shoot_frame(shot: _FrameShot) -> dict:
     cameras = {}
     for cam in session.cameras:
         cid = cam.id()
-        t_cam = shot.t_k + rig.cam_offsets[cid]
+        t_cam = shot.t_k + (rig.cam_offsets[cid] if shot.motion else 0.0)
         T_rig = shot.traj.at(t_cam)[0]
         _set_camera_pose(cam, T_rig @ rig.cam_mounts[cid])
         ts = time.perf_counter()

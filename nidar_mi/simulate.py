@@ -13,6 +13,7 @@ renders only when the folder does not already hold the same request
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import time
@@ -26,6 +27,8 @@ from .errors import NidarError
 from .render_session import RenderOptions, RenderSession, profile_key
 
 __all__ = ["render_scene", "ensure_rendered", "nidar_columns"]
+
+log = logging.getLogger("nidar_mi.render")
 
 
 @dataclass
@@ -97,6 +100,8 @@ def _scan_lidars(run: _Run, session: RenderSession, bar) -> None:
             "materials": result.material_names,
             "timings_s": result.timings | {"scan_total": time.perf_counter() - t0},
         }
+        if result.weather is not None:
+            run.lidars[sensor.id()]["weather"] = result.weather.to_dict()
         bar.update(1)
 
 
@@ -159,7 +164,7 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
         "nidar_observed": (N,) bool}``, one value
         per valid return.
     """
-    from .io.calib import render_camera
+    from .io.calib import render_calib_model
 
     rgbs = {cid: r.srgb8() for cid, (r, _) in renders.items()}
     maps = {cid: model.predict_image(rgb) for cid, rgb in rgbs.items()}
@@ -167,7 +172,7 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
     for lid, result in results.items():
         cams, depth, cam_maps = [], [], []
         for cid, (r, calib) in renders.items():
-            cams.append(render_camera(calib, cid, lid))
+            cams.append(render_calib_model(calib, cid, lid))
             depth.append(r.depth)
             cam_maps.append(maps[cid])
         pts = result.points()
@@ -196,7 +201,7 @@ def _nidar_step(run: _Run, options: RenderOptions) -> dict[str, dict]:
     from .nidar.pipeline import NidarModel
 
     model = NidarModel.load(options.weights)
-    branch = options.nidar_branch or "R"
+    branch = options.branch()
     applied = options.profile or (model.default_profile() if branch == "R" else None)
     run.profile = profile_key(applied)
     return nidar_columns(model, run.results, run.renders, branch, options.profile)
@@ -222,7 +227,9 @@ def _write_lidars(run: _Run, options: RenderOptions, extra: dict[str, dict]) -> 
 def _manifest(session: RenderSession, run: _Run, total_s: float) -> dict:
     """The render folder's ``manifest.json``: request, provenance, sensors, timings, files."""
     opts, req = session.options, session.request
+    weather = session.loaded.weather
     return {
+        **({} if weather is None else {"weather": weather.to_dict()}),
         "request": req.to_dict(),
         "scene": req.scene,
         "scene_sha256": req.scene_sha256,
@@ -247,15 +254,18 @@ def _manifest(session: RenderSession, run: _Run, total_s: float) -> dict:
     }
 
 
-def render_scene(options: RenderOptions, out_dir: str, *, overwrite: bool = False) -> dict:
+def render_scene(
+    options: RenderOptions, out_dir: str, *, overwrite: bool = False, nested: bool = False
+) -> dict:
     """Render a scene into ``out_dir`` (layout: :mod:`nidar_mi.render_folder`), in the active
     Mitsuba variant (:func:`nidar_mi.backend.set_variant`).
 
     Args:
         options: what to render (:class:`~nidar_mi.render_session.RenderOptions`).
-        out_dir: the render folder; a non-empty folder that is not an earlier render folder is
-            refused unless ``overwrite``; an earlier render folder is replaced whole.
-        overwrite: replace a non-empty ``out_dir``.
+        out_dir: the render folder; an earlier render folder is replaced whole, any other
+            folder as :func:`nidar_mi.io.ownership.check_owner` says.
+        overwrite: the user passed ``overwrite`` (:func:`~nidar_mi.io.ownership.check_owner`).
+        nested: ``out_dir`` is a cache inside the caller's own output (a dataset's renders).
 
     Returns:
         The manifest (also written to ``out_dir/manifest.json``).
@@ -268,7 +278,8 @@ def render_scene(options: RenderOptions, out_dir: str, *, overwrite: bool = Fals
     t_start = time.perf_counter()
     session = RenderSession.open(options)
     session.check_memory()
-    with staged_directory(out_dir, overwrite=overwrite, marker=rf.MANIFEST) as stage:
+    publish = dict(owner=rf.RENDER_OWNER, overwrite=overwrite, nested=nested)
+    with staged_directory(out_dir, **publish) as stage:
         run = _Run(stage=str(stage), timings={"load": session.load_s})
         _sense(run, session)
         extra = {}
@@ -279,6 +290,12 @@ def render_scene(options: RenderOptions, out_dir: str, *, overwrite: bool = Fals
         _write_lidars(run, options, extra)
         manifest = _manifest(session, run, time.perf_counter() - t_start)
         rf.write_manifest(stage, manifest)
+    for name, e in manifest["lidars"].items():
+        t = e["timings_s"]["scan_total"]
+        log.debug("lidar %s: %d rays, %d returns, %.2f s", name, e["rays"], e["returns"], t)
+    for name, e in manifest["cameras"].items():
+        t = e["timings_s"]["render_total"]
+        log.debug("camera %s: %dx%d pixels, %.2f s", name, e["width"], e["height"], t)
     return manifest
 
 
@@ -291,4 +308,4 @@ def ensure_rendered(options: RenderOptions, out_dir: str) -> dict:
     """
     if rf.is_current(out_dir, options.key()):
         return rf.read_manifest(out_dir)
-    return render_scene(options, out_dir, overwrite=True)
+    return render_scene(options, out_dir, overwrite=True, nested=True)

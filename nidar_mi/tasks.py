@@ -28,8 +28,10 @@ Whatever the mode, the job behaves the same:
 * Warnings raised in a worker are raised again in this process.
 
 Each worker process runs ``setup(threads)`` before each task (it must be cheap when repeated):
-for rendering, :func:`nidar_mi.backend.prepare_worker` sets Dr.Jit's thread count and the
-Mitsuba variant, whose plugins register per variant per process. Functions and arguments are
+for rendering, :func:`nidar_mi.backend.worker_setup` (``prepare_worker`` with the caller's
+variant) sets Dr.Jit's thread count and the Mitsuba variant, whose plugins register per variant
+per process. A serial job runs its tasks in the caller's process, whose variant stays as the
+caller's entry point chose it. Functions and arguments are
 pickled to the workers, so a task function must be importable there (a module-level function
 of an installed package) and take plain data (paths, numbers, dicts), never a loaded scene.
 
@@ -45,8 +47,8 @@ Example (one render folder per frame of a sequence)::
 
 from __future__ import annotations
 
+import contextlib
 import os
-import shutil
 import sys
 import time
 import traceback
@@ -201,8 +203,9 @@ def _execute(fn, args, kwargs, setup, threads, capture_warnings: bool) -> _Outco
 
 
 def _sweep(tasks: Sequence[Task]) -> None:
-    """Remove what killed writers left beside the tasks' outputs (one listing per folder)."""
-    from .io.atomic import leftovers
+    """Remove what killed writers left beside the tasks' outputs (one listing per folder); a
+    staging folder a live writer still holds stays (:func:`nidar_mi.io.atomic.remove_stale`)."""
+    from .io.atomic import leftovers, remove_stale
 
     by_dir: dict[Path, set[str]] = {}
     for t in tasks:
@@ -213,7 +216,7 @@ def _sweep(tasks: Sequence[Task]) -> None:
         for name, path in leftovers(folder):
             if name in names:
                 if path.is_dir() and not path.is_symlink():
-                    shutil.rmtree(path, ignore_errors=True)
+                    remove_stale(path, str(folder / name))
                 else:
                     path.unlink(missing_ok=True)
 
@@ -294,7 +297,16 @@ def _import_ray():
 
 
 def _check_address(address: str) -> None:
-    """Fail fast with one line when nothing listens at ``host:port`` (Ray would retry for minutes)."""
+    """Fail fast with one line when nothing, or something that is not a Ray cluster, answers at
+    ``host:port``.
+
+    Ray has no call that only checks an address: ``ray.init`` retries an address where nothing
+    answers for minutes, and with its reconnect timeout shortened (``RAY_gcs_rpc_server_
+    reconnect_timeout_s``) its core ends the process instead of raising; run in a child
+    process, a probe by ``ray.init`` takes over 10 s here even with 3 s timeouts. So the address
+    is checked at the protocol Ray speaks there: a Ray cluster (GCS or Ray Client server) is a
+    gRPC server, which answers an HTTP/2 client's preface with its SETTINGS frame.
+    """
     import socket
 
     host, _, port = address.removeprefix("ray://").rpartition(":")
@@ -397,32 +409,38 @@ def _init(ray, workers: int | None, address: str | None) -> None:
     )
 
 
+class _LogLines:
+    """A text stream whose lines go to the debug log (what Ray's driver prints while a job
+    runs)."""
+
+    def __init__(self, log) -> None:
+        self.log, self._part = log, ""
+
+    def write(self, text: str) -> int:
+        *lines, self._part = (self._part + text).split("\n")
+        for line in lines:
+            if line.strip():
+                self.log.debug("ray: %s", line)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
 @contextmanager
-def _raylet_messages_to_log():
-    """Send the messages Ray's driver prints about dead workers and retries to the debug log.
+def _ray_prints_to_log():
+    """Send what the driver prints to stdout while the job runs to the debug log.
 
     With ``log_to_driver=False`` Ray still prints the raylet's error messages (several lines per
-    killed worker) to stdout; each task's failure is reported here in one line instead. Ray has
-    no option for it, so its printer is replaced while the job runs (left alone if absent).
+    killed worker) to stdout from its listener thread; each task's failure is reported here in
+    one line instead. Ray has no option for it; nothing else prints while a job runs (the
+    progress bar and the failures go to stderr), so stdout itself is sent to the log.
     """
     import logging
 
-    from ray._private import worker as ray_worker
-
-    log = logging.getLogger("nidar_mi.tasks")
-    original = getattr(ray_worker, "print_to_stdstream", None)
-
-    def to_log(data, ignore_prefix=False):  # noqa: ARG001 - Ray's signature
-        for line in data.get("lines", []):
-            log.debug("ray %s: %s", data.get("pid", ""), line)
-
-    if original is not None:
-        ray_worker.print_to_stdstream = to_log
-    try:
+    lines = _LogLines(logging.getLogger("nidar_mi.tasks"))
+    with contextlib.redirect_stdout(lines):
         yield
-    finally:
-        if original is not None:
-            ray_worker.print_to_stdstream = original
 
 
 def _ray_error(ray, err: Exception, retries: int) -> str:
@@ -473,7 +491,7 @@ def _run_ray(pending, setup, report, bar, where, started) -> None:
     ray = _import_ray()
     address = where[1]
     bar.note("starting Ray" if address is None else f"connecting to {address}")
-    with _raylet_messages_to_log(), _sigterm_through_ray() as after_init:
+    with _ray_prints_to_log(), _sigterm_through_ray() as after_init:
         _run_on(ray, pending, setup, report, bar, where, after_init, started)
 
 

@@ -8,11 +8,12 @@ module of :data:`PLUGIN_MODULES` for the active variant, once, and makes
 ``nidar_mi.plugins.<name>`` that variant's module; :func:`plugin_module` returns the module of any
 variant registered so far. Importing a plugin module needs an active variant.
 
-Invalid parameters: a plugin's constructor raises :class:`PluginParameterError` with one line
-naming the plugin and the parameter. Mitsuba turns an exception raised in a Python plugin's
-``__init__`` into a ``RuntimeError`` whose text carries the Python traceback, ending with
-``PluginParameterError: <message>`` (the exception object itself is not kept);
-:func:`parameter_error` reads the message back, and :func:`nidar_mi.scene.load_scene` reports it.
+Invalid parameters: a plugin's constructor raises the package's one error type,
+:class:`~nidar_mi.errors.NidarError`, with one line naming the plugin and the parameter. Mitsuba
+turns an exception raised in a Python plugin's ``__init__`` into a ``RuntimeError`` whose text
+carries the Python traceback, ending with ``NidarError: <message>`` (the exception object itself
+is not kept); :func:`parameter_error` reads the message back, and
+:func:`nidar_mi.scene.load_scene` reports it.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from types import ModuleType
 
 __all__ = [
     "PLUGIN_MODULES",
-    "PluginParameterError",
     "parameter_error",
     "plugin_module",
     "register_all",
@@ -35,19 +35,18 @@ PLUGIN_MODULES = ("lidar", "retroreflector", "roughdiffuse")
 _by_variant: dict[str, dict[str, ModuleType]] = {}
 
 
-class PluginParameterError(ValueError):
-    """An invalid plugin parameter; the message is one line naming the plugin and the parameter."""
-
-
 def parameter_error(err: BaseException) -> str | None:
-    """The message of a :class:`PluginParameterError` that made a Mitsuba load fail, or None.
+    """The message of the :class:`~nidar_mi.errors.NidarError` a plugin raised that made a
+    Mitsuba load fail, or None.
 
     Args:
         err: the exception ``mi.load_string`` / ``mi.load_dict`` raised (or the error itself).
     """
-    if isinstance(err, PluginParameterError):
+    from nidar_mi.errors import NidarError
+
+    if isinstance(err, NidarError):
         return str(err)
-    marker = f"{PluginParameterError.__name__}: "
+    marker = f"{NidarError.__name__}: "
     text = str(err)
     if marker not in text:
         return None

@@ -1,5 +1,5 @@
 """Parameter checks shared by the BSDF plugins: a number read from ``mi.Properties``, finite
-and inside its interval, or a :class:`~nidar_mi.plugins.PluginParameterError` of one line
+and inside its interval, or a :class:`~nidar_mi.errors.NidarError` of one line
 naming the plugin and the parameter, e.g.
 ``roughdiffuse 'road': parameter 'sigma' must be in [0, 90) degrees (got 90)``.
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from . import PluginParameterError
+from nidar_mi.errors import NidarError
 
 __all__ = ["bounded", "plugin_name"]
 
@@ -41,22 +41,20 @@ def bounded(
         unit: appended to the interval in the message (e.g. ``" degrees"``).
 
     Raises:
-        PluginParameterError: not a number, not finite, or outside the interval.
+        NidarError: not a number, not finite, or outside the interval.
     """
     raw = props.get(name, default)
     try:
         value = float(raw)
     except (TypeError, ValueError):
-        raise PluginParameterError(
-            f"{where}: parameter '{name}' must be a number (got '{raw}')"
-        ) from None
+        raise NidarError(f"{where}: parameter '{name}' must be a number (got '{raw}')") from None
     if not math.isfinite(value):
-        raise PluginParameterError(f"{where}: parameter '{name}' must be finite (got '{raw}')")
+        raise NidarError(f"{where}: parameter '{name}' must be finite (got '{raw}')")
     left, low, high, right = interval
     above = value > low if left == "(" else value >= low
     below = value < high if right == ")" else value <= high
     if not (above and below):
-        raise PluginParameterError(
+        raise NidarError(
             f"{where}: parameter '{name}' must be in {left}{low:g}, {high:g}{right}{unit} "
             f"(got {value:g})"
         )

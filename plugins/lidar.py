@@ -6,11 +6,14 @@ Executed once per Mitsuba variant by :func:`nidar_mi.plugins.register_all`; see
 
 from __future__ import annotations
 
+import re
+
 import mitsuba as mi
 
+from nidar_mi.errors import NidarError
 from nidar_mi.lidar.config import PARAMETERS, LidarConfig
-
-from . import PluginParameterError
+from nidar_mi.weather.conditions import PARAMETERS as WEATHER_PARAMETERS
+from nidar_mi.weather.conditions import Weather
 
 __all__ = ["VARIANT", "LidarSensor"]
 
@@ -32,8 +35,16 @@ class LidarSensor(mi.Sensor):
          - Default
        * - ``preset``
          - string
-         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top`` (tables and
-           sources in :mod:`nidar_mi.lidar.pattern` and :mod:`nidar_mi.lidar.layouts`)
+         - ``vlp16``, ``hdl32e``, ``hdl64e``, ``os1_64``, ``os1_128``, ``waymo_top``,
+           ``vlp32c``, ``vls128``, ``os0_128``, ``os2_128``, ``pandar64``, ``xt32``, ``at128``,
+           ``livox_mid40`` (tables and sources in :mod:`nidar_mi.lidar.pattern` and
+           :mod:`nidar_mi.lidar.layouts`); a preset also sets the defaults of
+           ``horizontal_resolution``, ``range_min``, ``range_max`` and, for ``at128``,
+           ``fov_h`` (120), ``fov_h_centred``, ``rotation_rate`` and ``scan_start_azimuth``;
+           ``livox_mid40``: one laser behind two Risley prisms (:mod:`nidar_mi.lidar.risley`),
+           ``horizontal_resolution`` shots per sweep, ``rotation_rate`` sweeps per second
+           (their product the point rate), ``fov_h``, ``spin`` and ``scan_start_azimuth``
+           unused
          - ``vlp16``
        * - ``layout``
          - string
@@ -62,16 +73,18 @@ class LidarSensor(mi.Sensor):
          - float
          - horizontal field of view in degrees, (0, 360]; column j points at azimuth
            a0 + (j + 0.5)·fov_h/cols from +x, counter-clockwise
-         - 360
+         - 360 (``at128``: 120)
        * - ``fov_h_centred``
          - boolean
          - ``true``: a0 = -fov_h/2, the columns span ±fov_h/2 around +x (forward);
            ``false``: a0 = 0, they span 0..fov_h
-         - ``false``
+         - ``false`` (``at128``: ``true``)
        * - ``rotation_rate``
          - float
-         - spin rate in Hz, (0, 100]; one sweep takes 1/rotation_rate s
-         - 10
+         - spin rate in Hz, (0, 100]; a 360° turn takes 1/rotation_rate s, a sweep of
+           ``fov_h`` fov_h/360 of it; a sequence's default frame rate (one frame per turn;
+           ``at128``: one mirror facet, 240° of beam, so 1.5 · rotation_rate)
+         - 10 (``at128``: 6.67, its beam's turn rate: 120° in 50 ms, 10 frames/s)
        * - ``spin``
          - string
          - ``cw`` (clockwise seen from above, as Velodyne and Ouster sensors spin) or ``ccw``
@@ -79,7 +92,7 @@ class LidarSensor(mi.Sensor):
        * - ``scan_start_azimuth``
          - float
          - azimuth in degrees where a sweep starts (firing time 0), [-360, 360]
-         - 180
+         - 180 (``at128``: 60)
        * - ``wavelength``
          - float
          - laser wavelength in nm, [360, 1700]
@@ -88,6 +101,23 @@ class LidarSensor(mi.Sensor):
          - float
          - g in I = g·ρ·T²·a(d,θ) + η, > 0
          - 1
+       * - ``laser_gains``
+         - string
+         - comma-separated per-laser gains G_r, one per ring (ring 0 the highest), each > 0:
+           a return of ring r is G_r·g·ρ·T²·a(d,θ) (a real unit's lasers differ; recovered by
+           ``python -m nidar_mi.reconstruct``)
+         - all 1
+       * - ``range_response``
+         - string
+         - comma-separated ``d:f`` pairs (ranges in m, strictly increasing; factors >= 0): the
+           expected intensity is multiplied by r(d), linear between the pairs and constant
+           outside (a receiver's range-dependent gain, e.g. a sensor's own range compensation)
+         - none (r = 1)
+       * - ``intensity_offset``
+         - float
+         - b >= 0: the reported intensity is max(output - b, 0) (an encoding that reads 0 for
+           weak returns it still detects, as KITTI's HDL-64E does); detection is unchanged
+         - 0
        * - ``range_min``
          - float
          - minimum range in m, >= 0
@@ -144,7 +174,8 @@ class LidarSensor(mi.Sensor):
        * - ``return_mode``
          - string
          - ``strongest``, ``first``, ``last`` or ``dual`` (strongest and last; the second
-           strongest when they coincide); several returns need ``beam_divergence`` > 0
+           strongest when they coincide); ``dual`` needs ``beam_divergence`` > 0 (refused
+           without: a beam of no width has one return)
          - ``strongest``
        * - ``return_separation``
          - float
@@ -154,12 +185,30 @@ class LidarSensor(mi.Sensor):
          - integer
          - seed of the noise and dropout draws, >= 0
          - 0
+       * - ``fog``
+         - float
+         - fog by its meteorological optical range in m, [5, 100000] (α at 550 nm = ln 20 /
+           MOR; droplets by ``fog_type``): attenuation, the fog's own soft return
+           (:mod:`nidar_mi.lidar.weather_returns`, docs/WEATHER.md)
+         - none
+       * - ``fog_type``
+         - string
+         - ``advection`` or ``radiation`` (droplet sizes, :mod:`nidar_mi.weather.particles`)
+         - ``advection``
+       * - ``rain``
+         - float
+         - rain rate in mm/h, [0, 300]: attenuation, drops in the beam
+         - none
+       * - ``snow``
+         - float
+         - snowfall rate as melted water in mm/h, [0, 50]; not with ``rain``
+         - none
        * - ``to_world``
          - transform
          - pose; LiDAR frame x forward, y left, z up
          - identity
 
-    An invalid value fails the scene load with :class:`nidar_mi.plugins.PluginParameterError`:
+    An invalid value fails the scene load with :class:`nidar_mi.errors.NidarError`:
     one line naming the sensor and the parameter.
 
     .. code-block:: xml
@@ -182,10 +231,15 @@ class LidarSensor(mi.Sensor):
         if "calibration_file" in values:  # relative to the scene file
             path = str(values["calibration_file"])
             values["calibration_file"] = str(mi.file_resolver().resolve(path))
+        name = props.id() or "lidar"
+        self.config = LidarConfig.from_mapping(name, values)
+        weather = {k: props.get(k) for k in WEATHER_PARAMETERS if k in props}
         try:
-            self.config = LidarConfig.from_mapping(props.id() or "lidar", values)
-        except ValueError as e:
-            raise PluginParameterError(str(e)) from None
+            #: the sensor's own weather (None: clear), what a scan uses unless told otherwise
+            self.weather = Weather.from_mapping(weather)
+        except NidarError as e:
+            message = re.sub(r"`(\w+)`", r"parameter '\1'", str(e))
+            raise NidarError(f"lidar '{name}': {message}") from None
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"

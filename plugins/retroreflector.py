@@ -73,7 +73,7 @@ class Retroreflector(mi.BSDF):
          - share ``d`` of ``rho`` sent into a Lambertian base, in [0, 1]
          - 0.0
 
-    An invalid value fails the load with :class:`nidar_mi.plugins.PluginParameterError`: one
+    An invalid value fails the load with :class:`nidar_mi.errors.NidarError`: one
     line naming the BSDF and the parameter.
 
     .. code-block:: xml

@@ -52,7 +52,7 @@ class RoughDiffuse(mi.BSDF):
          - half width at half maximum of the surge in phase angle, degrees, in (0, 90]
          - 5
 
-    An invalid value fails the load with :class:`nidar_mi.plugins.PluginParameterError`: one
+    An invalid value fails the load with :class:`nidar_mi.errors.NidarError`: one
     line naming the BSDF and the parameter. Front-facing only, like ``diffuse``.
 
     .. code-block:: xml

@@ -10,7 +10,7 @@ are removed. The notebooks stay committed without outputs. ``--fast`` uses the n
 settings (``NIDAR_NOTEBOOK_FAST=1``); the committed figures are the full settings.
 
 No exported figure may derive from the non-commercial datasets (KITTI, nuScenes, the EPFL
-photos): the notebooks run with ``NIDAR_KITTI_DIR`` pointing at a folder that does not exist, so
+photos): the notebooks run with ``NIDAR_MI_DATA`` pointing at a folder that does not exist, so
 a notebook that compares with real sweeps (``05_ground_coverage``) draws its simulated half only.
 """
 
@@ -50,7 +50,7 @@ def execute(path: Path, *, fast: bool):
     nb = nbformat.read(path, as_version=4)
     env = {"MPLBACKEND": "module://matplotlib_inline.backend_inline"}
     env["NIDAR_NOTEBOOK_FAST"] = "1" if fast else ""
-    env["NIDAR_KITTI_DIR"] = NO_DATA
+    env["NIDAR_MI_DATA"] = NO_DATA
     old = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
     try:

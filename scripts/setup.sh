@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what nidar_mi needs on a Debian/Ubuntu machine: libLLVM >= 16 for Dr.Jit's CPU
 # back end (via apt when missing and running as root), then a virtual environment with the
-# package, its dependencies and the development tools.
+# package, every optional extra and the development tools, at the versions of constraints.txt.
 set -euo pipefail
 PYTHON=${PYTHON:-python3}
 VENV=${VENV:-.venv}
@@ -55,10 +55,14 @@ quietly() {  # run a command with its output in $LOG; print the log and stop whe
         exit 1
     fi
 }
-quietly "$VENV/bin/python" -m pip install -q --upgrade pip
+# Every version comes from constraints.txt (scripts/lock_dependencies.py writes it), so two
+# set-ups a month apart install the same packages.
+PIN=(-c constraints.txt)
+quietly "$VENV/bin/python" -m pip install -q "${PIN[@]}" --upgrade pip
 # The CPU build of torch; an unpinned torch would pull a multi-GB CUDA build.
-quietly "$VENV/bin/python" -m pip install -q "torch==2.13.0"
-quietly "$VENV/bin/python" -m pip install -q -e ".[dev]"
+quietly "$VENV/bin/python" -m pip install -q "${PIN[@]}" "torch==2.13.0"
+# The package with every extra the tests need (.[dev]; a plain `pip install .` is the lean core).
+quietly "$VENV/bin/python" -m pip install -q "${PIN[@]}" -e ".[dev]"
 "$VENV/bin/python" -c "import nidar_mi, mitsuba, drjit, torch" \
     || { echo "setup: the environment in $VENV does not import (try: $VENV/bin/python -m pip install -e '.[dev]')" >&2; exit 1; }
 echo "setup: ready ($VENV)"

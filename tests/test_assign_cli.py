@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.nidar.pipeline import shipped_weights_dir
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -79,7 +80,7 @@ def test_points_image_calib(tmp_path):
     assert "profile: generic-compensated (" in r.stdout
     assert "warning: unknown sensor" in r.stderr and "python -m nidar_mi.calibrate" in r.stderr
     p = read_npz(out / "points.npz")
-    assert sorted(os.listdir(out)) == ["points.las", "points.npz", "points.ply"]
+    assert sorted(os.listdir(out)) == [RECORD, "points.las", "points.npz", "points.ply"]
     np.testing.assert_array_equal(p["xyz"], xyz)
     np.testing.assert_array_equal(p["intensity"], np.arange(len(xyz), dtype=np.float32))
     obs = p["nidar_observed"]
@@ -109,20 +110,19 @@ def test_points_image_calib(tmp_path):
     not os.path.isdir(KITTI), reason="KITTI frames not available (../shared/data/kitti)"
 )
 def test_kitti_frame(tmp_path):
-    """The default profile with --kitti is kitti-hdl64e, fitted at first use on the KITTI frames
-    under the data root (here a small synthetic stand-in) and cached; a profile file gives the
-    same numbers."""
+    """The default profile with --kitti is kitti-hdl64e, fitted at first use on the other frames
+    of the --kitti folder (never on the frame assigned; nothing to set but the flags) and
+    cached; a profile file gives the same numbers."""
     from nidar_mi.io.kitti import read_kitti_bin
     from nidar_mi.io.points import read_npz
-    from tests.helpers.synthetic_kitti import make_kitti
 
-    make_kitti(tmp_path / "data" / "kitti", frames=2)
-    env = {"NIDAR_MI_DATA": str(tmp_path / "data"), "NIDAR_MI_CACHE": str(tmp_path / "cache")}
+    env = {"NIDAR_MI_DATA": str(tmp_path / "no_data"), "NIDAR_MI_CACHE": str(tmp_path / "cache")}
     out = tmp_path / "k"
     args = ("--kitti", KITTI, "--frame", "000000", "--formats", "npz")
     r = run("nidar_mi.assign", *args, "-o", str(out), env=env)
     assert r.returncode == 0, r.stderr
-    assert "fitting the kitti-hdl64e profile" in r.stderr
+    assert "fitting the kitti-hdl64e profile on 5 other frames of" in r.stderr
+    assert "(not on 000000)" in r.stderr
     assert "profile: kitti-hdl64e (" in r.stdout and "unknown sensor" not in r.stderr
     p = read_npz(out / "points.npz")
     xyz, refl = read_kitti_bin(os.path.join(KITTI, "velodyne", "000000.bin"))

@@ -98,14 +98,16 @@ def test_plugins_are_defined_once_per_variant(variant):
         (
             "[parser.cpp:1718] At string (line 3, col 5): failed to instantiate sensor plugin of "
             'type "lidar": Traceback (most recent call last):\n  File "x.py", line 9, in __init__'
-            "\nPluginParameterError: lidar 'top': parameter 'gain' must be > 0 (got 0)",
+            "\nnidar_mi.errors.NidarError: lidar 'top': parameter 'gain' must be > 0 (got 0)",
             "lidar 'top': parameter 'gain' must be > 0 (got 0)",
         ),
         ("[parser.cpp:12] unreferenced property 'wavelenght'", None),
     ],
 )
 def test_parameter_error_reads_the_plugin_message(text, message):
-    from nidar_mi.plugins import PluginParameterError, parameter_error
+    from nidar_mi.plugins import parameter_error
+
+    from nidar_mi.errors import NidarError
 
     assert parameter_error(RuntimeError(text)) == message
-    assert parameter_error(PluginParameterError("x: parameter 'y' bad")) == "x: parameter 'y' bad"
+    assert parameter_error(NidarError("x: parameter 'y' bad")) == "x: parameter 'y' bad"

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.render_dataset import build_dataset, split_scenes
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -174,7 +175,7 @@ def test_workers_give_the_serial_frames_even_when_a_worker_is_killed(variant, tm
             for k in ("nir", "depth"):
                 np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * a[k].max(), err_msg=k)
             assert np.abs(a["rgb"].astype(int) - b["rgb"].astype(int)).max() <= 1
-    hidden = [p for p in (tmp_path / "ray").rglob(".*")]
+    hidden = [p for p in (tmp_path / "ray").rglob(".*") if p.name != RECORD]
     assert hidden == []  # the killed render's staging folder was removed
     stamps = {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")}
     build_dataset(str(scenes), str(tmp_path / "ray"), workers=2, **opts)  # resumed: all done
@@ -200,7 +201,7 @@ def test_a_failing_scene_is_named_and_the_others_are_rendered(variant, tmp_path,
         "error: 1 of 4 scenes failed (broken); the other 3 are written; "
         "run again to retry the failed ones"
     ]
-    assert sorted(p.name for p in out.iterdir()) == ["renders"]  # no split, no meta.json
+    assert sorted(p.name for p in out.iterdir()) == [RECORD, "renders"]  # no split, no meta
     renders = out / "renders"
     assert sorted(p.name for p in renders.iterdir()) == sorted(REPEATABLE)
     stamps = {p: p.stat().st_mtime for p in renders.glob("*/manifest.json")}

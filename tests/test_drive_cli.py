@@ -51,8 +51,8 @@ def test_reduced_study_end_to_end(study):
 
 
 def test_a_second_run_reuses_the_frames(study):
-    frame = study / "frames" / "physics" / "000010.npz"
-    nidar = next((study / "frames" / "physics").glob("nidar_*/000010.npz"))
+    frame = study / "frames" / "physics" / "frames" / "000010" / "lidar_top" / "points.npz"
+    nidar = next((study / "frames").glob("nidar_*/000010.npz"))
     before = frame.stat().st_mtime_ns, nidar.stat().st_mtime_ns
     assert main(["-o", str(study), *REDUCED]) == 0
     assert (frame.stat().st_mtime_ns, nidar.stat().st_mtime_ns) == before
@@ -92,8 +92,9 @@ def test_sequence_folder_adds_the_distorted_runs(study, tmp_path):
     seq.mkdir()
     np.savetxt(seq / "poses.txt", rel[:, :3, :].reshape(len(rel), 12))
     np.savetxt(seq / "times.txt", times)
+    frames = study / "frames" / "physics" / "frames"
     for k in range(len(times)):
-        pts = dict(np.load(study / "frames" / "physics" / f"{k:06d}.npz"))
+        pts = dict(np.load(frames / f"{k:06d}" / "lidar_top" / "points.npz"))
         az = np.mod(np.arctan2(pts["xyz"][:, 1], pts["xyz"][:, 0]), 2 * np.pi)
         pts["t"] = (az / (2 * np.pi) * 0.1).astype(np.float32)
         d = seq / "frames" / f"{k:06d}" / "lidar_top"
@@ -124,5 +125,6 @@ def test_a_folder_of_something_else_is_refused(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert main(["-o", str(tmp_path), *REDUCED]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and "is not empty" in err and err.count("\n") == 1
+    assert err.startswith("error: ") and err.count("\n") == 1
+    assert "holds 1 file(s) that 'drive' did not write (notes.txt)" in err and "--overwrite" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from nidar_mi.cli.evaluate import main
+from nidar_mi.io.ownership import RECORD
 
 
 def _dataset(root, scenes):
@@ -47,7 +48,7 @@ def tiny_run(tmp_path_factory, variant):
     from nidar_mi.datasets.profile_fitting import fit_split_calibration
     from nidar_mi.nidar.config import TrainConfig
     from nidar_mi.nidar.pipeline import NidarModel
-    from nidar_mi.nidar.train import train
+    from nidar_mi.nidar.training import train
     from nidar_mi.render_dataset import build_dataset
 
     root = tmp_path_factory.mktemp("e2e")
@@ -77,7 +78,7 @@ def tiny_run(tmp_path_factory, variant):
 def test_end_to_end_tables(tiny_run, tmp_path):
     import csv
 
-    from nidar_mi.eval.frames import METHODS
+    from nidar_mi.eval.rendered import METHODS
 
     out = tmp_path / "out"
     argv = ["--data", str(tiny_run / "data"), "--weights", str(tiny_run / "run"), "-o", str(out)]
@@ -118,7 +119,7 @@ def test_lpips_without_lpips_is_an_error(tiny_run, tmp_path, capsys, monkeypatch
 
 def test_out_is_published_whole_and_caches_stay_outside(tiny_run, tmp_path, capsys):
     """Hand-made scenes render into the cache (reused by a rerun), never into OUT; a rerun
-    replaces OUT whole; a foreign OUT needs --overwrite."""
+    replaces OUT whole; a file evaluate did not write is never removed."""
     import os
     import shutil
 
@@ -130,6 +131,7 @@ def test_out_is_published_whole_and_caches_stay_outside(tiny_run, tmp_path, caps
     argv += ["--scenes", str(scenes), "--cache", str(cache), "--no-twin", "--figures", "0", "-q"]
     assert main(argv) == 0, capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == [
+        RECORD,
         "figures",
         "results.csv",
         "results.json",
@@ -137,18 +139,19 @@ def test_out_is_published_whole_and_caches_stay_outside(tiny_run, tmp_path, caps
     ]
     manifest = cache / "renders" / "park" / "manifest.json"
     stamp = os.path.getmtime(manifest)
-    (out / "figures" / "stale.png").write_bytes(b"x")
+    (out / "results.md").write_text("an earlier run's")
     assert main(argv) == 0
     assert os.path.getmtime(manifest) == stamp  # the cached render was reused
-    assert not (out / "figures" / "stale.png").exists()  # OUT replaced whole
+    assert (out / "results.md").read_text() != "an earlier run's"  # OUT replaced whole
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
-    foreign = tmp_path / "foreign"
-    foreign.mkdir()
-    (foreign / "notes.txt").write_text("mine")
+    (out / "figures" / "mine.png").write_bytes(b"x")  # a file evaluate did not write: kept
     capsys.readouterr()
-    assert main([*argv[:4], "-o", str(foreign), *argv[6:]]) == 2
-    assert "is not empty" in capsys.readouterr().err
-    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
+    assert main([*argv, "--overwrite"]) == 2
+    assert (
+        "holds 1 file(s) that 'evaluate' did not write (figures/mine.png)"
+        in capsys.readouterr().err
+    )
+    assert (out / "figures" / "mine.png").read_bytes() == b"x"
 
 
 def test_late_failure_leaves_no_output(tiny_run, tmp_path, capsys):
@@ -256,10 +259,12 @@ def test_the_command_line_becomes_evaluate_options():
 
 def test_the_library_names_parameters_and_the_command_flags(tmp_path, capsys):
     from nidar_mi.errors import NidarError
-    from nidar_mi.eval.suite import EvaluateOptions, run
+    from nidar_mi.eval.suite import EvaluateOptions, run_evaluation
 
     with pytest.raises(NidarError, match="`heldout_materials` needs `data`"):
-        run(EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path)))
+        run_evaluation(
+            EvaluateOptions(out=str(tmp_path / "o"), photos="p", heldout_materials=str(tmp_path))
+        )
     argv = ["--photos", "p", "--heldout-materials", str(tmp_path), "-o", str(tmp_path / "o")]
     assert main(argv) == 2
     assert "error: --heldout-materials needs --data" in capsys.readouterr().err

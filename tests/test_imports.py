@@ -187,10 +187,10 @@ def test_no_import_cycles_between_packages():
 #: First component below ``nidar_mi`` -> layer (0 low, 1 middle, 2 top); docs/ARCHITECTURE.md.
 LAYERS = {
     **dict.fromkeys(
-        ("errors", "backend", "illumination", "io", "geometry", "labels", "lidar", "materials"),
+        ("errors", "extras", "backend", "illumination", "io", "geometry", "labels", "lidar"),
         0,
     ),
-    **dict.fromkeys(("plugins", "tasks", "frames", "progress"), 0),
+    **dict.fromkeys(("materials", "weather", "plugins", "tasks", "training_frames", "progress"), 0),
     **dict.fromkeys(
         (
             "scene",
@@ -204,15 +204,27 @@ LAYERS = {
             "nidar",
             "profiles",
             "cloud_intensity",
+            "cloud_weather",
             "scenegen",
         ),
         1,
     ),
     "studies": 1,
-    **dict.fromkeys(("eval", "cli"), 2),
+    **dict.fromkeys(("eval", "resim", "cli"), 2),
 }
 #: Package-level modules that only start a command (``python -m nidar_mi.<command>``).
-SHIMS = {"render", "assign", "train", "evaluate", "pseudo_nir", "calibrate", "drive", "dataset"}
+SHIMS = {
+    "render",
+    "assign",
+    "train",
+    "evaluate",
+    "pseudo_nir",
+    "calibrate",
+    "drive",
+    "dataset",
+    "reflectance_cue",
+    "reconstruct",
+}
 
 
 def _component(module: str) -> str:
@@ -244,4 +256,79 @@ def test_imports_point_down_the_layers():
                 offences.append(f"{module} imports the command line ({dep})")
             elif LAYERS[_component(dep)] > own:
                 offences.append(f"{module} (layer {own}) imports {dep}")
+    assert offences == []
+
+
+def test_the_architecture_diagram_is_the_import_graph():
+    """docs/ARCHITECTURE.md's picture of the layers is drawn from this graph
+    (``scripts/layer_diagram.py --write`` redraws it)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "layer_diagram", REPO / "scripts" / "layer_diagram.py"
+    )
+    diagram = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(diagram)
+    doc = (REPO / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    assert diagram._with_diagram(doc, diagram.mermaid()) == doc
+    reduced = diagram.reduced({"a": {"b", "c"}, "b": {"c"}, "c": set()})
+    assert reduced == {"a": {"b"}, "b": {"c"}, "c": set()}
+
+
+def _module_level_imports(node: ast.AST):
+    """Import statements run when a module is imported: not those inside functions, nor
+    under ``if TYPE_CHECKING:``."""
+    for child in ast.iter_child_nodes(node):
+        if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+            continue
+        if isinstance(child, ast.If) and ast.unparse(child.test) in (
+            "TYPE_CHECKING",
+            "typing.TYPE_CHECKING",
+        ):
+            continue
+        if isinstance(child, ast.Import | ast.ImportFrom):
+            yield child
+        yield from _module_level_imports(child)
+
+
+#: Modules a physics render imports when they are imported (the command, the plugins, the scan,
+#: the materials, the writers): none may import a module of an optional extra at module level.
+CORE_ROOTS = (
+    "nidar_mi",
+    "nidar_mi.cli.render",
+    "nidar_mi.plugins",
+    "nidar_mi.simulate",
+    "nidar_mi.sequence",
+    "nidar_mi.render_session",
+    "nidar_mi.render_folder",
+    "nidar_mi.lidar.scan",
+    "nidar_mi.materials",
+    "nidar_mi.scenegen",
+    "nidar_mi.io.point_cloud",
+)
+
+
+def test_core_import_path_imports_no_optional_extra():
+    """Importing the core modules (and every module they import at module level, package
+    ``__init__`` files included) imports no module of an extra (nidar_mi.extras.EXTRAS)."""
+    from nidar_mi.extras import EXTRAS
+
+    optional = {m for mods in EXTRAS.values() for m in mods}
+    mods = _modules()
+    seen, todo, offences = set(), list(CORE_ROOTS), []
+    while todo:
+        module = todo.pop()
+        if module in seen or module not in mods:
+            continue
+        seen.add(module)
+        path, is_pkg = mods[module]
+        parts = module.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts))]  # parent packages
+        for node in _module_level_imports(ast.parse(path.read_text(), str(path))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            offences += [f"{module} imports {n}" for n in names if n.split(".")[0] in optional]
+            todo += _targets(node, module, is_pkg, mods)
+    assert len(seen) > 40
     assert offences == []

@@ -9,6 +9,8 @@ import laspy
 import numpy as np
 import pytest
 
+from nidar_mi.io.ownership import RECORD
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STREET = os.path.join(REPO, "scenes", "street.xml")
 SMALL = ["-D", "width=48", "-D", "height=27", "-D", "cols=256", "--spp", "2"]
@@ -53,7 +55,7 @@ def test_every_file_is_written(street_out):
         "cam_front/calib.json",
     }
     found = {str(p.relative_to(street_out)) for p in street_out.rglob("*") if p.is_file()}
-    assert found == expected
+    assert found == expected | {RECORD}
     assert not [p for p in street_out.parent.iterdir() if ".partial-" in p.name]
 
 
@@ -242,16 +244,21 @@ def test_two_lidars_in_one_scene(tmp_path):
     np.testing.assert_allclose(rear["reflectance"], 0.3 + 0.3 * (1550 - 360) / 1340, rtol=1e-4)
 
 
-def test_pcd_format_and_semantic_labels(tmp_path):
-    """``--formats npz,pcd`` writes the same points twice; the street's labels follow its shapes
-    (every asphalt return is road, every brick return building, every car-paint return car)."""
+def test_pcd_laz_formats_and_semantic_labels(tmp_path):
+    """``--formats npz,pcd,las,laz`` writes the same points: the PCD file holds the npz's, the
+    LAZ file (lazrs) the LAS file's; the street's labels follow its shapes (every asphalt return
+    is road, every brick return building, every car-paint return car)."""
+    from nidar_mi.io.las import read_las
     from nidar_mi.io.pcd import read_pcd
     from nidar_mi.io.points import read_npz
 
     out = tmp_path / "street"
-    r = run_cli(STREET, "-o", str(out), "-q", "--no-cameras", "--formats", "npz,pcd", *SMALL)
+    formats = ["--formats", "npz,pcd,las,laz"]
+    r = run_cli(STREET, "-o", str(out), "-q", "--no-cameras", *formats, *SMALL)
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in (out / "lidar_top").glob("points.*")) == [
+        "points.las",
+        "points.laz",
         "points.npz",
         "points.pcd",
     ]
@@ -260,6 +267,11 @@ def test_pcd_format_and_semantic_labels(tmp_path):
     assert sorted(pcd) == sorted(npz)
     for key, value in npz.items():
         np.testing.assert_array_equal(pcd[key], value, err_msg=key)
+    las, laz = read_las(out / "lidar_top/points.las"), read_las(out / "lidar_top/points.laz")
+    assert sorted(laz) == sorted(las) and len(laz["xyz"]) == len(npz["xyz"]) > 1000
+    for key, value in las.items():
+        np.testing.assert_array_equal(laz[key], value, err_msg=key)
+    assert laspy.read(out / "lidar_top/points.laz").header.are_points_compressed
     names = list(npz["material_names"])
     material = np.array(names)[npz["material"]]
     for mat, label in (("asphalt", 40), ("brick_red", 50), ("car_paint_red", 10)):

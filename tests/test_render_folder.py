@@ -9,6 +9,7 @@ import pytest
 
 from nidar_mi import render_folder as rf
 from nidar_mi.errors import NidarError
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.render_session import RenderOptions
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -60,17 +61,16 @@ def test_earlier_render_is_replaced_whole_and_user_folders_refused(tmp_path, var
     assert (out / "lidar" / "points.ply").is_file()
     render_scene(RenderOptions(TARGET, seed=1, **FAST), str(out))
     assert not (out / "lidar" / "points.ply").exists()  # nothing stale from the first run
-    assert sorted(rf.read_manifest(out)["files"]) == sorted(
+    assert sorted([*rf.read_manifest(out)["files"], RECORD]) == sorted(
         str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()
     )
     user = tmp_path / "mine"
     user.mkdir()
     (user / "notes.txt").write_text("keep")
-    with pytest.raises(NidarError, match="not empty"):
-        render_scene(RenderOptions(TARGET, seed=1, **FAST), str(user))
-    assert [p.name for p in user.iterdir()] == ["notes.txt"]
-    render_scene(RenderOptions(TARGET, seed=1, **FAST), str(user), overwrite=True)
-    assert not (user / "notes.txt").exists()
+    for overwrite in (False, True):
+        with pytest.raises(NidarError, match="did not write \\(notes.txt\\)"):
+            render_scene(RenderOptions(TARGET, seed=1, **FAST), str(user), overwrite=overwrite)
+        assert [p.name for p in user.iterdir()] == ["notes.txt"]
 
 
 def test_read_render_errors(tmp_path):

@@ -101,18 +101,23 @@ def test_another_variant_than_the_active_one_is_refused(variant):
     ],
 )
 def test_sequence_options_are_checked_before_loading(tmp_path, options, message):
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions, check_sequence
 
     traj = tmp_path / "poses.txt"
     traj.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n")
-    options = {"trajectory": str(traj)} | options
+    frame = RenderOptions(TARGET, **{k: v for k, v in options.items() if k == "spp"})
+    options = {"trajectory": str(traj)} | {k: v for k, v in options.items() if k != "spp"}
     with pytest.raises(NidarError, match=message):
-        check_sequence(SequenceOptions(TARGET, **options))
+        check_sequence(SequenceOptions(frame, **options))
 
 
-def test_sequence_frames_are_rendered_with_physics_intensity():
-    from nidar_mi.sequence import SequenceOptions
+def test_sequence_frames_are_rendered_with_physics_intensity(tmp_path):
+    from nidar_mi.render_session import RenderOptions
+    from nidar_mi.sequence import SequenceOptions, check_sequence
 
-    frame = SequenceOptions(TARGET, "poses.txt", seed=4, deskew=True).frame_options()
-    assert frame.intensity == "physics" and not frame.rgb_twin
-    assert frame.seed == 4 and frame.deskew and frame.formats == rf.FORMATS
+    traj = tmp_path / "poses.txt"
+    traj.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n")
+    frame = RenderOptions(TARGET, intensity="nidar")
+    with pytest.raises(NidarError, match="`intensity`: a sequence renders the physics intensity"):
+        check_sequence(SequenceOptions(frame, str(traj)))

@@ -257,9 +257,12 @@ def test_kitti_sequence_intensity_is_that_of_each_frames_bin(tmp_path, trajector
 @given(frames=st.integers(1, 10**12), max_frames=st.integers(1, 10**12))
 def test_the_frame_bound_refuses_exactly_the_frames_above_it(trajectory, frames, max_frames):
     from nidar_mi.errors import NidarError
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions, check_sequence
 
-    options = SequenceOptions(STREET, trajectory, frames=frames, max_frames=max_frames)
+    options = SequenceOptions(
+        RenderOptions(STREET), trajectory, frames=frames, max_frames=max_frames
+    )
     if frames <= max_frames:
         check_sequence(options)
         return

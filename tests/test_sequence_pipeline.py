@@ -30,11 +30,17 @@ def trajectory(tmp_path_factory):
 
 
 def _options(trajectory, **kw):
+    """Sequence options of the street; ``kw`` are fields of the sequence or of its frames."""
+    from dataclasses import fields
+
+    from nidar_mi.render_session import RenderOptions
     from nidar_mi.sequence import SequenceOptions
 
     kw = {"rate": 10.0, "frames": 3, "formats": ("npz",), "spp": 1, "params": SMALL,
           "progress": False} | kw  # fmt: skip
-    return SequenceOptions(STREET, trajectory, **kw)
+    own = {f.name for f in fields(SequenceOptions)}
+    frame = RenderOptions(STREET, **{k: v for k, v in kw.items() if k not in own})
+    return SequenceOptions(frame, trajectory, **{k: v for k, v in kw.items() if k in own})
 
 
 def test_no_kernel_compiled_after_the_first_frame(variant, trajectory, tmp_path, monkeypatch):
@@ -220,3 +226,40 @@ def _wait_for_render(folder, timeout=120.0):
             return
         time.sleep(0.1)
     raise AssertionError("the render did not start")
+
+
+def test_without_motion_each_frame_is_a_scan_and_a_photo_from_its_start_pose(
+    variant, trajectory, tmp_path
+):
+    """``motion`` off: frame k is the scan from the rig pose at t_k with seed + k, exactly, the
+    camera at that pose; labels off reads none; the last frame starts at the trajectory's end;
+    ensure_sequence reuses a current folder and renders another request again."""
+    from nidar_mi.geometry.se3 import transform_matrix
+    from nidar_mi.io.trajectory import read_trajectory
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.render_folder import read_render
+    from nidar_mi.scene import load_scene
+    from nidar_mi.sequence import ensure_sequence
+
+    options = _options(trajectory, rate=4.0, frames=None, seed=5, motion=False, labels=False)
+    out = tmp_path / "o"
+    m = ensure_sequence(options, str(out))
+    assert m["frame_count"] == 9 and m["request"]["motion"] is False  # 0 .. 2 s at 4 Hz
+    assert m["request"]["labels"] is False
+    loaded = load_scene(STREET, params=SMALL)
+    lidar, camera = loaded.lidars[0], loaded.cameras[0]
+    rig = read_trajectory(trajectory).at(np.array([2.0]))[0]
+    pose = rig @ transform_matrix(lidar.world_transform())
+    direct = scan(loaded.scene, lidar, seed=5 + 8, to_world=pose).points()
+    last = read_render(out / "frames" / "000008")
+    for key in ("xyz", "intensity", "range", "t"):
+        np.testing.assert_array_equal(last.points[key], direct[key], err_msg=key)
+    assert not last.points["label"].any()
+    T_world_cam = np.asarray(last.manifest["cameras"][camera.id()]["T_world_cam"])
+    mount = transform_matrix(camera.world_transform()) @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    np.testing.assert_allclose(T_world_cam, rig @ mount, atol=1e-5)
+    stamp = (out / "manifest.json").stat().st_mtime_ns
+    assert ensure_sequence(options, str(out)) == m
+    assert (out / "manifest.json").stat().st_mtime_ns == stamp
+    again = ensure_sequence(_options(trajectory, rate=4.0, frames=2, motion=False), str(out))
+    assert again["frame_count"] == 2 and "labels" not in again["request"]

@@ -58,8 +58,9 @@ def _setup_seen() -> tuple[int, str]:
 def _die_once(marker: str, out: str) -> str:
     """SIGKILL this worker in the middle of writing ``out`` the first time; write it the next."""
     from nidar_mi.io.atomic import staged_directory
+    from nidar_mi.io.ownership import Owner
 
-    with staged_directory(out) as stage:
+    with staged_directory(out, owner=Owner("test", "run")) as stage:
         (stage / "data.txt").write_text("half")
         if not os.path.exists(marker):
             open(marker, "w").close()
@@ -138,6 +139,36 @@ def test_bad_options_and_missing_ray_are_one_line_errors(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def _variant_in_task() -> str:
+    import mitsuba as mi
+
+    return mi.variant()
+
+
+@pytest.fixture()
+def caller_variant(variant):
+    """The caller's variant for one test: ``scalar_spectral``, not the default one (which a
+    worker without a variant of its own would take); the session's variant back afterwards."""
+    import mitsuba as mi
+
+    mi.set_variant("scalar_spectral")
+    yield "scalar_spectral"
+    mi.set_variant(variant)
+
+
+def test_a_serial_job_keeps_the_callers_variant(caller_variant):
+    """A serial job runs its tasks in the caller's process: the rendering set-up, with or
+    without the caller's variant named, renders in it and leaves it active."""
+    import mitsuba as mi
+
+    from nidar_mi.backend import prepare_worker, worker_setup
+
+    for setup in (prepare_worker, worker_setup()):
+        report = run_tasks([Task("t", _variant_in_task)], setup=setup, progress=False)
+        assert report.results == [caller_variant] and report.failures == []
+        assert mi.variant() == caller_variant
+
+
 def test_serial_mode_never_imports_ray(tmp_path):
     code = textwrap.dedent(
         f"""
@@ -198,6 +229,17 @@ def test_ray_workers_run_the_setup_with_their_cpu_share(ray_runtime):
     assert os.getpid() not in {pid for pid, _ in report.results}
 
 
+def test_ray_workers_render_in_the_callers_variant_and_leave_it(ray_runtime, caller_variant):
+    import mitsuba as mi
+
+    from nidar_mi.backend import worker_setup
+
+    tasks = [Task(f"t{i}", _variant_in_task) for i in range(3)]
+    report = run_tasks(tasks, workers=2, setup=worker_setup(), progress=False)
+    assert report.results == [caller_variant] * 3 and report.failures == []
+    assert mi.variant() == caller_variant
+
+
 def test_ray_failures_are_named_and_warnings_come_back(ray_runtime, tmp_path, capsys):
     tasks = _noise_tasks(tmp_path, 3) + [Task("broken", _fail, ("nidar",)), Task("w", _warn)]
     with pytest.warns(UserWarning, match="RGB reflectance past 830 nm"):
@@ -229,7 +271,9 @@ def test_a_worker_killed_for_good_fails_its_task_and_a_rerun_resumes(ray_runtime
     )
     first = run_tasks([victim, *_noise_tasks(tmp_path, 3)], workers=2, retries=0, progress=False)
     assert [f.name for f in first.failures] == ["victim"] and first.ran == 3
-    assert "worker process died" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "worker process died" in printed.err
+    assert printed.out == ""  # Ray's own lines about the dead worker went to the debug log
     assert not out.exists()
     second = run_tasks([victim, *_noise_tasks(tmp_path, 3)], workers=2, progress=False)
     assert second.ran == 1 and second.results[0] == "written" and len(second.skipped) == 3

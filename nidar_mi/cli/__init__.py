@@ -22,8 +22,11 @@ COMMANDS = {
     "pseudo_nir": "pseudo-NIR images from colour photos (NIDAR's spectral translation)",
     "calibrate": "fit a sensor profile (distance and ring response) on a sensor's own scans",
     "assign": "NIDAR intensity for a point cloud from camera images (or a KITTI frame)",
+    "weather": "add fog, rain or snow to point clouds recorded in clear air",
     "evaluate": "score NIDAR and the baselines (tables, figures)",
+    "reflectance_cue": "how well image values rank the true reflectance; what the image adds",
     "drive": "odometry and loop closure per intensity source on a simulated drive",
+    "reconstruct": "re-simulate a recorded drive: scene, reflectance and sensor from its scans",
 }
 
 

@@ -8,7 +8,8 @@ status:
 status  meaning
 ======  ====================================================================================
 0       success
-2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file)
+2       bad input or environment (:class:`~nidar_mi.errors.NidarError`, an OS error on a file,
+        a module of an optional extra that is not installed: :mod:`nidar_mi.extras`)
 130     interrupted by Ctrl-C (SIGINT)
 143     terminated (SIGTERM)
 ======  ====================================================================================
@@ -21,9 +22,11 @@ interrupted or failed command leaves nothing behind. Warnings are printed as one
 ``warning: ...`` line each.
 
 Every command takes ``-q``/``--quiet`` (warnings and errors only, no summary) and
-``-v``/``--verbose`` (debug lines too, e.g. one per training epoch); the package's log lines go
-to stderr at that level while :func:`run` runs. Progress bars (:func:`show_progress`) show on
-a terminal only, unless ``--progress`` or ``--no-progress`` says otherwise.
+``-v``/``--verbose`` (debug lines too; each command's ``--help`` says which: one per frame
+rendered, per scene, per epoch, ...); the package's log lines go to stderr at that level while
+:func:`run` runs. Progress bars (:func:`show_progress`) show on a terminal only, unless
+``--progress`` or ``--no-progress`` says otherwise; ``-q`` hides them, and no bar of the
+command's work shows where it decided on none (:func:`nidar_mi.progress.bars_allowed`).
 """
 
 from __future__ import annotations
@@ -37,7 +40,8 @@ import warnings
 from collections.abc import Callable, Mapping
 
 from ..errors import MAX_SEED, NidarError, check_seed, flag_message
-from ..progress import stderr_is_terminal
+from ..extras import extra_of, missing_extra
+from ..progress import bars_allowed, stderr_is_terminal
 
 __all__ = [
     "EXIT_OK",
@@ -46,12 +50,15 @@ __all__ = [
     "EXIT_TERMINATED",
     "Terminated",
     "flag_message",
+    "out_path",
     "parser",
     "parse_defines",
     "run",
     "scene_inputs",
     "seed_arg",
     "show_progress",
+    "add_weather_args",
+    "weather_of",
 ]
 
 EXIT_OK = 0
@@ -81,11 +88,18 @@ class _Parser(argparse.ArgumentParser):
 
 
 def parser(
-    command: str, description: str, *, progress: bool = True, **kwargs
+    command: str, description: str, *, verbose: str, progress: bool = True, **kwargs
 ) -> argparse.ArgumentParser:
     """An argument parser for ``python -m nidar_mi.<command>`` with ``--version``, ``-q`` and
     ``-v`` (and ``--progress``/``--no-progress`` where the command shows ``progress`` bars); a
-    usage error (unknown option, a value of the wrong type) is one line on stderr and status 2."""
+    usage error (unknown option, a value of the wrong type) is one line on stderr and status 2.
+
+    Args:
+        command: the command's name.
+        description: what it does, for ``--help``.
+        verbose: what ``-v`` adds for this command (its debug lines), for ``--help``.
+        progress: the command shows progress bars.
+    """
     from .. import __version__
 
     p = _Parser(prog=f"python -m nidar_mi.{command}", description=description, **kwargs)
@@ -94,9 +108,7 @@ def parser(
     level.add_argument(
         "-q", "--quiet", action="store_true", help="warnings and errors only (no summary, no bars)"
     )
-    level.add_argument(
-        "-v", "--verbose", action="store_true", help="debug lines too (e.g. one per epoch)"
-    )
+    level.add_argument("-v", "--verbose", action="store_true", help=f"debug lines too: {verbose}")
     if progress:
         bars = p.add_mutually_exclusive_group()
         bars.add_argument(
@@ -109,6 +121,13 @@ def parser(
             "--no-progress", dest="progress", action="store_false", help="no progress bars"
         )
     return p
+
+
+def out_path(text: str) -> str:
+    """argparse ``type`` of an output path: any path but an empty one."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path; name the output")
+    return text
 
 
 def show_progress(args: argparse.Namespace) -> bool:
@@ -175,13 +194,18 @@ def parse_defines(items: list[str]) -> dict[str, str]:
     """``-D NAME=VALUE`` options as a dict (later ones win).
 
     Raises:
-        NidarError: an item without ``=`` or with an empty name.
+        NidarError: an item without ``=``, with an empty name or an empty value.
     """
     out = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise NidarError(f"-D expects NAME=VALUE (got '{item}')")
+        if not value.strip():
+            raise NidarError(
+                f"-D {name.strip()}= has no value: give NAME=VALUE (leave -D {name.strip()} out "
+                "to keep the scene's own value)"
+            )
         out[name.strip()] = value.strip()
     return out
 
@@ -194,7 +218,11 @@ def scene_inputs(scene: str, depth: int = 8) -> list[str]:
     import os
     import xml.etree.ElementTree as ET
 
+    from ..io.atomic import file_problem
+
     found = [scene]
+    if file_problem(scene):  # a pipe or a device is never opened here; the scene's checks say
+        return found
     try:
         root = ET.parse(scene).getroot()
     except (OSError, ET.ParseError):
@@ -253,7 +281,8 @@ def run(
     except ValueError:  # not the main thread: leave SIGTERM alone
         previous = None
     try:
-        with warnings.catch_warnings(), _log_level(args):
+        bars = show_progress(args) if args is not None else stderr_is_terminal()
+        with warnings.catch_warnings(), _log_level(args), bars_allowed(bars):
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning
             status = work()
@@ -267,6 +296,13 @@ def run(
     except KeyboardInterrupt:
         print(f"interrupted; {_left(on_interrupt)}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except ModuleNotFoundError as e:  # a module of an extra that is not installed
+        extra = extra_of(e.name or "")
+        if extra is None:
+            raise
+        message = missing_extra(extra, "this command", ((e.name or "").split(".")[0],))
+        print(f"error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
     except OSError as e:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"error: {where}{_one_line(e.strerror or e)}", file=sys.stderr)
@@ -274,3 +310,54 @@ def run(
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def add_weather_args(p: argparse.ArgumentParser, *, what: str) -> None:
+    """``--fog``, ``--fog-type``, ``--rain`` and ``--snow`` (:mod:`nidar_mi.weather`) in one
+    group; ``what`` says what they apply to."""
+    g = p.add_argument_group("weather (docs/WEATHER.md)")
+    g.add_argument(
+        "--fog",
+        type=float,
+        default=None,
+        metavar="MOR_M",
+        help=f"fog of this meteorological optical range in m (5 .. 100000) {what}",
+    )
+    g.add_argument(
+        "--fog-type",
+        default=None,
+        choices=("advection", "radiation"),
+        help="the fog's droplets: advection (default) or radiation fog",
+    )
+    g.add_argument(
+        "--rain", type=float, default=None, metavar="MM_PER_H", help=f"rain, mm/h (0 .. 300) {what}"
+    )
+    g.add_argument(
+        "--snow",
+        type=float,
+        default=None,
+        metavar="MM_PER_H",
+        help=f"snowfall as melted water, mm/h (0 .. 50; not with --rain) {what}",
+    )
+
+
+def weather_of(args: argparse.Namespace):
+    """The :class:`nidar_mi.weather.Weather` of the weather flags (checked), or None when no
+    flag was given.
+
+    Raises:
+        NidarError: an impossible value, or ``--fog-type`` without ``--fog``.
+    """
+    from ..weather import Weather, check_weather
+
+    if args.fog_type is not None and args.fog is None:
+        raise NidarError("`fog_type` needs `fog`")
+    if args.fog is None and args.rain is None and args.snow is None:
+        return None
+    from ..extras import require
+
+    w = check_weather(
+        Weather(fog=args.fog, fog_type=args.fog_type or "advection", rain=args.rain, snow=args.snow)
+    )
+    require("weather", "fog, rain and snow")
+    return w

@@ -10,7 +10,7 @@ entry per camera (schema: :mod:`nidar_mi.io.calib`; the render command's ``calib
 ``--lidar`` choosing the LiDAR of a scene with several), one ``--image`` per camera in the same
 order: 8-bit colour PNG as a camera delivers it (RGBA loses alpha, 16-bit is reduced to 8 bit, a
 greyscale image is used as R = G = B with a warning). ``--kitti`` reads ``velodyne/ID.bin``,
-``image_2/ID.png`` and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti.load_frame`).
+``image_2/ID.png`` and ``calib/ID.txt`` (camera P2; :func:`nidar_mi.datasets.kitti_objects.load_kitti_frame`).
 
 Points with a non-finite value (NaN or infinity, e.g. the no-return points of an organised
 cloud) are dropped before any work, with a warning that counts them.
@@ -40,7 +40,8 @@ from __future__ import annotations
 import os
 
 from ..errors import NidarError
-from ._common import parser, run
+from ..extras import require
+from ._common import out_path, parser, run
 
 __all__ = ["main", "build_parser"]
 
@@ -49,7 +50,11 @@ FLAGS = {"images": "--image"}
 
 
 def build_parser():
-    p = parser("assign", "NIDAR intensity for a point cloud from camera images (or a KITTI frame).")
+    p = parser(
+        "assign",
+        "NIDAR intensity for a point cloud from camera images (or a KITTI frame).",
+        verbose="the points read and dropped, the profile, the points each camera sees",
+    )
     src = p.add_argument_group("input")
     src.add_argument("--points", help="point cloud (.ply .pcd .las .bin .npz), LiDAR frame")
     src.add_argument(
@@ -64,7 +69,7 @@ def build_parser():
     )
     src.add_argument("--kitti", help="KITTI folder with velodyne/, image_2/, calib/")
     src.add_argument("--frame", help="KITTI frame id, e.g. 000003")
-    p.add_argument("-o", "--out", help="output folder (default: out/assign/<name>)")
+    p.add_argument("-o", "--out", type=out_path, help="output folder (default: out/assign/<name>)")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
     p.add_argument("--formats", default="npz,ply,las", help="npz,ply,las (default: all)")
     p.add_argument("--no-occlusion", action="store_true", help="skip the occlusion test")
@@ -82,14 +87,22 @@ def build_parser():
         "generic-raw, or a profile file from python -m nidar_mi.calibrate",
     )
     p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT written by nidar_mi 0.1.0 (no record of its files); a file "
+        "assign did not write is never removed",
     )
     return p
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _assign(args), flags=FLAGS, args=args)
+
+    def work():
+        require("nidar", "assign")
+        _assign(args)
+
+    return run(work, flags=FLAGS, args=args)
 
 
 def _formats(text: str) -> list[str]:
@@ -140,13 +153,13 @@ def _profile(args, inputs) -> tuple[str | None, bool]:
 
 
 def _assign(args) -> None:
-    from ..cloud_intensity import assign_cloud, write_points
+    from ..cloud_intensity import ASSIGN_OWNER, assign_cloud, write_points
     from ..datasets.sensor_profiles import profile_line, warn_unknown_sensor
     from ..io.atomic import check_output_folder
 
     formats = _formats(args.formats)
     read = [args.points, args.calib, *args.image, args.kitti, args.weights, args.profile]
-    publish = dict(overwrite=args.overwrite, marker="points.npz", inputs=read)
+    publish = dict(owner=ASSIGN_OWNER, overwrite=args.overwrite, inputs=read)
     if args.out:  # before the inputs are read; the default OUT is named after them
         check_output_folder(args.out, **publish)
     inputs = _inputs(args)

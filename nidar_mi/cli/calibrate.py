@@ -1,14 +1,14 @@
 """``python -m nidar_mi.calibrate``: fit a sensor profile on a sensor's own scans.
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
-                                 [--form gbm|context|range_ring|distance_quantile|physical]
+                                 [--form context|gbm|range_ring|distance_quantile|physical]
                                  [--inputs GROUP,...] [--kind gbm|mlp] [--branch R|I_hat]
-                                 [--incidence [--no-geometry] | --no-incidence]
+                                 [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
 
 The default form is ``kitti-hdl64e``'s, ``context`` (below). A ``gbm`` profile reads the
-incidence by default (``--incidence`` says so explicitly).
+incidence unless ``--no-incidence``.
 
 ``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
 ``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with
@@ -18,9 +18,8 @@ its ``--branch`` map at the returns a camera sees is fitted to the sensor's inte
 (:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile also reads each
 return's ``|cos θ|``, from normals estimated on the scan's own points
 (:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence`` (the former recipe of
-``kitti-hdl64e``). ``--incidence`` asks for that default and changes nothing (kept for existing
-scripts). ``assign`` and ``render`` then estimate it the same way on the clouds they are
-given. With ``--no-geometry`` the profile reads the value and the
+``kitti-hdl64e`` reads it). ``assign`` and ``render`` then estimate it the same way on the clouds
+they are given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
 ``--max-frames K`` fits on K of the frames, evenly spaced over their order
@@ -52,7 +51,8 @@ from ..datasets.sensor_profiles import (
     KITTI_PROFILE_OPTIONS,
 )
 from ..errors import NidarError
-from ._common import parser, run, show_progress
+from ..extras import require
+from ._common import out_path, parser, run, show_progress
 
 __all__ = ["build_parser", "main"]
 
@@ -62,11 +62,14 @@ def build_parser():
         "calibrate",
         "Fit a sensor profile (its response to the value and the return's geometry) on a "
         "sensor's own scans.",
+        verbose="the frames read and the returns each gives, the fit's summary",
     )
     p.add_argument(
         "scans", nargs="+", metavar="SCANS", help="scan folders (KITTI, data or generic)"
     )
-    p.add_argument("-o", "--out", required=True, help="profile file to write (.json)")
+    p.add_argument(
+        "-o", "--out", required=True, type=out_path, help="profile file to write (.json)"
+    )
     p.add_argument("--name", help="profile name (default: the output file's stem)")
     p.add_argument("--sensor", default="", help="what the sensor is, free text")
     p.add_argument(
@@ -80,19 +83,10 @@ def build_parser():
         "distance_quantile: the paper's distance encoding + quantile map; physical: "
         "gain * R * |cos θ| / d^p, the generic profiles' closed form",
     )
-    inc = p.add_mutually_exclusive_group()
-    inc.add_argument(
-        "--incidence",
-        action="store_true",
-        default=None,
-        help="gbm: read the incidence |cos θ| of each return (the default of the gbm form: "
-        "changes nothing, kept for existing scripts)",
-    )
-    inc.add_argument(
+    p.add_argument(
         "--no-incidence",
-        dest="incidence",
-        action="store_false",
-        help="gbm: do not read the incidence",
+        action="store_true",
+        help="gbm, physical: do not read the incidence |cos θ| of each return (read by default)",
     )
     p.add_argument(
         "--no-geometry",
@@ -135,29 +129,33 @@ def build_parser():
     return p
 
 
-def _check_target(path: str, overwrite: bool, inputs: list) -> None:
-    from ..io.atomic import check_output_folder, check_outside_inputs
-
-    check_outside_inputs(path, inputs)
-    if os.path.isdir(path):
-        raise NidarError(f"{path} is a folder; give a file name for the profile")
-    check_output_folder(os.path.dirname(os.path.abspath(path)), overwrite=True)
-    if not os.path.exists(path) or overwrite:
-        return
+def _is_profile(path) -> bool:
+    """Whether ``path`` holds a sensor profile (an earlier output of this command)."""
     try:
         with open(path, encoding="utf-8") as f:
-            is_profile = json.load(f).get("schema", "").startswith("nidar_mi.sensor_profile/")
+            return json.load(f).get("schema", "").startswith("nidar_mi.sensor_profile/")
     except (OSError, ValueError, AttributeError, UnicodeDecodeError):
-        is_profile = False
-    if not is_profile:
-        raise NidarError(
-            f"{path} exists and is not a sensor profile; pass --overwrite to replace it"
-        )
+        return False
+
+
+def _check_target(path: str, overwrite: bool, inputs: list) -> str:
+    """The profile file to write (a link's target; :func:`nidar_mi.io.atomic.check_output_file`)."""
+    from ..io.atomic import check_output_file
+
+    checked = check_output_file(
+        path, overwrite=overwrite, inputs=inputs, earlier=_is_profile, kind="a sensor profile"
+    )
+    return str(checked)
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _calibrate(args, argv), args=args)
+
+    def work():
+        require("nidar", "calibrate")
+        _calibrate(args, argv)
+
+    return run(work, args=args)
 
 
 def _calibrate(args, argv) -> None:
@@ -165,14 +163,13 @@ def _calibrate(args, argv) -> None:
     from ..datasets.scans import load_scans
     from ..nidar.pipeline import NidarModel
 
-    if args.incidence is not None and args.form not in ("gbm", "physical"):
-        flag = "--incidence" if args.incidence else "--no-incidence"
-        raise NidarError(f"{flag} needs --form gbm or physical (got --form {args.form})")
+    if args.no_incidence and args.form not in ("gbm", "physical"):
+        raise NidarError(f"--no-incidence needs --form gbm or physical (got --form {args.form})")
     options = _context_options(args)
     if args.max_frames is not None and args.max_frames < 1:
         raise NidarError(f"--max-frames must be at least 1 (got {args.max_frames})")
     incidence = args.form in ("gbm", "physical") and (
-        KITTI_PROFILE_INCIDENCE if args.incidence is None else args.incidence
+        KITTI_PROFILE_INCIDENCE and not args.no_incidence
     )
     if args.no_geometry and not incidence:
         raise NidarError(
@@ -181,7 +178,7 @@ def _calibrate(args, argv) -> None:
         )
     if args.no_geometry and args.form != "gbm":
         raise NidarError(f"--no-geometry needs --form gbm (got --form {args.form})")
-    _check_target(args.out, args.overwrite, [*args.scans, args.weights])
+    target = _check_target(args.out, args.overwrite, [*args.scans, args.weights])
     name = args.name or os.path.splitext(os.path.basename(args.out))[0]
     splits = [s.strip() for s in args.splits.split(",")] if args.splits else None
     scans = load_scans(
@@ -206,7 +203,7 @@ def _calibrate(args, argv) -> None:
         **({"use_geometry": False} if args.no_geometry else {}),
         **options,
     )
-    profile.save(args.out)
+    profile.save(target)
     if not args.quiet:
         prov = profile.provenance
         print(

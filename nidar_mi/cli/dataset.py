@@ -3,7 +3,7 @@
     python -m nidar_mi.dataset --scenes DIR -o DATA [...]        rendered scenes
     python -m nidar_mi.dataset --kitti DIR [--kitti DIR ...] -o DATA   real KITTI frames
 
-The frame format is :mod:`nidar_mi.frames`; KITTI frames are
+The frame format is :mod:`nidar_mi.training_frames`; KITTI frames are
 :mod:`nidar_mi.datasets.kitti_frames` (held-out frame list, rings, short scans). KITTI data is
 non-commercial: keep ``DATA`` out of any repository.
 """
@@ -11,7 +11,7 @@ non-commercial: keep ``DATA`` out of any repository.
 from __future__ import annotations
 
 from ..errors import NidarError
-from ._common import parse_defines, parser, run, seed_arg, show_progress
+from ._common import out_path, parse_defines, parser, run, seed_arg, show_progress
 from ._workers import add_worker_options
 
 __all__ = ["main", "build_parser"]
@@ -22,6 +22,8 @@ def build_parser():
         "dataset",
         "Render scenes (cached in DATA/renders) and turn every camera into a NIDAR training "
         "frame; the frames and meta.json are published together when every scene is done.",
+        verbose="one per scene (rendered or cached, its frames) or KITTI frame, and a failed "
+        "scene's traceback",
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--scenes", help="folder of scene XML files (e.g. from nidar_mi.scenegen)")
@@ -32,7 +34,7 @@ def build_parser():
         help="KITTI folder (velodyne/, image_2/, calib/); repeatable, e.g. "
         "../shared/data/kitti and ../shared/data/kitti_raw_0926",
     )
-    p.add_argument("-o", "--out", required=True, help="dataset folder")
+    p.add_argument("-o", "--out", required=True, type=out_path, help="dataset folder")
     p.add_argument(
         "--split",
         default="0.8,0.1,0.1",
@@ -66,7 +68,8 @@ def build_parser():
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="accept an output folder that holds other files (they are removed)",
+        help="replace a dataset of the other source (--scenes / --kitti) or one written by "
+        "nidar_mi 0.1.0 (no record of its files); a file dataset did not write is never removed",
     )
     add_worker_options(p, "scenes")
     return p
@@ -90,8 +93,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     def work():
-        from ..frames import SPLITS
         from ..render_dataset import build_dataset
+        from ..training_frames import SPLITS
 
         if args.kitti:
             given = [f for f, d in _SCENE_OPTIONS.items() if getattr(args, d) != p.get_default(d)]
@@ -99,7 +102,9 @@ def main(argv=None) -> int:
                 raise NidarError(f"{', '.join(given)}: options of --scenes, not of --kitti")
             from ..datasets.kitti_frames import build_kitti_frames
 
-            meta = build_kitti_frames(args.kitti, args.out, progress=show_progress(args))
+            meta = build_kitti_frames(
+                args.kitti, args.out, progress=show_progress(args), overwrite=args.overwrite
+            )
             if not args.quiet:
                 for s in SPLITS:
                     print(f"{s:5s}  {len(meta['frames'][s]):5d} frames")
@@ -114,6 +119,9 @@ def main(argv=None) -> int:
             raise NidarError(
                 f"--split: three fractions in [0, 1] summing to 1 expected (got '{args.split}')"
             )
+        from ..backend import set_variant
+
+        set_variant()  # the renders' variant, also the workers' (nidar_mi.backend.worker_setup)
         meta = build_dataset(
             args.scenes,
             args.out,

@@ -1,14 +1,16 @@
 """``python -m nidar_mi.drive -o OUT``: the drive study (odometry and loop closure per intensity
 source on a simulated drive; :mod:`nidar_mi.eval.drive.study`).
 
-Writes ``OUT/results.json``, ``OUT/report.md`` and figures; the scene, the frames and NIDAR's
-columns are cached under ``OUT`` (an interrupted run resumes; new NIDAR weights recompute only
-NIDAR's columns and the analysis).
+Writes ``OUT/results.json``, ``OUT/report.md`` and figures; the scene, the sweeps (a sequence
+folder per kind, published whole) and NIDAR's columns are cached under ``OUT`` (an interrupted
+run resumes from the last step it completed; new NIDAR weights recompute only NIDAR's columns
+and the analysis).
 """
 
 from __future__ import annotations
 
-from ._common import parser, run, show_progress
+from ..extras import require
+from ._common import out_path, parser, run, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -22,8 +24,9 @@ def build_parser():
         "Render a drive through a generated city, run KISS-ICP on it (ATE/RPE against the true "
         "poses) and detect its loops with scan context for each intensity source "
         f"({', '.join(SOURCES)}); pose-graph correction with the verified loops.",
+        verbose="one per step of the study (frames, odometry and loops per source) with its time",
     )
-    p.add_argument("-o", "--out", required=True, help="output and cache folder")
+    p.add_argument("-o", "--out", required=True, type=out_path, help="output and cache folder")
     p.add_argument("--kind", choices=("city", "suburb"), default=d.kind, help="layout kind")
     p.add_argument("--seed", type=int, default=d.seed, help="scene seed (default 0)")
     p.add_argument("--blocks", default="4,3", metavar="NX,NY", help="blocks of the layout (4,3)")
@@ -52,7 +55,8 @@ def build_parser():
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="write into OUT even when it holds files of something else (none is removed)",
+        help="write into OUT even when it holds files of something else (none is removed; "
+        "another command's output is refused)",
     )
     return p
 
@@ -94,10 +98,17 @@ def main(argv=None) -> int:
             body_motion=not args.no_body_motion,
         )
         cfg.check()  # bad options are named before the variant starts
+        require("drive", "drive")
+        if "nidar" in cfg.sources:
+            require("nidar", "drive --sources nidar")
         set_variant()
         results = run_study(args.out, cfg, progress=show_progress(args), overwrite=args.overwrite)
         if not args.quiet:
             print(markdown_tables(results))
             print(f"report: {args.out}/report.md")
 
-    return run(work, on_interrupt="frames rendered so far are kept; run again to resume", args=args)
+    return run(
+        work,
+        on_interrupt="the scene and the sweeps completed so far are kept; run again to resume",
+        args=args,
+    )

@@ -29,7 +29,7 @@ the ablations.
 ``DATA/cache/evaluate``): a rerun reuses what it holds, and nothing of it is written into
 ``OUT``. ``OUT`` receives ``results.md``, ``results.csv`` (one row per frame and method, plus
 ``mean`` rows), ``results.json`` and ``figures/*.png`` (no figure of real data), published whole
-when everything succeeded. See :mod:`nidar_mi.eval.frames` for the methods and the metric scale.
+when everything succeeded. See :mod:`nidar_mi.eval.rendered` for the methods and the metric scale.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ import logging
 import os
 import sys
 
-from ._common import parser, run, show_progress
+from ._common import out_path, parser, run, show_progress
 from ._workers import add_worker_options
 
 __all__ = ["main"]
@@ -51,6 +51,7 @@ def _parser():
         "evaluate",
         "Score NIDAR and the baselines on held-out and hand-made scenes, real KITTI frames, real "
         "RGB/NIR photos, and the ablations.",
+        verbose="one per rendered frame scored (its returns)",
     )
     p.add_argument("--data", help="dataset folder (meta.json, renders/, splits)")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -85,9 +86,14 @@ def _parser():
         "--cache",
         help="folder of the renders and ablation runs a rerun reuses (default: DATA/cache/evaluate)",
     )
-    p.add_argument("-o", "--out", required=True, help="output folder (results, figures)")
     p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+        "-o", "--out", required=True, type=out_path, help="output folder (results, figures)"
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT written by nidar_mi 0.1.0 (no record of its files); a file "
+        "evaluate did not write is never removed",
     )
     add_worker_options(p, "hand-made scenes to render")
     return p
@@ -127,14 +133,14 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     def work():
-        from ..eval.suite import run as evaluate
+        from ..eval.suite import run_evaluation
 
         opts = options(args, argv_text)
         if opts.scans_scenes:
             from ..backend import set_variant
 
             set_variant("llvm_ad_spectral")
-        payload = evaluate(opts)
+        payload = run_evaluation(opts)
         log.info("wrote %s in %.0f s", os.path.join(opts.out, "results.md"), payload["seconds"])
 
     return run(work, flags={"scene_dir": "--scenes"}, args=args)

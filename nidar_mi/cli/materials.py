@@ -7,7 +7,8 @@ Usage::
 
 ``--list`` (the default) prints name, kind, reflectance at 550 / 905 / 1550 nm, sRGB colour and
 source of every material. ``--plot`` writes a PNG of the chosen materials' reflectance from 360 to
-1700 nm with the 905 and 1550 nm LiDAR wavelengths marked.
+1700 nm with the 905 and 1550 nm LiDAR wavelengths marked; an existing file (``-o``, default
+``spectra.png``) is replaced only with ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -16,20 +17,28 @@ import os
 import sys
 
 from ..errors import NidarError
-from ._common import parser, run
+from ._common import out_path, parser, run
 
 __all__ = ["main"]
 
 
 def _parser():
     p = parser(
-        "materials", "List the spectral material library and plot material spectra.", progress=False
+        "materials",
+        "List the spectral material library and plot material spectra.",
+        verbose="the source of each plotted spectrum",
+        progress=False,
     )
     p.add_argument("--list", action="store_true", help="print the material table (default)")
     p.add_argument("--plot", nargs="+", metavar="NAME", help="materials to plot")
     p.add_argument(
-        "-o", "--output", default=None, help="PNG path for --plot (default: spectra.png)"
+        "-o",
+        "--output",
+        default=None,
+        type=out_path,
+        help="PNG path for --plot (default: spectra.png)",
     )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --plot file (-o)")
     return p
 
 
@@ -38,7 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
 
     def work():
-        from ..materials.report import format_table, list_materials, plot_spectra
+        from ..io.atomic import check_output_file
+        from ..materials.listing import format_table, list_materials, plot_spectra
 
         if args.output is not None and not args.plot:
             raise NidarError("-o/--output names the --plot file: give --plot NAME ... too")
@@ -47,10 +57,13 @@ def main(argv: list[str] | None = None) -> int:
             raise NidarError(f"-o/--output: the plot is a PNG; name a .png file (got {output})")
         if args.plot and not os.path.isdir(os.path.dirname(os.path.abspath(output))):
             raise NidarError(f"output folder does not exist: {os.path.dirname(output)}")
+        if args.overwrite and not args.plot:
+            raise NidarError("--overwrite applies to the --plot file: give --plot NAME ... too")
+        target = check_output_file(output, overwrite=args.overwrite) if args.plot else None
         if args.list or not args.plot:
             sys.stdout.write(format_table(list_materials()))
         if args.plot:
-            plot_spectra(args.plot, output)
+            plot_spectra(args.plot, str(target))
             sys.stdout.write(f"wrote {output}\n")
 
     return run(work, args=args)

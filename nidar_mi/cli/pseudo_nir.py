@@ -5,7 +5,8 @@
 
 Each ``INPUT`` is an image file or a folder (its images: ``.png .jpg .jpeg .bmp .tif .tiff
 .webp``; other files in a folder are skipped with one line saying how many; ``--recursive``
-descends into sub-folders). For each image ``OUT/<stem>.png`` is written: the 8-bit pseudo-NIR
+descends into sub-folders, except ``OUT`` and earlier outputs of this command). For each image
+``OUT/<stem>.png`` is written: the 8-bit pseudo-NIR
 at the input's full size and its own exposure (linear pseudo-NIR, sRGB-encoded like the input;
 :func:`nidar_mi.nidar.infer.pseudo_nir_linear`), pixel-aligned with the stored pixels (EXIF
 orientation is not applied). ``--exr`` adds ``OUT/<stem>.exr``: the linear pseudo-NIR as
@@ -27,6 +28,7 @@ succeeded.
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
 from dataclasses import dataclass
@@ -35,14 +37,30 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ._common import parser, run, show_progress
+from ..extras import require
+from ..io.ownership import Owner
+from ._common import out_path, parser, run, show_progress
+
+log = logging.getLogger("nidar_mi.pseudo_nir")
 
 __all__ = ["IMAGE_EXTENSIONS", "build_parser", "collect_inputs", "main", "output_names"]
 
 #: File extensions read as images (case-insensitive).
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
-#: Marker file of an earlier output folder (it is replaced without ``--overwrite``).
+#: The index of an output folder (every input with its outputs).
 INDEX = "index.json"
+
+
+def _indexed(folder: Path) -> list[str]:
+    """The files an output folder of nidar_mi 0.1.0 (no record) lists in its index."""
+    import json
+
+    with open(folder / INDEX, encoding="utf-8") as f:
+        return [INDEX, *(o for e in json.load(f)["images"] for o in e["outputs"])]
+
+
+#: Who writes a pseudo-NIR output folder (:mod:`nidar_mi.io.ownership`).
+OWNER = Owner("pseudo_nir", "images", names=(INDEX,), listed=_indexed)
 
 
 @dataclass(frozen=True)
@@ -69,12 +87,16 @@ def _is_image_name(p: Path) -> bool:
 
 def _probe(path: Path) -> _Input:
     """Open ``path`` as a colour image (header only); one-line NidarError if it is not one."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
-    if not path.is_file():
-        raise NidarError(f"{path}: no such file")
+    from ..io.atomic import file_problem
+    from ..io.images import open_image
+
+    problem = file_problem(path)
+    if problem:
+        raise NidarError(f"{path}: {problem}")
     try:
-        with Image.open(path) as im:
+        with open_image(path) as im:
             mode, (w, h) = im.mode, im.size
     except UnidentifiedImageError:
         raise NidarError(f"{path}: not an image (or a format Pillow cannot read)") from None
@@ -89,23 +111,48 @@ def _probe(path: Path) -> _Input:
     return _Input(path, w, h)
 
 
+def _folder_files(folder: Path, recursive: bool, skip: set[Path]) -> list[Path]:
+    """The files of ``folder`` (and of its sub-folders when ``recursive``), sorted; folders in
+    ``skip`` (links resolved) and earlier outputs of this command (their record) left out."""
+    from ..io.ownership import read_record
+
+    out = []
+    for root, dirs, files in os.walk(folder):
+        dirs[:] = sorted(
+            d
+            for d in dirs
+            if recursive
+            and Path(os.path.realpath(os.path.join(root, d))) not in skip
+            and (read_record(Path(root, d)) or {}).get("command") != OWNER.command
+        )
+        out += [Path(root, f) for f in files if Path(root, f).is_file()]
+    return sorted(out)
+
+
 def collect_inputs(
-    inputs: list[str], *, recursive: bool = False, skip_bad: bool = False
+    inputs: list[str],
+    *,
+    recursive: bool = False,
+    skip_bad: bool = False,
+    exclude: list[str] = (),
 ) -> list[_Input]:
     """Image files named by ``inputs`` (files and folders), each probed, in the given order.
 
     Folder contents are sorted by path. Non-image files inside folders are skipped (one warning
-    per folder with their count); a file given by name must be a readable colour image.
+    per folder with their count); a file given by name must be a readable colour image. A
+    recursive walk leaves out the folders ``exclude`` (the output) and every earlier output of
+    this command (a folder with its record): a rerun never reads its own images.
 
     Raises:
         NidarError: a missing input, a bad image (unless ``skip_bad``), or no image at all.
     """
     found: list[_Input] = []
     seen: set[Path] = set()
+    skip = {Path(os.path.realpath(e)) for e in exclude}
     for item in inputs:
         p = Path(item)
         if p.is_dir():
-            files = sorted(q for q in (p.rglob("*") if recursive else p.iterdir()) if q.is_file())
+            files = _folder_files(p, recursive, skip)
             images = [q for q in files if _is_image_name(q)]
             others = len(files) - len(images)
             if others:
@@ -115,7 +162,7 @@ def collect_inputs(
         else:
             raise NidarError(f"{p}: no such file or folder")
         for q in images:
-            key = q.resolve()
+            key = Path(os.path.realpath(q))
             if key in seen:
                 continue
             seen.add(key)
@@ -161,12 +208,11 @@ def output_names(paths: list[Path]) -> list[str]:
 def _read_rgb(path: Path, skip_bad: bool = False) -> np.ndarray | None:
     """The image's pixels (H, W, 3) uint8; a file that fails to decode past its header (e.g.
     truncated) is an error, or with ``skip_bad`` a warning and None."""
-    from PIL import Image
-
     from ..io.atomic import reading
+    from ..io.images import open_image
 
     try:
-        with reading(path) as p, Image.open(p) as im:
+        with reading(path) as p, open_image(p) as im:
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except NidarError as e:
         if not skip_bad:
@@ -183,9 +229,13 @@ def _to_png8(nir_linear: np.ndarray) -> np.ndarray:
 
 
 def build_parser():
-    p = parser("pseudo_nir", "Pseudo-NIR images from colour photos with NIDAR's STN.")
+    p = parser(
+        "pseudo_nir",
+        "Pseudo-NIR images from colour photos with NIDAR's STN.",
+        verbose="one per image (its size and inference scale)",
+    )
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="image files or folders")
-    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("-o", "--out", required=True, type=out_path, help="output folder")
     p.add_argument("--exr", action="store_true", help="also write float32 linear EXR")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
     p.add_argument(
@@ -203,13 +253,23 @@ def build_parser():
     )
     p.add_argument("-r", "--recursive", action="store_true", help="descend into sub-folders")
     p.add_argument("--skip-bad", action="store_true", help="skip unreadable files with a warning")
-    p.add_argument("--overwrite", action="store_true", help="replace a non-empty OUT")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT written by nidar_mi 0.1.0 (no record of its files); a file "
+        "pseudo_nir did not write is never removed",
+    )
     return p
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: _convert(args), args=args)
+
+    def work():
+        require("nidar", "pseudo_nir")
+        _convert(args)
+
+    return run(work, args=args)
 
 
 def _convert(args) -> None:
@@ -220,12 +280,14 @@ def _convert(args) -> None:
     from ..nidar.pipeline import NidarModel
     from ..progress import progress_bar
 
-    publish = dict(overwrite=args.overwrite, marker=INDEX, inputs=[*args.inputs, args.weights])
+    publish = dict(owner=OWNER, overwrite=args.overwrite, inputs=[*args.inputs, args.weights])
     check_output_folder(args.out, **publish)
     reduced_size(1, 1, args.scale)
     if args.max_side < 16:
         raise NidarError(f"--max-side must be >= 16 (got {args.max_side})")
-    items = collect_inputs(args.inputs, recursive=args.recursive, skip_bad=args.skip_bad)
+    items = collect_inputs(
+        args.inputs, recursive=args.recursive, skip_bad=args.skip_bad, exclude=[args.out]
+    )
     names = output_names([it.path for it in items])
     model = NidarModel.load(args.weights)
     if model.stn is None:
@@ -243,6 +305,9 @@ def _convert(args) -> None:
             if rgb is None:
                 continue
             scale = min(args.scale, args.max_side / max(rgb.shape[:2]))
+            log.debug(
+                "%s: %dx%d, inferred at scale %.3g", it.path, rgb.shape[1], rgb.shape[0], scale
+            )
             nir = pseudo_nir_linear(model.stn, rgb, scale=scale)
             if not np.all(np.isfinite(nir)):
                 raise NidarError(f"{it.path}: the network gave non-finite values")

@@ -15,7 +15,17 @@ import os
 from ..render_folder import BIN_INTENSITY, DEFAULT_FORMATS, FORMATS
 from ..render_session import INTENSITY_SOURCES, NIDAR_BRANCHES
 from ..sequence import MAX_FRAMES
-from ._common import parse_defines, parser, run, scene_inputs, seed_arg, show_progress
+from ._common import (
+    add_weather_args,
+    out_path,
+    parse_defines,
+    parser,
+    run,
+    scene_inputs,
+    seed_arg,
+    show_progress,
+    weather_of,
+)
 
 __all__ = ["main", "build_parser"]
 
@@ -73,9 +83,13 @@ def build_parser():
         "render",
         "Scan every lidar sensor of a scene (points with NIR intensity) and render every "
         "camera (RGB, NIR band at the LiDAR wavelength, depth).",
+        verbose="one per sensor scanned or rendered, and with --trajectory one per frame, each "
+        "with its time",
     )
     p.add_argument("scene", help="scene XML file")
-    p.add_argument("-o", "--out", help="output directory (default: out/<scene name>)")
+    p.add_argument(
+        "-o", "--out", type=out_path, help="output directory (default: out/<scene name>)"
+    )
     p.add_argument(
         "--formats",
         default=",".join(DEFAULT_FORMATS),
@@ -106,7 +120,11 @@ def build_parser():
     p.add_argument("--rgb-twin", action="store_true", help="load the scene's RGB-only twin")
     p.add_argument("--no-cameras", action="store_true", help="skip the camera renders")
     p.add_argument(
-        "--overwrite", action="store_true", help="replace OUT even when it holds other files"
+        "--overwrite",
+        action="store_true",
+        help="replace an OUT of the other kind of render (one scene / --trajectory) or one "
+        "written by nidar_mi 0.1.0 (no record of its files); a file render did not write is "
+        "never removed",
     )
     p.add_argument(
         "--max-memory",
@@ -115,6 +133,7 @@ def build_parser():
         help="memory a scan or camera render may use, e.g. 16G (default: half the machine's "
         "memory, or NIDAR_MAX_MEMORY); larger requests are refused before anything runs",
     )
+    add_weather_args(p, what="for every lidar and camera (replacing the scene's own)")
     _add_sequence_args(p)
     p.add_argument(
         "--deskew",
@@ -146,7 +165,7 @@ def _add_intensity_args(p) -> None:
     )
     p.add_argument(
         "--bin-intensity",
-        default="unit",
+        default=None,
         choices=BIN_INTENSITY,
         help="intensity in points.bin: unit, KITTI's [0, 1] (intensity / the sensor's full "
         "scale, clipped; default); raw, the simulated intensity as it is",
@@ -173,7 +192,8 @@ def _add_sequence_args(p) -> None:
         "--rate",
         type=float,
         default=None,
-        help="frames per second (default: the first lidar's rotation_rate); also the sample "
+        help="frames per second (default: the first lidar's frame rate, its rotation_rate but "
+        "for the at128's 10 Hz); also the sample "
         "rate of KITTI odometry poses",
     )
     seq.add_argument(
@@ -210,9 +230,25 @@ def _add_sequence_args(p) -> None:
     )
 
 
+def _bin_intensity(args) -> str:
+    """``--bin-intensity``, refused where no ``.bin`` is written (default ``unit``)."""
+    from ..errors import NidarError
+
+    if args.bin_intensity is None:
+        return "unit"
+    bins = "bin" in _parse_formats(args.formats) or "kitti" in args.sequence_formats.lower()
+    if not bins:
+        raise NidarError(
+            "--bin-intensity applies to the .bin points: add bin to --formats (or, with "
+            "--trajectory, kitti to --sequence-formats)"
+        )
+    return args.bin_intensity
+
+
 def _sequence_options(args):
     """The :class:`~nidar_mi.sequence.SequenceOptions` of ``--trajectory``."""
     from ..errors import NidarError
+    from ..render_session import RenderOptions
     from ..sequence import SequenceOptions
 
     if args.intensity != "physics" or args.rgb_twin:
@@ -221,25 +257,29 @@ def _sequence_options(args):
         raise NidarError(
             "--weights, --nidar-branch and --profile are used only with --intensity nidar"
         )
-    return SequenceOptions(
+    frame = RenderOptions(
         args.scene,
-        args.trajectory,
-        rate=args.rate,
-        frames=args.frames,
         formats=tuple(_parse_formats(args.formats)),
-        sequence_formats=tuple(
-            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
-        ),
-        bin_intensity=args.bin_intensity,
         seed=args.seed,
         spp=args.spp,
         params=parse_defines(args.params),
         cameras=not args.no_cameras,
-        deskew=args.deskew,
+        bin_intensity=_bin_intensity(args),
         max_memory=_memory(args.max_memory),
+        deskew=args.deskew,
+        progress=show_progress(args),
+        weather=weather_of(args),
+    )
+    return SequenceOptions(
+        frame,
+        args.trajectory,
+        rate=args.rate,
+        frames=args.frames,
+        sequence_formats=tuple(
+            f.strip().lower() for f in args.sequence_formats.split(",") if f.strip()
+        ),
         max_frames=MAX_FRAMES if args.max_frames is None else args.max_frames,
         max_disk=_memory(args.max_disk, "--max-disk"),
-        progress=show_progress(args),
         previews=args.previews or "first",
     )
 
@@ -251,6 +291,12 @@ def _render_options(args):
 
     if args.intensity == "nidar" and args.no_cameras:
         raise NidarError("--intensity nidar needs the camera renders (drop --no-cameras)")
+    weather = weather_of(args)
+    if weather is not None and not weather.clear and args.intensity == "nidar":
+        raise NidarError(
+            "--intensity nidar reads the surfaces from the camera images, which the weather "
+            "veils (NIDAR learned clear days): render weather with --intensity physics"
+        )
     profile = None
     if args.intensity == "nidar":
         from ..datasets.sensor_profiles import profile_line
@@ -276,11 +322,25 @@ def _render_options(args):
         weights=args.weights,
         nidar_branch=args.nidar_branch,
         profile=profile,
-        bin_intensity=args.bin_intensity,
+        bin_intensity=_bin_intensity(args),
         max_memory=_memory(args.max_memory),
         deskew=args.deskew,
         progress=show_progress(args),
+        weather=weather,
     )
+
+
+def _require_extras(args) -> None:
+    """The optional dependencies the options need (:mod:`nidar_mi.extras`), checked before any
+    work."""
+    from ..extras import require
+
+    if args.intensity == "nidar" or args.profile is not None:
+        require("nidar", "--intensity nidar")
+    if "laz" in _parse_formats(args.formats):
+        require("laz", "--formats laz")
+    if "rosbag" in args.sequence_formats.lower():
+        require("ros", "--sequence-formats rosbag")
 
 
 def main(argv=None) -> int:
@@ -290,11 +350,14 @@ def main(argv=None) -> int:
     def work():
         from ..backend import set_variant
         from ..errors import NidarError
-        from ..io.atomic import check_outside_inputs
+        from ..io.atomic import check_output_folder
+        from ..render_folder import RENDER_OWNER, SEQUENCE_OWNER
 
         sequence_only = (args.rate, args.frames, args.max_frames, args.max_disk)
         inputs = [*scene_inputs(args.scene), args.trajectory, args.weights, args.profile]
-        check_outside_inputs(out, inputs)
+        owner = RENDER_OWNER if args.trajectory is None else SEQUENCE_OWNER
+        check_output_folder(out, owner=owner, overwrite=args.overwrite, inputs=inputs)
+        _require_extras(args)
         if args.trajectory is None and (
             any(v is not None for v in sequence_only)
             or args.sequence_formats

@@ -2,8 +2,9 @@
 
 Writes ``DIR/scene_<S>_<k>.xml`` for k = 0 .. N-1 (scenes already there are skipped, so a run
 resumes; a file holding a scene of another run is refused unless ``--overwrite``, a file edited
-by hand is kept) and ``DIR/index.json``; a non-empty ``DIR`` without a scenegen ``index.json``
-is refused unless ``--overwrite``. Every scene renders with ``python -m nidar_mi.render``.
+by hand is kept) and ``DIR/index.json``; a non-empty ``DIR`` that holds files scenegen did not
+write is refused unless ``--overwrite`` (they are kept), another command's output always
+(:mod:`nidar_mi.io.ownership`). Every scene renders with ``python -m nidar_mi.render``.
 ``--kind city`` / ``--kind suburb`` draw a grid of blocks (``--blocks NX,NY``) with a drive round
 it: ``DIR/scene_<S>_<k>_drive.tum`` (``--frames``, ``--rate``, ``--speed``;
 :mod:`nidar_mi.scenegen.drives`); these options with another kind are refused.
@@ -11,15 +12,12 @@ it: ``DIR/scene_<S>_<k>_drive.tum`` (``--frames``, ``--rate``, ``--speed``;
 
 from __future__ import annotations
 
-import json
-import math
-import os
-
 from ..errors import NidarError
 from ..scenegen.drives import DEFAULT_FRAMES
-from ..scenegen.generate import INDEX_NAME, KINDS
+from ..scenegen.generate import KINDS
+from ..scenegen.route import check_drive
 from ..scenegen.streets import CITY_KINDS
-from ._common import parser, run, seed_arg, show_progress
+from ._common import out_path, parser, run, seed_arg, show_progress
 
 __all__ = ["main", "build_parser"]
 
@@ -29,10 +27,11 @@ def build_parser():
         "scenegen",
         "Generate random urban and vegetated scenes (library materials, sun and sky "
         "with NIR, a LiDAR + camera rig) as Mitsuba XML. Resumable: existing scenes are skipped.",
+        verbose="one per scene (written, skipped or kept)",
     )
     p.add_argument("--count", type=int, required=True, help="number of scenes")
     p.add_argument("--seed", type=seed_arg, default=0, help="run seed, 0 .. 2**32-1 (default 0)")
-    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("-o", "--out", required=True, type=out_path, help="output folder")
     p.add_argument(
         "--kind",
         choices=KINDS,
@@ -68,7 +67,8 @@ def build_parser():
         "--overwrite",
         action="store_true",
         help="replace scene files of another run (another --kind or --materials) and files "
-        "edited by hand; write into a folder that holds other files (none of them is removed)",
+        "edited by hand; write into a folder that holds other files (none of them is removed; "
+        "another command's output is refused)",
     )
     p.add_argument(
         "--blocks", default=None, metavar="NX,NY", help="city/suburb: blocks along x and y (4,3)"
@@ -86,33 +86,12 @@ def build_parser():
     return p
 
 
-def _check_out(out: str, overwrite: bool) -> None:
-    """A non-empty ``-o`` folder that holds no scenegen output (its ``index.json``) is refused
-    without ``--overwrite`` (scenes are added to it; nothing in it is removed)."""
-    if overwrite or not os.path.isdir(out):
-        return
-    with os.scandir(out) as entries:
-        if not any(entries):
-            return
-    try:
-        with open(os.path.join(out, INDEX_NAME), encoding="utf-8") as f:
-            if json.load(f).get("generator") == "nidar_mi.scenegen":
-                return
-    except (OSError, ValueError, AttributeError):
-        pass
-    raise NidarError(
-        f"{out} is not empty and holds no scenegen output: choose another folder or pass "
-        "--overwrite"
-    )
-
-
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
 
     def work():
         from ..scenegen.generate import generate
 
-        _check_out(args.out, args.overwrite)
         blocks = None
         city = [f for f in ("blocks", "frames", "rate", "speed") if getattr(args, f) is not None]
         if city and args.kind not in CITY_KINDS:
@@ -134,9 +113,7 @@ def main(argv=None) -> int:
             "rate_hz": 10.0 if args.rate is None else args.rate,
             "speed": 10.0 if args.speed is None else args.speed,
         }
-        finite = all(math.isfinite(drive[k]) and drive[k] > 0 for k in ("rate_hz", "speed"))
-        if drive["frames"] < 2 or not finite:
-            raise NidarError("--frames must be >= 2, --rate and --speed finite and > 0")
+        check_drive(drive["frames"], drive["rate_hz"], drive["speed"])
         index = generate(
             args.out,
             args.count,

@@ -15,12 +15,13 @@ trained, ``OUT/calibration.json``: the distance encoding and quantile map fitted
 split (:func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`; ``--no-calibration`` skips it). Options given on
 the command line override the configuration file (``--epochs``, ``--max-steps`` and
 ``--batch-size`` apply to both stages). ``--all-frames`` (with ``--stage irnet``) trains
-IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.train`.
+IRNet on every frame of DATA, for a model to ship. See :mod:`nidar_mi.nidar.training`.
 
 An OUT where a stage of this command has trained already is refused unless ``--resume``
 (continue that run) or ``--overwrite`` (replace it: the earlier folder is moved aside, put back
 when the new run fails before its first checkpoint, removed otherwise). OUT must not hold an
-input (DATA, ``--config``, ``--stn-weights``, ...).
+input (DATA, ``--config``, ``--stn-weights``, ...), nor a file ``train`` did not write (it is
+never removed; :mod:`nidar_mi.io.ownership`).
 
 A compact IRNet on real KITTI frames (quarter resolution, wide crops, one thread)::
 
@@ -37,7 +38,27 @@ import shutil
 from pathlib import Path
 
 from ..errors import NidarError
-from ._common import parser, run, seed_arg, show_progress
+from ..extras import require
+from ..io.ownership import Owner
+from ._common import out_path, parser, run, seed_arg, show_progress
+
+#: Who writes a training run's folder (:mod:`nidar_mi.io.ownership`): weights, logs,
+#: checkpoints and the frames' cache.
+OWNER = Owner(
+    "train",
+    "weights",
+    names=(
+        "config.json",
+        "train_log.json",
+        "calibration.json",
+        "*.safetensors",
+        "checkpoints/*",
+        "cache/*",
+        "profiles/*",
+        "*.tmp-*",
+    ),
+    whole=False,
+)
 
 __all__ = ["main", "build_config"]
 
@@ -47,9 +68,14 @@ def _parser() -> argparse.ArgumentParser:
         "train",
         "Train the NIDAR networks (STN, then IRNet) on a dataset from nidar_mi.dataset; "
         "resumable (--resume); a run that fails before its first checkpoint leaves nothing.",
+        verbose="one per epoch (losses, time)",
     )
     p.add_argument("data", type=Path, help="training-data directory (meta.json, train/, val/)")
-    p.add_argument("out", type=Path, help="output directory for weights, logs, checkpoints")
+    p.add_argument(
+        "out",
+        type=lambda text: Path(out_path(text)),
+        help="output directory for weights, logs, checkpoints",
+    )
     p.add_argument("--config", type=Path, help="JSON file with a TrainConfig (nested dict)")
     p.add_argument("--reduced", action="store_true", help="start from the tiny test config")
     p.add_argument(
@@ -88,8 +114,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace an earlier run in OUT (or other files there); it is removed only once "
-        "this run has saved its first checkpoint",
+        help="replace an earlier run in OUT; it is removed only once this run has saved its "
+        "first checkpoint (a file train did not write is never removed: such an OUT is refused)",
     )
     p.add_argument(
         "--no-calibration", action="store_true", help="do not fit calibration.json after training"
@@ -182,22 +208,29 @@ def main(argv: list[str] | None = None) -> int:
     left = {"text": "nothing written"}
 
     def work():
-        from ..io.atomic import check_output_folder
+        from ..io.atomic import check_output_folder, write_record
 
+        require("nidar", "train")
         cfg = build_config(args)
-        out = args.out
         if args.overwrite and args.resume:
             raise NidarError("--overwrite replaces the run that --resume continues: give one")
         inputs = [args.data, args.config, args.stn_weights, args.photos, args.init_irnet]
-        check_output_folder(
-            out, overwrite=args.overwrite, marker="config.json", inputs=[*inputs, args.renders]
+        # a link is written through: the folder it names is trained into, the link kept
+        out = args.out = check_output_folder(
+            args.out,
+            owner=OWNER,
+            overwrite=args.overwrite or args.resume,
+            inputs=[*inputs, args.renders],
         )
         if not (args.resume or args.overwrite):
             _check_no_earlier_run(out, _stages(args))
         aside = _move_aside(out) if args.overwrite else None
         fresh = not out.exists() or (out.is_dir() and not any(out.iterdir()))
         try:
+            out.mkdir(parents=True, exist_ok=True)
+            write_record(out, OWNER)  # an interrupted run is known as this command's
             _train(args, cfg)
+            write_record(out, OWNER)
         except BaseException:
             left["text"] = _after_failure(out, fresh, aside)
             raise
@@ -217,7 +250,7 @@ def _photos(folder, progress: bool):
 
 
 def _train(args: argparse.Namespace, cfg) -> None:
-    from ..nidar import train as training
+    from ..nidar import training
 
     progress = show_progress(args)
     if args.stage == "stn" and args.photos is not None:
@@ -270,7 +303,7 @@ def _train(args: argparse.Namespace, cfg) -> None:
 
 
 def _render_frames(data: Path) -> list[Path]:
-    from ..frames import list_frames
+    from ..training_frames import list_frames
 
     frames = list_frames(data, "train")
     if not frames:
@@ -279,7 +312,7 @@ def _render_frames(data: Path) -> list[Path]:
 
 
 def _all_frames(data: Path) -> dict[str, list[Path]]:
-    from ..frames import SPLITS, list_frames
+    from ..training_frames import SPLITS, list_frames
 
     return {"train": [f for split in SPLITS for f in list_frames(data, split)], "val": []}
 

@@ -1,8 +1,8 @@
 """Real datasets: readers in their own layouts, and training data built from them.
 
-* :mod:`~nidar_mi.datasets.kitti`: KITTI object-layout frames (Velodyne scan, camera-2
-  image, calibration): :func:`~nidar_mi.datasets.kitti.frame_ids`,
-  :func:`~nidar_mi.datasets.kitti.load_frame` (the files are read by :mod:`nidar_mi.io.kitti`).
+* :mod:`~nidar_mi.datasets.kitti_objects`: KITTI object-layout frames (Velodyne scan, camera-2
+  image, calibration): :func:`~nidar_mi.datasets.kitti_objects.frame_ids`,
+  :func:`~nidar_mi.datasets.kitti_objects.load_kitti_frame` (the files are read by :mod:`nidar_mi.io.kitti`).
 * :mod:`~nidar_mi.datasets.kitti_rings`: the laser ring of every point from the storage order
   (checked by elevation), and the road plane.
 * :mod:`~nidar_mi.datasets.kitti_frames`: KITTI frames as NIDAR training frames (cached, with a
@@ -18,6 +18,6 @@ The data is read from ``../shared/data`` (or ``$NIDAR_MI_DATA``, or a path given
 and nothing derived from it is kept inside the project.
 """
 
-from .kitti import KittiFrame, frame_ids, load_frame
+from .kitti_objects import KittiFrame, frame_ids, load_kitti_frame
 
-__all__ = ["KittiFrame", "frame_ids", "load_frame"]
+__all__ = ["KittiFrame", "frame_ids", "load_kitti_frame"]

@@ -1,8 +1,8 @@
 """KITTI frames as NIDAR training frames: real sparse intensity, visible returns, rings.
 
-Each KITTI frame (:func:`nidar_mi.datasets.kitti.load_frame`) becomes one training frame in the
-format of :mod:`nidar_mi.frames` (source ``"kitti"``, keys
-:data:`nidar_mi.frames.FRAME_SOURCES` ``["kitti"]``):
+Each KITTI frame (:func:`nidar_mi.datasets.kitti_objects.load_kitti_frame`) becomes one training frame in the
+format of :mod:`nidar_mi.training_frames` (source ``"kitti"``, keys
+:data:`nidar_mi.training_frames.FRAME_SOURCES` ``["kitti"]``):
 
 * the returns camera 2 sees: in front of it, inside the image and not hidden in the cloud's own
   z-buffer (:func:`nidar_mi.geometry.camera_returns`, the package defaults; KITTI has no
@@ -26,6 +26,7 @@ the project: KITTI is non-commercial data.
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
 from pathlib import Path
@@ -34,7 +35,8 @@ import numpy as np
 
 from ..errors import NidarError
 from ..io.cache_key import cache_key
-from .kitti import KittiFrame, frame_ids, load_frame
+from ..io.ownership import Owner
+from .kitti_objects import KittiFrame, frame_ids, load_kitti_frame
 from .kitti_rings import HDL64E_RINGS, checked_rings, elevation_rings
 from .paths import cache_dir, data_root
 
@@ -42,12 +44,15 @@ __all__ = [
     "DEFAULT_HELD_OUT",
     "DEFAULT_SOURCES",
     "KITTI_FRAMES_VERSION",
+    "OWNER",
     "build_kitti_frames",
     "default_kitti_dirs",
     "frame_name",
     "kitti_training_data",
     "kitti_training_frame",
 ]
+
+log = logging.getLogger("nidar_mi.dataset")
 
 #: Version of the frames this module writes (part of the cache key).
 KITTI_FRAMES_VERSION = 1
@@ -122,12 +127,23 @@ def _source_mtime(kitti_dir: Path, fid: str) -> float:
     )
 
 
+#: Who writes a dataset folder of KITTI frames (:mod:`nidar_mi.io.ownership`).
+OWNER = Owner(
+    "dataset",
+    "kitti",
+    names=("meta.json", "train/*", "val/*", "test/*", "*.tmp-*"),
+    label="dataset --kitti",
+    whole=False,
+)
+
+
 def build_kitti_frames(
     kitti_dirs,
     out_dir: str | os.PathLike,
     *,
     held_out: dict[str, tuple[str, ...]] | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> dict:
     """Write every frame of ``kitti_dirs`` into ``out_dir`` (cached) and its ``meta.json``.
 
@@ -138,19 +154,55 @@ def build_kitti_frames(
         held_out: split name -> frame names held out of ``train`` (default
             :data:`DEFAULT_HELD_OUT`); names not present are ignored.
         progress: show a progress bar.
+        overwrite: the user passed ``overwrite`` (``out_dir`` is another kind of dataset, or
+            one of nidar_mi 0.1.0: :func:`nidar_mi.io.ownership.check_owner`).
 
     Returns:
         The meta dict (also written to ``out_dir/meta.json``).
 
     Raises:
-        NidarError: no frames, clashing folder names, or a malformed frame.
+        NidarError: no frames, clashing folder names, a malformed frame (nothing this build
+            wrote is left then), or an output folder :data:`OWNER` may not write.
     """
-    from ..frames import SPLITS, list_frames, write_frame
-    from ..io.atomic import atomic_write_json, check_outside_inputs
-    from ..progress import progress_bar
+    from ..io.atomic import atomic_write_json, check_output_folder, write_record
+    from ..io.ownership import folder_files
+    from ..training_frames import SPLITS
 
     dirs = [Path(d) for d in kitti_dirs]
-    check_outside_inputs(out_dir, dirs)
+    names, held, jobs = _kitti_jobs(dirs, held_out)
+    out = check_output_folder(out_dir, owner=OWNER, overwrite=overwrite, inputs=dirs)
+    made = [p for p in (out, *(out / s for s in SPLITS)) if not p.exists()]
+    try:
+        splits, info = _write_frames(jobs, held, out, progress)
+    except BaseException:
+        for folder in reversed(made):  # the folders this build made, when left empty
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
+    _drop_moved_frames(out, splits)
+    short = _warn_about_scans(info)
+    meta = {
+        "source": "kitti",
+        "version": KITTI_FRAMES_VERSION,
+        "sensor": "Velodyne HDL-64E (KITTI), camera 2",
+        "intensity": "stored Velodyne reflectance in [0, 1]",
+        "intensity_scale": 1.0,
+        "kitti_dirs": {s: str(d.resolve()) for d, s in zip(dirs, names)},
+        "held_out": {k: sorted(v) for k, v in held.items()},
+        "frames": splits,
+        "frame_info": info,
+        "short_scans": short,
+    }
+    atomic_write_json(out / "meta.json", meta)
+    write_record(out, OWNER, [f for f in folder_files(out) if OWNER.writes(f)])
+    return meta
+
+
+def _kitti_jobs(dirs: list[Path], held_out) -> tuple[list[str], dict[str, set], list[tuple]]:
+    """The folders' names (the frames' prefixes), the held-out frames per split and the frames
+    to write, ``(folder, name, frame id)`` each, checked (:func:`build_kitti_frames`)."""
+    from ..training_frames import SPLITS
+
     names = [d.resolve().name for d in dirs]
     if len(set(names)) != len(names):
         raise NidarError(f"KITTI folders need distinct names (got {', '.join(map(str, dirs))})")
@@ -164,17 +216,23 @@ def build_kitti_frames(
             "no KITTI frame (velodyne/ID.bin + image_2/ID.png + calib/ID.txt) in "
             + ", ".join(map(str, dirs))
         )
-    out = Path(out_dir)
-    meta_path = out / "meta.json"
-    old_version, old_info = None, {}
-    if meta_path.is_file():
-        from ..frames import load_meta
+    return names, held, jobs
 
+
+def _write_frames(jobs, held: dict[str, set], out: Path, progress: bool):
+    """Write every frame not current in ``out`` (written by this version after its scan):
+    ``(splits, info)``, the frame names per split and each frame's record. Frames this build
+    created are removed again if it fails (``meta.json`` does not list them)."""
+    from ..progress import progress_bar
+    from ..training_frames import SPLITS, load_meta, write_frame
+
+    old_version, old_info = None, {}
+    if (out / "meta.json").is_file():
         old = load_meta(out)
         old_version, old_info = old.get("version"), old.get("frame_info", {})
     splits: dict[str, list[str]] = {s: [] for s in SPLITS}
     info: dict[str, dict] = {}
-    added: list[Path] = []  # frame files this build created: removed if it fails
+    added: list[Path] = []
     try:
         for kitti_dir, source, fid in progress_bar(
             jobs, show=progress, desc="KITTI frames", unit="frame"
@@ -189,28 +247,47 @@ def build_kitti_frames(
             )
             prev = old_info.get(name) if fresh else None
             if prev is None:
-                frame, prev = kitti_training_frame(load_frame(kitti_dir, fid))
+                frame, prev = kitti_training_frame(load_kitti_frame(kitti_dir, fid))
                 if not target.exists():
                     added.append(target)
                 write_frame(target, frame)
             info[name] = prev
             splits[split].append(name)
+            log.debug(
+                "%s: %d points, %d seen by camera 2 (%s)",
+                name,
+                prev["points"],
+                prev["visible"],
+                split,
+            )
     except BaseException:
-        for path in added:  # meta.json does not list them
+        for path in added:
             path.unlink(missing_ok=True)
         raise
-    for split in SPLITS:  # frames an earlier build left in another split
+    return splits, info
+
+
+def _drop_moved_frames(out: Path, splits: dict[str, list[str]]) -> None:
+    """Remove the frames an earlier build left in another split."""
+    from ..training_frames import SPLITS, list_frames
+
+    for split in SPLITS:
         keep = set(splits[split])
         for path in list_frames(out, split):
             if path.stem not in keep:
                 path.unlink()
+
+
+def _warn_about_scans(info: dict[str, dict]) -> dict[str, int]:
+    """Warn about short scans and scans whose rings come from their elevations; the short
+    scans' ring counts by frame name."""
     short = {n: i["rings"] for n, i in info.items() if 0 < i["rings"] < HDL64E_RINGS}
     if short:
         warnings.warn(
             "short scans (fewer than 64 rings, only the top ones): "
             + ", ".join(f"{n} ({r} rings)" for n, r in sorted(short.items())),
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     elevation = sorted(n for n, i in info.items() if i["ring_method"] != "scan order")
     if elevation:
@@ -218,22 +295,9 @@ def build_kitti_frames(
             f"{len(elevation)} scan(s) not in KITTI's stored order; their rings come from the "
             "nominal HDL-64E elevations (approximate): " + ", ".join(elevation[:5]),
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
-    meta = {
-        "source": "kitti",
-        "version": KITTI_FRAMES_VERSION,
-        "sensor": "Velodyne HDL-64E (KITTI), camera 2",
-        "intensity": "stored Velodyne reflectance in [0, 1]",
-        "intensity_scale": 1.0,
-        "kitti_dirs": {s: str(d.resolve()) for d, s in zip(dirs, names)},
-        "held_out": {k: sorted(v) for k, v in held.items()},
-        "frames": splits,
-        "frame_info": info,
-        "short_scans": short,
-    }
-    atomic_write_json(meta_path, meta)
-    return meta
+    return short
 
 
 def kitti_training_data(kitti_dirs=None, *, progress: bool = True) -> Path:
@@ -257,5 +321,5 @@ def kitti_training_data(kitti_dirs=None, *, progress: bool = True) -> Path:
         )
     key = cache_key([str(d.resolve()) for d in dirs] + [KITTI_FRAMES_VERSION])
     out = cache_dir("kitti_frames", key)
-    build_kitti_frames(dirs, out, progress=progress)
+    build_kitti_frames(dirs, out, progress=progress, overwrite=True)  # the package's own cache
     return out

@@ -18,6 +18,7 @@ intensity) and hand them to :func:`nidar_mi.profiles.fit`, the one fitting entry
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -42,6 +43,8 @@ __all__ = [
     "scan_values",
     "select_frames",
 ]
+
+log = logging.getLogger("nidar_mi.calibrate")
 
 #: Maps :func:`fit_split_calibration` can calibrate: the reflectance branch, or the STN's
 #: pseudo-NIR in place of it (a baseline).
@@ -132,6 +135,7 @@ def _scan_returns(scans, values, incidence: bool, progress: bool, name: str, inp
         progress_bar(scans, show=progress, desc=f"profile {name}", unit="frame")
     ):
         v = np.asarray(values(scan), dtype=np.float64).reshape(-1)
+        log.debug("%s: %d returns", scan.name, v.size)
         if v.shape != scan.intensity.shape:
             raise NidarError(f"{scan.name}: {v.size} values for {scan.intensity.size} returns")
         ok = np.flatnonzero(np.isfinite(v))
@@ -324,7 +328,7 @@ def fit_split_calibration(
     Raises:
         NidarError: unknown branch, a model without that map, or no frames in the split.
     """
-    from ..frames import list_frames, load_frame, load_meta
+    from ..training_frames import list_frames, load_frame, load_meta
 
     if branch not in CALIBRATION_BRANCHES:
         raise NidarError(

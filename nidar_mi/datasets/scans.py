@@ -4,7 +4,7 @@ A :class:`ScanFrame` is one LiDAR scan reduced to the returns that a camera sees
 intensity on the [0, 1] scale, their ring when known, and the camera images and models (loaded
 when asked for, so that many frames fit in memory). :func:`load_scans` reads any of:
 
-* a **NIDAR data folder** (``meta.json``; :mod:`nidar_mi.frames`), rendered or KITTI: its
+* a **NIDAR data folder** (``meta.json``; :mod:`nidar_mi.training_frames`), rendered or KITTI: its
   frames' ``points_*`` keys (frames of every split, or the splits asked for); intensities are
   divided by the folder's ``intensity_scale`` and clipped to [0, 1];
 * a **KITTI folder** (``velodyne/``, ``image_2/``, ``calib/``): converted once into cached
@@ -25,6 +25,7 @@ when asked for, so that many frames fit in memory). :func:`load_scans` reads any
 from __future__ import annotations
 
 import functools
+import math
 import os
 import warnings
 from collections.abc import Callable, Sequence
@@ -40,6 +41,7 @@ __all__ = [
     "frames_from_data",
     "frames_from_generic",
     "load_scans",
+    "scan_frame",
     "scan_kind",
     "simulator_scale",
 ]
@@ -133,33 +135,42 @@ def frames_from_data(
     Raises:
         NidarError: a frame without the ``points_*`` keys (rebuild the folder).
     """
-    from ..frames import SPLITS, list_frames, load_frame, load_meta
-    from ..geometry import CameraModel
+    from ..training_frames import SPLITS, list_frames, load_frame, load_meta
 
     meta = load_meta(data_dir)
     scale = float(meta["intensity_scale"])
     out = []
     for split in splits or SPLITS:
         for path in list_frames(data_dir, split):
-            f = load_frame(
-                path, ("K", "T_cam_lidar", "mask", "points_xyz", "points_intensity", "points_ring")
-            )
-            h, w = f["mask"].shape
-            cam = CameraModel(
-                K=f["K"], width=w, height=h, T_cam_lidar=f["T_cam_lidar"], name=path.stem
-            )
-            out.append(
-                ScanFrame(
-                    name=path.stem,
-                    xyz=f["points_xyz"].astype(np.float64),
-                    intensity=np.clip(f["points_intensity"].astype(np.float64) / scale, 0.0, 1.0),
-                    ring=f["points_ring"],
-                    cameras=[cam],
-                    source=str(path),
-                    _images=lambda p=path: [load_frame(p, ("rgb",))["rgb"]],
-                )
-            )
+            f = load_frame(path, _SCAN_KEYS)
+            images = lambda p=path: [load_frame(p, ("rgb",))["rgb"]]  # noqa: E731
+            out.append(scan_frame(f, path.stem, str(path), scale, images))
     return out
+
+
+#: The keys of a training frame (:mod:`nidar_mi.training_frames`) a :class:`ScanFrame` is made of.
+_SCAN_KEYS = ("K", "T_cam_lidar", "mask", "points_xyz", "points_intensity", "points_ring")
+
+
+def scan_frame(
+    f: dict, name: str, source: str, scale: float, images: Callable[[], list[np.ndarray]]
+) -> ScanFrame:
+    """A training frame (:mod:`nidar_mi.training_frames`; its :data:`_SCAN_KEYS`) as a scan: the
+    camera-visible returns, their intensity divided by ``scale`` and clipped to [0, 1], the
+    camera, and ``images`` to read the image when asked for."""
+    from ..geometry import CameraModel
+
+    h, w = f["mask"].shape
+    cam = CameraModel(K=f["K"], width=w, height=h, T_cam_lidar=f["T_cam_lidar"], name=name)
+    return ScanFrame(
+        name=name,
+        xyz=f["points_xyz"].astype(np.float64),
+        intensity=np.clip(f["points_intensity"].astype(np.float64) / scale, 0.0, 1.0),
+        ring=f["points_ring"],
+        cameras=[cam],
+        source=source,
+        _images=images,
+    )
 
 
 def _auto_scale(values: np.ndarray, given: float | None, where: str) -> float:
@@ -300,10 +311,13 @@ def load_scans(
     folder's name as a prefix when several folders are given and names clash.
 
     Raises:
-        NidarError: an unsupported folder, or no frame at all.
+        NidarError: ``intensity_scale`` not a finite number > 0, an unsupported folder, or no
+            frame at all.
     """
     from .kitti_frames import kitti_training_data
 
+    if intensity_scale is not None and not (math.isfinite(intensity_scale) and intensity_scale > 0):
+        raise NidarError(f"`intensity_scale` must be a finite number > 0 (got {intensity_scale})")
     kinds = [(Path(p), scan_kind(p)) for p in paths]
     frames: list[ScanFrame] = []
     kitti = [p for p, k in kinds if k == "kitti"]

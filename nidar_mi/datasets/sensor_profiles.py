@@ -15,8 +15,10 @@ Names :func:`resolve_profile` knows (besides a path to a profile file):
   the key covers the weights, the folders and the recipe). Form :data:`KITTI_PROFILE_FORM`: a
   ``context`` profile (:mod:`nidar_mi.profiles.context`, :data:`KITTI_PROFILE_OPTIONS`) of the
   returns' range, elevation, incidence, laser, local geometry, image context and NIDAR's maps,
-  input the ``R`` branch, fitted on every frame of those folders. The default of
-  ``assign --kitti``; it reads the camera image.
+  input the ``R`` branch, fitted on every frame of those folders; it reads the camera image.
+  The default of ``assign --kitti``, where it is fitted instead on up to
+  :data:`KITTI_ASSIGN_FRAMES` other frames of the ``--kitti`` folder, never on the frame it
+  assigns (:func:`kitti_frame_profile`; cached per set of frames).
 * ``generic-compensated``: a range-compensated sensor of unknown make, from physics, not from
   data: ``I = clip(ρ·|cos θ|, 0, 1)`` with ``ρ`` the NIDAR ``R`` value (a ``physical`` profile,
   :class:`~nidar_mi.profiles.PhysicalMap`, gain 1, no range term). The default of ``assign``
@@ -43,6 +45,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ..errors import NidarError
 from ..nidar.pipeline import SIM_PROFILE
 from ..profiles import PhysicalMap, SensorProfile, load_profile
@@ -58,12 +62,14 @@ __all__ = [
     "GENERIC_RAW_GAIN",
     "GENERIC_RAW_LEVEL",
     "GENERIC_RAW_PROFILE",
+    "KITTI_ASSIGN_FRAMES",
     "KITTI_PROFILE_FORM",
     "KITTI_PROFILE_INCIDENCE",
     "KITTI_PROFILE_OPTIONS",
     "PROFILE_NAMES",
     "default_profile",
     "generic_profile",
+    "kitti_frame_profile",
     "profile_line",
     "resolve_profile",
     "warn_unknown_sensor",
@@ -95,7 +101,7 @@ KITTI_PROFILE_OPTIONS: dict = {"kind": "gbm"}
 #: leave-one-frame-out metric but the camera-map SSIM, docs/RESULTS.md).
 KITTI_PROFILE_INCIDENCE = True
 #: Version of the fitting procedure (part of the cache key).
-_FIT_VERSION = 4
+_FIT_VERSION = 5
 _KITTI_SENSOR = "Velodyne HDL-64E (KITTI), stored reflectance in [0, 1]"
 
 
@@ -110,11 +116,8 @@ def _sim_profile(model: NidarModel) -> SensorProfile:
 
 
 def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfile:
-    from ..io.atomic import atomic_write_json
-    from ..io.cache_key import cache_key
     from .kitti_frames import default_kitti_dirs, kitti_training_data
-    from .paths import cache_dir, data_root
-    from .profile_fitting import fit_scan_profile
+    from .paths import data_root
     from .scans import frames_from_data
 
     dirs = [Path(d) for d in kitti_dirs] if kitti_dirs else default_kitti_dirs()
@@ -124,38 +127,107 @@ def _kitti_profile(model: NidarModel, kitti_dirs, progress: bool) -> SensorProfi
             f"not shipped: KITTI is non-commercial data) and none were found under {data_root()}; "
             "set NIDAR_MI_DATA, or fit one with python -m nidar_mi.calibrate and pass --profile FILE"
         )
-    key = cache_key(
-        {
-            "model": model.identity(),
-            "dirs": [str(d.resolve()) for d in dirs],
-            "form": KITTI_PROFILE_FORM,
-            "options": KITTI_PROFILE_OPTIONS,
-            "version": _FIT_VERSION,
-        }
+    data = {"dirs": [str(d.resolve()) for d in dirs]}
+    where = f"the KITTI frames in {', '.join(map(str, dirs))}"
+    return _cached_fit(
+        model,
+        data,
+        where,
+        lambda: frames_from_data(kitti_training_data(dirs, progress=progress)),
+        progress,
     )
+
+
+def _cached_fit(model: NidarModel, data: dict, where: str, scans, progress: bool) -> SensorProfile:
+    """``kitti-hdl64e`` fitted on ``scans()`` (the frames ``data`` names, ``where`` in words),
+    cached in the user's cache folder under a key of ``data``, the weights, the form and the
+    fitting version; one warning when it is fitted."""
+    from ..io.atomic import atomic_write_json
+    from ..io.cache_key import cache_key
+    from .paths import cache_dir
+    from .profile_fitting import fit_scan_profile
+
+    settings = {"form": KITTI_PROFILE_FORM, "options": KITTI_PROFILE_OPTIONS}
+    key = cache_key({"model": model.identity(), **data, **settings, "version": _FIT_VERSION})
     path = cache_dir("profiles", f"{DEFAULT_KITTI_PROFILE}-{key}.json")
     if path.is_file():
         return load_profile(path)
     warnings.warn(
-        f"fitting the {DEFAULT_KITTI_PROFILE} profile on the KITTI frames in "
-        f"{', '.join(map(str, dirs))} (once; cached in {path})",
-        stacklevel=3,
+        f"fitting the {DEFAULT_KITTI_PROFILE} profile on {where} (once; cached in {path})",
+        stacklevel=4,
     )
-    scans = frames_from_data(kitti_training_data(dirs, progress=progress))
     profile = fit_scan_profile(
         model,
-        scans,
+        scans(),
         name=DEFAULT_KITTI_PROFILE,
         sensor=_KITTI_SENSOR,
         form=KITTI_PROFILE_FORM,
         branch="R",
-        provenance={"data": [str(d.resolve()) for d in dirs], "cache": str(path)},
+        provenance={**data, "cache": str(path)},
         progress=progress,
         **KITTI_PROFILE_OPTIONS,
     )
-    os.makedirs(path.parent, exist_ok=True)
     atomic_write_json(path, profile.to_dict())
     return profile
+
+
+#: How many frames of the ``--kitti`` folder ``kitti-hdl64e`` is fitted on for ``assign --kitti``
+#: (evenly spread; ten frames of a sensor calibrate it about as well as all, docs/NIDAR.md).
+KITTI_ASSIGN_FRAMES = 10
+
+
+def _assign_frames(ids: list[str], frame_id: str) -> list[str]:
+    """:data:`KITTI_ASSIGN_FRAMES` of ``ids`` evenly spread, ``frame_id`` never among them (its
+    next neighbour not chosen takes its place, so that most frames share one choice)."""
+    if len(ids) <= KITTI_ASSIGN_FRAMES + 1:
+        return [i for i in ids if i != frame_id]
+    pick = np.unique(np.round(np.linspace(0, len(ids) - 1, KITTI_ASSIGN_FRAMES)).astype(int))
+    chosen = [ids[i] for i in pick]
+    if frame_id in chosen:
+        free = [i for i in ids if i not in chosen and i != frame_id]
+        at = ids.index(frame_id)
+        chosen[chosen.index(frame_id)] = min(free, key=lambda i: (abs(ids.index(i) - at), i))
+    return sorted(chosen)
+
+
+def kitti_frame_profile(
+    model: NidarModel, kitti_dir: str | os.PathLike, frame_id: str, *, progress: bool = True
+) -> SensorProfile:
+    """``kitti-hdl64e`` for assigning the KITTI frame ``frame_id`` of ``kitti_dir``: fitted on up
+    to :data:`KITTI_ASSIGN_FRAMES` other frames of that folder (evenly spread), never on the
+    frame itself, cached in the user's cache folder under a key of the frames used (their
+    files' sizes and times), the weights, the form and the fitting version.
+
+    Raises:
+        NidarError: the folder holds no other frame.
+    """
+    from .kitti_frames import kitti_training_frame
+    from .kitti_objects import frame_ids, load_kitti_frame
+    from .scans import scan_frame
+
+    folder = Path(kitti_dir).resolve()
+    chosen = _assign_frames(frame_ids(folder), frame_id)
+    if not chosen:
+        raise NidarError(
+            f"the {DEFAULT_KITTI_PROFILE} profile of a KITTI frame is fitted on the other frames "
+            f"of its folder, and {kitti_dir} holds no other: give --profile FILE (python -m "
+            "nidar_mi.calibrate fits one)"
+        )
+    stamps = {
+        i: [(f.stat().st_size, f.stat().st_mtime_ns) for f in sorted(folder.glob(f"*/{i}.*"))]
+        for i in chosen
+    }
+
+    def scans():
+        out = []
+        for fid in chosen:
+            frame, _ = kitti_training_frame(load_kitti_frame(folder, fid))
+            out.append(scan_frame(frame, fid, str(folder), 1.0, lambda f=frame: [f["rgb"]]))
+        return out
+
+    data = {"data": str(folder), "frames": chosen, "stamps": stamps}
+    where = f"{len(chosen)} other frames of {kitti_dir} (not on {frame_id})"
+    return _cached_fit(model, data, where, scans, progress)
 
 
 def generic_profile(name: str) -> SensorProfile:
@@ -237,6 +309,7 @@ def resolve_profile(
     *,
     kitti_dirs: Sequence[str | os.PathLike] | None = None,
     progress: bool = True,
+    kitti_frame: tuple[str | os.PathLike, str] | None = None,
 ) -> SensorProfile:
     """The profile named by ``spec``: a file, or one of :data:`PROFILE_NAMES` (module docstring).
 
@@ -245,6 +318,9 @@ def resolve_profile(
         model: the NIDAR model the profile is used with.
         kitti_dirs: KITTI folders for ``kitti-hdl64e`` (default: those under the data root).
         progress: show progress while fitting.
+        kitti_frame: ``(folder, frame id)`` of the KITTI frame the profile is for:
+            ``kitti-hdl64e`` is then fitted on that folder's other frames
+            (:func:`kitti_frame_profile`), never on the frame.
 
     Raises:
         NidarError: an unknown name, an invalid file, or no data to fit ``kitti-hdl64e``.
@@ -252,6 +328,8 @@ def resolve_profile(
     spec = DEFAULT_SIM_PROFILE if spec is None else spec
     if str(spec) == DEFAULT_SIM_PROFILE:
         profile = _sim_profile(model)
+    elif str(spec) == DEFAULT_KITTI_PROFILE and kitti_frame is not None:
+        profile = kitti_frame_profile(model, *kitti_frame, progress=progress)
     elif str(spec) == DEFAULT_KITTI_PROFILE:
         profile = _kitti_profile(model, kitti_dirs, progress)
     elif str(spec) in (GENERIC_COMPENSATED_PROFILE, GENERIC_RAW_PROFILE):

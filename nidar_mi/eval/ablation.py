@@ -10,7 +10,7 @@
   R raw and R remapped (R through the distance encoding + quantile map fitted on the training
   split, :func:`nidar_mi.datasets.profile_fitting.fit_split_calibration`).
 
-The networks are trained by :func:`nidar_mi.nidar.train.train_irnet` into
+The networks are trained by :func:`nidar_mi.nidar.training.train_irnet` into
 ``OUT/<input>__<variant>/``; a finished run (its ``irnet.safetensors`` exists) is reused, so an
 interrupted ablation resumes where it stopped. :class:`AblationSettings` are deliberately
 reduced (narrow networks, small crops, few epochs) so that 11 runs fit on a CPU; the same
@@ -97,7 +97,7 @@ def train_variant(
     settings: AblationSettings,
 ) -> Path:
     """Train one IRNet variant (skipped when ``out_dir/irnet.safetensors`` exists)."""
-    from ..nidar.train import train_irnet
+    from ..nidar.training import train_irnet
 
     out_dir = Path(out_dir)
     if (out_dir / "irnet.safetensors").is_file():
@@ -141,8 +141,8 @@ def evaluate_run(
         "R_remap": scores]}``, scores from :func:`map_scores`.
     """
     from ..datasets.profile_fitting import fit_split_calibration
-    from ..frames import list_frames, load_meta
     from ..nidar.pipeline import NidarModel
+    from ..training_frames import list_frames, load_meta
 
     run_dir = Path(run_dir)
     scale = float(load_meta(data_dir).get("intensity_scale", 1.0))

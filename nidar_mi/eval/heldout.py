@@ -4,13 +4,14 @@
 * :func:`twin_prediction`: baseline (a) at a frame's points from the RGB-twin scan.
 * :func:`render_scenes`: cached renders of scene files (the hand-made scenes).
 * :func:`evaluate_renders`: every frame of a set of rendered scenes through
-  :func:`~nidar_mi.eval.frames.predict_frame` and :func:`~nidar_mi.eval.frames.evaluate_frame`.
+  :func:`~nidar_mi.eval.rendered.predict_frame` and :func:`~nidar_mi.eval.rendered.evaluate_frame`.
 * :func:`heldout_material_scores`: the methods on the returns whose material no training scene
   has (scenes from ``python -m nidar_mi.scenegen --materials heldout``).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Sequence
 
@@ -18,14 +19,14 @@ import numpy as np
 
 from ..errors import NidarError
 from .baselines import ClassConstant
-from .frames import (
+from .metrics import scale_intensity
+from .rendered import (
     FrameData,
     FrameResult,
     evaluate_frame,
     load_render_frames,
     predict_frame,
 )
-from .metrics import scale_intensity
 
 __all__ = [
     "evaluate_renders",
@@ -34,6 +35,8 @@ __all__ = [
     "render_scenes",
     "twin_prediction",
 ]
+
+log = logging.getLogger("nidar_mi.evaluate")
 
 
 def fit_class_constant(
@@ -113,7 +116,7 @@ def render_scenes(
     """
     from functools import partial
 
-    from ..backend import prepare_worker
+    from ..backend import worker_setup
     from ..render_dataset import scene_params
     from ..render_folder import is_current
     from ..render_session import RenderOptions
@@ -139,7 +142,7 @@ def render_scenes(
         tasks,
         workers=workers,
         address=ray_address,
-        setup=prepare_worker,
+        setup=worker_setup(),
         progress=progress,
         desc="render",
         unit="scene",
@@ -196,6 +199,7 @@ def evaluate_renders(
                 twin_pred=tp,
             )
             res = evaluate_frame(frame, pred, lpips=lpips)
+            log.debug("%s: %d returns scored", getattr(frame, "name", rdir), frame.gt.size)
             if on_frame is not None:
                 on_frame(res)
             results.append(res)

@@ -1,7 +1,7 @@
 """How well IRNet's decomposition separates reflectance from shading, on rendered frames.
 
 Rendered frames carry the true reflectance at the LiDAR wavelength (``R_true``) and the true
-shading (``S_true``: irradiance, so cast shadows and incidence; :mod:`nidar_mi.frames`). A
+shading (``S_true``: irradiance, so cast shadows and incidence; :mod:`nidar_mi.training_frames`). A
 decomposition whose ``R`` still carries shadows correlates with ``S_true``; one that recovers the
 material correlates with ``R_true``. :func:`intrinsic_scores` measures both on the pixels with a
 surface (``R_true >= 1e-3``; ``R_true`` clipped to [0, 1] as in training):
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ..frames import load_frame
+from ..training_frames import load_frame
 
 __all__ = ["INTRINSIC_KEYS", "intrinsic_frame_scores", "intrinsic_scores"]
 
@@ -61,7 +61,7 @@ def intrinsic_frame_scores(
     Raises:
         NidarError: shapes differ, or no pixel has a surface.
     """
-    from scipy.stats import spearmanr
+    from .metrics import spearman
 
     shape = np.shape(r_true)
     for name in ("R", "S", "pseudo_nir"):
@@ -74,13 +74,12 @@ def intrinsic_frame_scores(
     st = np.asarray(s_true)[valid]
     r, s = np.asarray(maps["R"])[valid], np.asarray(maps["S"])[valid]
     x = np.asarray(maps["pseudo_nir"])[valid]
-    rho = spearmanr(r, rt).statistic if np.ptp(r) > 0 and np.ptp(rt) > 0 else float("nan")
     return {
         "r_R_shading": _pearson(r, st),
         "r_true_shading": _pearson(rt, st),
         "r_input_shading": _pearson(x, st),
         "r_R_reflectance": _pearson(r, rt),
-        "spearman_R_reflectance": float(rho),
+        "spearman_R_reflectance": spearman(r, rt),
         "r_R_S": _pearson(r, s),
         "pixels": int(valid.sum()),
     }

@@ -6,8 +6,9 @@ starts at its own origin: a laser whose line runs ``v`` above the sensor's axis 
 ``atan(v / D)`` higher at range ``D``). Two figures:
 
 * **ring-matched**: the return's own laser. KITTI stores a cloud laser by laser, highest first,
-  each ring sweeping from azimuth 0 counter-clockwise; :func:`storage_rings` recovers the ring
-  of every return from that order, and ring ``r`` is the layout's ``r``-th highest laser.
+  each ring sweeping from azimuth 0 counter-clockwise;
+  :func:`~nidar_mi.datasets.kitti_rings.scan_rings` recovers the ring of every return from that
+  order, and ring ``r`` is the layout's ``r``-th highest laser.
 * **nearest ring**: the laser closest in elevation, whatever the return's own laser. Any table of
   64 rings spanning the field of view scores about 0.1° here (every elevation lies within half a
   ring spacing of some ring), so this figure says little about a table's correctness.
@@ -23,30 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["storage_rings", "predicted_elevation", "Agreement", "elevation_agreement"]
+from ..datasets.kitti_rings import scan_rings
 
-
-def storage_rings(xyz: np.ndarray) -> np.ndarray:
-    """(N,) int ring of each return of a KITTI-ordered cloud (ring 0 = first stored = highest).
-
-    A ring ends where the azimuth wraps from +180° to -180° (or +90° to -90° for clouds cut to
-    the front half) and the next ring starts where the azimuth crosses 0° after that wrap.
-    """
-    az = np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))
-    wraps = np.flatnonzero(np.diff(az) < -100.0) + 1
-    bounds = np.concatenate([[0], wraps, [len(xyz)]])
-    ring = np.zeros(len(xyz), dtype=np.int64)
-    for k in range(1, len(bounds) - 1):
-        a, e = bounds[k], bounds[k + 1]
-        neg = (az[a:e] < 0).astype(np.int64)
-        # split the segment where the count of positive-azimuth points before the split plus
-        # negative-azimuth points after it is smallest: the 0° crossing
-        before_pos = np.concatenate([[0], np.cumsum(1 - neg)])
-        after_neg = neg.sum() - np.concatenate([[0], np.cumsum(neg)])
-        j = int(np.argmin(before_pos + after_neg))
-        ring[a : a + j] = k - 1
-        ring[a + j : e] = k
-    return ring
+__all__ = ["predicted_elevation", "Agreement", "elevation_agreement"]
 
 
 def predicted_elevation(pattern, ring: np.ndarray, xyz: np.ndarray) -> np.ndarray:
@@ -119,7 +99,7 @@ def elevation_agreement(pattern, velodyne_dir: str | os.PathLike) -> Agreement:
     for name in names:
         xyz, _ = read_kitti_bin(os.path.join(velodyne_dir, name))
         xyz = xyz.astype(np.float64)
-        ring = storage_rings(xyz)
+        ring = scan_rings(xyz)
         if ring.max() + 1 != pattern.rings:
             skipped.append(name)
             continue

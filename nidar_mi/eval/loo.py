@@ -217,12 +217,14 @@ def standard_methods(
     """
     colours = CachedValues(colour_at_returns)
     lum = CachedValues(lambda s: map_at_returns(s, [_luminance_map(im) for im in s.images]))
+    nir = None
+    if linear_nir is not None:
+        nir = CachedValues(lambda s: map_at_returns(s, [linear_nir(im) for im in s.images]))
     methods: dict[str, LooMethod] = {
         "lin9": linear_colour_distance_method(colours),
         "carla": raw_method("(d) CARLA exp(-0.004 d)", carla_values, "no fitting"),
     }
-    if linear_nir is not None:
-        nir = CachedValues(lambda s: map_at_returns(s, [linear_nir(im) for im in s.images]))
+    if nir is not None:
         methods["linnir_dq"] = profile_method(
             "(i) linear RGB→NIR + NIDAR calibration",
             nir,
@@ -231,14 +233,30 @@ def standard_methods(
             note="4-parameter map fitted on the RGB/NIR training photos; the paper's distance "
             "encoding + quantile map fitted on the training frames",
         )
+    methods |= _geometry_methods(forms)
+    sources = _value_sources(lum, nir, model)
+    methods |= _source_methods(sources, forms)
+    if model is not None:
+        raw = next(v for k, _, v, _ in sources if k == "nidar_I_hat")
+        methods["nidar_I_hat_raw"] = raw_method("(f) NIDAR Î raw, zero-shot", raw, "no fitting")
+        if zero_shot_profile is not None:
+            methods["nidar_zero_shot"] = _zero_shot_method(model, zero_shot_profile, sources)
+    return methods
+
+
+def _geometry_methods(forms: Sequence[str]) -> dict[str, LooMethod]:
+    """The rows that read no image: range and ring (``range_ring``) and, with ``gbm`` among the
+    ``forms``, range and elevation, without and with the incidence."""
     range_only = CachedValues(lambda s: np.zeros(len(s.xyz)))
-    methods["range_only"] = profile_method(
-        "range and ring only (constant value, range_ring profile)",
-        range_only,
-        form="range_ring",
-        input="constant",
-        note="what a profile knows without any image",
-    )
+    methods = {
+        "range_only": profile_method(
+            "range and ring only (constant value, range_ring profile)",
+            range_only,
+            form="range_ring",
+            input="constant",
+            note="what a profile knows without any image",
+        )
+    }
     if "gbm" in forms:
         methods["geometry_gbm"] = profile_method(
             "range and elevation only (gbm profile without a value)",
@@ -257,8 +275,14 @@ def standard_methods(
             use_value=False,
             incidence=True,
         )
+    return methods
+
+
+def _value_sources(lum, nir, model) -> list[tuple[str, str, CachedValues, str]]:
+    """The image values profiles are fitted on: ``(key, label, values, input)`` each, in table
+    order (luminance, the linear map when given, NIDAR's maps when a model is given)."""
     sources = [("lum", "(b) luminance", lum, "luminance")]
-    if linear_nir is not None:
+    if nir is not None:
         sources.append(("linnir", "(i) linear RGB→NIR", nir, "linear_nir"))
     if model is not None:
         maps = CachedValues(lambda s: _nidar_branches(model, s))
@@ -270,10 +294,17 @@ def standard_methods(
             sources.append(
                 (f"nidar_{branch}", name, CachedValues(_branch_of(maps, branch)), f"nidar:{branch}")
             )
+    return sources
+
+
+def _source_methods(sources, forms: Sequence[str]) -> dict[str, LooMethod]:
+    """One row per value source and profile form, and the source's variants
+    (:data:`_VARIANTS`)."""
+    methods = {}
     for key, name, vals, inp in sources:
         for form in forms:
             if key == "linnir" and form == "distance_quantile":
-                continue  # row (i) above
+                continue  # row (i), with the rows that read no value source
             methods[f"{key}_{form}"] = profile_method(
                 f"{name} + {form} profile", vals, form=form, input=inp
             )
@@ -282,11 +313,6 @@ def standard_methods(
                     methods[f"{key}{suffix}"] = profile_method(
                         f"{name} + {what}", vals, form=form, input=inp, **options
                     )
-    if model is not None:
-        raw = next(v for k, _, v, _ in sources if k == "nidar_I_hat")
-        methods["nidar_I_hat_raw"] = raw_method("(f) NIDAR Î raw, zero-shot", raw, "no fitting")
-        if zero_shot_profile is not None:
-            methods["nidar_zero_shot"] = _zero_shot_method(model, zero_shot_profile, sources)
     return methods
 
 

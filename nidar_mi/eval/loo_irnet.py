@@ -2,7 +2,7 @@
 
 :func:`irnet_methods` gives :class:`~nidar_mi.eval.loo.LooMethod` rows for
 :func:`~nidar_mi.eval.loo.leave_one_out`: in each fold an IRNet is trained on the fold's
-training frames only (:func:`nidar_mi.nidar.train.train_irnet` with the fold's frame list, a
+training frames only (:func:`nidar_mi.nidar.training.train_irnet` with the fold's frame list, a
 fixed STN, the given configuration: e.g. a compact ``unet`` at quarter resolution) and its
 maps at the returns feed the rows:
 
@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import NidarError
+from ..io.cache_key import file_sha256
 from .loo import CachedValues, LooMethod, profile_method, raw_method
 
 __all__ = ["FoldModels", "irnet_methods"]
@@ -51,7 +52,7 @@ class FoldModels:
         init_weights: IRNet weights every fold starts from (e.g. pretrained on renders; not
             fitted on any real frame), None for a random initialisation.
         render_frames: rendered frames every fold mixes in to supervise the decomposition
-            (:func:`~nidar_mi.nidar.train.train_irnet`), None for none.
+            (:func:`~nidar_mi.nidar.training.train_irnet`), None for none.
     """
 
     cfg: Any
@@ -67,7 +68,7 @@ class FoldModels:
 
     def fold_dir(self, train: Sequence[Any]) -> Path:
         """``WORK/fold-<held-out frames>`` of the fold that trains on ``train``."""
-        from ..frames import SPLITS, list_frames
+        from ..training_frames import SPLITS, list_frames
 
         names = {s.name for s in train}
         every = sorted(f.stem for split in SPLITS for f in list_frames(self.data_dir, split))
@@ -103,7 +104,6 @@ class FoldModels:
     def _check_finished(self, fold: Path) -> None:
         """A finished fold is reused only if it was trained as this evaluation would train it
         (configuration, initial weights, rendered frames)."""
-        import hashlib
 
         try:
             record = json.loads((fold / "config.json").read_text())
@@ -114,7 +114,7 @@ class FoldModels:
             raise NidarError(f"cannot read {fold / 'config.json'}: {exc}") from None
         init = None
         if self.init_weights is not None:
-            init = {"sha256": hashlib.sha256(Path(self.init_weights).read_bytes()).hexdigest()}
+            init = {"sha256": file_sha256(self.init_weights)}
         renders = sorted(str(f) for f in self.render_frames) if self.render_frames else None
         want = _fold_identity(self.cfg.to_dict(), {"init": init, "renders": renders})
         if have != want:
@@ -128,7 +128,7 @@ class FoldModels:
 
         from ..nidar.loop import read_train_log
         from ..nidar.pipeline import NidarModel
-        from ..nidar.train import train_irnet
+        from ..nidar.training import train_irnet
 
         done = (fold / "irnet.safetensors").is_file() and read_train_log(fold).get("irnet", {}).get(
             "done"
@@ -160,11 +160,11 @@ class FoldModels:
 
 
 def _fold_identity(train_record: dict, data: dict) -> tuple:
-    from ..nidar.train import _comparable, _input_identity
+    from ..nidar.training import input_identity, resume_identity
 
     return (
-        _comparable({k: v for k, v in train_record.items() if k != "stn"}),
-        _input_identity(data.get("init")),
+        resume_identity({k: v for k, v in train_record.items() if k != "stn"}),
+        input_identity(data.get("init")),
         data.get("renders"),
     )
 

@@ -14,7 +14,7 @@ mask M:
   the window is cut at the image edge and renormalised (the local statistics use only pixels
   inside the image), so the map has the input's size; farther in, it is the reference
   formulation exactly. It is the training loss's SSIM
-  (:func:`nidar_mi.nidar.losses.ssim_map`), evaluated in float64.
+  (:func:`nidar_mi.nidar.losses.ssim_map_torch`), evaluated in float64.
 * LPIPS (AlexNet, via the ``lpips`` package): only with ImageNet AlexNet weights in the torch
   cache (``torch.hub.get_dir()/checkpoints/alexnet-owt-7be5be79.pth``); otherwise ``None`` with
   the reason, never a random backbone. The backbone is loaded from that file with
@@ -23,8 +23,10 @@ mask M:
   mask, invalid pixels are set to 0 and the spatial LPIPS map (layer maps upsampled to the
   input size) is averaged over the valid pixels. AlexNet needs maps of at least 31 x 31 pixels.
 
-**Points** ((N,) arrays): RMSE, MAE and Spearman's rank correlation (average ranks for ties;
-``nan`` when either side is constant).
+**Points** ((N,) arrays): RMSE, MAE and Spearman's rank correlation, the package's one
+(:func:`spearman`): average ranks for ties; ``nan`` when either side is constant or there are
+fewer than 3 pairs (two points always rank ±1: no evidence of an order); an error for
+non-finite values or shapes that differ.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ __all__ = [
     "psnr",
     "rmse",
     "scale_intensity",
+    "SPEARMAN_MIN_PAIRS",
     "spearman",
     "ssim",
     "ssim_map",
@@ -131,7 +134,7 @@ def psnr(pred: Any, gt: Any, mask: Any = None) -> float:
 def ssim_map(x: Any, y: Any) -> np.ndarray:
     """Per-pixel SSIM of two (H, W) maps in [0, 1] (data range 1), in float64.
 
-    This evaluates the package's one SSIM, :func:`nidar_mi.nidar.losses.ssim_map` (the one the
+    This evaluates the package's one SSIM, :func:`nidar_mi.nidar.losses.ssim_map_torch` (the one the
     training loss uses): 11x11 Gaussian window (σ = 1.5), cut at the image edge and
     renormalised; variances and covariance are the window-weighted population ones.
 
@@ -144,11 +147,11 @@ def ssim_map(x: Any, y: Any) -> np.ndarray:
     """
     import torch
 
-    from ..nidar.losses import ssim_map as _ssim_map
+    from ..nidar.losses import ssim_map_torch
 
     x, y, _ = _pair(x, y, ndim=2)
     with torch.no_grad():
-        s = _ssim_map(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])
+        s = ssim_map_torch(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])
     return s[0, 0].numpy()
 
 
@@ -168,20 +171,32 @@ def ssim(pred: Any, gt: Any, mask: Any = None) -> float:
 # --- rank correlation -------------------------------------------------------------------------
 
 
+#: Fewest pairs :func:`spearman` scores (with two, ρ is ±1 whatever the values).
+SPEARMAN_MIN_PAIRS = 3
+
+
 def spearman(pred: Any, gt: Any) -> float:
     """Spearman's rank correlation (:func:`scipy.stats.spearmanr`; average ranks for ties).
 
     Args:
-        pred: (N,) values.
-        gt: (N,) values.
+        pred: (N,) finite values.
+        gt: (N,) finite values.
 
     Returns:
-        ρ in [-1, 1]; ``nan`` when either input is constant (or N < 2).
+        ρ in [-1, 1]; ``nan`` when either input is constant or N < :data:`SPEARMAN_MIN_PAIRS`
+        (empty included).
+
+    Raises:
+        NidarError: the shapes differ or are not 1-D, or a value is not finite.
     """
     from scipy.stats import spearmanr
 
-    p, g, _ = _pair(pred, gt, ndim=1)
-    if p.size < 2 or np.all(p == p[0]) or np.all(g == g[0]):
+    p = np.asarray(pred, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    if p.size == 0 and g.size == 0 and p.ndim == g.ndim == 1:
+        return float("nan")
+    p, g, _ = _pair(p, g, ndim=1)
+    if p.size < SPEARMAN_MIN_PAIRS or np.all(p == p[0]) or np.all(g == g[0]):
         return float("nan")
     return float(np.clip(spearmanr(p, g).statistic, -1.0, 1.0))
 

@@ -1,12 +1,12 @@
 """The whole evaluation behind ``python -m nidar_mi.evaluate``: every group, tables, figures.
 
 Held-out generated scenes (a dataset's ``test`` split), hand-made scene files, scenes of held-out
-materials and the IRNet ablations (scored with :mod:`nidar_mi.eval.frames`), and the real data:
+materials and the IRNet ablations (scored with :mod:`nidar_mi.eval.rendered`), and the real data:
 KITTI leave-one-frame-out (:mod:`nidar_mi.eval.loo`) and the held-out RGB/NIR photos
 (:mod:`nidar_mi.eval.photos`), both via :mod:`nidar_mi.eval.real`. The results are written as
 ``OUT/results.{md,csv,json}`` and ``OUT/figures/*.png`` (no figure of real data), published whole
 when everything succeeded; renders and ablation runs are cached outside ``OUT``
-(:func:`cache_dir`; the KITTI frames in the user's cache, :mod:`nidar_mi.datasets.paths`).
+(:func:`evaluation_cache`; the KITTI frames in the user's cache, :mod:`nidar_mi.datasets.paths`).
 
 The run is described by an :class:`EvaluateOptions` (the command line builds one from its
 arguments). Scanning and rendering scenes (baseline (a), ``scenes``, ``heldout_materials``)
@@ -22,8 +22,14 @@ import os
 import time
 
 from ..errors import NidarError
+from ..io.ownership import Owner
 
-__all__ = ["EvaluateOptions", "run", "cache_dir"]
+__all__ = ["EvaluateOptions", "OWNER", "run_evaluation", "evaluation_cache"]
+
+#: Who writes an evaluation's output folder (:mod:`nidar_mi.io.ownership`).
+OWNER = Owner(
+    "evaluate", "results", names=("results.md", "results.csv", "results.json", "figures/*")
+)
 
 log = logging.getLogger("nidar_mi.evaluate")
 
@@ -76,7 +82,7 @@ class EvaluateOptions:
         return bool(self.data) and bool(self.twin or self.scenes or self.heldout_materials)
 
 
-def cache_dir(options: EvaluateOptions) -> str:
+def evaluation_cache(options: EvaluateOptions) -> str:
     """The evaluation's cache: ``options.cache``, default ``DATA/cache/evaluate``.
 
     It holds ``renders/<scene>`` (the hand-made scenes rendered with the dataset's parameters;
@@ -88,11 +94,11 @@ def cache_dir(options: EvaluateOptions) -> str:
     return options.cache or os.path.join(options.data, "cache", "evaluate")
 
 
-def run(options: EvaluateOptions) -> dict:
+def run_evaluation(options: EvaluateOptions) -> dict:
     """Everything the evaluation does; returns the results payload (also written to OUT).
 
     ``OUT`` (results and figures) is published whole when everything succeeded
-    (:func:`nidar_mi.io.atomic.staged_directory`); caches go to :func:`cache_dir`.
+    (:func:`nidar_mi.io.atomic.staged_directory`); caches go to :func:`evaluation_cache`.
 
     Raises:
         NidarError: a missing or inconsistent input, LPIPS requested but unavailable, no
@@ -102,7 +108,7 @@ def run(options: EvaluateOptions) -> dict:
 
     t0 = time.perf_counter()
     out = options.out
-    publish = dict(overwrite=options.overwrite, marker="results.json", inputs=_inputs(options))
+    publish = dict(owner=OWNER, overwrite=options.overwrite, inputs=_inputs(options))
     check_output_folder(out, **publish)
     meta = _check_inputs(options)
     _check_environment(options)
@@ -125,13 +131,13 @@ def _inputs(options: EvaluateOptions) -> list[str | None]:
     """Every file and folder the run reads (the output must not hold one); the cache too,
     which a replaced output would take with it."""
     o = options
-    extra = [o.cache or (cache_dir(o) if o.data else None)]
+    extra = [o.cache or (evaluation_cache(o) if o.data else None)]
     return [o.data, o.weights, o.scenes, o.heldout_materials, *o.kitti, o.photos, *extra]
 
 
 def _real_data(options: EvaluateOptions) -> bool:
     """Whether ``kitti`` or ``photos`` hold anything to score (else both would be skipped)."""
-    from ..datasets.kitti import frame_ids
+    from ..datasets.kitti_objects import frame_ids
     from ..datasets.rgbnir import list_pairs
 
     if any(frame_ids(d) for d in options.kitti):
@@ -146,7 +152,7 @@ def _real_data(options: EvaluateOptions) -> bool:
 
 def _check_inputs(options: EvaluateOptions) -> dict | None:
     """The dataset's meta (None without ``data``), after checking every input exists."""
-    from ..frames import load_meta
+    from ..training_frames import load_meta
 
     o = options
     if not (o.data or o.kitti or o.photos):
@@ -253,7 +259,7 @@ def _photos(options: EvaluateOptions, model, payload: dict):
 
 def _kitti(options: EvaluateOptions, model, linear, payload: dict) -> None:
     """KITTI leave-one-frame-out into ``payload["kitti"]`` (skipped without frames)."""
-    from ..datasets.kitti import frame_ids
+    from ..datasets.kitti_objects import frame_ids
 
     present = [d for d in options.kitti if frame_ids(d)]
     if not present:
@@ -297,7 +303,7 @@ def _synthetic(options: EvaluateOptions, meta: dict, model, fig_dir: str, payloa
         stn = model.weights_dir / "stn.safetensors"
         payload["ablation"] = run_ablation(
             options.data,
-            os.path.join(cache_dir(options), "ablation", _ablation_key(meta, stn)),
+            os.path.join(evaluation_cache(options), "ablation", _ablation_key(meta, stn)),
             stn,
             split=options.split,
         )
@@ -332,7 +338,7 @@ def _fit_baselines(options: EvaluateOptions, meta: dict, model, payload: dict) -
 def _generated(options, meta: dict, model, ctx: _Rendered, fig_dir: str, payload: dict) -> None:
     """The dataset's held-out generated scenes (and the decomposition against the true maps
     when the frames carry them)."""
-    from ..frames import frame_has, list_frames
+    from ..training_frames import frame_has, list_frames
     from .heldout import evaluate_renders
 
     names = meta["scenes"][options.split]
@@ -359,7 +365,7 @@ def _handmade(options, model, ctx: _Rendered, fig_dir: str, payload: dict) -> No
     log.info("rendering and evaluating %d hand-made scenes", len(files))
     dirs = render_scenes(
         files,
-        os.path.join(cache_dir(options), "renders"),
+        os.path.join(evaluation_cache(options), "renders"),
         **ctx.render_opts,
         workers=options.workers,
         ray_address=options.ray_address,
@@ -382,7 +388,7 @@ def _heldout_materials(options, model, ctx: _Rendered, payload: dict) -> None:
 
     files = find_scenes(options.heldout_materials)
     log.info("rendering and evaluating %d scenes of held-out materials", len(files))
-    cache = os.path.join(cache_dir(options), "renders_heldout")
+    cache = os.path.join(evaluation_cache(options), "renders_heldout")
     dirs = render_scenes(files, cache, **ctx.render_opts)
     res = evaluate_renders(dirs, model, ctx.scale, **ctx.scoring)
     class_const = ctx.scoring["class_const"]
@@ -394,7 +400,7 @@ def _heldout_materials(options, model, ctx: _Rendered, payload: dict) -> None:
 
 
 def _group(results, name: str, scenes: list[str], note: str = "") -> dict:
-    from .frames import mean_table, result_rows
+    from .rendered import mean_table, result_rows
 
     rows = result_rows(results, name)
     return {"scenes": scenes, "rows": rows, "mean": mean_table(rows), "note": note}
@@ -404,7 +410,7 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
     import numpy as np
 
     from .figures import maps_figure, scatter_figure
-    from .frames import METHOD_LABELS
+    from .rendered import METHOD_LABELS
 
     paths = []
     for r in results[: max(count, 0)]:
@@ -434,8 +440,7 @@ def _figures(results, group: str, fig_dir: str, count: int) -> list[str]:
 
 def _ablation_key(meta: dict, stn) -> str:
     """16 hex digits naming the ablation runs of one dataset, STN and settings."""
-    from ..io.cache_key import cache_key
-    from ..render_folder import file_sha256
+    from ..io.cache_key import cache_key, file_sha256
     from .ablation import AblationSettings
 
     data = {k: meta.get(k) for k in ("request", "frames", "intensity_scale")}
@@ -446,21 +451,21 @@ def _ablation_key(meta: dict, stn) -> str:
 def _write(stage: str, payload: dict, out: str) -> None:
     """Write the tables into ``stage`` (figure paths in ``payload`` name their place in
     ``out``)."""
-    from . import report
+    from . import tables
 
     md, csv_rows = _tables(payload)
     if payload["figures"]:
         md.append("## Figures\n\n")
         md.extend(f"- `{os.path.relpath(p, out)}`\n" for p in payload["figures"])
-    report.write_csv(os.path.join(stage, "results.csv"), csv_rows)
-    report.write_json(os.path.join(stage, "results.json"), payload)
-    report.write_text(os.path.join(stage, "results.md"), "".join(md))
+    tables.write_csv(os.path.join(stage, "results.csv"), csv_rows)
+    tables.write_json(os.path.join(stage, "results.json"), payload)
+    tables.write_text(os.path.join(stage, "results.md"), "".join(md))
 
 
 def _tables(payload: dict) -> tuple[list[str], list[dict]]:
     """``results.md`` as a list of parts (figures left out) and the rows of ``results.csv``."""
-    from . import report
-    from .frames import METHOD_LABELS
+    from . import tables
+    from .rendered import METHOD_LABELS
 
     titles = {"generated": "Held-out generated scenes", "handmade": "Hand-made scenes"}
     md = ["# NIDAR evaluation\n\n"]
@@ -478,22 +483,22 @@ def _tables(payload: dict) -> tuple[list[str], list[dict]]:
         )
     csv_rows = []
     for key, group in payload["groups"].items():
-        md.append(report.group_markdown(titles.get(key, key), group, METHOD_LABELS) + "\n")
+        md.append(tables.group_markdown(titles.get(key, key), group, METHOD_LABELS) + "\n")
         csv_rows += group["rows"] + [
             {"group": key, "scene": "mean", "camera": "", **r} for r in group["mean"]
         ]
     if "intrinsic" in payload:
-        md.append(report.intrinsic_markdown(payload["intrinsic"]) + "\n")
+        md.append(tables.intrinsic_markdown(payload["intrinsic"]) + "\n")
     if "heldout_materials" in payload:
         h = payload["heldout_materials"]
-        md.append(report.heldout_materials_markdown(h, METHOD_LABELS) + "\n")
+        md.append(tables.heldout_materials_markdown(h, METHOD_LABELS) + "\n")
         csv_rows += [{"group": "heldout_materials", **r} for r in h["rows"]]
     if "kitti" in payload:
-        md.append(report.loo_markdown(payload["kitti"]) + "\n")
+        md.append(tables.loo_markdown(payload["kitti"]) + "\n")
         csv_rows += [{"group": "kitti_loo", **r} for r in payload["kitti"].get("rows", [])]
     if "photos" in payload:
-        md.append(report.photos_markdown(payload["photos"]) + "\n")
+        md.append(tables.photos_markdown(payload["photos"]) + "\n")
         csv_rows += [{"group": "photos", **r} for r in payload["photos"].get("rows", [])]
     if "ablation" in payload:
-        md.append(report.ablation_markdown(payload["ablation"]) + "\n")
+        md.append(tables.ablation_markdown(payload["ablation"]) + "\n")
     return md, csv_rows

@@ -11,20 +11,18 @@
   wins) and :func:`splat_points` (its maps alone).
 * :mod:`~nidar_mi.geometry.fusion`: :func:`sample_cameras` (a per-point value from several
   cameras, fused by a rule) and :func:`locate_in_cameras` (its geometric half: which points
-  each camera sees, and where, before any image exists).
-* :mod:`~nidar_mi.geometry.device_fusion`: :func:`sample_cameras_on` (the same in torch on a
-  device, a GPU's or the CPU).
+  each camera sees, and where, before any image exists): the one camera-sampling path, in
+  NumPy on the host, whatever device made the images (docs/ARCHITECTURE.md says why).
 * :mod:`~nidar_mi.geometry.normals`: :func:`estimate_normals` (plane fits to each point's
   neighbours) and :func:`incidence_cosine` (the ray's ``|cos θ|`` on the surface).
 * :mod:`~nidar_mi.geometry.se3`: SE(3) exponential and logarithm, poses interpolated along a
-  trajectory (constant twist between samples).
+  trajectory (constant twist between samples), a Mitsuba transform as a NumPy pose.
 
 Pixel centres are at integer ``(u, v) = (column, row)``; lengths and depths are in metres.
 """
 
 from .camera_model import CONVENTIONS, R_OPENCV_FROM_WAYMO, CameraModel
 from .camera_returns import CameraReturns, camera_returns, splat_points
-from .device_fusion import sample_cameras_on
 from .fusion import FUSION_RULES, Sightings, locate_in_cameras, sample_cameras
 from .normals import estimate_normals, incidence_cosine
 from .projection import bilinear_sample, in_image, project, unproject
@@ -48,7 +46,6 @@ __all__ = [
     "locate_in_cameras",
     "project",
     "sample_cameras",
-    "sample_cameras_on",
     "splat_points",
     "unproject",
     "visible_mask",

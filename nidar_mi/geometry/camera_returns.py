@@ -2,7 +2,7 @@
 
 Every builder of camera-visible returns (the rendered training frames of
 :mod:`nidar_mi.render_dataset`, the KITTI frames of :mod:`nidar_mi.datasets.kitti_frames`, the
-evaluation frames of :mod:`nidar_mi.eval.frames`) takes the same three steps here:
+evaluation frames of :mod:`nidar_mi.eval.rendered`) takes the same three steps here:
 
 1. **project** each return into the camera (:func:`~nidar_mi.geometry.projection.project`);
 2. keep those in front of it, inside the image and not hidden

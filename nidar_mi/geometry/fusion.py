@@ -29,10 +29,10 @@ import numpy as np
 from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
-from .projection import _points, bilinear_sample, project_in_image
+from .projection import bilinear_sample, check_points, project_in_image
 from .visibility import DEFAULT_ABS_TOL, DEFAULT_ZBUFFER_CELL, visible_mask
 
-__all__ = ["FUSION_RULES", "Sightings", "locate_in_cameras", "sample_cameras"]
+__all__ = ["FUSION_RULES", "VISIBILITY_OPTIONS", "Sightings", "locate_in_cameras", "sample_cameras"]
 
 FUSION_RULES = ("nearest_center", "mean", "min_depth")
 """Rules :func:`sample_cameras` can fuse several cameras' samples with."""
@@ -127,16 +127,31 @@ def _fuse(
     return values, observed, camera_index
 
 
+#: The options of the occlusion test (:func:`~nidar_mi.geometry.visibility.visible_mask`) that
+#: :func:`sample_cameras` and :func:`locate_in_cameras` hand on, and their defaults.
+VISIBILITY_OPTIONS = {
+    "depth_kind": "z",
+    "rel_tol": None,
+    "abs_tol": DEFAULT_ABS_TOL,
+    "zbuffer_cell": DEFAULT_ZBUFFER_CELL,
+}
+
+
+def _visibility(options: dict[str, Any], caller: str) -> dict[str, Any]:
+    """The occlusion test's options: :data:`VISIBILITY_OPTIONS` updated by ``options``."""
+    unknown = sorted(set(options) - set(VISIBILITY_OPTIONS))
+    if unknown:
+        raise NidarError(f"{caller}: unknown option(s) {', '.join(unknown)}")
+    return VISIBILITY_OPTIONS | options
+
+
 def locate_in_cameras(
     points: Any,
     cameras: Sequence[CameraModel],
     *,
     depth_images: Sequence[Any] | None = None,
     occlusion: bool = True,
-    depth_kind: str = "z",
-    rel_tol: float | None = None,
-    abs_tol: float = DEFAULT_ABS_TOL,
-    zbuffer_cell: int = DEFAULT_ZBUFFER_CELL,
+    **visibility: Any,
 ) -> Sightings:
     """Which points each camera sees, and where: the geometric half of :func:`sample_cameras`,
     which needs no image (so it can run while the images are still being computed).
@@ -144,7 +159,8 @@ def locate_in_cameras(
     Args:
         points: (N, 3) points in the LiDAR frame, metres.
         cameras: C cameras (a single :class:`CameraModel` is taken as one camera).
-        depth_images, occlusion, depth_kind, rel_tol, abs_tol, zbuffer_cell: as for
+        depth_images, occlusion: as for :func:`sample_cameras`.
+        **visibility: ``depth_kind``, ``rel_tol``, ``abs_tol``, ``zbuffer_cell`` as for
             :func:`sample_cameras`.
 
     Returns:
@@ -154,13 +170,9 @@ def locate_in_cameras(
         NidarError: no cameras, points not (N, 3) or not finite, or depth images that do not
             match the cameras in number.
     """
-    visibility = {
-        "depth_kind": depth_kind,
-        "rel_tol": rel_tol,
-        "abs_tol": abs_tol,
-        "zbuffer_cell": zbuffer_cell,
-    }
-    return _locate(points, cameras, depth_images, occlusion, visibility, "locate_in_cameras")
+    caller = "locate_in_cameras"
+    visibility = _visibility(visibility, caller)
+    return _locate(points, cameras, depth_images, occlusion, visibility, caller)
 
 
 def _locate(
@@ -181,7 +193,7 @@ def _locate(
         depth_images = [None] * len(cameras)
     elif len(depth_images) != len(cameras):
         raise NidarError(f"{caller}: {len(cameras)} cameras but {len(depth_images)} depth images")
-    p = _points(points)
+    p = check_points(points)
     per_camera = tuple(
         _locate_camera(p, cam, dimg, occlusion=occlusion, visibility=visibility)
         for cam, dimg in zip(cameras, depth_images, strict=True)
@@ -197,11 +209,8 @@ def sample_cameras(
     depth_images: Sequence[Any] | None = None,
     occlusion: bool = True,
     fusion: str = "nearest_center",
-    depth_kind: str = "z",
-    rel_tol: float | None = None,
-    abs_tol: float = DEFAULT_ABS_TOL,
-    zbuffer_cell: int = DEFAULT_ZBUFFER_CELL,
     sightings: Sightings | None = None,
+    **visibility: Any,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Give each point a value sampled from the camera images that see it.
 
@@ -219,13 +228,14 @@ def sample_cameras(
         depth_images: optional C entries, each an (H_c, W_c) rendered depth in metres or None.
         occlusion: apply the occlusion test.
         fusion: ``"nearest_center"``, ``"mean"`` or ``"min_depth"``.
-        depth_kind: what the depth images hold, ``"z"`` or ``"range"``.
-        rel_tol: relative occlusion tolerance; None for
-            :data:`~nidar_mi.geometry.visibility.DEFAULT_REL_TOL`.
-        abs_tol: absolute occlusion tolerance in metres.
-        zbuffer_cell: z-buffer cell in pixels when a camera has no depth image.
         sightings: :func:`locate_in_cameras` of these points and cameras, computed before
-            (the arguments above that it took are then not used again); None: located here.
+            (the arguments it took are then not used again); None: located here.
+        **visibility: the occlusion test's options (:data:`VISIBILITY_OPTIONS`):
+            ``depth_kind``, what the depth images hold, ``"z"`` or ``"range"``; ``rel_tol``,
+            the relative occlusion tolerance (None for
+            :data:`~nidar_mi.geometry.visibility.DEFAULT_REL_TOL`); ``abs_tol``, the absolute
+            one in metres; ``zbuffer_cell``, the z-buffer cell in pixels when a camera has no
+            depth image.
 
     Returns:
         ``(values, observed, camera_index)``: (N,) float32 values (0 where no camera sees
@@ -233,8 +243,9 @@ def sample_cameras(
         (-1 where unobserved).
 
     Raises:
-        NidarError: no cameras, an unknown fusion rule, or images / depth images that do not
-            match the cameras in number or size; ``sightings`` of another cloud or camera count.
+        NidarError: no cameras, an unknown fusion rule or option, or images / depth images
+            that do not match the cameras in number or size; ``sightings`` of another cloud or
+            camera count.
     """
     if isinstance(cameras, CameraModel):
         cameras = [cameras]
@@ -250,13 +261,8 @@ def sample_cameras(
             raise NidarError(
                 f"sample_cameras: image {k} is {img.shape}, camera {k} is {(cam.height, cam.width)}"
             )
+    visibility = _visibility(visibility, "sample_cameras")
     if sightings is None:
-        visibility = {
-            "depth_kind": depth_kind,
-            "rel_tol": rel_tol,
-            "abs_tol": abs_tol,
-            "zbuffer_cell": zbuffer_cell,
-        }
         sightings = _locate(points, cameras, depth_images, occlusion, visibility, "sample_cameras")
     elif len(sightings.per_camera) != len(cameras) or sightings.n != len(np.asarray(points)):
         raise NidarError("sample_cameras: sightings of another cloud or other cameras")

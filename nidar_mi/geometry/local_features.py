@@ -47,12 +47,12 @@ from .normals import (
     DEGENERATE,
     MAX_COORDINATE,
     WORKERS,
-    _covariances,
-    _neighbours,
-    _plane_eigen,
-    _tree,
-    _trig_eigenvalues,
     incidence_cosine,
+    neighbour_covariances,
+    neighbour_indices,
+    neighbour_tree,
+    plane_eigen,
+    trig_eigenvalues,
 )
 
 __all__ = [
@@ -116,15 +116,15 @@ def _shape(p: np.ndarray, idx: np.ndarray, normal: bool = True) -> tuple:
     normals' Newton refinement of the smallest, which a double root throws off), and (3, n)
     the normals' unit eigenvector of the smallest (zero where ``flat``: the points coincide or
     lie on one line); without ``normal`` the last two are None."""
-    cov, scale = _covariances(p, idx)
+    cov, scale = neighbour_covariances(p, idx)
     vec = flat = None
     if normal:
-        second, vec = _plane_eigen(cov)
+        second, vec = plane_eigen(cov)
         flat = ~(second > DEGENERATE * scale)
         vec[:, flat] = 0.0
     s = np.abs(cov).max(axis=0)
     s[s <= 0] = 1.0
-    q, top, low = _trig_eigenvalues(*(cov / s))
+    q, top, low = trig_eigenvalues(*(cov / s))
     lam = np.stack([top, 3.0 * q - top - low, low]) * (s / idx.shape[1])
     return np.clip(lam, 0.0, None), vec, flat
 
@@ -190,13 +190,15 @@ def _query(q: np.ndarray, k: int) -> np.ndarray:
     point's neighbours do not depend on the split)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    tree = _tree(q)
+    tree = neighbour_tree(q)
     cuts = np.linspace(0, len(q), min(WORKERS, -(-len(q) // BLOCK)) + 1).astype(int)
     shares = [q[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
     if len(shares) == 1:
-        return _neighbours(tree, q, k)
+        return neighbour_indices(tree, q, k)
     with ThreadPoolExecutor(len(shares)) as pool:
-        return np.concatenate(list(pool.map(lambda share: _neighbours(tree, share, k), shares)))
+        return np.concatenate(
+            list(pool.map(lambda share: neighbour_indices(tree, share, k), shares))
+        )
 
 
 def _fill(q, near, ks, feats, normals, notes) -> None:

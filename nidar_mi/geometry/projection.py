@@ -16,17 +16,27 @@ from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
 
-__all__ = ["bilinear_sample", "in_image", "project", "project_in_image", "unproject"]
+__all__ = [
+    "bilinear_sample",
+    "check_points",
+    "check_uv",
+    "in_image",
+    "project",
+    "project_in_image",
+    "unproject",
+]
 
 
-def _points(points: Any, name: str = "points") -> np.ndarray:
+def check_points(points: Any, name: str = "points") -> np.ndarray:
+    """``points`` as an (N, 3) float64 array; NidarError naming ``name`` otherwise."""
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3:
         raise NidarError(f"{name} must have shape (N, 3), got {p.shape}")
     return p
 
 
-def _uv(uv: Any) -> np.ndarray:
+def check_uv(uv: Any) -> np.ndarray:
+    """Pixel coordinates as an (N, 2) float64 array; NidarError otherwise."""
     a = np.asarray(uv, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 2:
         raise NidarError(f"uv must have shape (N, 2), got {a.shape}")
@@ -49,7 +59,7 @@ def project(
         (N,) bool ``depth > min_depth``. Points in front may still fall outside the image
         (see :func:`in_image`).
     """
-    p = _points(points_lidar)
+    p = check_points(points_lidar)
     x, y, depth = _camera_coordinates(p, cam)
     in_front = depth > min_depth
     uv = np.full((p.shape[0], 2), np.nan)
@@ -73,7 +83,7 @@ def project_in_image(
         ``(index, uv, depth)``: (M,) int64 indices of those points into ``points_lidar``
         (ascending), their (M, 2) float64 pixel coordinates and (M,) camera-forward depths, m.
     """
-    p = _points(points_lidar)
+    p = check_points(points_lidar)
     depth = _camera_coordinates(p, cam, axes=(2,))[0]
     front = np.flatnonzero(depth > min_depth)
     depth = depth[front]
@@ -126,7 +136,7 @@ def unproject(uv: Any, depth: Any, cam: CameraModel) -> np.ndarray:
     Returns:
         (N, 3) points in the LiDAR frame, metres.
     """
-    uv = _uv(uv)
+    uv = check_uv(uv)
     depth = np.asarray(depth, dtype=np.float64).reshape(-1)
     if depth.shape[0] != uv.shape[0]:
         raise NidarError(f"unproject: {uv.shape[0]} pixels but {depth.shape[0]} depths")
@@ -147,7 +157,7 @@ def in_image(uv: Any, cam: CameraModel) -> np.ndarray:
     Returns:
         (N,) bool: finite ``uv`` inside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``.
     """
-    uv = _uv(uv)
+    uv = check_uv(uv)
     u, v = uv[:, 0], uv[:, 1]
     with np.errstate(invalid="ignore"):
         return (u >= -0.5) & (u < cam.width - 0.5) & (v >= -0.5) & (v < cam.height - 0.5)
@@ -171,7 +181,7 @@ def bilinear_sample(img: Any, uv: Any, *, fill: float = np.nan) -> np.ndarray:
     img = np.asarray(img)
     if img.ndim != 2:
         raise NidarError(f"bilinear_sample: image must be (H, W), got shape {img.shape}")
-    uv = _uv(uv)
+    uv = check_uv(uv)
     H, W = img.shape
     out = np.full(uv.shape[0], fill, dtype=np.float64)
     with np.errstate(invalid="ignore"):

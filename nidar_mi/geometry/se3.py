@@ -1,4 +1,5 @@
-"""Rigid motions: SE(3) exponential and logarithm, and poses interpolated along a trajectory.
+"""Rigid motions: SE(3) exponential and logarithm, poses interpolated along a trajectory, and a
+Mitsuba transform as a NumPy pose (:func:`transform_matrix`).
 
 Between two poses ``T0`` and ``T1`` the interpolated pose at fraction ``s`` is the constant-twist
 (screw) motion ``T(s) = T0 · exp(s · log(T0⁻¹ T1))``: a vehicle turning at constant yaw rate and
@@ -10,7 +11,25 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["se3_exp", "se3_log", "interpolate_poses"]
+__all__ = [
+    "POSE_TOLERANCE",
+    "se3_exp",
+    "se3_log",
+    "interpolate_poses",
+    "rigid_pose_problem",
+    "transform_matrix",
+]
+
+#: How far a pose's rotation block may be from a rotation: |RᵀR − I| and |det R − 1| at most
+#: this (poses are float32 in the renderer: ~1e-7 relative; a text matrix rounded to 6
+#: digits stays well inside), and the bottom row from (0, 0, 0, 1).
+POSE_TOLERANCE = 1e-4
+
+
+def transform_matrix(transform) -> np.ndarray:
+    """(4, 4) float64 matrix of a Mitsuba transform (``mi.Transform4f``, ``AffineTransform4f``
+    or anything with ``.matrix.numpy()``), e.g. a sensor's ``world_transform()``."""
+    return np.array(transform.matrix.numpy(), dtype=np.float64).reshape(4, 4)
 
 
 def _hat(w: np.ndarray) -> np.ndarray:
@@ -94,3 +113,32 @@ def interpolate_poses(times: np.ndarray, poses: np.ndarray, query: np.ndarray) -
     out[exact0] = T0[exact0]
     out[exact1] = T1[exact1]
     return out
+
+
+def rigid_pose_problem(T: np.ndarray, tol: float = POSE_TOLERANCE) -> str | None:
+    """Why the (4, 4) matrix ``T`` is not a rigid pose (a rotation and a translation), in
+    words, or None when it is one within ``tol`` (:data:`POSE_TOLERANCE`).
+
+    Returns:
+        e.g. ``holds NaN or infinite values``, ``scales by 2``, ``mirrors (det -1)``,
+        ``shears or scales unevenly``, ``is not affine (bottom row ...)``.
+    """
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        return f"is not a 4x4 matrix (shape {T.shape})"
+    if not np.isfinite(T).all():
+        return "holds NaN or infinite values"
+    if np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() > tol:
+        return f"is not affine (bottom row {np.round(T[3], 6).tolist()})"
+    R = T[:3, :3]
+    det = float(np.linalg.det(R))
+    scales = np.linalg.svd(R, compute_uv=False)
+    if scales.min() <= tol:
+        return "collapses space (scale 0)"
+    if np.abs(R.T @ R - np.eye(3)).max() <= tol and abs(det - 1.0) <= tol:
+        return None
+    if det < 0 and np.abs(scales - 1.0).max() <= tol:
+        return f"mirrors (det {det:.3g})"
+    if np.ptp(scales) <= tol * scales.max():
+        return f"scales by {scales.mean():.6g}"
+    return f"shears or scales unevenly (scales {', '.join(f'{v:.4g}' for v in scales)})"

@@ -40,7 +40,7 @@ import numpy as np
 from nidar_mi.errors import NidarError
 
 from .camera_model import CameraModel
-from .projection import _uv, in_image
+from .projection import check_uv, in_image
 
 __all__ = [
     "DEFAULT_ABS_TOL",
@@ -104,7 +104,7 @@ def visible_mask(
     Returns:
         (N,) bool, True for points inside the image, in front of the camera and unoccluded.
     """
-    uv = _uv(uv)
+    uv = check_uv(uv)
     depth = np.asarray(depth, dtype=np.float64).reshape(-1)
     if depth.shape[0] != uv.shape[0]:
         raise NidarError(f"visible_mask: {uv.shape[0]} pixels but {depth.shape[0]} depths")

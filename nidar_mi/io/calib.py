@@ -41,7 +41,7 @@ from nidar_mi.geometry.camera_model import CameraModel
 from nidar_mi.io.atomic import atomic_write_text
 
 __all__ = [
-    "render_camera",
+    "render_calib_model",
     "camera_from_dict",
     "camera_to_dict",
     "is_render_calib",
@@ -145,7 +145,7 @@ def is_render_calib(path: str | os.PathLike) -> bool:
         return False
 
 
-def render_camera(
+def render_calib_model(
     data: Mapping[str, Any], name: str, lidar: str | None = None, where: str | None = None
 ) -> CameraModel:
     """The camera model of a renderer ``calib.json`` (or its manifest entry) for one LiDAR.
@@ -208,7 +208,7 @@ def load_calib(path: str | os.PathLike[str], *, lidar: str | None = None) -> lis
         msg = " ".join(str(exc).split())
         raise NidarError(f"{path}: cannot parse camera calibration: {msg}") from None
     if _is_render_calib(data):
-        return [render_camera(data, path.parent.name, lidar, str(path))]
+        return [render_calib_model(data, path.parent.name, lidar, str(path))]
     if lidar is not None:
         raise NidarError(f"{path}: `lidar` applies to a renderer calib.json only")
     if isinstance(data, Mapping):

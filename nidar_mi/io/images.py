@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import warnings
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -29,6 +31,8 @@ __all__ = [
     "write_png",
     "read_png",
     "read_rgb8",
+    "MAX_IMAGE_PIXELS",
+    "open_image",
     "write_exr",
     "read_exr",
     "write_colormap_png",
@@ -40,6 +44,46 @@ REC709_LUMA = (0.2126, 0.7152, 0.0722)
 rounded as ITU-R BT.709 states them)."""
 
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+#: The most pixels an image read may have: Pillow's own bound (about 89 million pixels, e.g.
+#: 10000 x 8900; a 6000 x 4000 photo has 24 million). A larger image is refused from its header,
+#: before any pixel is decoded (a decompression bomb would take the machine's memory).
+MAX_IMAGE_PIXELS = 89_478_485
+
+
+@contextmanager
+def open_image(path: str | os.PathLike):
+    """Pillow's ``Image.open`` of ``path``, refusing an image of more than
+    :data:`MAX_IMAGE_PIXELS` from its header.
+
+    Yields:
+        The open ``PIL.Image.Image`` (closed after the block).
+
+    Raises:
+        NidarError: an image larger than the bound (one line naming the file and its size).
+        OSError, PIL.UnidentifiedImageError: what Pillow raises on a file it cannot read.
+    """
+    from PIL import Image
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Image.DecompressionBombWarning)
+        try:
+            im = Image.open(path)
+        except (Image.DecompressionBombError, Image.DecompressionBombWarning) as e:
+            found = re.search(r"\((\d+) pixels\)", str(e))
+            size = f"{int(found.group(1)):,} pixels" if found else "more pixels than that"
+            raise NidarError(
+                f"{path}: an image of {size}, more than the {MAX_IMAGE_PIXELS:,} an image may "
+                "have (a decompression bomb?)"
+            ) from None
+    with im:
+        w, h = im.size
+        if w * h > MAX_IMAGE_PIXELS:  # Pillow's bound may have been lifted by someone else
+            raise NidarError(
+                f"{path}: a {w}x{h} image, more than the {MAX_IMAGE_PIXELS:,} pixels an image may "
+                "have (a decompression bomb?)"
+            )
+        yield im
 
 
 @functools.cache
@@ -119,11 +163,10 @@ def read_png(path: str | os.PathLike) -> np.ndarray:
         images are expanded to RGB/RGBA); 16-bit grey is returned as its integer array.
 
     Raises:
-        NidarError: missing or unreadable file.
+        NidarError: missing or unreadable file, or an image of more than
+            :data:`MAX_IMAGE_PIXELS`.
     """
-    from PIL import Image
-
-    with reading(path) as p, Image.open(p) as im:
+    with reading(path) as p, open_image(p) as im:
         if im.mode == "1":
             im = im.convert("L")
         elif im.mode not in ("L", "RGB", "RGBA") and not im.mode.startswith("I"):
@@ -144,11 +187,10 @@ def read_rgb8(path: str | os.PathLike) -> np.ndarray:
         (H, W, 3) uint8.
 
     Raises:
-        NidarError: missing or unreadable file, or a floating-point image.
+        NidarError: missing or unreadable file, a floating-point image, or one of more than
+            :data:`MAX_IMAGE_PIXELS`.
     """
-    from PIL import Image
-
-    with reading(path) as p, Image.open(p) as im:
+    with reading(path) as p, open_image(p) as im:
         mode = im.mode
         if mode == "F":
             raise ValueError("floating-point image; expected an 8- or 16-bit colour image")
@@ -195,7 +237,11 @@ def write_exr(path: str | os.PathLike, channels: dict[str, np.ndarray]) -> None:
     pixels = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in planes.items()}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with atomic_path(path) as tmp:
-        OpenEXR.File(header, pixels).write(str(tmp))
+        try:
+            OpenEXR.File(header, pixels).write(str(tmp))
+        except RuntimeError as e:  # OpenEXR's failures (a full disk among them) are RuntimeErrors
+            why = " ".join(str(e).replace(str(tmp), str(path)).split())
+            raise NidarError(f"cannot write {path}: {why}") from None
 
 
 def read_exr(path: str | os.PathLike) -> dict[str, np.ndarray]:

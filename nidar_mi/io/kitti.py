@@ -55,6 +55,7 @@ from .atomic import atomic_path, atomic_write_text, reading
 
 __all__ = [
     "KITTI_IMAGE_SIZE",
+    "ROTATION_TOLERANCE",
     "load_kitti_calib",
     "read_kitti_calib",
     "read_kitti_bin",
@@ -136,21 +137,53 @@ def write_kitti_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
     atomic_write_text(path, "".join(_matrix_row(P[:3, :]) + "\n" for P in poses))
 
 
+#: How far the 3x3 part of a pose may be from a rotation (max |RᵀR - I|) to be read as one.
+ROTATION_TOLERANCE = 1e-3
+
+
 def read_kitti_poses(path: str | os.PathLike) -> np.ndarray:
-    """(F, 4, 4) float64 poses of a KITTI ``poses.txt``.
+    """(F, 4, 4) float64 poses of a KITTI ``poses.txt`` (also the KITTI odometry trajectories of
+    :func:`nidar_mi.io.trajectory.read_trajectory`).
+
+    Per line the row-major 3x4 ``[R | t]``: 12 numbers, separated by blanks or commas; ``#``
+    starts a comment, blank lines are skipped. ``R`` must be a rotation to within
+    :data:`ROTATION_TOLERANCE` (it is returned as written).
 
     Raises:
-        NidarError: missing file, or a line that is not 12 numbers.
+        NidarError: an unreadable file, no pose, or a line that is not 12 finite numbers of a
+            pose (the message names the line).
     """
     try:
-        rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
-    except (OSError, ValueError) as e:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as e:
         raise NidarError(f"{path}: not a KITTI poses file ({e})") from None
-    if rows.shape[1] != 12:
-        raise NidarError(f"{path}: expected 12 numbers per line, got {rows.shape[1]}")
-    out = np.tile(np.eye(4), (len(rows), 1, 1))
-    out[:, :3, :] = rows.reshape(-1, 3, 4)
-    return out
+    poses = []
+    for n, line in enumerate(lines, start=1):
+        fields = line.split("#", 1)[0].replace(",", " ").split()
+        if fields:
+            poses.append(_pose_line(path, n, fields))
+    if not poses:
+        raise NidarError(f"{path}: no poses")
+    return np.asarray(poses)
+
+
+def _pose_line(path, n: int, fields: list[str]) -> np.ndarray:
+    """(4, 4) pose of line ``n`` of a KITTI poses file, checked (:func:`read_kitti_poses`)."""
+    if len(fields) != 12:
+        raise NidarError(f"{path}:{n}: expected 12 numbers per line, got {len(fields)}")
+    try:
+        values = np.array([float(v) for v in fields])
+    except ValueError:
+        raise NidarError(f"{path}:{n}: not a number in '{' '.join(fields)}'") from None
+    if not np.all(np.isfinite(values)):
+        raise NidarError(f"{path}:{n}: a value is not finite")
+    pose = np.eye(4)
+    pose[:3, :] = values.reshape(3, 4)
+    R = pose[:3, :3]
+    if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
+        raise NidarError(f"{path}:{n}: the 3x3 part is not a rotation matrix")
+    return pose
 
 
 def write_kitti_times(path: str | os.PathLike, times: Sequence[float] | np.ndarray) -> None:

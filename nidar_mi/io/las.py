@@ -18,15 +18,16 @@ from typing import Any
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import missing_extra
 from .atomic import atomic_path, reading
 from .points import (
-    _PLY_TYPES,
-    _TAG,
-    _decode_meta,
-    _flatten,
-    _header_json,
-    _split_points,
-    _unflatten,
+    PLY_TYPES,
+    POINTS_TAG,
+    decode_metadata,
+    flatten_columns,
+    header_json,
+    split_points,
+    unflatten_columns,
 )
 
 __all__ = ["LAS_SCALE_M", "write_las", "read_las"]
@@ -36,7 +37,7 @@ LAS_SCALE_M = 1e-4
 
 _USER_ID = "nidar_mi"
 _RECORD_ID = 1
-_TYPES = _PLY_TYPES | {"i8", "u8"}
+_TYPES = PLY_TYPES | {"i8", "u8"}
 _DESCRIPTIONS = {
     "range": "range [m]",
     "reflectance": "reflectance at LiDAR wavelength",
@@ -59,7 +60,7 @@ def _intensity_scale(intensity: np.ndarray | None, scale: float | None) -> float
 
 def _laz_hint(e: Exception) -> str:
     """laspy's message, plus the fix when LAZ support is missing."""
-    hint = " (.laz files need the lazrs package: pip install lazrs)"
+    hint = f" ({missing_extra('laz', '.laz files', ('lazrs',))})"
     return f"{e}{hint if 'LazBackend' in str(e) else ''}"
 
 
@@ -86,7 +87,7 @@ def write_las(
     """
     import laspy
 
-    n, columns, meta = _split_points(points)
+    n, columns, meta = split_points(points)
     xyz = columns.pop("xyz").astype(np.float64)
     if not np.isfinite(xyz).all():
         raise NidarError(f"cannot write {path}: xyz holds NaN or infinity")
@@ -96,7 +97,7 @@ def write_las(
         raise NidarError(f"cannot write {path}: the point extent is too large for LAS at 0.1 mm")
     intensity = columns.pop("intensity", None)
     scale = _intensity_scale(intensity, intensity_scale)
-    fields, schema = _flatten(columns, _TYPES, "LAS")
+    fields, schema = flatten_columns(columns, _TYPES, "LAS")
     header = laspy.LasHeader(point_format=6, version="1.4")
     clash = fields.keys() & set(header.point_format.dimension_names)
     long = [k for k in fields if len(k) > 32]
@@ -114,10 +115,10 @@ def write_las(
             for k, v in fields.items()
         ]
     )
-    doc = _header_json(schema, meta, intensity_scale=scale if intensity is not None else None)
+    doc = header_json(schema, meta, intensity_scale=scale if intensity is not None else None)
     if len(doc) > 65535:
         raise NidarError(f"cannot write {path}: metadata exceeds the 64 KiB of a LAS VLR")
-    header.vlrs.append(laspy.VLR(_USER_ID, _RECORD_ID, f"{_TAG} JSON", doc.encode("ascii")))
+    header.vlrs.append(laspy.VLR(_USER_ID, _RECORD_ID, f"{POINTS_TAG} JSON", doc.encode("ascii")))
     las = laspy.LasData(header, points=laspy.ScaleAwarePointRecord.zeros(n, header=header))
     las.X, las.Y, las.Z = (counts[:, i].astype(np.int32) for i in range(3))
     las.return_number = np.ones(n, np.uint8)
@@ -167,6 +168,6 @@ def read_las(path: str | os.PathLike) -> dict[str, np.ndarray]:
         if doc is None:
             out.update(fields)
         else:
-            out.update(_unflatten(fields, doc["columns"]))
-            out.update(_decode_meta(doc))
+            out.update(unflatten_columns(fields, doc["columns"]))
+            out.update(decode_metadata(doc))
         return out

@@ -24,7 +24,14 @@ import numpy as np
 
 from ..errors import NidarError
 from .atomic import atomic_path, reading
-from .points import _TAG, _decode_meta, _flatten, _header_json, _split_points, _unflatten
+from .points import (
+    POINTS_TAG,
+    decode_metadata,
+    flatten_columns,
+    header_json,
+    split_points,
+    unflatten_columns,
+)
 
 __all__ = ["read_pcd", "write_pcd"]
 
@@ -50,9 +57,9 @@ def write_pcd(path: str | os.PathLike, points) -> None:
     Raises:
         NidarError: invalid points dict, a column PCD cannot store or name, or a write failure.
     """
-    n, columns, meta = _split_points(points)
+    n, columns, meta = split_points(points)
     xyz = columns.pop("xyz").astype("<f4")
-    fields, schema = _flatten(columns, _PCD_TYPES, "PCD")
+    fields, schema = flatten_columns(columns, _PCD_TYPES, "PCD")
     if {"x", "y", "z"} & fields.keys():
         raise NidarError("PCD columns cannot be named 'x', 'y' or 'z' (they hold xyz)")
     fields = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], **fields}
@@ -65,7 +72,7 @@ def write_pcd(path: str | os.PathLike, points) -> None:
     kinds = {"f": "F", "i": "I", "u": "U"}
     header = [
         "# .PCD v0.7 - Point Cloud Data file format",
-        f"# {_TAG} {_header_json(schema, meta)}",
+        f"# {POINTS_TAG} {header_json(schema, meta)}",
         "VERSION 0.7",
         "FIELDS " + " ".join(fields),
         "SIZE " + " ".join(str(v.dtype.itemsize) for v in fields.values()),
@@ -92,8 +99,8 @@ def _parse_header(raw: bytes) -> tuple[dict[str, list[str]], int]:
         end = len(raw) if end < 0 else end
         line = raw[pos:end].decode("ascii", errors="replace").strip()
         pos = end + 1
-        if line.startswith(f"# {_TAG} "):
-            header["#"] = [line[len(_TAG) + 3 :]]
+        if line.startswith(f"# {POINTS_TAG} "):
+            header["#"] = [line[len(POINTS_TAG) + 3 :]]
             continue
         if not line or line.startswith("#"):
             continue
@@ -174,8 +181,8 @@ def read_pcd(path: str | os.PathLike) -> dict[str, np.ndarray]:
         out = {"xyz": np.stack([fields.pop(k) for k in "xyz"], axis=1).astype(np.float32)}
         if "#" in header:
             doc = json.loads(header["#"][0])
-            out.update(_unflatten(fields, doc["columns"]))
-            out.update(_decode_meta(doc))
+            out.update(unflatten_columns(fields, doc["columns"]))
+            out.update(decode_metadata(doc))
             return out
         if "intensity" in fields:
             out["intensity"] = fields.pop("intensity").astype(np.float32)

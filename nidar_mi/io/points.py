@@ -43,6 +43,12 @@ name                 dtype      shape   unit  meaning
                                               at the point (the camera's per-surface cue), 0
                                               where no camera sees the point
 ``nidar_observed``   bool       (N,)    --    with ``--intensity nidar``: a camera saw the point
+``scatterer``        uint8      (N,)    --    in weather (``--fog``, ``--rain``, ``--snow``):
+                                              what the return came from, an index into
+                                              ``scatterer_names``: 0 surface, 1 fog (the medium's
+                                              own return), 2 drop, 3 flake (docs/WEATHER.md)
+``scatterer_names``  str (U)    (4,)    --    in weather: ``surface``, ``fog``, ``drop``,
+                                              ``flake``
 ===================  =========  ======  ====  ==================================================
 
 Other entries are carried generically by every writer:
@@ -74,14 +80,23 @@ from ..errors import NidarError
 from .atomic import atomic_path, reading
 
 __all__ = [
-    "write_npz",
+    "PLY_TYPES",
+    "POINTS_TAG",
+    "decode_metadata",
+    "flatten_columns",
+    "header_json",
     "read_npz",
-    "write_ply",
     "read_ply",
+    "split_points",
+    "unflatten_columns",
+    "write_npz",
+    "write_ply",
 ]
 
-_TAG = "nidar_mi.points"  # marks our JSON in PLY obj_info lines and the LAS VLR
-_PLY_TYPES = frozenset({"i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8"})
+#: Marks the package's JSON in PLY ``obj_info`` lines, the LAS VLR and PCD comments.
+POINTS_TAG = "nidar_mi.points"
+#: Scalar types a PLY field may hold (LAS and PCD add their own).
+PLY_TYPES = frozenset({"i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8"})
 # Required trailing width of the simulator's columns (None: 1-D).
 _KNOWN_SHAPES = {
     "xyz_world": 3,
@@ -89,14 +104,14 @@ _KNOWN_SHAPES = {
     "t": None,
     "return_index": None,
     **dict.fromkeys(("range", "intensity", "reflectance", "cos_incidence"), None),
-    **dict.fromkeys(("ring", "column", "material", "label", "instance"), None),
+    **dict.fromkeys(("ring", "column", "material", "label", "instance", "scatterer"), None),
 }
 
 
 # --- the points dict ---------------------------------------------------------------------
 
 
-def _split_points(points: Mapping[str, Any]) -> tuple[int, dict, dict]:
+def split_points(points: Mapping[str, Any]) -> tuple[int, dict, dict]:
     """Check a points dict; split it into per-point columns and metadata.
 
     Returns:
@@ -151,7 +166,7 @@ def _storable(name: str, a: np.ndarray, types: frozenset[str], fmt: str) -> np.n
     raise NidarError(f"column {name!r}: {fmt} cannot store {a.dtype} values")
 
 
-def _flatten(columns: dict, types: frozenset[str], fmt: str) -> tuple[dict, dict]:
+def flatten_columns(columns: dict, types: frozenset[str], fmt: str) -> tuple[dict, dict]:
     """Per-point columns -> scalar fields, plus the schema that restores them."""
     fields: dict[str, np.ndarray] = {}
     schema: dict[str, dict] = {}
@@ -168,8 +183,8 @@ def _flatten(columns: dict, types: frozenset[str], fmt: str) -> tuple[dict, dict
     return fields, schema
 
 
-def _unflatten(fields: dict, schema: dict) -> dict:
-    """Inverse of :func:`_flatten`; fields the schema does not name are kept as they are."""
+def unflatten_columns(fields: dict, schema: dict) -> dict:
+    """Inverse of :func:`flatten_columns`; fields the schema does not name are kept as they are."""
     out: dict[str, np.ndarray] = {}
     used: set[str] = set()
     for name, spec in schema.items():
@@ -186,7 +201,7 @@ def _unflatten(fields: dict, schema: dict) -> dict:
     return out
 
 
-def _header_json(schema: dict, meta: dict, **extra: Any) -> str:
+def header_json(schema: dict, meta: dict, **extra: Any) -> str:
     """The JSON a PLY or LAS file carries to restore the points dict."""
     doc = {"version": 1, **extra, "columns": schema, "metadata": {}}
     for name, a in meta.items():
@@ -199,7 +214,8 @@ def _header_json(schema: dict, meta: dict, **extra: Any) -> str:
         ) from None
 
 
-def _decode_meta(doc: dict) -> dict:
+def decode_metadata(doc: dict) -> dict:
+    """The metadata arrays of a :func:`header_json` document, by name."""
     return {
         name: np.asarray(m["data"], dtype=m["dtype"]).reshape(m["shape"])
         for name, m in doc["metadata"].items()
@@ -215,7 +231,7 @@ def write_npz(path: str | os.PathLike, points: Mapping[str, Any]) -> None:
     Raises:
         NidarError: ``points`` is not a valid points dict, or the file cannot be written.
     """
-    _, columns, meta = _split_points(points)
+    _, columns, meta = split_points(points)
     arrays = {name: (columns[name] if name in columns else meta[name]) for name in points}
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, **arrays)
@@ -250,16 +266,16 @@ def write_ply(path: str | os.PathLike, points: Mapping[str, Any]) -> None:
     """
     from plyfile import PlyData, PlyElement
 
-    n, columns, meta = _split_points(points)
+    n, columns, meta = split_points(points)
     xyz = columns.pop("xyz").astype("<f4")
-    fields, schema = _flatten(columns, _PLY_TYPES, "PLY")
+    fields, schema = flatten_columns(columns, PLY_TYPES, "PLY")
     if {"x", "y", "z"} & fields.keys():
         raise NidarError("PLY columns cannot be named 'x', 'y' or 'z' (they hold xyz)")
     fields = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], **fields}
     vertex = np.empty(n, dtype=[(k, v.dtype) for k, v in fields.items()])
     for k, v in fields.items():
         vertex[k] = v
-    info = f"{_TAG} {_header_json(schema, meta)}"
+    info = f"{POINTS_TAG} {header_json(schema, meta)}"
     ply = PlyData([PlyElement.describe(vertex, "vertex")], byte_order="<", obj_info=[info])
     with atomic_path(path) as tmp:
         ply.write(str(tmp))
@@ -287,12 +303,16 @@ def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
             raise ValueError("vertex element has no x, y, z properties")
         scalar = [k for k in names if data.dtype[k].kind != "O"]  # list properties are skipped
         fields = {k: np.ascontiguousarray(data[k]) for k in scalar if k not in ("x", "y", "z")}
-        docs = [line[len(_TAG) + 1 :] for line in ply.obj_info if line.startswith(_TAG + " ")]
+        docs = [
+            line[len(POINTS_TAG) + 1 :]
+            for line in ply.obj_info
+            if line.startswith(POINTS_TAG + " ")
+        ]
         out = {"xyz": np.stack([data["x"], data["y"], data["z"]], axis=1).astype(np.float32)}
         if docs:
             doc = json.loads(docs[0])
-            out.update(_unflatten(fields, doc["columns"]))
-            out.update(_decode_meta(doc))
+            out.update(unflatten_columns(fields, doc["columns"]))
+            out.update(decode_metadata(doc))
         else:
             out.update(fields)
         return out

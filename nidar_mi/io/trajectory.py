@@ -13,8 +13,9 @@ CSV (``.csv``)     a header naming the columns ``t, x, y, z, qx, qy, qz, qw`` (a
                    per row
 =================  ============================================================================
 
-Poses are world-from-rig transforms in metres. Rotation matrices are re-orthonormalised (to
-within 1e-3 they must be rotations already); quaternions are normalised. Times must increase.
+Poses are world-from-rig transforms in metres. KITTI odometry lines are read by
+:func:`nidar_mi.io.kitti.read_kitti_poses` (to within 1e-3 rotations already) and
+re-orthonormalised; quaternions are normalised. Times must increase.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 from ..errors import NidarError
 from .atomic import atomic_write_text, reading
+from .kitti import read_kitti_poses
 
 __all__ = ["Trajectory", "read_trajectory", "write_tum"]
 
@@ -80,9 +82,8 @@ def _numbers(path: str, lineno: int, fields: list[str]) -> list[float]:
     return values
 
 
-def _rotation(path: str, lineno: int, R: np.ndarray) -> np.ndarray:
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-3 or np.linalg.det(R) <= 0:
-        raise NidarError(f"{path}:{lineno}: the 3x3 part is not a rotation matrix")
+def _orthonormal(R: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) nearest rotations to near-rotation matrices (SVD)."""
     u, _, vt = np.linalg.svd(R)
     return u @ vt
 
@@ -143,12 +144,9 @@ def read_trajectory(path: str | os.PathLike, *, rate: float | None = None) -> Tr
         if width == 12:
             if rate is None or not rate > 0:
                 raise NidarError(f"{path}: KITTI odometry poses carry no time; give the rate (Hz)")
-            poses = np.tile(np.eye(4), (len(lines), 1, 1))
-            for i, (n, v) in enumerate(lines):
-                M = np.asarray(v).reshape(3, 4)
-                poses[i, :3, :3] = _rotation(path, n, M[:, :3])
-                poses[i, :3, 3] = M[:, 3]
-            times = np.arange(len(lines)) / float(rate)
+            poses = read_kitti_poses(path)
+            poses[:, :3, :3] = _orthonormal(poses[:, :3, :3])
+            times = np.arange(len(poses)) / float(rate)
             fmt = "kitti"
         elif width == 8:
             times, poses = _quaternion_poses(path, lines, list(range(8)))

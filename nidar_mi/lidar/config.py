@@ -26,9 +26,10 @@ from pydantic import (
     model_validator,
 )
 
+from ..errors import NidarError
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
-from .pattern import PRESETS, BeamPattern, parse_angles
+from .pattern import PRESETS, BeamPattern, RisleyPattern, parse_angles
 from .return_model import INTENSITY_MODES
 
 __all__ = [
@@ -63,6 +64,9 @@ PARAMETERS = (
     "scan_start_azimuth",
     "wavelength",
     "gain",
+    "laser_gains",
+    "range_response",
+    "intensity_offset",
     "range_min",
     "range_max",
     "atmospheric_extinction",
@@ -114,6 +118,9 @@ class LidarConfig:
     beam_sample_quality: int = 3
     return_mode: str = "strongest"
     return_separation: float = 0.5
+    laser_gains: tuple[float, ...] | None = None
+    range_response: tuple[tuple[float, float], ...] | None = None
+    intensity_offset: float = 0.0
     table: LaserTable | None = None
 
     @property
@@ -124,6 +131,14 @@ class LidarConfig:
     @property
     def pattern(self) -> BeamPattern:
         """The beams of one sweep (directions, origins, firing times)."""
+        prisms = PRESETS[self.preset].risley if self.preset is not None else None
+        if prisms is not None and self.table is None:
+            return RisleyPattern(
+                self.laser_table,
+                self.horizontal_resolution,
+                rotation_rate=self.rotation_rate,
+                prisms=prisms,
+            )
         return BeamPattern(
             self.laser_table,
             self.horizontal_resolution,
@@ -133,6 +148,14 @@ class LidarConfig:
             spin=-1 if self.spin == "cw" else 1,
             scan_start_azimuth=self.scan_start_azimuth,
         )
+
+    @property
+    def frame_rate(self) -> float:
+        """Frames per second, Hz: ``rotation_rate`` for a spinning head (one frame per turn) and
+        a Risley sweep; ``rotation_rate · 360° / frame_sweep_deg`` for a preset whose frame is
+        part of a beam turn (the ``at128``'s mirror facet: 6.67 Hz · 360 / 240 = 10 Hz)."""
+        sweep = PRESETS[self.preset].frame_sweep_deg if self.preset is not None else 360.0
+        return self.rotation_rate * 360.0 / sweep
 
     @property
     def subrays(self) -> int:
@@ -188,11 +211,11 @@ class LidarConfig:
                 are ignored).
 
         Raises:
-            ValueError: one line naming the sensor and the offending parameter.
+            NidarError: one line naming the sensor and the offending parameter.
         """
 
-        def fail(param: str, why: str) -> ValueError:
-            return ValueError(f"lidar '{name}': parameter '{param}' {why}")
+        def fail(param: str, why: str) -> NidarError:
+            return NidarError(f"lidar '{name}': parameter '{param}' {why}")
 
         try:
             lasers = LayoutParameters.model_validate(dict(values))
@@ -204,12 +227,21 @@ class LidarConfig:
             v = SensorParameters.model_validate(given)
         except ValidationError as e:
             raise _first_error(e, fail) from None
+        if v.return_mode == "dual" and v.beam_divergence <= 0.0:
+            raise fail(
+                "return_mode",
+                "'dual' needs beam_divergence > 0 (a beam of no width has one return); set "
+                "beam_divergence or choose strongest, first or last",
+            )
         if table is not None:
             elevations = table.elevation_deg
         elif v.elevation_angles is not None:
             elevations = v.elevation_angles
         else:
             elevations = PRESETS[lasers.preset].elevations_deg
+        if v.laser_gains is not None and len(v.laser_gains) != len(elevations):
+            why = f"needs one gain per laser ({len(elevations)}, got {len(v.laser_gains)})"
+            raise fail("laser_gains", why)
         return cls(
             name=name,
             preset=lasers.preset if lasers.elevation_angles is None else None,
@@ -310,6 +342,38 @@ def _angles(raw: Any) -> tuple[float, ...] | None:
         raise _Problem(str(e)) from None
 
 
+def _gains(raw: Any) -> tuple[float, ...] | None:
+    """Comma-separated per-laser gains, each finite and > 0."""
+    if raw is None:
+        return None
+    try:
+        gains = tuple(float(g) for g in str(raw).replace(",", " ").split())
+    except ValueError:
+        raise _Problem(f"must be comma-separated numbers (got '{raw}')") from None
+    if not gains or not all(math.isfinite(g) and g > 0 for g in gains):
+        raise _Problem("must be finite numbers > 0, one per laser")
+    return gains
+
+
+def _response(raw: Any) -> tuple[tuple[float, float], ...] | None:
+    """``d:f`` pairs, comma-separated: ranges >= 0 strictly increasing, factors finite >= 0."""
+    if raw is None:
+        return None
+    try:
+        pairs = tuple(
+            (float(a), float(b))
+            for a, b in (p.split(":") for p in str(raw).replace(" ", "").split(",") if p)
+        )
+    except ValueError:
+        raise _Problem(f"must be comma-separated range:factor pairs (got '{raw}')") from None
+    d = [a for a, _ in pairs]
+    if not pairs or not all(math.isfinite(a) and math.isfinite(b) and b >= 0 for a, b in pairs):
+        raise _Problem("must hold finite range:factor pairs, factors >= 0")
+    if d[0] < 0 or any(b <= a for a, b in zip(d, d[1:])):
+        raise _Problem("needs ranges >= 0 in strictly increasing order")
+    return pairs
+
+
 def _optional(validator: BeforeValidator) -> BeforeValidator:
     """``validator`` for a value given; None (not given) is left for the preset's default."""
     return BeforeValidator(lambda raw: None if raw is None else validator.func(raw))
@@ -367,6 +431,10 @@ class LayoutParameters(BaseModel):
             "detection_threshold": p.detection_threshold if p and raw else 0.0,
             # the receiver noise belongs to the preset's receiver: kept when the threshold is set
             "receiver_noise_std": p.receiver_noise_std if p and raw else 0.0,
+            "fov_h": p.fov_h if p else 360.0,
+            "fov_h_centred": p.fov_h_centred if p else False,
+            "rotation_rate": p.rotation_rate if p else 10.0,
+            "scan_start_azimuth": p.scan_start_azimuth if p else 180.0,
         }
 
 
@@ -392,6 +460,11 @@ class SensorParameters(BaseModel):
     fov_h: Annotated[float, _number(lo=0.0, lo_open=True, hi=360.0)] = 360.0
     wavelength: Annotated[float, _number(lo=360.0, hi=1700.0)] = 905.0
     gain: Annotated[float, _number(lo=0.0, lo_open=True)] = 1.0
+    laser_gains: Annotated[tuple[float, ...] | None, BeforeValidator(_gains)] = None
+    range_response: Annotated[
+        tuple[tuple[float, float], ...] | None, BeforeValidator(_response)
+    ] = None
+    intensity_offset: Annotated[float, _number(lo=0.0)] = 0.0
     range_min: Annotated[float, _number(lo=0.0)]
     range_max: Annotated[float, _number(lo=0.0, lo_open=True), AfterValidator(_below_range_max)]
     atmospheric_extinction: Annotated[float, _number(lo=0.0)] = 0.0
@@ -412,7 +485,7 @@ class SensorParameters(BaseModel):
     return_separation: Annotated[float, _number(lo=0.0, lo_open=True)] = 0.5
 
 
-def _first_error(error: ValidationError, fail: Callable[[str, str], ValueError]) -> ValueError:
+def _first_error(error: ValidationError, fail: Callable[[str, str], NidarError]) -> NidarError:
     """The first problem of a validation, as the plugin's one-line message."""
     e = error.errors()[0]
     problem = (e.get("ctx") or {}).get("error")

@@ -18,7 +18,9 @@ return is the path length from the beam's own origin; distance corrections of a 
 (``dist_correction``) are measurement calibration and are not simulated.
 
 Shipped tables (``nidar_mi/lidar/data/*.csv``, each file names its source repository, commit and
-path in its header; all BSD-licensed):
+path in its header; all BSD-licensed). Hesai's azimuths grow clockwise: a table's azimuth offset
+is minus Hesai's (plus the AT128's, whose points are at minus it). Hesai's firing times are kept
+as published, less the earliest where some are negative (Pandar64):
 
 ========================  ==================================================================
 ``hdl64e``                HDL-64E S2.1 factory calibration of one unit (ros-drivers/velodyne
@@ -33,6 +35,17 @@ path in its header; all BSD-licensed):
                           (ouster-sdk test data): beam altitude and azimuth tables, beam origin
                           12.163 / 15.806 mm from the axis, lidar origin 36.18 mm above the
                           sensor frame; all beams of a column fire together.
+``vlp32c``                VLP-32C (ros-drivers/velodyne ``VeloView-VLP-32C.yaml``; offsets
+                          42.4 mm·tan(-θ)); pairs of lasers fire 2.304 µs apart.
+``vls128``                VLS-128 / Alpha Prime (ros-drivers/velodyne ``VLS128.yaml``; offsets
+                          58.63 mm·tan(-θ)); groups of 8 lasers 2.665 µs apart.
+``os0_128``, ``os2_128``  Ouster OS0-128 and OS2-128 (fw v2.3.0) sensor metadata (ouster-sdk test
+                          data): beam origin 27.67 / 13.762 mm from the axis, lidar origin
+                          36.18 / 78.296 mm above the sensor frame.
+``pandar64``              Pandar64 angle and firing time correction files (HesaiLidar_SDK_2.0).
+``xt32``                  PandarXT-32 angle and firing time correction files (HesaiLidar_SDK_2.0).
+``at128``                 AT128E2X angle correction (binary, HesaiLidar_SDK_2.0) and firing times:
+                          128 channels' elevations and azimuth offsets.
 ========================  ==================================================================
 
 Calibration files (:func:`read_calibration`): a Velodyne ``db.xml`` (degrees and cm, e.g. KITTI's
@@ -64,6 +77,13 @@ TABLE_FILES: dict[str, tuple[str, float, float]] = {
     "hdl64e": ("hdl64e_s2_sztaki.csv", 0.0, 0.0),
     "os1_64": ("os1_64.csv", 12.163e-3, 36.18e-3),
     "os1_128": ("os1_128.csv", 15.806e-3, 36.18e-3),
+    "vlp32c": ("vlp32c.csv", 0.0, 0.0),
+    "vls128": ("vls128.csv", 0.0, 0.0),
+    "os0_128": ("os0_128.csv", 27.67e-3, 36.18e-3),
+    "os2_128": ("os2_128.csv", 13.762e-3, 78.296e-3),
+    "pandar64": ("pandar64.csv", 0.0, 0.0),
+    "xt32": ("xt32.csv", 0.0, 0.0),
+    "at128": ("at128.csv", 0.0, 0.0),
 }
 
 

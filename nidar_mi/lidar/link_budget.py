@@ -47,7 +47,7 @@ from statistics import NormalDist
 
 from scipy.optimize import brentq
 
-from ..materials.oren_nayar import monostatic_reflectance
+from ..materials.oren_nayar import oren_nayar_monostatic
 from .return_model import detection_probability, expected_intensity
 
 __all__ = [
@@ -107,7 +107,7 @@ def ground_return(
     ``h`` (1/m², gain 1): ``ρ_eff`` the monostatic reflectance ``ρ (A + B sin²θ / cos θ)(1 + B0)``
     at ``cos θ = h / d``. ``range_m`` may be an array (the result has its shape)."""
     c = height_m / range_m
-    rho_eff = monostatic_reflectance(rho, c, sigma_deg, amplitude)
+    rho_eff = oren_nayar_monostatic(rho, c, sigma_deg, amplitude)
     return expected_intensity(1.0, rho_eff, range_m, c, 0.0, "raw")
 
 

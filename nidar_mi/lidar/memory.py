@@ -37,10 +37,19 @@ RETURN_BYTES = 170
 
 
 def default_limit() -> int:
-    """Half the machine's physical memory, bytes (``NIDAR_MAX_MEMORY`` overrides)."""
+    """Half the machine's physical memory, bytes (``NIDAR_MAX_MEMORY`` overrides).
+
+    Raises:
+        NidarError: ``NIDAR_MAX_MEMORY`` is set to something that is not a positive size.
+    """
     env = os.environ.get("NIDAR_MAX_MEMORY")
     if env:
-        return parse_size(env)
+        from ..errors import NidarError
+
+        try:
+            return parse_size(env)
+        except ValueError as e:
+            raise NidarError(f"NIDAR_MAX_MEMORY: {e}") from None
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
     except (ValueError, OSError, AttributeError):  # not POSIX

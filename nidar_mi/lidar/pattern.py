@@ -29,6 +29,34 @@ Uniform elevation tables (degrees; the per-laser tables are in :mod:`nidar_mi.li
 * ``waymo_top`` — Waymo Open Dataset top LiDAR (Sun et al., CVPR 2020, Table 1): 64 beams over
   -17.6..+2.4 deg; the real beam inclinations are non-uniform and per-vehicle, here uniform over that
   field of view; 2650 columns as in the dataset's range images.
+* ``vlp32c`` — Velodyne VLP-32C: 32 channels over +15..-25 deg (user manual 63-9325 Rev C,
+  Table 9-6); 1808 columns, the 55.296 µs firing sequences of one turn at 10 Hz.
+* ``vls128`` — Velodyne VLS-128: 128 channels over +15..-25 deg (Velodyne's key features as quoted
+  in Apollo's installation guide); 1876 columns, the 53.3 µs firing sequences (user manual
+  63-9483 Rev A, 9.3.1.1) of one turn at 10 Hz.
+* ``os0_128`` — Ouster OS0 Rev 6 datasheet (v2.5): 128 channels over +45..-45 deg; 2048 columns
+  (the 2048 x 10 Hz mode).
+* ``os2_128`` — Ouster OS2 Rev 6 datasheet (v2.5): 128 channels over 22.5 deg
+  (+11.25..-11.25); 2048 columns.
+* ``pandar64`` — Hesai Pandar64: 64 channels over +15..-25 deg (the real channels are denser near
+  the horizon: the per-laser table); 1800 columns (0.2 deg at 10 Hz).
+* ``xt32`` — Hesai PandarXT-32 user manual X01-en-220410: 32 channels, +15..-16 deg 1 deg apart;
+  2000 columns (0.18 deg at 10 Hz).
+* ``at128`` — Hesai AT128 (AT128E2X): 128 channels over +12.9..-12.5 deg (0.2 deg apart), a
+  120 deg horizontal field of view centred on +x, 1200 columns (0.1 deg). Its channels are fixed;
+  a mirror of three facets (the SDK's correction file) on a motor turning at 200 rpm sweeps
+  them, the beam at twice the mirror's angle (the SDK's azimuth is 2 · (encoder - facet start)),
+  so ``rotation_rate`` is 2 · 200 / 60 = 6.67 Hz of the beam: the 120 deg view in 50 ms (one
+  column every 41.67 µs, as TIER IV's decoder times the blocks), from +60 deg clockwise. Each
+  facet is one frame: 120 deg of mirror, 240 deg of beam (``frame_sweep_deg``), 100 ms, so the
+  frame rate is 3 · 200 / 60 = 10 Hz (:attr:`nidar_mi.lidar.config.LidarConfig.frame_rate`);
+  half of each frame the beam is outside the view and nothing fires.
+* ``livox_mid40`` — Livox Mid-40: one laser, a 38.4 deg circular field of view around +x swept
+  in a non-repetitive rosette by two Risley prisms (:mod:`nidar_mi.lidar.risley`); 10,000 shots
+  per sweep at 10 Hz (100,000 points/s).
+
+Ranges and every other figure of these presets, with the source of each (and where none was
+found): ``docs/SENSORS.md``, "Presets against their sources".
 """
 
 from __future__ import annotations
@@ -38,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .layouts import LaserTable
+from .risley import MID40_PRISMS, RisleyPrisms
 
 __all__ = [
     "Preset",
@@ -47,6 +76,7 @@ __all__ = [
     "azimuths_deg",
     "beam_directions",
     "BeamPattern",
+    "RisleyPattern",
 ]
 
 
@@ -62,6 +92,15 @@ class Preset:
         range_min: minimum range in m.
         range_max: maximum range in m.
         reference: datasheet or paper the table comes from.
+        fov_h: default horizontal field of view, degrees (360 for a spinning head).
+        fov_h_centred: whether the default field of view is centred on +x.
+        rotation_rate: default rate of the horizontal sweep, Hz: turns per second of the head,
+            or of the beam for a scanning mirror (``at128``).
+        scan_start_azimuth: default azimuth where a sweep starts, degrees.
+        frame_sweep_deg: beam azimuth swept per frame, degrees: 360 for a spinning head (one
+            frame per turn); 240 for the ``at128``, whose frame is one 120 deg mirror facet.
+        risley: the prism pair of a Risley-prism (rosette) sensor, None for a spinning head or a
+            scanning mirror (:mod:`nidar_mi.lidar.risley`).
         detection_threshold: default ``raw``-mode detection threshold (1/m², gain 1): 0 where
             the datasheet gives no range for a stated reflectivity; for ``hdl64e`` the
             datasheet's 10 % at 50 m (:mod:`nidar_mi.lidar.link_budget`).
@@ -78,6 +117,12 @@ class Preset:
     reference: str
     detection_threshold: float = 0.0
     receiver_noise_std: float = 0.0
+    fov_h: float = 360.0
+    fov_h_centred: bool = False
+    rotation_rate: float = 10.0
+    scan_start_azimuth: float = 180.0
+    frame_sweep_deg: float = 360.0
+    risley: RisleyPrisms | None = None
 
 
 def _desc(values: np.ndarray) -> tuple[float, ...]:
@@ -128,6 +173,86 @@ PRESETS: dict[str, Preset] = {
         0.5,
         75.0,
         "Waymo Open Dataset top LiDAR (Sun et al. CVPR 2020)",
+    ),
+    "vlp32c": Preset(
+        _desc(np.linspace(15.0, -25.0, 32)),
+        1808,  # firing sequences per turn at 10 Hz: 1 / (10 Hz x 55.296 us) = 1808.4
+        0.4,  # ros-drivers/velodyne VLP-32C_points.launch min_range (no datasheet minimum found)
+        200.0,
+        "Velodyne VLP-32C user manual 63-9325 Rev C (elevations, firing in pairs) and datasheet "
+        "as quoted in autonomymobilitylab/HenryRTD: 32 channels, +15..-25 deg, 360 deg, "
+        "200 m, ~600,000 points/s single return",
+    ),
+    "vls128": Preset(
+        _desc(np.linspace(15.0, -25.0, 128)),
+        1876,  # firing sequences per turn at 10 Hz: 1 / (10 Hz x 53.3 us) = 1876.2
+        0.4,  # ros-drivers/velodyne VLS128_points.launch min_range (no datasheet minimum found)
+        300.0,
+        "Velodyne VLS-128 user manual 63-9483 Rev A (53.3 us firing sequence, groups of 8) and "
+        "key features as quoted in ApolloAuto/apollo: 128 channels, +15..-25 deg, 360 deg, "
+        "up to 300 m, up to ~9.6 million points/s over 4 returns",
+    ),
+    "os0_128": Preset(
+        _desc(np.linspace(45.0, -45.0, 128)),
+        2048,
+        0.3,
+        50.0,
+        "Ouster OS0 Rev 6 datasheet v2.5 as quoted in isaac-sim/IsaacSim: 128 channels, "
+        "+45..-45 deg, 360 deg, 2048 x 10 Hz, minimum range 0.3 m, 50 m (>50 % detection, "
+        "100 klx)",
+    ),
+    "os2_128": Preset(
+        _desc(np.linspace(11.25, -11.25, 128)),
+        2048,
+        1.0,
+        240.0,
+        "Ouster OS2 Rev 6 datasheet v2.5 as quoted in isaac-sim/IsaacSim: 128 channels, "
+        "+11.25..-11.25 deg, 360 deg, 2048 x 10 Hz, minimum range 1.0 m, 240 m (>50 % "
+        "detection, 100 klx)",
+    ),
+    "pandar64": Preset(
+        _desc(np.linspace(15.0, -25.0, 64)),
+        1800,  # 0.2 deg at 10 Hz
+        0.3,
+        200.0,
+        "Hesai Pandar64 (TIER IV nebula decoder's sensor constants; user manual 4.2.2: 600 rpm "
+        "default): 64 channels, +15..-25 deg, 360 deg, 0.2 deg at 10 Hz, 0.3-200 m",
+    ),
+    "xt32": Preset(
+        _desc(np.linspace(15.0, -16.0, 32)),
+        2000,  # 0.18 deg at 10 Hz
+        0.05,
+        120.0,
+        "Hesai PandarXT-32 user manual X01-en-220410 p.13 (as quoted in isaac-sim/IsaacSim) and "
+        "TIER IV nebula: 32 channels, +15..-16 deg, 360 deg, 0.18 deg at 10 Hz, 0.05-120 m",
+    ),
+    "at128": Preset(
+        _desc(np.linspace(12.9, -12.5, 128)),
+        1200,  # 0.1 deg over 120 deg, one frame per mirror facet, 10 frames/s
+        0.5,
+        200.0,
+        "Hesai AT128E2X (HesaiLidar_SDK_2.0 correction file: 3 mirror facets; TIER IV nebula: "
+        "120 x 25.4 deg, 0.1 x 0.2 deg, 200 rpm; user manual A01-en-230510 as transcribed in "
+        "tier4/AWSIM: 200 m, near field from 0.5 m)",
+        fov_h=120.0,
+        fov_h_centred=True,
+        # the beam sweeps at twice the mirror's 200 rpm: 2400 deg/s, 120 deg in 50 ms, from the
+        # left edge (+60 deg) clockwise; a frame is one facet, 240 deg of beam (100 ms)
+        rotation_rate=2.0 * 200.0 / 60.0,
+        scan_start_azimuth=60.0,
+        frame_sweep_deg=240.0,
+    ),
+    "livox_mid40": Preset(
+        (0.0,),  # one laser behind two turning prisms
+        10_000,  # shots per sweep: 100,000 points/s at 10 sweeps/s
+        1.0,  # HELIOS++ livox_mid-40 rangeMin_m (no datasheet minimum found)
+        260.0,
+        "Livox Mid-40 (Livox wiki, Mid series point cloud specifications): 38.4 deg circular "
+        "field of view, 100,000 points/s, 260 m at 80 % reflectivity; the rosette of two "
+        "Risley prisms (nidar_mi.lidar.risley)",
+        fov_h=38.4,
+        fov_h_centred=True,
+        risley=MID40_PRISMS,
     ),
 }
 
@@ -297,3 +422,44 @@ class BeamPattern:
             axis=-1,
         )
         return d, o
+
+
+@dataclass(frozen=True)
+class RisleyPattern(BeamPattern):
+    """The beams of one sweep of a Risley-prism LiDAR (:mod:`nidar_mi.lidar.risley`): one ring
+    (the laser), one column per shot, shot ``j`` at ``t_j = j / (cols · rotation_rate)``.
+
+    Attributes:
+        prisms: the prism pair (required).
+        (the rest as :class:`BeamPattern`; the laser's firing offset, ``fov_h``, ``start_deg``,
+        ``spin`` and ``scan_start_azimuth`` do not move its beams)
+    """
+
+    prisms: RisleyPrisms | None = None
+
+    def column_time_s(self) -> np.ndarray:
+        """(C,) float64 firing time of each shot since the sweep's start, s."""
+        return np.arange(self.cols, dtype=np.float64) / (self.cols * self.rotation_rate)
+
+    def column_azimuth_deg(self) -> np.ndarray:
+        """(C,) float64 azimuth of each shot's beam, degrees (counter-clockwise from +x)."""
+        d = self.prisms.directions(self.column_time_s())
+        return np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+
+    def time_s(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """(n,) float64 firing time of beams ``start..stop`` since the sweep's start, s."""
+        _, col = self._index(start, stop)
+        return self.column_time_s()[col]
+
+    def beams(self, start: int = 0, stop: int | None = None):
+        """``(directions, None)`` of beams ``start..stop``: (n, 3) float64 unit vectors, every
+        beam from the sensor origin."""
+        return self.prisms.directions(self.time_s(start, stop)), None
+
+    def rays_at(self, ring: np.ndarray, column_azimuth_deg: np.ndarray):
+        """Not defined for a Risley pattern (a shot's direction is not set by an azimuth).
+
+        Raises:
+            ValueError: always.
+        """
+        raise ValueError("a Risley-prism pattern has no beams per column azimuth")

@@ -14,10 +14,12 @@ the sweep's start (motion compensated).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from ..labels import ShapeLabels
+from ..weather.media import SCATTERERS
 from .config import LidarConfig
 
 __all__ = ["ReturnLayer", "ScanResult"]
@@ -37,6 +39,9 @@ class ReturnLayer:
         material: int32 index into the scan's ``material_names``; -1 where no hit.
         shape_index: int32 index into the scan's ``shape_names`` (``scene.shapes()`` order);
             -1 where no hit.
+        scatterer: in weather, uint8 what the return came from (an index into
+            :data:`nidar_mi.weather.media.SCATTERERS`: surface, fog, drop, flake); None in
+            clear weather.
     """
 
     valid: np.ndarray
@@ -46,6 +51,7 @@ class ReturnLayer:
     cos_incidence: np.ndarray
     material: np.ndarray
     shape_index: np.ndarray
+    scatterer: np.ndarray | None = None
 
 
 @dataclass
@@ -75,6 +81,9 @@ class ScanResult:
         column_poses: (C, 4, 4) float64 LiDAR world pose at each column's firing time; None
             when the pose is ``to_world`` throughout.
         further: the other returns (``dual``: one layer), empty for single-return scans.
+        scatterer: in weather, uint8 what the first return came from (:class:`ReturnLayer`);
+            None in clear weather.
+        weather: the :class:`nidar_mi.weather.Weather` scanned in, None in clear weather.
     """
 
     config: LidarConfig
@@ -96,6 +105,8 @@ class ScanResult:
     origins: np.ndarray | None = None
     column_poses: np.ndarray | None = None
     further: list[ReturnLayer] = field(default_factory=list)
+    scatterer: np.ndarray | None = None
+    weather: Any = None
 
     @property
     def first(self) -> ReturnLayer:
@@ -108,6 +119,7 @@ class ScanResult:
             self.cos_incidence,
             self.material,
             self.shape_index,
+            self.scatterer,
         )
 
     @property
@@ -148,6 +160,8 @@ class ScanResult:
         if self.time is not None:
             pts["t"] = self.time[m].astype(np.float32)
         pts["return_index"] = np.full(len(rng), index, dtype=np.uint8)
+        if layer.scatterer is not None:
+            pts["scatterer"] = layer.scatterer[m].astype(np.uint8)
         if deskew:
             inv = np.linalg.inv(self.to_world)
             pts["xyz_deskewed"] = (world @ inv[:3, :3].T + inv[:3, 3]).astype(np.float32)
@@ -169,4 +183,6 @@ class ScanResult:
         pts["material_names"] = np.asarray(self.material_names, dtype=np.str_)
         if self.shape_labels is not None:
             pts["instance_names"] = self.shape_labels.instance_names
+        if self.scatterer is not None:
+            pts["scatterer_names"] = np.asarray(SCATTERERS, dtype=np.str_)
         return pts

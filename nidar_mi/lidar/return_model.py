@@ -29,7 +29,10 @@ threshold is detected half the time. The sensor reports the receiver's output ``
 ``η`` is further zero-mean Gaussian noise added after the detection test (:func:`add_noise`;
 the range gets its own), the result clipped at 0. :func:`compensate` turns written intensities
 back into the range-compensated ``g·ρ·T²·cos θ·exp(-2αd)`` (+ noise).
-:func:`full_scale_intensity` is a sensor's fixed reference for integer or unit-range encodings
+A sensor may add per-laser gains (``laser_gains``: ``g`` becomes ``g·G_r`` for ring ``r``), a
+range response ``r(d)`` multiplying ``E`` (:func:`range_response`, piecewise linear) and an
+intensity offset ``b`` (the reported intensity is ``max(E + σ_n·n - b + η, 0)``); detection
+is on ``E`` itself. :func:`full_scale_intensity` is a sensor's fixed reference for integer or unit-range encodings
 (LAS counts, KITTI's [0, 1]): the same for every frame of the sensor.
 
 Every function takes NumPy arrays (or Python floats) or Dr.Jit arrays alike and returns the
@@ -41,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "array_module",
     "INTENSITY_MODES",
     "attenuation",
     "expected_intensity",
@@ -51,6 +55,7 @@ __all__ = [
     "box_muller",
     "compensate",
     "full_scale_intensity",
+    "range_response",
 ]
 
 #: Values of the sensor's ``intensity_mode``.
@@ -61,7 +66,7 @@ def _is_drjit(x) -> bool:
     return type(x).__module__.startswith("drjit")
 
 
-def _math(*xs):
+def array_module(*xs):
     """``drjit`` if any argument is a Dr.Jit array, else ``numpy``."""
     if any(_is_drjit(x) for x in xs):
         import drjit as dr
@@ -88,7 +93,7 @@ def attenuation(d, cos_theta, alpha, mode: str = "raw"):
         Broadcast shape of the arguments; unitless (``compensated``) or 1/m² (``raw``).
     """
     _check_mode(mode)
-    a = cos_theta * _math(d, alpha).exp(-2.0 * alpha * d)
+    a = cos_theta * array_module(d, alpha).exp(-2.0 * alpha * d)
     return a / (d * d) if mode == "raw" else a
 
 
@@ -145,7 +150,7 @@ def detect(
         no energy is never reported, whatever the threshold and the noise),
         ``E + σ_n·normal >= T``, ``range_min <= d <= range_max`` and ``u >= dropout``.
     """
-    xp = _math(expected, d, u, normal)
+    xp = array_module(expected, d, u, normal)
     return (
         hit
         & xp.isfinite(expected)
@@ -180,8 +185,13 @@ def detection_probability(expected, threshold, noise):
         noise: ``σ_n`` >= 0, the unit of ``E``.
 
     Returns:
-        (...) float64 probabilities in [0, 1] (NumPy only).
+        (...) float64 probabilities in [0, 1]; for Dr.Jit arguments a Dr.Jit array (there
+        ``σ_n`` must be > 0), differentiable in ``E``, ``T`` and ``σ_n``.
     """
+    if _is_drjit(expected) or _is_drjit(threshold) or _is_drjit(noise):
+        import drjit as dr
+
+        return 0.5 * (1.0 + dr.erf((expected - threshold) / (noise * np.sqrt(2.0))))
     from scipy.special import ndtr
 
     e = np.asarray(expected, dtype=np.float64)
@@ -201,12 +211,12 @@ def add_noise(value, std, normal):
         std: standard deviation, in the unit of ``value``, >= 0.
         normal: standard normal deviates (:func:`box_muller`), same shape as ``value``.
     """
-    return _math(value, std, normal).maximum(value + std * normal, 0.0)
+    return array_module(value, std, normal).maximum(value + std * normal, 0.0)
 
 
 def box_muller(u1, u2):
     """Standard normal deviates from two uniform deviates in [0, 1) (Box–Muller, cosine branch)."""
-    xp = _math(u1, u2)
+    xp = array_module(u1, u2)
     return xp.sqrt(-2.0 * xp.log(1.0 - u1)) * xp.cos(2.0 * xp.pi * u2)
 
 
@@ -249,3 +259,27 @@ def full_scale_intensity(gain: float, mode: str) -> float:
     """
     _check_mode(mode)
     return float(gain) * float(attenuation(1.0, 1.0, 0.0, mode))
+
+
+def range_response(d, knots_m, values):
+    """A sensor's range response ``r(d)``: piecewise linear through ``(knots_m[i], values[i])``,
+    constant before the first knot and after the last.
+
+    Written as ``values[0] + Σ_i (values[i+1] - values[i]) · clip((d - k_i) / (k_{i+1} - k_i),
+    0, 1)`` so that it runs on NumPy and Dr.Jit alike and is differentiable in ``values``.
+
+    Args:
+        d: range in m.
+        knots_m: (K,) strictly increasing ranges, m (Python floats).
+        values: (K,) the response at the knots (floats, or Dr.Jit scalars).
+
+    Returns:
+        Shape of ``d``; unitless.
+    """
+    xp = array_module(d, *values)
+    out = values[0] + 0.0 * d
+    for i in range(len(knots_m) - 1):
+        width = float(knots_m[i + 1]) - float(knots_m[i])
+        t = xp.clip((d - float(knots_m[i])) / width, 0.0, 1.0)
+        out = out + (values[i + 1] - values[i]) * t
+    return out

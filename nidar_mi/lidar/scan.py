@@ -46,6 +46,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..geometry.se3 import transform_matrix
 from ..labels import SceneLabels, shape_labels
 from .config import LidarConfig
 from .echoes import group_echoes, select_returns
@@ -60,9 +61,11 @@ from .return_model import (
     box_muller,
     detect,
     expected_intensity,
+    range_response,
     received,
 )
 from .scene_tables import SceneTables, material_table, scene_tables, shape_table
+from .weather_returns import device_tables, range_jitter, weather_model
 
 __all__ = ["ScanResult", "ReturnLayer", "scan", "material_table", "shape_table"]
 
@@ -76,6 +79,7 @@ def scan(
     poses_per_column=None,
     max_memory: int | None = None,
     labels: SceneLabels | None = None,
+    weather=None,
 ) -> ScanResult:
     """Cast every beam of ``sensor`` and compute its returns.
 
@@ -90,6 +94,9 @@ def scan(
         max_memory: bytes the scan may use (None: :func:`.memory.default_limit`).
         labels: the scene's label declaration (:attr:`nidar_mi.scene.LoadedScene.labels`);
             None: every point ``unlabeled``, every shape its own instance.
+        weather: a :class:`nidar_mi.weather.Weather` overriding the sensor's own (its XML
+            ``fog``, ``rain``, ``snow``); None: the sensor's. Clear weather scans exactly as
+            without (:mod:`.weather`).
 
     Returns:
         The scan on the (ring, column) grid.
@@ -103,9 +110,13 @@ def scan(
     timings: dict[str, float] = {}
     pose = _pose(sensor, to_world)
     poses_per_column = _check_column_poses(cfg, poses_per_column)
+    model = _weather_model(sensor, cfg, weather, timings)
     with _timed(timings, "pattern"):
         inputs, poses = _kernel_inputs(
-            cfg, cfg.seed if seed is None else int(seed), pose if poses_per_column is None else None
+            cfg,
+            cfg.seed if seed is None else int(seed),
+            pose if poses_per_column is None else None,
+            0.0 if model is None else model.alpha,
         )
         ctx = _Context(
             scene,
@@ -115,6 +126,7 @@ def scan(
             scene_tables(scene),
             _Outputs(cfg.rings * cfg.horizontal_resolution, cfg.max_returns),
             timings,
+            None if model is None else (model, device_tables(model, _float_type())),
         )
     for start, stop in chunk_beams(cfg):
         _scan_block(ctx, start, stop)
@@ -137,6 +149,22 @@ def _check_column_poses(cfg: LidarConfig, poses):
     return poses
 
 
+def _weather_model(sensor, cfg: LidarConfig, weather, timings: dict):
+    """The scan's :class:`.weather.WeatherModel` (timed as ``weather``), or None in clear
+    weather."""
+    w = weather if weather is not None else getattr(sensor, "weather", None)
+    if w is None or w.clear:
+        return None
+    with _timed(timings, "weather"):
+        return weather_model(w, cfg)
+
+
+def _float_type():
+    import mitsuba as mi
+
+    return mi.Float
+
+
 def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
     """The scan's :class:`ScanResult` from the read-back outputs (warnings, dropped materials)."""
     cfg, out, tables = ctx.cfg, ctx.out, ctx.tables
@@ -152,6 +180,7 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
             cos_incidence=layer["cos"].reshape(shape),
             material=layer["material"].reshape(shape),
             shape_index=layer["shape"].reshape(shape),
+            scatterer=layer["scatterer"].reshape(shape) if "scatterer" in layer else None,
         )
         for layer in out.layers
     ]
@@ -180,6 +209,8 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
         origins=None if origins is None else origins.reshape(*shape, 3),
         column_poses=poses_per_column,
         further=layers[1:],
+        scatterer=first.scatterer,
+        weather=None if ctx.weather is None else ctx.weather[0].weather,
     )
 
 
@@ -196,6 +227,7 @@ class _Context(NamedTuple):
     tables: SceneTables
     out: Any
     timings: dict
+    weather: Any = None  # (WeatherModel, its tables on the device) or None: clear
 
 
 class _Outputs:
@@ -211,6 +243,7 @@ class _Outputs:
         "cos": np.float32,
         "material": np.int32,
         "shape": np.int32,
+        "scatterer": np.uint8,
     }
 
     def __init__(self, beams: int, returns: int) -> None:
@@ -266,9 +299,13 @@ def _scan_block(ctx: _Context, start: int, stop: int) -> None:
             cfg.intensity_mode,
             beams.two_way_transmittance,
         )
+        laser = _laser_gain(cfg, first, stop - start, 1 if subrays is None else cfg.subrays)
+        expected = expected * laser * _range_factor(cfg, d)
     draws = _draws(cfg, stop - start, inputs, first)
-    shading = _Shading(rho, cos_t, bsdf, d, expected)
-    if subrays is None:
+    shading = _Shading(rho, cos_t, bsdf, d, expected, laser)
+    if subrays is None and ctx.weather is not None:
+        _ideal_weather_block(ctx, beams, shading, draws, (start, stop, first))
+    elif subrays is None:
         _ideal_block(ctx, beams, shading, draws, start, stop)
     else:
         _echo_block(ctx, rays, beams, shading, draws, start, stop)
@@ -283,6 +320,36 @@ class _Shading(NamedTuple):
     bsdf: Any
     d: Any
     expected: Any
+    laser_gain: Any = 1.0
+
+
+def _laser_gain(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
+    """Each ray's per-laser gain (``laser_gains`` of its ring; 1.0 when the sensor has none).
+
+    Args:
+        first_beam: opaque ``mi.UInt32`` flat index of the block's first beam.
+        beams: beams in the block; per_beam: rays per beam (sub-rays).
+    """
+    if cfg.laser_gains is None:
+        return 1.0
+    import drjit as dr
+    import mitsuba as mi
+
+    gains = _cached(
+        _jit_cache,
+        ("laser_gains", cfg.laser_gains, mi.variant()),
+        lambda: jit_float(np.asarray(cfg.laser_gains, dtype=np.float32)),
+    )
+    beam = dr.arange(mi.UInt32, beams * per_beam) // per_beam + first_beam
+    return dr.gather(mi.Float, gains, beam // cfg.horizontal_resolution)
+
+
+def _range_factor(cfg: LidarConfig, d):
+    """The sensor's ``range_response`` at range ``d`` (1.0 when it has none)."""
+    if cfg.range_response is None:
+        return 1.0
+    knots, values = zip(*cfg.range_response)
+    return range_response(d, knots, values)
 
 
 def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: int) -> None:
@@ -290,7 +357,7 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
     columns in one kernel, then one synchronisation and the columns' read-back."""
     import drjit as dr
 
-    inputs, tables = ctx.inputs, ctx.tables
+    inputs, tables, cfg = ctx.inputs, ctx.tables, ctx.cfg
     with _timed(ctx.timings, "detect"):
         u_dropout, normal_intensity, normal_range = draws.returns[0]
         valid = detect(
@@ -306,7 +373,9 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
             normal=draws.receiver,
         )
         output = received(sh.expected, inputs.receiver_noise, draws.receiver)
-        intensity = add_noise(output, inputs.noise_intensity, normal_intensity)
+        intensity = add_noise(
+            output - cfg.intensity_offset, inputs.noise_intensity, normal_intensity
+        )
         range_m = add_noise(sh.d, inputs.noise_range, normal_range)
         hit = beams.hit
         material = dr.select(hit, tables.material_index(sh.bsdf), -1)
@@ -323,14 +392,111 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
         columns["nonfinite"] = hit & ~dr.isfinite(sh.expected)  # its material is dropped
         dr.eval(columns)  # one kernel
     with _timed(ctx.timings, "readback"):
-        cols = {key: value.numpy() for key, value in columns.items()}
-        ctx.out.hit[start:stop] = cols.pop("hit")
-        nonfinite = cols.pop("nonfinite")
-        if nonfinite.any():
-            ctx.out.nonfinite.append(cols["material"][nonfinite])
-        if tables.rgb_only:  # the materials hit matter only to warn of RGB-only ones
-            ctx.out.materials_hit.append(_materials_hit(cols["material"]))
-        ctx.out.put(0, start, stop, **cols)
+        _store_ideal(ctx, {key: value.numpy() for key, value in columns.items()}, start, stop)
+
+
+def _ideal_weather_block(ctx: _Context, beams, sh: _Shading, draws, span) -> None:
+    """:func:`_ideal_block` in weather: the hard target (attenuated, occluded by the particles
+    in the beam), the soft return and the sampled particles are candidates, each detected in
+    its own receiver noise; the return mode picks one (:mod:`.weather`). One kernel, as in
+    clear weather."""
+    import drjit as dr
+
+    from .weather_returns import candidates, choose, detect_candidates, range_jitter
+
+    (model, tables), inputs, cfg = ctx.weather, ctx.inputs, ctx.cfg
+    start, stop, first = span
+    with _timed(ctx.timings, "detect"):
+        u_dropout, normal_intensity, normal_range = draws.returns[0]
+        uniform, normal = _weather_draws(inputs, stop - start, first, cfg.receiver_noise_std > 0)
+        limit = dr.select(beams.hit, sh.d, cfg.range_max + model.receiver.pulse_length)
+        cands = candidates(model, limit, tables, uniform)
+        hard = dr.select(beams.hit, sh.expected * cands.occlusion, 0.0)
+        gates = {"threshold": inputs.threshold, "noise": inputs.receiver_noise}
+        gates |= {"range_min": inputs.range_min, "range_max": inputs.range_max}
+        valid = [detect(hard, sh.d, hit=beams.hit, normal=draws.receiver, **gates)]
+        output = [received(hard, inputs.receiver_noise, draws.receiver)]
+        more_valid, more_output = detect_candidates(cands, normals=normal, **gates)
+        ranges = [sh.d, *cands.range_m]
+        pick = choose(cfg.return_mode, valid + more_valid, output + more_output, ranges)
+
+        def picked(values, default):
+            out = default
+            for i, v in enumerate(values):
+                out = dr.select(pick == i, v, out)
+            return out
+
+        clear = sh.expected * dr.exp(2.0 * model.alpha * sh.d)  # the same return in clear air
+        energy = picked([hard, *cands.energy], 0.0)
+        jitter = range_jitter(model, energy, picked([clear], float("inf"))) * normal()
+        surface = pick <= 0
+        hit = beams.hit
+        columns = {
+            "range": dr.select(
+                pick >= 0,
+                add_noise(picked(ranges, 0.0) + jitter, inputs.noise_range, normal_range),
+                0.0,
+            ),
+            "intensity": dr.select(
+                pick >= 0,
+                add_noise(
+                    picked(output + more_output, 0.0), inputs.noise_intensity, normal_intensity
+                ),
+                0.0,
+            ),
+            "reflectance": dr.select(
+                surface,
+                dr.select(dr.isfinite(sh.rho), sh.rho, 0.0),
+                picked([0.0, *cands.reflectance], 0.0),
+            ),
+            "cos": dr.select(
+                surface, dr.select(hit, sh.cos_t, 0.0), dr.select(pick >= 2, 1.0, 0.0)
+            ),
+            "material": dr.select(surface & hit, ctx.tables.material_index(sh.bsdf), -1),
+            "shape": dr.select(surface & hit, ctx.tables.shape_index(beams.si.shape), -1),
+            "scatterer": picked([0, *cands.scatterer], 0),
+            "valid": (pick >= 0) & (u_dropout >= inputs.dropout),
+            "hit": hit,
+            "nonfinite": hit & ~dr.isfinite(sh.expected),
+        }
+        columns["range"] = dr.select(columns["valid"], columns["range"], 0.0)
+        columns["intensity"] = dr.select(columns["valid"], columns["intensity"], 0.0)
+        dr.eval(columns)  # one kernel
+    with _timed(ctx.timings, "readback"):
+        _store_ideal(ctx, {key: value.numpy() for key, value in columns.items()}, start, stop)
+
+
+def _store_ideal(ctx: _Context, cols: dict, start: int, stop: int) -> None:
+    """Hand one ideal block's read-back columns to the outputs."""
+    ctx.out.hit[start:stop] = cols.pop("hit")
+    nonfinite = cols.pop("nonfinite")
+    if nonfinite.any():
+        ctx.out.nonfinite.append(cols["material"][nonfinite])
+    if ctx.tables.rgb_only:  # the materials hit matter only to warn of RGB-only ones
+        ctx.out.materials_hit.append(_materials_hit(cols["material"]))
+    ctx.out.put(0, start, stop, **cols)
+
+
+#: Offset of the weather draws' PCG32 streams from the beams' own (no beam index reaches it).
+_WEATHER_STREAM = 1 << 40
+
+
+def _weather_draws(inputs, n: int, first_beam, noisy: bool):
+    """Functions returning, per call, one uniform and one standard normal (0.0 without receiver
+    noise) per beam, from each beam's own weather stream (the clear draws keep theirs)."""
+    import mitsuba as mi
+
+    offset = mi.UInt64(first_beam)
+    rng = mi.PCG32(
+        size=n,
+        initstate=inputs.seed_state + offset,
+        initseq=inputs.stream + offset + mi.UInt64(_WEATHER_STREAM),
+    )
+
+    def normal():
+        return box_muller(rng.next_float32(), rng.next_float32()) if noisy else 0.0
+
+    return rng.next_float32, normal
 
 
 def _materials_hit(material: np.ndarray) -> np.ndarray:
@@ -345,6 +511,10 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
     cfg = ctx.cfg
     with _timed(ctx.timings, "readback"):
         contrib_range, contrib_energy, attrs, hit = _echo_contributions(ctx, rays, beams, sh)
+        if ctx.weather is not None:
+            contrib_range, contrib_energy = _with_weather(
+                ctx, beams, sh, (contrib_range, contrib_energy, attrs), start
+            )
         n = stop - start
         nonfinite = hit & ~np.isfinite(attrs["energy"][:, : cfg.subrays])
         ctx.out.nonfinite.append(attrs["material"][:, : cfg.subrays][nonfinite])
@@ -384,20 +554,92 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
             e = echoes.energy[rows, pick]
             r = echoes.range_m[rows, pick]
             material = np.where(has, attrs["material"][rows, src], -1)
+            extra = (
+                {}
+                if ctx.weather is None
+                else _echo_weather(ctx, attrs, e, (rows, src, has), (start, m))
+            )
+            r = r + extra.pop("jitter", 0.0)
             ctx.out.put(
                 m,
                 start,
                 stop,
                 valid=valid,
-                intensity=np.where(valid, add_noise(e, cfg.noise_intensity_std, normal_i), 0.0),
+                intensity=np.where(
+                    valid,
+                    add_noise(e - cfg.intensity_offset, cfg.noise_intensity_std, normal_i),
+                    0.0,
+                ),
                 range=np.where(valid, add_noise(r, cfg.noise_range_std, normal_r), 0.0),
                 reflectance=np.where(has, attrs["reflectance"][rows, src], 0.0),
                 cos=np.where(has, attrs["cos"][rows, src], 0.0),
                 material=material,
                 shape=np.where(has, attrs["shape"][rows, src], -1),
+                **extra,
             )
             if m == 0 and ctx.tables.rgb_only:
                 ctx.out.materials_hit.append(_materials_hit(material))
+
+
+def _with_weather(ctx: _Context, beams, sh: _Shading, contributions, start: int):
+    """Add each diverging beam's soft return and sampled particles (:mod:`.weather`, on the
+    beam's axis) to its (n, K) contributions: the attrs grow in place (``scatterer`` and
+    ``clear_ratio``, the clear-air return over the return, join them).
+
+    Returns:
+        ``(range_m, energy)`` with the new columns, the surfaces' energies occluded by the
+        particles in front of them.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from .weather_returns import candidates
+
+    (model, tables), cfg = ctx.weather, ctx.cfg
+    contrib_range, contrib_energy, attrs = contributions
+    n = contrib_range.shape[0]
+    axis = dr.arange(mi.UInt32, n) * cfg.subrays  # sub-ray 0 of each beam is its axis
+    far = cfg.range_max + model.receiver.pulse_length
+    limit = dr.select(dr.gather(mi.Bool, beams.hit, axis), dr.gather(mi.Float, sh.d, axis), far)
+    uniform, _ = _weather_draws(ctx.inputs, n, dr.opaque(mi.UInt32, start), False)
+    c = candidates(model, limit, tables, uniform)
+    cols = [c.energy, c.range_m, c.reflectance]
+    dr.eval(cols, c.occlusion)
+    energy, rng, refl = (
+        np.stack([np.broadcast_to(_host(v), n) for v in col], axis=1) for col in cols
+    )
+    occlusion = np.broadcast_to(_host(c.occlusion), n)[:, None]
+    k = energy.shape[1]
+    seen = np.where(np.isfinite(contrib_range), contrib_range, 0.0)
+    ratio = np.exp(2.0 * model.alpha * seen) / np.maximum(occlusion, 1e-30)
+    new = {
+        "clear_ratio": (ratio, np.full((n, k), np.inf)),
+        "scatterer": (np.zeros(seen.shape, np.uint8), np.tile(np.uint8(c.scatterer), (n, 1))),
+        "reflectance": (attrs["reflectance"], refl),
+        "cos": (attrs["cos"], np.tile((np.arange(k) > 0).astype(attrs["cos"].dtype), (n, 1))),
+        "material": (attrs["material"], np.full((n, k), -1, attrs["material"].dtype)),
+        "shape": (attrs["shape"], np.full((n, k), -1, attrs["shape"].dtype)),
+    }
+    attrs.update({key: np.concatenate(pair, axis=1) for key, pair in new.items()})
+    present = energy > 0
+    return (
+        np.concatenate([contrib_range, np.where(present, rng, np.inf)], axis=1),
+        np.concatenate([contrib_energy * occlusion, np.where(present, energy, 0.0)], axis=1),
+    )
+
+
+def _echo_weather(ctx: _Context, attrs: dict, energy, picked, where) -> dict:
+    """The weather's columns of one return of a block of diverging beams: what it came from
+    (``scatterer``) and its extra range deviation (``jitter``, drawn)."""
+    (model, _), cfg = ctx.weather, ctx.cfg
+    rows, src, has = picked
+    start, m = where
+    clear = energy * attrs["clear_ratio"][rows, src]
+    normal = _echo_normals(ctx.inputs.seed, start, (rows.size, cfg.max_returns), salt=1)[:, m]
+    return {
+        "jitter": range_jitter(model, energy, clear) * normal,
+        "scatterer": np.where(has, attrs["scatterer"][rows, src], 0),
+    }
 
 
 def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
@@ -425,6 +667,8 @@ def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
         * attenuation(
             dr.select(glass.hit, glass.path_m, 1.0), 1.0, inputs.alpha, cfg.intensity_mode
         )
+        * sh.laser_gain
+        * _range_factor(cfg, dr.select(glass.hit, glass.path_m, 1.0))
     )
     surface = {
         "hit": beams.hit,
@@ -558,7 +802,7 @@ def _pattern(cfg: LidarConfig):
 def _pose(sensor, to_world) -> np.ndarray:
     """(4, 4) float64 pose: ``to_world`` when given, else the sensor's own."""
     if to_world is None:
-        return np.array(sensor.world_transform().matrix.numpy(), dtype=np.float64).reshape(4, 4)
+        return transform_matrix(sensor.world_transform())
     return np.asarray(to_world, dtype=np.float64).reshape(4, 4)
 
 
@@ -584,9 +828,10 @@ class _KernelInputs(NamedTuple):
     seed: int
 
 
-def _kernel_inputs(cfg: LidarConfig, seed: int, pose: np.ndarray | None):
+def _kernel_inputs(cfg: LidarConfig, seed: int, pose: np.ndarray | None, weather_alpha: float):
     """The kernels' scalars and the single pose (when given, (4, 4)), in one upload and one
-    width-1 kernel (:func:`.rays.jit_scalars`).
+    width-1 kernel (:func:`.rays.jit_scalars`); ``weather_alpha`` (1/m) adds to the clear-air
+    extinction (0 in clear weather).
 
     Returns:
         ``(_KernelInputs, Poses or None)``.
@@ -597,7 +842,7 @@ def _kernel_inputs(cfg: LidarConfig, seed: int, pose: np.ndarray | None):
     params = [
         cfg.wavelength,
         cfg.gain,
-        cfg.atmospheric_extinction,
+        cfg.atmospheric_extinction + weather_alpha,
         cfg.range_min,
         cfg.range_max,
         cfg.detection_threshold,
@@ -680,9 +925,10 @@ def _mix64(x: np.ndarray) -> np.ndarray:
     return x ^ (x >> np.uint64(31))
 
 
-def _echo_normals(seed: int, first_beam: int, shape: tuple[int, int]) -> np.ndarray:
+def _echo_normals(seed: int, first_beam: int, shape: tuple[int, int], salt: int = 0) -> np.ndarray:
     """(n, E) standard normals, one per echo slot of beams ``first_beam..first_beam+n``: a
-    counter-based draw (hash of seed, beam and slot), the same whatever block a beam is cast in.
+    counter-based draw (hash of seed, beam and slot), the same whatever block a beam is cast in;
+    another ``salt`` draws another set.
     """
     n, e = shape
     beam = np.arange(first_beam, first_beam + n, dtype=np.uint64)[:, None]
@@ -691,6 +937,7 @@ def _echo_normals(seed: int, first_beam: int, shape: tuple[int, int]) -> np.ndar
         key = _mix64(
             np.array([seed], dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)
             + np.uint64(0x632BE59BD9B4E019)
+            + np.uint64(salt) * np.uint64(0xA0761D6478BD642F)
         )
         base = _mix64(key ^ (beam * np.uint64(0xD1B54A32D192ED03) + slot * np.uint64(2)))
         u = [(_mix64(base + np.uint64(i)) >> np.uint64(11)) * 2.0**-53 for i in (1, 2)]

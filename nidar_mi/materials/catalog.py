@@ -22,7 +22,13 @@ from .metals import METAL_SOURCES, METALS_LICENSE, metal_nk, metal_reflectance
 from .optics import SODA_LIME_SOURCE, soda_lime_ior
 from .spectra import GRID_NM, Spectrum, absorption_band, flat, logistic
 
-__all__ = ["build_catalog", "CLEAR_COAT_IOR", "GLASS_IOR_WAVELENGTH_NM", "ROAD_SURFACE"]
+__all__ = [
+    "build_catalog",
+    "catalog_spectra",
+    "CLEAR_COAT_IOR",
+    "GLASS_IOR_WAVELENGTH_NM",
+    "ROAD_SURFACE",
+]
 
 MODEL_LICENSE = "CC0 1.0 (parametric model defined in nidar_mi)"
 #: Refractive index of automotive clear coat (acrylic / polyurethane), used for car paints.
@@ -58,6 +64,18 @@ _EARTHLIB_DIFFUSE = (
     ("dirt", "bare", "dirt", "lcxnxx.001-", "urban bare dirt"),
     ("sand", "bare", "sand", "lbxsxx.001-", "beach sand"),
 )
+
+#: The earthlib spectra of the car paints' pigments (LEVEL_2, LEVEL_3, NAME).
+_RED_PIGMENT = ("built", "paint", "tccrye.001-")
+_BLUE_PIGMENT = ("built", "paint", "tpabmg.001-")
+
+
+def catalog_spectra() -> list[tuple[str, str, str]]:
+    """The earthlib spectra the catalogue names, ``(LEVEL_2, LEVEL_3, NAME)`` each, in order
+    and without repeats (shipped as ``materials/data/earthlib_catalog.json``)."""
+    names = [(l2, l3, sid) for _, l2, l3, sid, _ in _EARTHLIB_DIFFUSE]
+    names += [_RED_PIGMENT, _BLUE_PIGMENT]
+    return list(dict.fromkeys(names))
 
 
 def _freeze(**params) -> MappingProxyType:
@@ -161,16 +179,16 @@ def _car_paints() -> list[Material]:
     pigments = (
         (
             "car_paint_red",
-            earthlib_spectrum("built", "paint", "tccrye.001-"),
+            earthlib_spectrum(*_RED_PIGMENT),
             "red",
-            _earthlib_source("built", "paint", "tccrye.001-"),
+            _earthlib_source(*_RED_PIGMENT),
             EARTHLIB_LICENSE,
         ),
         (
             "car_paint_blue",
-            earthlib_spectrum("built", "paint", "tpabmg.001-"),
+            earthlib_spectrum(*_BLUE_PIGMENT),
             "blue",
-            _earthlib_source("built", "paint", "tpabmg.001-"),
+            _earthlib_source(*_BLUE_PIGMENT),
             EARTHLIB_LICENSE,
         ),
         (

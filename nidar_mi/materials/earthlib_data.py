@@ -2,9 +2,14 @@
 
 earthlib ships 7261 spectra (ENVI spectral library ``data/spectra.sli`` with its ``.hdr`` and a
 metadata table ``data/spectra.csv``, row-aligned) sampled every 10 nm from 400 to 2450 nm, with
-the water-vapour bands 1350-1460 nm and 1790-1960 nm removed. The files are read here at run time
-with numpy (the package's own import loads both of its libraries and pulls in pandas); nothing is
-copied into this repository.
+the water-vapour bands 1350-1460 nm and 1790-1960 nm removed. The full library is read at run
+time with numpy (the package's own import loads both of its libraries and pulls in pandas), from
+the optional ``earthlib`` extra (``pip install 'nidar_mi[earthlib]'``): ``scenegen --spectra
+earthlib`` and the colour -> ρ map of :mod:`.visible_albedo` need it. The 19 spectra the
+material catalogue names ship with the package (``data/earthlib_catalog.json``, the library's
+float32 values and metadata, written by ``scripts/extract_earthlib_spectra.py``), so rendering
+needs no earthlib: :func:`earthlib_spectrum` and :func:`earthlib_notes` read a spectrum from
+there when it holds it.
 
 A spectrum is named by its metadata levels and name, ``(LEVEL_2, LEVEL_3, NAME)``, e.g.
 ``("built", "road", "rpaeye.006-")``; provenance strings read ``earthlib:built/road/rpaeye.006-``.
@@ -26,13 +31,16 @@ from __future__ import annotations
 import csv
 import functools
 import importlib.util
+import json
 import os
 import re
 from dataclasses import dataclass
+from importlib import resources
 
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import missing_extra
 from .spectra import GRID_NM, Spectrum
 
 __all__ = [
@@ -40,6 +48,7 @@ __all__ = [
     "EarthlibLibrary",
     "earthlib_dir",
     "load_earthlib",
+    "catalog_library",
     "earthlib_spectrum",
     "earthlib_row_spectrum",
     "earthlib_notes",
@@ -99,7 +108,7 @@ def earthlib_dir() -> str:
     """
     spec = importlib.util.find_spec("earthlib")
     if spec is None or not spec.submodule_search_locations:
-        raise NidarError("the earthlib package is not installed: pip install 'earthlib>=1.1'")
+        raise NidarError(missing_extra("earthlib", "the full earthlib spectral library"))
     return os.path.join(list(spec.submodule_search_locations)[0], "data")
 
 
@@ -180,16 +189,45 @@ def extend_below(wavelengths_nm: np.ndarray, values: np.ndarray, grid_nm: np.nda
     return out
 
 
+@functools.lru_cache(maxsize=1)
+def catalog_library() -> EarthlibLibrary:
+    """The earthlib spectra the material catalogue names, as shipped with the package
+    (``nidar_mi/materials/data/earthlib_catalog.json``; module docstring)."""
+    text = resources.files("nidar_mi.materials").joinpath("data", "earthlib_catalog.json")
+    doc = json.loads(text.read_text("utf-8"))
+    rows = doc["spectra"]
+    values = [[np.nan if v is None else v for v in r["reflectance"]] for r in rows]
+    return EarthlibLibrary(
+        wavelengths_nm=np.asarray(doc["wavelengths_nm"], dtype=np.float64),
+        data=np.asarray(values, dtype=np.float32),
+        **{k: tuple(r[k] for r in rows) for k in ("level_2", "level_3", "level_4")},
+        names=tuple(r["name"] for r in rows),
+        sources=tuple(r["source"] for r in rows),
+        notes=tuple(r["notes"] for r in rows),
+    )
+
+
+def _library_of(level_2: str, level_3: str, name: str) -> tuple[EarthlibLibrary, int]:
+    """The shipped catalogue spectra when they hold this spectrum, else the installed library;
+    and its row there."""
+    shipped = catalog_library()
+    keys = zip(shipped.level_2, shipped.level_3, shipped.names)
+    if (level_2, level_3, name) in set(keys):
+        return shipped, shipped.index(level_2, level_3, name)
+    lib = load_earthlib()
+    return lib, lib.index(level_2, level_3, name)
+
+
 def earthlib_spectrum(
     level_2: str, level_3: str, name: str, grid_nm: np.ndarray = GRID_NM
 ) -> Spectrum:
     """One earthlib spectrum on ``grid_nm`` (default 360-1700 nm), processed as documented above.
 
     Raises:
-        NidarError: earthlib is missing or has no unique spectrum of that name.
+        NidarError: a spectrum the package does not ship and earthlib is missing, or the
+            library has no unique spectrum of that name.
     """
-    lib = load_earthlib()
-    return earthlib_row_spectrum(lib.index(level_2, level_3, name), grid_nm)
+    return _row_spectrum(*_library_of(level_2, level_3, name), grid_nm)
 
 
 def earthlib_row_spectrum(row: int, grid_nm: np.ndarray = GRID_NM) -> Spectrum:
@@ -199,7 +237,10 @@ def earthlib_row_spectrum(row: int, grid_nm: np.ndarray = GRID_NM) -> Spectrum:
     Raises:
         NidarError: earthlib is missing, or the row has fewer than 2 finite values.
     """
-    lib = load_earthlib()
+    return _row_spectrum(load_earthlib(), row, grid_nm)
+
+
+def _row_spectrum(lib: EarthlibLibrary, row: int, grid_nm: np.ndarray) -> Spectrum:
     data = lib.data[row].astype(np.float64)
     ok = np.isfinite(data)
     if ok.sum() < 2:
@@ -210,6 +251,5 @@ def earthlib_row_spectrum(row: int, grid_nm: np.ndarray = GRID_NM) -> Spectrum:
 
 def earthlib_notes(level_2: str, level_3: str, name: str) -> str:
     """earthlib's own metadata of a spectrum, e.g. ``"measured (asd): urban reflectance ..."``."""
-    lib = load_earthlib()
-    i = lib.index(level_2, level_3, name)
+    lib, i = _library_of(level_2, level_3, name)
     return f"{lib.level_4[i]} ({lib.sources[i]}): {lib.notes[i]}"

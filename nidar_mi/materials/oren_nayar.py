@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-__all__ = ["coefficients", "half_width_h", "monostatic_reflectance", "brdf"]
+__all__ = ["coefficients", "half_width_h", "oren_nayar_monostatic", "brdf"]
 
 
 def coefficients(sigma_deg: float) -> tuple[float, float]:
@@ -63,7 +63,7 @@ def brdf(wi, wo, rho, sigma_deg: float, amplitude: float = 0.0, width_deg: float
     return np.where((ci > 0) & (co > 0), on * (1.0 + surge), 0.0)
 
 
-def monostatic_reflectance(rho, cos_theta, sigma_deg: float, amplitude: float = 0.0):
+def oren_nayar_monostatic(rho, cos_theta, sigma_deg: float, amplitude: float = 0.0):
     """``rho_eff = pi f(wi, wi) = rho (A + B sin²θ / cos θ)(1 + B0)`` (unitless)."""
     a, b = coefficients(sigma_deg)
     c = np.asarray(cos_theta, dtype=np.float64)

@@ -20,6 +20,7 @@ from ..io.images import linear_to_srgb
 from .spectra import Spectrum
 
 __all__ = [
+    "colour_tables",
     "spectrum_to_xyz",
     "spectrum_to_linear_srgb",
     "spectrum_to_srgb",
@@ -28,7 +29,9 @@ __all__ = [
 
 
 @functools.lru_cache(maxsize=1)
-def _colour():
+def colour_tables():
+    """``(colour, cmfs, d65)``: colour-science (imported once, its SciPy notice silenced), the
+    CIE 1931 2° observer and illuminant D65."""
     with warnings.catch_warnings():
         # colour-science notes at import that optional SciPy features are unavailable.
         warnings.filterwarnings("ignore", message=".*SciPy.*")
@@ -50,7 +53,7 @@ def spectrum_to_xyz(spectrum: Spectrum) -> np.ndarray:
     Returns:
         (3,) XYZ.
     """
-    colour, cmfs, d65 = _colour()
+    colour, cmfs, d65 = colour_tables()
     wl = np.arange(360.0, 831.0, 1.0)
     values = np.interp(wl, spectrum.wavelengths_nm, spectrum.values, left=0.0, right=0.0)
     sd = colour.SpectralDistribution(values, wl)
@@ -62,7 +65,7 @@ def spectrum_to_xyz(spectrum: Spectrum) -> np.ndarray:
 
 def spectrum_to_linear_srgb(spectrum: Spectrum) -> np.ndarray:
     """Linear sRGB (D65 white) of a reflectance spectrum, clipped to [0, 1]. Shape (3,)."""
-    colour, _, _ = _colour()
+    colour, _, _ = colour_tables()
     xyz = spectrum_to_xyz(spectrum)
     rgb = colour.XYZ_to_sRGB(xyz, apply_cctf_encoding=False)
     return np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)

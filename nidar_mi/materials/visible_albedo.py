@@ -53,9 +53,9 @@ def compute_srgb_weights() -> np.ndarray:
     :data:`ALBEDO_WAVELENGTHS_NM` (read linearly between the samples): the colour-science sRGB
     of each sample's hat function (module docstring)."""
     from .spectra import Spectrum
-    from .srgb import _colour, spectrum_to_xyz
+    from .srgb import colour_tables, spectrum_to_xyz
 
-    colour, _, _ = _colour()
+    colour, _, _ = colour_tables()
     wl = ALBEDO_WAVELENGTHS_NM
     step = float(wl[1] - wl[0])
     grid = np.concatenate(([wl[0] - step], wl, [wl[-1] + step]))

@@ -1,6 +1,6 @@
 """Torch datasets over the training frames: crops, flips and tensors for the networks.
 
-The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.frames`; these classes only
+The frame format (files, keys, dtypes) belongs to :mod:`nidar_mi.training_frames`; these classes only
 read it. Intensity is divided by ``intensity_scale`` and clipped to [0, 1].
 Crops and flips are drawn from a generator seeded by ``(seed, epoch, index)``, so a sample
 does not depend on worker processes or on where a run was resumed.
@@ -8,6 +8,7 @@ does not depend on worker processes or on where a run was resumed.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,14 +16,16 @@ import torch
 from torch.utils.data import Dataset
 
 from ..errors import NidarError
-from ..frames import load_frame
+from ..training_frames import load_frame
 from .preprocess import colour_input, prepare_nir, prepare_rgb
 
 __all__ = [
+    "R_TARGET_KEYS",
     "area_resize",
     "reduce_sparse",
     "FrameDataset",
     "STNDataset",
+    "IntrinsicTargets",
     "IRNetDataset",
     "MixedDataset",
 ]
@@ -157,7 +160,7 @@ class STNDataset(FrameDataset):
 
 
 #: Frame keys each ``r_target`` reads beside ``R_true`` (:class:`~nidar_mi.nidar.config.LossConfig`).
-_R_TARGET_KEYS = {"monostatic": (), "surface": ("R_surface",), "colour": ("A_true",)}
+R_TARGET_KEYS = {"monostatic": (), "surface": ("R_surface",), "colour": ("A_true",)}
 
 
 def reflectance_target(arrays: dict, r_target: str, wavelength_nm: float) -> np.ndarray:
@@ -179,9 +182,27 @@ def reflectance_target(arrays: dict, r_target: str, wavelength_nm: float) -> np.
         from ..materials.visible_albedo import colour_reflectance_map
 
         target = colour_reflectance_map(wavelength_nm)(arrays["A_true"])
-    from ..frames import R_TRUE_MIN
+    from ..training_frames import R_TRUE_MIN
 
     return np.where(r_true >= R_TRUE_MIN, np.maximum(target, R_TRUE_MIN), 0.0).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class IntrinsicTargets:
+    """The rendered frames' true reflectance and shading as targets of IRNet's R and S.
+
+    Attributes:
+        r_target: what R is compared with (:attr:`~nidar_mi.nidar.config.LossConfig.r_target`,
+            :func:`reflectance_target`).
+        wavelength_nm: the LiDAR wavelength of the ``"colour"`` target's map.
+        missing_zero: frames without true maps (real frames) give zero maps, which the
+            supervised terms leave out (their pixel mask is ``R_true >= 1e-3``); False: such a
+            frame is an error.
+    """
+
+    r_target: str = "monostatic"
+    wavelength_nm: float = 905.0
+    missing_zero: bool = False
 
 
 class IRNetDataset(FrameDataset):
@@ -197,12 +218,8 @@ class IRNetDataset(FrameDataset):
         input_dir: directory with ``<frame>.npy`` pseudo-NIR images ``(1, H, W)`` float32
             (the frozen STN's output, full resolution); None gives the prepared RGB image as
             input.
-        intrinsic_targets: also give the rendered frames' true reflectance and shading
-            (``R_true``, ``S_true``; frames without them are an error, unless
-            ``missing_targets_zero``).
-        missing_targets_zero: with ``intrinsic_targets``, frames without true maps (real
-            frames) give zero maps, which the supervised terms leave out (their pixel mask is
-            ``R_true >= 1e-3``).
+        intrinsic: also give the rendered frames' true reflectance and shading (``R_true``,
+            ``S_true``), as :class:`IntrinsicTargets` says; None: not.
         supervise_intensity: False gives an empty intensity mask (frames that only supervise
             the decomposition: renders of another sensor than the real frames').
         colour: with ``input_dir``, an IRNet input mode whose colour channels are stacked
@@ -216,7 +233,7 @@ class IRNetDataset(FrameDataset):
 
     Items: ``{"x": (C, h, w), "intensity": (1, h, w), "mask": (1, h, w)}`` float32 (``C``: 1, 3
     or 4; the mask as 0/1), plus ``"R_true"`` and ``"S_true"`` ``(1, h, w)`` float32 (the same crop
-    and flip) with ``intrinsic_targets``; ``(h, w)`` is the crop shape.
+    and flip) with ``intrinsic``; ``(h, w)`` is the crop shape.
     """
 
     def __init__(
@@ -227,23 +244,21 @@ class IRNetDataset(FrameDataset):
         seed: int = 0,
         train: bool = True,
         input_dir: str | Path | None = None,
-        intrinsic_targets: bool = False,
+        intrinsic: IntrinsicTargets | None = None,
         scale: float = 1.0,
-        missing_targets_zero: bool = False,
         supervise_intensity: bool = True,
         colour: str | None = None,
-        r_target: str = "monostatic",
-        wavelength_nm: float = 905.0,
     ) -> None:
         super().__init__(frames, crop_size, seed, train)
-        self.r_target = r_target
-        self.wavelength_nm = float(wavelength_nm)
+        targets = intrinsic or IntrinsicTargets()
+        self.r_target = targets.r_target
+        self.wavelength_nm = float(targets.wavelength_nm)
         self.colour = colour
-        self.missing_targets_zero = bool(missing_targets_zero)
+        self.missing_targets_zero = bool(targets.missing_zero)
         self.supervise_intensity = bool(supervise_intensity)
         self.intensity_scale = float(intensity_scale)
         self.input_dir = Path(input_dir) if input_dir is not None else None
-        self.intrinsic_targets = bool(intrinsic_targets)
+        self.intrinsic_targets = intrinsic is not None
         if not 0.0 < float(scale) <= 1.0:
             raise NidarError(f"scale must lie in (0, 1], got {scale}")
         self.scale = float(scale)
@@ -262,11 +277,11 @@ class IRNetDataset(FrameDataset):
             keys = (*keys, "range")
         zero_targets = False
         if self.intrinsic_targets:
-            from ..frames import frame_has
+            from ..training_frames import frame_has
 
             zero_targets = self.missing_targets_zero and not frame_has(path, ("R_true",))
             if not zero_targets:
-                keys = (*keys, "R_true", "S_true", *_R_TARGET_KEYS[self.r_target])
+                keys = (*keys, "R_true", "S_true", *R_TARGET_KEYS[self.r_target])
         arrays = load_frame(path, keys)
         if not zero_targets and self.intrinsic_targets:
             arrays["R_true"] = reflectance_target(arrays, self.r_target, self.wavelength_nm)

@@ -25,7 +25,7 @@ __all__ = [
     "SSIM_SIGMA",
     "SSIM_WINDOW",
     "gaussian_window",
-    "ssim_map",
+    "ssim_map_torch",
     "stn_loss",
     "reconstruction_loss",
     "reflectance_smoothness_loss",
@@ -67,7 +67,7 @@ def _gaussian_1d(size: int, sigma: float, dtype, device) -> torch.Tensor:
     return g / g.sum()
 
 
-def ssim_map(
+def ssim_map_torch(
     x: torch.Tensor,
     y: torch.Tensor,
     window_size: int = SSIM_WINDOW,
@@ -141,7 +141,7 @@ def stn_loss(
     for p, t in zip(preds, targets, strict=True):
         l1 = (p - t).abs().mean()
         if min(p.shape[-2:]) > 5:
-            total = total + alpha * ((1 - ssim_map(p, t)) / 2).mean() + (1 - alpha) * l1
+            total = total + alpha * ((1 - ssim_map_torch(p, t)) / 2).mean() + (1 - alpha) * l1
         else:
             total = total + l1
     return total
@@ -187,7 +187,7 @@ def photo_stn_loss(
     """
     r = pearson_r(pred, target)
     fitted = gain_offset_fit(pred, target)
-    return (1.0 - r).mean() + ssim_weight * (1.0 - ssim_map(fitted, target)).mean()
+    return (1.0 - r).mean() + ssim_weight * (1.0 - ssim_map_torch(fitted, target)).mean()
 
 
 def reconstruction_loss(r: torch.Tensor, s: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
@@ -314,7 +314,7 @@ def masked_ssim_loss(
 ) -> torch.Tensor:
     """L_SSIM = 1 - sum(M * SSIM_map(M pred, M target)) / (||M||_1 + eps)."""
     p, t, m = _masked(pred, target, mask)
-    smap = ssim_map(p, t)
+    smap = ssim_map_torch(p, t)
     num = (m * smap).flatten(1).sum(1)
     return (1 - num / (m.flatten(1).sum(1) * p.shape[1] + eps)).mean()
 

@@ -1,6 +1,6 @@
 """Building the networks from their configuration and loading trained weights.
 
-A weights directory written by :mod:`nidar_mi.nidar.train` holds ``stn.safetensors``,
+A weights directory written by :mod:`nidar_mi.nidar.training` holds ``stn.safetensors``,
 ``irnet.safetensors``, ``config.json`` and ``train_log.json``. Each weights file carries its
 network configuration as JSON in its safetensors metadata, so it can be loaded on its own.
 """
@@ -112,12 +112,24 @@ def load_pipeline(
         ``(stn, irnet, config)``; ``stn`` is None when the directory has no STN.
     """
     weights_dir = Path(weights_dir)
+    path = weights_dir / "config.json"
     try:
-        cfg = TrainConfig.from_dict(json.loads((weights_dir / "config.json").read_text())["train"])
+        saved = json.loads(path.read_text())
     except FileNotFoundError:
-        raise NidarError(f"{weights_dir / 'config.json'} not found") from None
-    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise NidarError(f"cannot read {weights_dir / 'config.json'}: {exc}") from None
+        raise NidarError(f"{path} not found") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise NidarError(f"cannot read {path}: {exc}") from None
+    if not isinstance(saved, dict) or "train" not in saved:
+        raise NidarError(
+            f"cannot read {path}: no 'train' key (the training configuration a weights folder's "
+            "config.json holds)"
+        )
+    try:
+        cfg = TrainConfig.from_dict(saved["train"])
+    except NidarError as exc:
+        raise NidarError(f"cannot read {path}: {exc}") from None
+    except (KeyError, TypeError) as exc:
+        raise NidarError(f"cannot read {path}: {type(exc).__name__} {exc}") from None
     irnet_path = weights_dir / "irnet.safetensors"
     if not irnet_path.is_file():
         raise NidarError(f"{irnet_path} not found")

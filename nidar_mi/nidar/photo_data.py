@@ -64,7 +64,7 @@ def augment_colour(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def render_pair(frame) -> tuple[np.ndarray, np.ndarray]:
     """``(rgb uint8 (H, W, 3), nir float32 (H, W) linear)`` of a rendered training frame."""
-    from ..frames import load_frame
+    from ..training_frames import load_frame
 
     arrays = load_frame(frame, ("rgb", "nir"))
     rgb = np.asarray(arrays["rgb"])

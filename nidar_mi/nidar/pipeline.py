@@ -1,8 +1,8 @@
 """NIDAR end to end: camera images -> per-point LiDAR intensity.
 
 RGB -> STN pseudo-NIR -> IRNet (R, S, Î) -> the R branch sampled at each point by calibrated
-projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on; in torch on
-the networks' device when that is a GPU: :mod:`nidar_mi.geometry.device_fusion`) -> the sensor's
+projection (:func:`nidar_mi.geometry.fusion.sample_cameras`, occlusion test on; on the host
+whatever the networks' device, the geometry beside the networks) -> the sensor's
 response, a sensor profile (:mod:`nidar_mi.profiles`): by default the weights' own
 (:meth:`NidarModel.default_profile`). Points no camera sees get 0 and ``observed = False``.
 
@@ -26,14 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
-from ..geometry import (
-    CameraModel,
-    incidence_cosine,
-    locate_in_cameras,
-    sample_cameras,
-    sample_cameras_on,
-)
-from ..geometry.device_fusion import to_host
+from ..geometry import CameraModel, incidence_cosine, locate_in_cameras, sample_cameras
 from ..geometry.local_features import local_geometry
 from ..profiles import DistanceQuantileMap, SensorProfile, load_profile
 
@@ -116,9 +109,6 @@ class NidarModel:
         self._calibration: SensorProfile | None = None
         self.weights_dir = weights_dir
         self.scale = 1.0
-        #: torch device of the point assignment; None: the networks' device when it is not the
-        #: CPU, else the NumPy reference (:func:`_assignment_device`).
-        self.assignment_device = None
         self._default_profile: SensorProfile | None | bool = False  # False: not read yet
 
     @property
@@ -146,17 +136,13 @@ class NidarModel:
         """SHA-256 of the weight files (``irnet_sha256``, ``stn_sha256`` when it has one): what
         a sensor profile records of the networks it was fitted for (computed once)."""
         if getattr(self, "_identity", None) is None:
-            import hashlib
+            from ..io.cache_key import file_sha256
 
             ident = {}
             for key in ("irnet", "stn"):
                 path = Path(self.weights_dir) / f"{key}.safetensors"
                 if path.is_file():
-                    h = hashlib.sha256()
-                    with open(path, "rb") as f:
-                        for chunk in iter(lambda f=f: f.read(1 << 20), b""):
-                            h.update(chunk)
-                    ident[f"{key}_sha256"] = h.hexdigest()
+                    ident[f"{key}_sha256"] = file_sha256(path)
             self._identity = ident
         return dict(self._identity)
 
@@ -265,10 +251,10 @@ class NidarModel:
     ) -> PointIntensity:
         """Intensity of LiDAR-frame points seen by calibrated cameras.
 
-        On the CPU the networks run on a second thread while the points are located in the
-        cameras and their incidence estimated (the result is that of the stages in turn); on two
-        cores one torch thread (``torch.set_num_threads(1)``) makes the faster frame
-        (docs/BENCHMARKS.md).
+        The networks run on a second thread (on their device) while the points are located in
+        the cameras and their incidence estimated on the host (the result is that of the stages
+        in turn); on two cores one torch thread (``torch.set_num_threads(1)``) makes the faster
+        frame (docs/BENCHMARKS.md).
 
         ``branch="R"`` (default, the paper's NIDAR-Full): the reflectance branch through the
         weights' own profile (:meth:`default_profile`: ``profiles/sim-905.json`` when the
@@ -331,22 +317,13 @@ class NidarModel:
 
     def _sampled_maps(self, xyz, cameras, images, maps, branch, opts, wants_cos):
         """``(values, observed, camera_index, R or None, seen_cos)``: :func:`_sample` of the
-        networks' maps of ``images`` (``maps`` when given) at the points; on the assignment's
-        device the networks and the assignment in turn, else the NumPy assignment with its
-        geometry beside the networks (:meth:`_maps_beside_geometry`; ``seen_cos`` as there,
-        else None)."""
-        device = _assignment_device(self)
+        networks' maps of ``images`` (``maps`` when given) at the points, the geometry located
+        beside the networks (:meth:`_maps_beside_geometry`; ``seen_cos`` as there)."""
         keys = tuple(dict.fromkeys((branch, "R")))  # the maps sampled
-        seen_cos = None
-        if device is not None:
-            if maps is None:
-                maps = [self.predict_image(im, as_tensors=True, outputs=keys) for im in images]
-        else:
-            maps, sightings, seen_cos = self._maps_beside_geometry(
-                xyz, cameras, images, maps, keys, opts, wants_cos
-            )
-            opts = {"sightings": sightings}
-        return *_sample(device, xyz, cameras, maps, branch, **opts), seen_cos
+        maps, sightings, seen_cos = self._maps_beside_geometry(
+            xyz, cameras, images, maps, keys, opts, wants_cos
+        )
+        return *_sample(xyz, cameras, maps, branch, sightings=sightings), seen_cos
 
     def _maps_beside_geometry(self, xyz, cameras, images, maps, keys, opts, wants_cos):
         """``(maps, sightings, seen_cos)``: the networks' ``keys`` maps of ``images`` (on a
@@ -439,40 +416,18 @@ def _nidar_inputs(profile: SensorProfile) -> tuple[str, ...]:
     return tuple(k for k in NIDAR_MAPS if k in profile.mapping.features)
 
 
-def _sample(device, xyz, cameras, maps, branch: str, **opts):
+def _sample(xyz, cameras, maps, branch: str, **opts):
     """``(values, observed, camera_index, R or None)`` (N,) arrays of ``branch``'s maps at the
-    points, and of R when the branch is another; on ``device`` in torch (the maps' tensors used
-    where they are, the results brought back in one transfer), or with the NumPy reference when
-    ``device`` is None."""
+    points (:func:`~nidar_mi.geometry.fusion.sample_cameras` with ``opts``), and of R when the
+    branch is another."""
     keys = [branch] if branch == "R" else [branch, "R"]
-    if device is None:
-        sampled = [sample_cameras(xyz, cameras, [_array(m[k]) for m in maps], **opts) for k in keys]
-        out = list(sampled[0])
-        return (*out, sampled[1][0] if len(sampled) > 1 else None)
-    sampled = [
-        sample_cameras_on(device, xyz, cameras, [m[k] for m in maps], as_tensors=True, **opts)
-        for k in keys
-    ]
-    host = to_host(*sampled[0], *(s[0] for s in sampled[1:]))
-    return (*host[:3], host[3] if len(host) > 3 else None)
+    sampled = [sample_cameras(xyz, cameras, [_array(m[k]) for m in maps], **opts) for k in keys]
+    return (*sampled[0], sampled[1][0] if len(sampled) > 1 else None)
 
 
 def _array(a) -> np.ndarray:
     """A map as a NumPy array (a tensor copied to the host)."""
     return a.detach().cpu().numpy() if hasattr(a, "detach") else np.asarray(a)
-
-
-def _assignment_device(model: NidarModel):
-    """The torch device the point assignment runs on: :attr:`NidarModel.assignment_device` when
-    set, else the networks' when it is not the CPU
-    (:func:`nidar_mi.geometry.device_fusion.sample_cameras_on`), else None (the NumPy
-    reference, :func:`nidar_mi.geometry.fusion.sample_cameras`)."""
-    if model.assignment_device is not None:
-        import torch
-
-        return torch.device(model.assignment_device)
-    device = next(model.irnet.parameters()).device
-    return None if device.type == "cpu" else device
 
 
 def _profile_intensity(

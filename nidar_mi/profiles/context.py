@@ -28,7 +28,7 @@ scale.
 
 Missing inputs (NaN: no ring, a neighbourhood without a shape) take the branch LightGBM learnt
 for them; the model is stored as LightGBM's text model, checked line by line before LightGBM
-parses it (:func:`nidar_mi.profiles.gbm._load_booster`), never pickled.
+parses it (:func:`nidar_mi.profiles.gbm.load_booster`), never pickled.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import NidarError
-from .gbm import MAX_LEAVES, MAX_TREES, _lgb, _load_booster, _predict_threads
+from .gbm import MAX_LEAVES, MAX_TREES, lightgbm_module, load_booster, predict_threads
 from .head import fit_head, head_from_dict, head_predict, head_to_dict
 from .inputs import GROUPS, IMAGE_GROUPS, feature_group
 
@@ -55,7 +55,7 @@ __all__ = [
     "ContextFitOptions",
     "ContextMap",
     "frame_rows",
-    "train_booster",
+    "train_context_booster",
     "training_rows",
 ]
 
@@ -135,10 +135,12 @@ def _params(o: ContextFitOptions) -> dict[str, Any]:
     }
 
 
-def train_booster(x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: ContextFitOptions):
+def train_context_booster(
+    x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: ContextFitOptions
+):
     """A LightGBM regression of ``y`` (N,) on ``x`` (N, F) (columns ``feats``) with the
     options' settings; the trained ``lightgbm.Booster``."""
-    lgb = _lgb()
+    lgb = lightgbm_module()
     data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
     return lgb.train(_params(o), data, num_boost_round=int(o.trees))
 
@@ -306,7 +308,7 @@ class ContextMap:
             "quantiles": list(self.quantiles),
             "params": dict(self.params),
         } | (
-            {"lightgbm": _lgb().__version__, "model": self.model}
+            {"lightgbm": lightgbm_module().__version__, "model": self.model}
             if self.kind == "gbm"
             else {"head": dict(self.head)}
         )
@@ -405,7 +407,7 @@ class ContextMap:
                 quantiles=tuple(float(v) for v in q),
                 params=record,
             )
-        booster = train_booster(xt, yt, feats, o)
+        booster = train_context_booster(xt, yt, feats, o)
         record |= {k: v for k, v in _params(o).items() if k not in ("verbose", "num_threads")}
         record["trees"] = int(booster.num_trees())
         return cls(
@@ -440,8 +442,8 @@ def _design(features: tuple[str, ...], context: Mapping[str, Any] | None, n: int
 
 def _booster_predict(model: str, feats: tuple[str, ...]):
     """The prediction function of a checked LightGBM text model on ``feats``."""
-    booster = _load_booster(model, feats, missing=True)
-    return lambda x: np.asarray(booster.predict(x, num_threads=_predict_threads()), np.float64)
+    booster = load_booster(model, feats, missing=True)
+    return lambda x: np.asarray(booster.predict(x, num_threads=predict_threads()), np.float64)
 
 
 def _known(context: Mapping[str, Any]) -> tuple[str, ...]:

@@ -54,6 +54,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import NidarError
+from ..extras import missing_extra
 
 __all__ = [
     "DEFAULT_LEAVES",
@@ -100,13 +101,11 @@ _FEATURE_SETS = (
 )
 
 
-def _lgb():
+def lightgbm_module():
     try:
         import lightgbm
-    except ImportError:  # pragma: no cover - a dependency of the package
-        raise NidarError(
-            "the gbm profile form needs LightGBM (pip install lightgbm==4.7.0)"
-        ) from None
+    except ImportError:  # the `nidar` extra
+        raise NidarError(missing_extra("nidar", "the gbm profile form", ("lightgbm",))) from None
     return lightgbm
 
 
@@ -206,7 +205,7 @@ class GbmMap:
             raise NidarError("gbm: 'monotone' must be true or false")
         if not isinstance(self.params, Mapping):
             raise NidarError("gbm: 'params' must be an object")
-        object.__setattr__(self, "_booster", _load_booster(self.model, feats))
+        object.__setattr__(self, "_booster", load_booster(self.model, feats))
 
     @property
     def uses_value(self) -> bool:
@@ -279,7 +278,7 @@ class GbmMap:
             object.__setattr__(self, "_table", table)
         if table:
             return table(x)
-        out = self._booster.predict(x, num_threads=_predict_threads())
+        out = self._booster.predict(x, num_threads=predict_threads())
         return np.asarray(out, dtype=np.float64)
 
     def to_dict(self) -> dict[str, Any]:
@@ -287,7 +286,7 @@ class GbmMap:
         return {
             "features": list(self.features),
             "monotone": self.monotone,
-            "lightgbm": _lgb().__version__,
+            "lightgbm": lightgbm_module().__version__,
             "params": dict(self.params),
             "model": self.model,
         }
@@ -423,7 +422,7 @@ def train_booster(x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: GbmFi
         min_leaf=o.min_leaf,
         seed=o.seed,
     )
-    lgb = _lgb()
+    lgb = lightgbm_module()
     data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
     return lgb.train(params, data, num_boost_round=int(o.trees))
 
@@ -481,7 +480,7 @@ class _CellTable:
         # one beyond the largest threshold
         reps = [np.append(t, t[-1] + abs(t[-1]) + 1.0) if len(t) else np.zeros(1) for t in th]
         grid = np.stack([g.ravel() for g in np.meshgrid(*reps, indexing="ij")], axis=1)
-        values = booster.predict(grid, num_threads=_predict_threads())
+        values = booster.predict(grid, num_threads=predict_threads())
         return cls(th, np.asarray(values, dtype=np.float64))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
@@ -505,7 +504,7 @@ def _split_thresholds(text: str, n_features: int) -> tuple[np.ndarray, ...]:
     return tuple(np.unique(t[f == j]) for j in range(n_features))
 
 
-def _predict_threads() -> int:
+def predict_threads() -> int:
     """Threads for prediction: the cores this process may use, at most 8 and at most
     ``$OMP_NUM_THREADS`` when set (rows are independent, so the output does not depend on it)."""
     import os
@@ -698,11 +697,11 @@ def _check_model_text(text: Any, features: tuple[str, ...], missing: bool = Fals
     return body + sep
 
 
-def _load_booster(text: Any, features: tuple[str, ...], missing: bool = False):
+def load_booster(text: Any, features: tuple[str, ...], missing: bool = False):
     """LightGBM booster of a model text, after checks that it is one this module could write
     (``missing``: or one whose splits route missing values, the ``context`` form's)."""
     checked = _check_model_text(text, features, missing)
-    lgb = _lgb()
+    lgb = lightgbm_module()
     try:
         booster = lgb.Booster(model_str=checked)
     except Exception as e:  # LightGBMError, ValueError: a malformed text

@@ -25,26 +25,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .layout import sample_light, sample_rig
-from .objects import _local, building, bush, pick, rnd, sign_post, street_light, tree, vehicle
+from .objects import building, bush, local_point, pick, rnd, sign_post, street_light, tree, vehicle
 from .primitives import Block, Cylinder, Layout, Patch, Shape
 from .streets import (
-    CITY_KINDS,
     DEFAULT_BLOCKS,
     LIDAR_HEIGHT_M,
     StreetGrid,
-    drive_route,
     sample_grid,
 )
 
-__all__ = [
-    "CITY_KINDS",
-    "DEFAULT_BLOCKS",
-    "LIDAR_HEIGHT_M",
-    "StreetGrid",
-    "sample_grid",
-    "sample_city",
-    "drive_route",
-]
+__all__ = ["sample_city"]
 
 _KERB_M = 0.15
 _NO_PARKING_M = 5.0  # no car parks closer than this to the end of a block side (turning cars)
@@ -366,7 +356,7 @@ def _bench(rng: np.random.Generator, prefix: str, x: float, y: float, yaw: float
         )
     ]
     for i, u in enumerate((-0.75, 0.75)):
-        lx, ly = _local(x, y, yaw, u, 0.0)
+        lx, ly = local_point(x, y, yaw, u, 0.0)
         out.append(
             Block(
                 f"{prefix}_leg{i}", legs, (rnd(lx), rnd(ly), 0.21), (0.03, 0.2, 0.21), rnd(yaw, 2)
@@ -413,7 +403,7 @@ def sample_city(
         The layout (its rig stands at the start of :func:`drive_route`, heading north, in the
         right-hand lane) and the grid.
     """
-    from .trajectory import route_start
+    from .route import route_start
 
     g = sample_grid(rng, kind, blocks)
     shapes = _streets(rng, g)

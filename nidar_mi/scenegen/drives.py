@@ -25,8 +25,8 @@ import numpy as np
 
 from ..io.kitti import write_kitti_poses, write_kitti_times
 from ..io.trajectory import write_tum
-from .city import StreetGrid
-from .trajectory import drive, revisits
+from .route import drive, revisits
+from .streets import StreetGrid
 
 __all__ = ["DEFAULT_FRAMES", "write_drive"]
 

@@ -17,25 +17,30 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import NidarError
-from .city import CITY_KINDS, DEFAULT_BLOCKS, sample_city, sample_grid
+from ..io.ownership import Owner
+from .city import sample_city
 from .layout import KINDS as LAYOUT_KINDS
 from .layout import sample_layout
 from .lighting import relight
 from .objects import material_set
 from .primitives import Layout
-from .spectra import draw_spectra
+from .spectral_regimes import draw_spectra
+from .streets import CITY_KINDS, DEFAULT_BLOCKS, sample_grid
 from .xml import scene_xml
 
 __all__ = [
     "INDEX_NAME",
     "KINDS",
     "MAX_SCENES",
+    "OWNER",
+    "SCENE_OPTIONS",
     "generate",
     "generate_scene",
     "index_entry",
@@ -45,7 +50,17 @@ __all__ = [
     "scene_rng",
 ]
 
+log = logging.getLogger("nidar_mi.scenegen")
+
 INDEX_NAME = "index.json"
+#: Who writes a scenegen folder (:mod:`nidar_mi.io.ownership`): it adds scenes to it.
+OWNER = Owner(
+    "scenegen",
+    "scenes",
+    names=(INDEX_NAME, "scene_*", ".scene_*.tmp-*"),
+    replaces=False,
+    whole=False,
+)
 #: Every kind of scene: the street and path layouts (:mod:`.layout`), then cities (:mod:`.city`).
 KINDS = LAYOUT_KINDS + CITY_KINDS
 
@@ -81,7 +96,7 @@ def generate_scene(
             has one).
         lighting: lighting regime (:data:`nidar_mi.scenegen.lighting.LIGHTING_REGIMES`):
             ``default`` (the layout's sun and sky) or ``varied`` (redrawn, overcast included).
-        spectra: spectral regime (:data:`nidar_mi.scenegen.spectra.SPECTRA_REGIMES`):
+        spectra: spectral regime (:data:`nidar_mi.scenegen.spectral_regimes.SPECTRA_REGIMES`):
             ``library`` (each material's own spectrum), ``earthlib`` (measured spectra drawn
             per scene for most diffuse, road and paint materials) or ``earthlib-family`` (drawn
             within each material's family).
@@ -179,9 +194,11 @@ def _read_index(path: str) -> list[dict]:
 
 
 def _file_sha256(path: str) -> str | None:
+    """:func:`~nidar_mi.io.cache_key.file_sha256`, or None for a file that cannot be read."""
+    from ..io.cache_key import file_sha256
+
     try:
-        with open(path, "rb") as f:
-            return hashlib.sha256(f.read()).hexdigest()
+        return file_sha256(path)
     except OSError:
         return None
 
@@ -337,19 +354,46 @@ def _write(folder: _Folder, scene: _Scene, seed: int, options: dict) -> None:
         atomic_write_text(scene.path, scene.text)
 
 
+#: How ``-v`` names what happened to a scene.
+_ACTION_WORDS = {
+    "write": "written",
+    "skip": "already there, skipped",
+    "keep": "edited by hand, kept",
+}
+
+
+def _publish_index(folder) -> dict:
+    """Write the folder's ``index.json`` and its record (:mod:`nidar_mi.io.ownership`)."""
+    from ..io.atomic import write_record
+    from ..io.ownership import folder_files
+
+    index = folder.write_index()
+    write_record(
+        folder.out_dir, OWNER, [f for f in folder_files(folder.out_dir) if OWNER.writes(f)]
+    )
+    return index
+
+
+#: What every scene of a run is drawn with (:func:`generate`'s scene options), and the defaults.
+SCENE_OPTIONS = {
+    "kind": None,
+    "blocks": None,
+    "materials": "all",
+    "lighting": "default",
+    "spectra": "library",
+    "drive": None,
+}
+
+
 def generate(
     out_dir: str,
     count: int,
     seed: int,
     *,
-    kind: str | None = None,
     progress: bool = True,
     overwrite: bool = False,
-    blocks: tuple[int, int] | None = None,
-    drive: dict | None = None,
-    materials: str = "all",
-    lighting: str = "default",
-    spectra: str = "library",
+    nested: bool = False,
+    **scene,
 ) -> dict:
     """Write scenes ``0 .. count-1`` of run ``seed`` into ``out_dir`` (resumable).
 
@@ -365,15 +409,15 @@ def generate(
         out_dir: destination folder (created).
         count: number of scenes, 1 .. :data:`MAX_SCENES`.
         seed: run seed (>= 0).
-        kind: ``urban``, ``vegetated`` or None for a mix.
         progress: show a progress bar on stderr.
         overwrite: replace scene files that differ from this run's.
-        blocks: (nx, ny) blocks of ``city`` and ``suburb`` layouts (None: the default).
-        drive: keyword arguments of :func:`.drives.write_drive` (``frames``, ``rate_hz``,
-            ``speed``) for ``city`` and ``suburb`` scenes.
-        materials: material set of every scene (:func:`generate_scene`).
-        lighting: lighting regime of every scene (:func:`generate_scene`).
-        spectra: spectral regime of every scene (:func:`generate_scene`).
+        nested: ``out_dir`` is inside an output of the caller's own (the drive study's scene).
+        **scene: what every scene is drawn with (:data:`SCENE_OPTIONS`): ``kind``
+            (:data:`KINDS`, None for a mix of urban and vegetated), ``blocks`` ((nx, ny) blocks
+            of ``city`` and ``suburb`` layouts, None: the default), ``materials``,
+            ``lighting`` and ``spectra`` (the set and regimes of :func:`generate_scene`) and
+            ``drive`` (keyword arguments of :func:`.drives.write_drive`: ``frames``,
+            ``rate_hz``, ``speed``, for ``city`` and ``suburb`` scenes).
 
     Returns:
         The index (also written to ``out_dir/index.json``) plus, under ``"run"``, the counts of
@@ -388,17 +432,14 @@ def generate(
     from ..io.atomic import check_output_folder
     from ..progress import progress_bar
 
-    _check_run(out_dir, count, seed, kind, blocks, drive)
-    check_output_folder(out_dir, overwrite=True)  # a writable place; scenes are added to it
+    unknown = sorted(set(scene) - set(SCENE_OPTIONS))
+    if unknown:
+        raise TypeError(f"generate() got unknown scene option(s) {', '.join(unknown)}")
+    options = SCENE_OPTIONS | scene
+    _check_run(out_dir, count, seed, options["kind"], options["blocks"], options["drive"])
+    # scenes are added to it: a folder of other files is refused unless `overwrite`
+    out_dir = str(check_output_folder(out_dir, owner=OWNER, overwrite=overwrite, nested=nested))
     folder = _Folder.read(out_dir)
-    options = {
-        "kind": kind,
-        "blocks": blocks,
-        "materials": materials,
-        "lighting": lighting,
-        "spectra": spectra,
-        "drive": drive,
-    }
     bar = progress_bar(total=count, show=progress, desc="scenegen", unit="scene")
     written = skipped = 0
     try:
@@ -417,13 +458,14 @@ def generate(
                 scene = _plan(folder, seed, k, options, overwrite)
                 bar.update(1)
             _write(folder, scene, seed, options)
+            log.debug("%s: %s", scene_id(seed, k), _ACTION_WORDS.get(scene.action, scene.action))
             written += scene.action == "write"
             skipped += scene.action != "write"
     except BaseException:  # interrupted or failed: the index lists the scenes written so far
         if written:
-            folder.write_index()
+            _publish_index(folder)
         raise
     finally:
         bar.close()
-    index = folder.write_index()
+    index = _publish_index(folder)
     return index | {"run": {"seed": seed, "count": count, "written": written, "skipped": skipped}}

@@ -18,6 +18,7 @@ from ..errors import NidarError
 from .primitives import Block, Cylinder, Panel, Shape, Sphere
 
 __all__ = [
+    "local_point",
     "HELDOUT_MATERIALS",
     "MATERIALS",
     "MATERIAL_SETS",
@@ -131,7 +132,9 @@ def _pt(x: float, y: float, z: float) -> tuple[float, float, float]:
     return (rnd(x), rnd(y), rnd(z))
 
 
-def _local(x0: float, y0: float, heading_deg: float, u: float, v: float) -> tuple[float, float]:
+def local_point(
+    x0: float, y0: float, heading_deg: float, u: float, v: float
+) -> tuple[float, float]:
     """World (x, y) of the point (u forward, v left) of a frame at (x0, y0) facing heading."""
     a = math.radians(heading_deg)
     return x0 + u * math.cos(a) - v * math.sin(a), y0 + u * math.sin(a) + v * math.cos(a)
@@ -158,7 +161,7 @@ def vehicle(
     h = rnd(heading_deg, 2)
     z_body = wheel_r * 0.55 + body_h / 2
     z_cabin = z_body + body_h / 2 + cabin_h / 2
-    cx, cy = _local(x, y, heading_deg, cabin_u, 0.0)
+    cx, cy = local_point(x, y, heading_deg, cabin_u, 0.0)
     shapes: list[Shape] = [
         Block(
             f"{prefix}_body", paint, _pt(x, y, z_body), _pt(length / 2, width / 2, body_h / 2), h
@@ -188,8 +191,8 @@ def vehicle(
     axle = length / 2 - rng.uniform(0.7, 0.95)
     for name, u in (("front", axle), ("rear", -axle)):
         for side, sgn in (("left", 1.0), ("right", -1.0)):
-            ax, ay = _local(x, y, heading_deg, u, sgn * (width / 2 - 0.02))
-            bx, by = _local(x, y, heading_deg, u, sgn * (width / 2 - 0.24))
+            ax, ay = local_point(x, y, heading_deg, u, sgn * (width / 2 - 0.02))
+            bx, by = local_point(x, y, heading_deg, u, sgn * (width / 2 - 0.24))
             shapes.append(
                 Cylinder(
                     f"{prefix}_wheel_{name}_{side}",
@@ -247,7 +250,7 @@ def building(
     for f in range(floors):
         for c in range(n_cols):
             v = -length / 2 + pitch * (c + 0.5)
-            px, py = _local(x, y, facade_heading_deg, depth / 2 + 0.03, -v)
+            px, py = local_point(x, y, facade_heading_deg, depth / 2 + 0.03, -v)
             if f == 0 and c == door_col:
                 shapes.append(
                     Panel(
@@ -322,8 +325,8 @@ def sign_post(
     half = rng.uniform(0.3, 0.45)
     pole_r = rng.uniform(0.03, 0.05)
     h = rnd(heading_deg, 2)
-    fx, fy = _local(x, y, heading_deg, pole_r + 0.02, 0.0)
-    sx, sy = _local(x, y, heading_deg, pole_r + 0.035, 0.0)
+    fx, fy = local_point(x, y, heading_deg, pole_r + 0.02, 0.0)
+    sx, sy = local_point(x, y, heading_deg, pole_r + 0.035, 0.0)
     return [
         Cylinder(
             f"{prefix}_pole", pick(rng, "pole"), _pt(x, y, 0.0), _pt(x, y, top + half), rnd(pole_r)
@@ -346,7 +349,7 @@ def street_light(
     height = rng.uniform(5.0, 8.0)
     arm = rng.uniform(0.8, 2.0)
     metal = pick(rng, "pole")
-    ax, ay = _local(x, y, heading_deg, arm, 0.0)
+    ax, ay = local_point(x, y, heading_deg, arm, 0.0)
     return [
         Cylinder(
             f"{prefix}_pole", metal, _pt(x, y, 0.0), _pt(x, y, height), rnd(rng.uniform(0.06, 0.12))
@@ -398,6 +401,6 @@ def clutter(rng: np.random.Generator, prefix: str, x: float, y: float) -> list[S
     legs = pick(rng, "pole")
     shapes: list[Shape] = [Block(f"{prefix}_seat", seat, _pt(x, y, 0.45), (0.9, 0.22, 0.03), yaw)]
     for i, u in enumerate((-0.75, 0.75)):
-        lx, ly = _local(x, y, yaw, u, 0.0)
+        lx, ly = local_point(x, y, yaw, u, 0.0)
         shapes.append(Block(f"{prefix}_leg_{i}", legs, _pt(lx, ly, 0.21), (0.03, 0.2, 0.21), yaw))
     return shapes

@@ -159,8 +159,8 @@ def scene_xml(
         layout: the layout to write.
         name: scene name for the header comment.
         description: extra header line (e.g. the seeds it was drawn from).
-        spectra: material name -> :class:`~nidar_mi.scenegen.spectra.SurfaceSpectrum` for the
-            materials that take another spectrum (:func:`~nidar_mi.scenegen.spectra.draw_spectra`),
+        spectra: material name -> :class:`~nidar_mi.scenegen.spectral_regimes.SurfaceSpectrum` for the
+            materials that take another spectrum (:func:`~nidar_mi.scenegen.spectral_regimes.draw_spectra`),
             written as the ``reflectance`` of their ``nidar_material`` with its source.
 
     Returns:

@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import glob
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -64,12 +63,15 @@ __all__ = [
     "MIN_REFERENCES",
     "TOLERANCE",
     "RANGE_BINS_M",
+    "SENSOR_HEIGHT_M",
 ]
 
 #: The road of the old model: Lambertian asphalt_old (its earthlib spectrum).
 LAMBERTIAN_ASPHALT = "lambertian:asphalt_old"
 #: The library's asphalt_old: roughdiffuse (nidar_mi.lidar.link_budget).
 ROUGH_ASPHALT = "asphalt_old"
+#: Height of the simulated sensor over the road, m (KITTI's Velodyne).
+SENSOR_HEIGHT_M = 1.73
 #: A ring's ground ranges are compared where the real frames hold at least this many of its
 #: ground returns per frame (about 5 % of a 2000-column sweep).
 MIN_GROUND_PER_FRAME = 50
@@ -172,7 +174,7 @@ def flat_road_scene_xml(
     preset: str,
     material: str,
     *,
-    height_m: float = 1.73,
+    height_m: float = SENSOR_HEIGHT_M,
     cols: int | None = None,
     threshold: float | None = None,
     noise: float | None = None,
@@ -221,16 +223,6 @@ def flat_road_scene_xml(
     return "\n".join(lines) + "\n"
 
 
-def _load_xml(xml: str):
-    from ..scene import load_scene
-
-    with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "scene.xml")
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(xml)
-        return load_scene(path)
-
-
 def _flat_ranges(pattern, height_m: float) -> np.ndarray:
     """(R,) ``|xyz|`` where each ring's beam of column 0 meets the plane ``z = -h`` below a
     level sensor; inf where it points up."""
@@ -247,41 +239,29 @@ def simulate_flat_road(
     preset: str = "hdl64e",
     material: str = ROUGH_ASPHALT,
     *,
-    height_m: float = 1.73,
-    cols: int | None = None,
-    threshold: float | None = None,
-    noise: float | None = None,
-    layout: str | None = None,
-    calibration_file: str | os.PathLike | None = None,
     poses: np.ndarray | None = None,
     front_only: Sequence[bool] | None = None,
     seed: int = 0,
+    **road,
 ) -> RingCoverage:
     """Scan a flat road (:func:`flat_road_scene_xml`); per ring its reported ground returns.
 
     Args:
-        preset, material, height_m, cols, threshold, noise, layout, calibration_file: the scene
-            (:func:`flat_road_scene_xml`).
+        preset, material: the scene's LiDAR preset and road (:func:`flat_road_scene_xml`).
         poses: (F, 4, 4) sensor poses over the road (the plane z = 0), one sweep each (e.g. a
             real coverage's ``poses``); None: one level sweep at ``height_m``.
         front_only: (F,) keep only the points ahead (x > 0 in the sensor frame) of sweep k, as
             in real sweeps cut to the front half; None: keep all.
         seed: noise seed of the first sweep; sweep k uses ``seed + k``.
+        **road: the rest of the scene, :func:`flat_road_scene_xml`'s keyword options
+            (``height_m``, ``cols``, ``threshold``, ``noise``, ``layout``,
+            ``calibration_file``).
     """
     from ..lidar.scan import scan
+    from ..scene import load_scene_text
 
-    loaded = _load_xml(
-        flat_road_scene_xml(
-            preset,
-            material,
-            height_m=height_m,
-            cols=cols,
-            threshold=threshold,
-            noise=noise,
-            layout=layout,
-            calibration_file=calibration_file,
-        )
-    )
+    height_m = road.get("height_m", SENSOR_HEIGHT_M)
+    loaded = load_scene_text(flat_road_scene_xml(preset, material, **road))
     lidar = loaded.lidars[0]
     if poses is None:
         level = np.eye(4)
@@ -289,15 +269,38 @@ def simulate_flat_road(
         poses = level[None]
     poses = np.asarray(poses, dtype=np.float64)
     front = np.zeros(len(poses), bool) if front_only is None else np.asarray(front_only, bool)
-    rings = lidar.config.rings
-    ranges: list[list[np.ndarray]] = [[] for _ in range(rings)]
-    detected = np.zeros(rings, dtype=np.int64)
-    missed = np.zeros(rings, dtype=np.int64)
-    bins = len(RANGE_BINS_M) - 1
-    range_hits = np.zeros(bins, dtype=np.int64)
-    range_detected = np.zeros(bins, dtype=np.int64)
+    tally = _Tally(lidar.config.rings)
     for k, pose in enumerate(poses):
-        r = scan(loaded.scene, lidar, seed=seed + k, to_world=pose)
+        tally.add(scan(loaded.scene, lidar, seed=seed + k, to_world=pose), pose, front[k])
+    return RingCoverage(
+        [np.concatenate(x) for x in tally.ranges],
+        tally.detected,
+        tally.missed,
+        len(poses),
+        _flat_ranges(lidar.config.pattern, height_m),
+        poses,
+        front,
+        tally.range_hits,
+        tally.range_detected,
+    )
+
+
+class _Tally:
+    """What :func:`simulate_flat_road` counts over its sweeps, per ring and per range bin."""
+
+    def __init__(self, rings: int) -> None:
+        bins = len(RANGE_BINS_M) - 1
+        self.rings = rings
+        self.ranges: list[list[np.ndarray]] = [[] for _ in range(rings)]
+        self.detected = np.zeros(rings, dtype=np.int64)
+        self.missed = np.zeros(rings, dtype=np.int64)
+        self.range_hits = np.zeros(bins, dtype=np.int64)
+        self.range_detected = np.zeros(bins, dtype=np.int64)
+
+    def add(self, r, pose: np.ndarray, front: bool) -> None:
+        """One sweep ``r`` (a :class:`~nidar_mi.lidar.result.ScanResult`) from ``pose``; only
+        the beams pointing ahead with ``front``."""
+        bins = len(self.range_hits)
         origins = np.zeros_like(r.directions) if r.origins is None else r.origins
         # where each beam meets the road, reported or not: |xyz| in the sensor frame
         o_z = origins @ pose[2, :3] + pose[2, 3]
@@ -308,32 +311,21 @@ def simulate_flat_road(
             origins + np.where(np.isfinite(t), t, 0.0)[..., None] * r.directions, axis=-1
         )
         # a sweep cut to the front half keeps the beams pointing ahead (x > 0)
-        keep = r.directions[..., 0] > 0 if front[k] else np.ones(r.valid.shape, bool)
+        keep = r.directions[..., 0] > 0 if front else np.ones(r.valid.shape, bool)
         valid, hit = r.valid & keep, r.hit & keep
-        for q in range(rings):
-            ranges[q].append(dist[q][valid[q]])
+        for q in range(self.rings):
+            self.ranges[q].append(dist[q][valid[q]])
         # P(detect) of ring q as on the real side: where ring q+1 returned the road
         ref = np.zeros_like(valid)
         ref[:-1] = valid[1:] & hit[:-1]
-        detected += (ref & valid).sum(axis=1)
-        missed += (ref & ~valid).sum(axis=1)
+        self.detected += (ref & valid).sum(axis=1)
+        self.missed += (ref & ~valid).sum(axis=1)
         b_idx = np.searchsorted(RANGE_BINS_M, dist[hit], side="right") - 1
         inside = (b_idx >= 0) & (b_idx < bins)
-        range_hits += np.bincount(b_idx[inside], minlength=bins)
-        range_detected += np.bincount(
+        self.range_hits += np.bincount(b_idx[inside], minlength=bins)
+        self.range_detected += np.bincount(
             b_idx[inside], weights=valid[hit][inside], minlength=bins
         ).astype(np.int64)
-    return RingCoverage(
-        [np.concatenate(x) for x in ranges],
-        detected,
-        missed,
-        len(poses),
-        _flat_ranges(lidar.config.pattern, height_m),
-        poses,
-        front,
-        range_hits,
-        range_detected,
-    )
 
 
 def _conditional_detection(az, ring, ground, step, rings: int):
@@ -526,7 +518,9 @@ def _target_scene(
     hi_m: float,
     divergence: float = 0.0,
 ):
-    return _load_xml(f"""<scene version="3.0.0">
+    from ..scene import load_scene_text
+
+    return load_scene_text(f"""<scene version="3.0.0">
   <sensor type="lidar" id="lidar">
     <float name="beam_divergence" value="{divergence:.9g}"/>
     <string name="elevation_angles" value="0"/>

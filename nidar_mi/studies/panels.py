@@ -6,8 +6,6 @@ See :mod:`nidar_mi.studies` for the experiments built on them.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -22,6 +20,7 @@ __all__ = [
     "LIDAR_HEIGHT_M",
     "REFERENCE_DISTANCE_M",
     "PanelLayout",
+    "PanelScene",
     "PanelScan",
     "panel_layout",
     "panel_scene_xml",
@@ -182,29 +181,11 @@ def _emitters_xml() -> str:
     )
 
 
-def panel_scene_xml(
-    materials: str | Sequence[str],
-    *,
-    distance_m: float | Sequence[float] = 10.0,
-    incidence_deg: float | Sequence[float] = 0.0,
-    wavelength_nm: float = 905.0,
-    intensity_mode: str = "raw",
-    alpha_per_m: float = 0.0,
-    gain: float = 1.0,
-    detection_threshold: float = 0.0,
-    panel_size_m: float = 1.0,
-    cols: int = 3600,
-    spread_deg: float = 360.0,
-    overrides: Mapping[str, float] | None = None,
-    backdrop: str | None = None,
-    backdrop_distance_m: float | None = None,
-    camera_size: tuple[int, int] | None = None,
-    camera_fov_deg: float = 70.0,
-) -> str:
-    """Mitsuba scene XML of a panel scene (see the module docstring).
+@dataclass(frozen=True)
+class PanelScene:
+    """What a panel scene holds besides its materials (:func:`panel_scene_xml`).
 
-    Args:
-        materials: one library material for every panel, or one per panel.
+    Attributes:
         distance_m: distance(s) to the panel centres, m (broadcast with ``incidence_deg``).
         incidence_deg: incidence angle(s) of the centre beams, degrees.
         wavelength_nm: laser wavelength, nm.
@@ -222,6 +203,31 @@ def panel_scene_xml(
         camera_size: (width, height) of a perspective camera at the LiDAR looking along +x,
             with ASTM G-173 sun and sky, or None for a LiDAR-only scene.
         camera_fov_deg: horizontal field of view of that camera, degrees.
+    """
+
+    distance_m: float | Sequence[float] = 10.0
+    incidence_deg: float | Sequence[float] = 0.0
+    wavelength_nm: float = 905.0
+    intensity_mode: str = "raw"
+    alpha_per_m: float = 0.0
+    gain: float = 1.0
+    detection_threshold: float = 0.0
+    panel_size_m: float = 1.0
+    cols: int = 3600
+    spread_deg: float = 360.0
+    overrides: Mapping[str, float] | None = None
+    backdrop: str | None = None
+    backdrop_distance_m: float | None = None
+    camera_size: tuple[int, int] | None = None
+    camera_fov_deg: float = 70.0
+
+
+def panel_scene_xml(materials: str | Sequence[str], **options) -> str:
+    """Mitsuba scene XML of a panel scene (see the module docstring).
+
+    Args:
+        materials: one library material for every panel, or one per panel.
+        **options: the fields of :class:`PanelScene`.
 
     Returns:
         Scene XML for :func:`nidar_mi.scene.load_scene` (``nidar_material`` not yet expanded).
@@ -230,42 +236,43 @@ def panel_scene_xml(
         NidarError: bad layout values, an unknown material, or a material count that does not
             match the panels.
     """
+    o = PanelScene(**options)
     layout = panel_layout(
-        distance_m,
-        incidence_deg,
-        panel_size_m=panel_size_m,
-        cols=cols,
-        spread_deg=spread_deg,
+        o.distance_m,
+        o.incidence_deg,
+        panel_size_m=o.panel_size_m,
+        cols=o.cols,
+        spread_deg=o.spread_deg,
         count=None if isinstance(materials, str) else len(materials),
     )
-    if intensity_mode not in INTENSITY_MODES:
+    if o.intensity_mode not in INTENSITY_MODES:
         raise NidarError(f"intensity_mode must be one of {', '.join(INTENSITY_MODES)}")
-    names = _panel_materials(materials, layout.distances_m.size, backdrop)
+    names = _panel_materials(materials, layout.distances_m.size, o.backdrop)
     far = float(layout.distances_m.max())
-    r_back = 1.5 * far if backdrop_distance_m is None else float(backdrop_distance_m)
-    if backdrop is not None and not r_back > far + panel_size_m:
+    r_back = 1.5 * far if o.backdrop_distance_m is None else float(o.backdrop_distance_m)
+    if o.backdrop is not None and not r_back > far + o.panel_size_m:
         raise NidarError(f"the backdrop ({r_back:g} m) must lie behind the farthest panel")
-    range_max = (r_back if backdrop is not None else far) * 1.5 + 1.0
+    range_max = (r_back if o.backdrop is not None else far) * 1.5 + 1.0
     lines = [
         '<?xml version="1.0" encoding="utf-8"?>',
         '<scene version="3.0.0">',
         '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
         *_lidar_xml(
             layout.cols,
-            wavelength_nm=wavelength_nm,
-            intensity_mode=intensity_mode,
-            alpha_per_m=alpha_per_m,
-            gain=gain,
-            detection_threshold=detection_threshold,
+            wavelength_nm=o.wavelength_nm,
+            intensity_mode=o.intensity_mode,
+            alpha_per_m=o.alpha_per_m,
+            gain=o.gain,
+            detection_threshold=o.detection_threshold,
             range_max=range_max,
         ),
     ]
-    if camera_size is not None:
-        lines += [*_camera_xml(camera_size, camera_fov_deg), _emitters_xml()]
-    lines += [_material_xml(name, name, overrides) for name in sorted(set(names))]
+    if o.camera_size is not None:
+        lines += [*_camera_xml(o.camera_size, o.camera_fov_deg), _emitters_xml()]
+    lines += [_material_xml(name, name, o.overrides) for name in sorted(set(names))]
     lines += _panels_xml(names, layout)
-    if backdrop is not None:
-        lines.append(_backdrop_xml(backdrop, r_back))
+    if o.backdrop is not None:
+        lines.append(_backdrop_xml(o.backdrop, r_back))
     lines.append("</scene>")
     return "\n".join(lines) + "\n"
 
@@ -368,17 +375,13 @@ def load_panel_scene(
     Returns:
         (:class:`nidar_mi.scene.LoadedScene`, :class:`PanelLayout`).
     """
-    from ..scene import load_scene
+    from ..scene import load_scene_text
 
     layout_keys = ("distance_m", "incidence_deg", "panel_size_m", "cols", "spread_deg")
     count = None if isinstance(materials, str) else len(materials)
     layout = panel_layout(**{k: kwargs[k] for k in layout_keys if k in kwargs}, count=count)
     xml = panel_scene_xml(materials, **kwargs)
-    with tempfile.TemporaryDirectory(prefix="nidar_panels_") as tmp:
-        path = os.path.join(tmp, "panels.xml")
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(xml)
-        loaded = load_scene(path, variant=variant, rgb_twin=rgb_twin)
+    loaded = load_scene_text(xml, "panels.xml", variant=variant, rgb_twin=rgb_twin)
     return loaded, layout
 
 

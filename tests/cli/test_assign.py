@@ -3,6 +3,7 @@ renderer's own calibration file, and the input's per-point columns carried to th
 
 from __future__ import annotations
 
+import json
 import struct
 import zlib
 
@@ -146,3 +147,99 @@ def test_the_renderers_own_files_and_columns(tmp_path, call, tiny_scene, variant
             np.testing.assert_array_equal(p[key], src[key], err_msg=f"{fmt} {key}")
         assert list(p["material_names"]) == list(src["material_names"]), fmt
         assert p["nidar_observed"].any() and p["intensity_nidar"].dtype == np.float32
+
+
+# --------------------------------------------------------------- --kitti: the newcomer's path
+
+
+@pytest.fixture()
+def fresh_user(tmp_path, monkeypatch):
+    """A user without NIDAR_MI_DATA, in a folder with no ``../shared/data``, with an empty
+    cache of their own."""
+    monkeypatch.delenv("NIDAR_MI_DATA", raising=False)
+    monkeypatch.setenv("NIDAR_MI_CACHE", str(tmp_path / "cache"))
+    home = tmp_path / "home" / "work"
+    home.mkdir(parents=True)
+    monkeypatch.chdir(home)
+    return tmp_path
+
+
+def test_assign_kitti_needs_only_its_flags_and_never_fits_on_its_frame(
+    fresh_user, call, monkeypatch
+):
+    """``assign --kitti DIR --frame F`` used to need NIDAR_MI_DATA, then fit kitti-hdl64e on
+    every frame it found, F among them (a leak into the result). It fits on the other frames of
+    DIR, once per set of frames."""
+    from nidar_mi.datasets import profile_fitting
+    from tests.helpers.synthetic_kitti import make_kitti
+
+    kitti = make_kitti(fresh_user / "kitti", frames=4, cols=90)
+    fitted = []
+    fit = profile_fitting.fit_scan_profile
+
+    def spy(model, scans, **kw):
+        fitted.append(sorted(s.name for s in scans))
+        return fit(model, scans, **kw)
+
+    monkeypatch.setattr(profile_fitting, "fit_scan_profile", spy)
+    argv = ["--kitti", kitti, "--frame", "000002", "--formats", "npz"]
+    status, out, err = call("assign", [*argv, "-o", fresh_user / "a"])
+    assert status == 0, err
+    assert fitted == [["000000", "000001", "000003"]]
+    assert "fitting the kitti-hdl64e profile on 3 other frames" in err and "(not on 000002" in err
+    (cached,) = (fresh_user / "cache" / "profiles").glob("kitti-hdl64e-*.json")
+    assert json.loads(cached.read_text())["provenance"]["frames"] == ["000000", "000001", "000003"]
+    status, _, err = call("assign", [*argv, "-o", fresh_user / "b"])  # the cached profile
+    assert status == 0 and "fitting" not in err and len(fitted) == 1, err
+    a, b = (read_npz(fresh_user / d / "points.npz") for d in "ab")
+    np.testing.assert_array_equal(a["intensity_nidar"], b["intensity_nidar"])
+    status, _, err = call("assign", ["--kitti", kitti, "--frame", "000000", "-o", fresh_user / "c"])
+    assert status == 0 and fitted[-1] == ["000001", "000002", "000003"], err
+
+
+def test_the_frames_of_a_long_drive_are_chosen_once(tmp_path):
+    """Ten frames evenly spread over the folder; the assigned frame's neighbour replaces it, so
+    that most frames of a drive share one profile."""
+    from nidar_mi.datasets.sensor_profiles import KITTI_ASSIGN_FRAMES, _assign_frames
+
+    ids = [f"{i:06d}" for i in range(78)]
+    base = _assign_frames(ids, "000005")
+    assert len(base) == KITTI_ASSIGN_FRAMES and "000005" not in base
+    assert _assign_frames(ids, "000040") == base  # not among the ten: the same ten
+    swapped = _assign_frames(ids, base[3])
+    assert base[3] not in swapped and len(set(swapped) - set(base)) == 1
+    assert _assign_frames(ids[:4], "000001") == ["000000", "000002", "000003"]
+
+
+def test_assign_kitti_with_a_greyscale_image(tmp_path, call):
+    """Used to fail after the model had loaded; ``--points`` takes a grey image as R = G = B with
+    a warning, and so does ``--kitti``."""
+    from PIL import Image
+
+    from tests.helpers.synthetic_kitti import make_kitti
+
+    kitti = make_kitti(tmp_path / "kitti", frames=1, cols=90)
+    png = kitti / "image_2" / "000000.png"
+    Image.open(png).convert("L").save(png)
+    argv = ["--kitti", kitti, "--frame", "000000", "--profile", "generic-compensated"]
+    status, _, err = call("assign", [*argv, "-o", tmp_path / "out", "--formats", "npz"])
+    assert status == 0, err
+    assert (
+        f"warning: {png} is a greyscale image (L): NIDAR, trained on colour images, sees it" in err
+    )
+    assert read_npz(tmp_path / "out" / "points.npz")["nidar_observed"].any()
+
+
+def test_assign_kitti_with_a_resized_image(tmp_path, call, one_error_line):
+    """A half-size image used to give 1.8 % of the points observed (16 % normally), status 0."""
+    from PIL import Image
+
+    from tests.helpers.synthetic_kitti import make_kitti
+
+    kitti = make_kitti(tmp_path / "kitti", frames=1, cols=90)
+    png = kitti / "image_2" / "000000.png"
+    Image.open(png).resize((621, 188)).save(png)
+    argv = ["--kitti", kitti, "--frame", "000000", "--profile", "generic-compensated"]
+    status, _, err = call("assign", [*argv, "-o", tmp_path / "out"])
+    one_error_line(status, err, "is 621x188 but calib P2's principal point (600, 180) is far from")
+    assert not (tmp_path / "out").exists()

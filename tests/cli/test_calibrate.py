@@ -47,7 +47,8 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
 
 def test_incidence_aware_profile(tmp_path, capsys):
     """The gbm form reads |cos θ| (estimated on the scans' points) by default, as the former
-    kitti-hdl64e did, and is non-decreasing in it; --incidence only with the gbm form."""
+    kitti-hdl64e did, and is non-decreasing in it; --no-incidence only with the gbm or
+    physical form; --incidence is no option."""
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "inc.json"
     assert main([str(kitti), "-o", str(out), "--form", "gbm"]) == 0
@@ -57,11 +58,11 @@ def test_incidence_aware_profile(tmp_path, capsys):
     c = np.linspace(0, 1, 50)
     y = p(np.full(50, 0.5), np.full(50, 12.0), elevation_deg=np.full(50, -8.0), cos_incidence=c)
     assert np.all(np.diff(y) >= 0)
-    assert main([str(kitti), "-o", str(out), "--incidence", "--form", "range_ring", "-q"]) == 2
-    assert "--incidence needs --form gbm" in capsys.readouterr().err
+    assert main([str(kitti), "-o", str(out), "--no-incidence", "--form", "range_ring", "-q"]) == 2
+    assert "--no-incidence needs --form gbm" in capsys.readouterr().err
     assert load_profile(out).uses_incidence  # the earlier file is untouched
     # --no-geometry: the value and the incidence only; range and elevation are not read
-    assert main([str(kitti), "-o", str(out), "--form", "gbm", "--incidence", "--no-geometry"]) == 0
+    assert main([str(kitti), "-o", str(out), "--form", "gbm", "--no-geometry"]) == 0
     assert "(value and incidence only) fitted on 2 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.mapping.features == ("v", "cos_incidence") and not p.mapping.uses_geometry
@@ -74,8 +75,8 @@ def test_incidence_aware_profile(tmp_path, capsys):
         assert main([str(kitti), "-o", str(out), "--form", "gbm", "--no-geometry", "-q", *bad]) == 2
         assert "--no-geometry needs the incidence" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
-        main([str(kitti), "-o", str(out), "--incidence", "--no-incidence", "-q"])
-    assert exc.value.code == 2 and "not allowed with" in capsys.readouterr().err
+        main([str(kitti), "-o", str(out), "--incidence", "-q"])
+    assert exc.value.code == 2 and "unrecognized arguments: --incidence" in capsys.readouterr().err
     assert not load_profile(out).mapping.uses_geometry  # untouched
 
 
@@ -186,13 +187,13 @@ def test_synopsis_and_help_show_overwrite_and_the_incidence_default(capsys):
     with pytest.raises(SystemExit):
         cli.main(["--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "--overwrite" in help_text and "the default of the gbm form" in help_text
+    assert "--overwrite" in help_text and "(read by default)" in help_text
     readme = open(Path(cli.__file__).parents[2] / "README.md", encoding="utf-8").read()
     synopsis = re.search(
         r"python -m nidar_mi\.calibrate SCANS\.\.\. -o profile\.json \[.*?```", readme, re.S
     ).group(0)
     for text in (cli.__doc__, synopsis):
-        assert "[--overwrite]" in text and "--incidence" in text
+        assert "[--overwrite]" in text and "--no-incidence" in text
     assert "reads the incidence by default" in cli.__doc__ + readme
 
 

@@ -75,10 +75,18 @@ def test_library_parameters_are_shown_as_flags(capsys):
 
 
 def test_parse_defines():
-    assert parse_defines(["a=1", " b = x y ", "a=2", "c="]) == {"a": "2", "b": "x y", "c": ""}
+    assert parse_defines(["a=1", " b = x y ", "a=2"]) == {"a": "2", "b": "x y"}
     for bad in (["a"], ["=1"], [" =1"]):
         with pytest.raises(NidarError, match="NAME=VALUE"):
             parse_defines(bad)
+
+
+@pytest.mark.parametrize("item", ["drop=", "drop=  ", "drop=\t"])
+def test_an_empty_define_is_refused(item):
+    """``-D drop=`` used to set the parameter to an empty string, which the scene then read as
+    0.0 instead of its own value."""
+    with pytest.raises(NidarError, match=r"^-D drop= has no value: give NAME=VALUE"):
+        parse_defines(["cols=8", item])
 
 
 def _cli(*args, **kw):
@@ -150,10 +158,40 @@ def test_every_command_has_quiet_verbose_and_progress_options(command, capsys):
         assert "--progress" in text and "--no-progress" in text
 
 
+def test_every_command_says_what_verbose_adds():
+    """``-v``'s help used to say "one per epoch" on every command; each says its own lines."""
+    import importlib
+
+    helps = {}
+    for command in COMMANDS:
+        module = importlib.import_module(f"nidar_mi.cli.{command}")
+        build = getattr(module, "build_parser", None) or module._parser
+        (verbose,) = [a.help for a in build()._actions if "--verbose" in a.option_strings]
+        helps[command] = verbose
+    assert len(set(helps.values())) == len(COMMANDS), helps
+    assert [c for c, h in helps.items() if "epoch" in h] == ["train"]
+    assert "per frame" in helps["render"] and "per scene" in helps["scenegen"]
+
+
+@pytest.mark.parametrize("argv", [["-q"], [], ["-q", "--no-progress"]])
+def test_no_bar_of_the_work_shows_where_the_command_wants_none(argv, capsys):
+    """A library function asked for its bar (``progress=True``, a default) inside a command run
+    with ``-q`` or into a log used to draw it there all the same."""
+    from nidar_mi.progress import progress_bar
+
+    def work():
+        assert list(progress_bar(range(3), show=True, desc="library bar")) == [0, 1, 2]
+
+    assert run(work, args=_args(argv)) == 0
+    assert "library bar" not in capsys.readouterr().err
+    assert run(work, args=_args(["--progress"])) == 0
+    assert "library bar" in capsys.readouterr().err
+
+
 def _args(argv):
     from nidar_mi.cli._common import parser
 
-    return parser("x", "a command").parse_args(argv)
+    return parser("x", "a command", verbose="none").parse_args(argv)
 
 
 @pytest.mark.parametrize(

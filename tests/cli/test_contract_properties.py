@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nidar_mi.io.images import read_exr
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.io.points import read_npz, read_ply
 from nidar_mi.nidar.pipeline import shipped_weights_dir
 
@@ -183,7 +184,7 @@ def _render(call, scene_xml: str, argv: list[str], earlier: Path, then=None) -> 
         if ok:
             _assert_finite_render(out)
             manifest = json.loads((out / "manifest.json").read_text())
-            listed = sorted(manifest["files"])
+            listed = sorted([*manifest["files"], RECORD])
             assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == listed
             if then is not None:
                 then(out)
@@ -498,12 +499,12 @@ def test_assign_input_modes(modes, call, assign_inputs):
 @settings(SETTINGS, max_examples=30)
 @given(
     form=st.sampled_from(["gbm", "range_ring", "distance_quantile"]),
-    incidence=st.sampled_from([None, "--incidence", "--no-incidence"]),
+    incidence=st.sampled_from([None, "--no-incidence"]),
     no_geometry=st.booleans(),
 )
 def test_calibrate_form_options(form, incidence, no_geometry, call):
-    """``--incidence``/``--no-incidence`` and ``--no-geometry`` act with the gbm form only
-    (``--no-geometry`` also needs the incidence); otherwise refused before any scan is read."""
+    """``--no-incidence`` and ``--no-geometry`` act with the gbm form only (``--no-geometry``
+    also needs the incidence); otherwise refused before any scan is read."""
     reads_incidence = form == "gbm" and incidence != "--no-incidence"
     legal = (incidence is None or form == "gbm") and (not no_geometry or reads_incidence)
     with tempfile.TemporaryDirectory() as tmp:

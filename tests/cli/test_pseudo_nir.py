@@ -12,6 +12,7 @@ import pytest
 
 from nidar_mi.cli.pseudo_nir import main, output_names
 from nidar_mi.io.images import read_exr, read_png, srgb_to_linear, write_png
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.nidar.infer import pseudo_nir_linear
 from nidar_mi.nidar.pipeline import NidarModel
 
@@ -57,6 +58,7 @@ def test_files_and_folders_with_clashes_and_exr(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "skipped 1 file(s) that are not images" in err
     assert sorted(p.name for p in out.iterdir()) == [
+        RECORD,
         "a__0001.exr",
         "a__0001.png",
         "b__0001.exr",
@@ -116,6 +118,7 @@ def test_bad_inputs_are_one_line_and_write_nothing(tmp_path, capsys):
     r = _cli(str(tmp_path / "ok.png"), str(tmp_path / "fake.png"), "-o", str(out), "--skip-bad")
     assert r.returncode == 0, r.stderr
     assert "warning: skipped" in r.stderr and sorted(p.name for p in out.iterdir()) == [
+        RECORD,
         "index.json",
         "ok.png",
     ]

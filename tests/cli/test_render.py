@@ -15,6 +15,7 @@ import pytest
 
 from nidar_mi.io.images import read_exr, read_png
 from nidar_mi.io.kitti import read_kitti_bin
+from nidar_mi.io.ownership import RECORD
 from nidar_mi.io.points import read_npz
 from nidar_mi.io.range_preview import preview_columns
 
@@ -79,24 +80,44 @@ def test_a_rerender_replaces_the_folder_whole(tmp_path, call, variant):
     _render(call, scene, out, "--formats", "npz,ply,las")
     m = _render(call, scene, out, "--formats", "npz", "--no-cameras")
     found = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
-    assert found == sorted(m["files"])  # no stale points.ply, no camera folder
+    assert found == sorted([*m["files"], RECORD])  # no stale points.ply, no camera folder
     assert not (out / "cam").exists() and not (out / "a_lidar" / "points.ply").exists()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
-def test_a_foreign_folder_needs_overwrite(tmp_path, call, one_error_line, snapshot, variant):
+def test_a_foreign_file_is_never_removed(tmp_path, call, one_error_line, snapshot, variant):
     scene, out = _scene(tmp_path), tmp_path / "out"
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     before = snapshot(out)
-    status, _, err = call("render", [scene, "-o", out, "-q", "--spp", "1"])
-    one_error_line(status, err, "is not empty")
-    assert snapshot(out) == before
-    m = _render(call, scene, out, "--overwrite")
-    assert not (out / "notes.txt").exists() and (out / "manifest.json").is_file()
-    assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == sorted(
-        m["files"]
-    )
+    for extra in ([], ["--overwrite"]):
+        status, _, err = call("render", [scene, "-o", out, "-q", "--spp", "1", *extra])
+        one_error_line(status, err, "holds 1 file(s) that 'render' did not write (notes.txt)")
+        assert snapshot(out) == before
+
+
+def test_verbose_sequence_logs_one_line_per_frame(tmp_path, call, variant):
+    """Long sequences used to log nothing per frame, even with ``-v``."""
+    scene = _scene(tmp_path)
+    traj = tmp_path / "t.tum"
+    traj.write_text("".join(f"{t:.1f} {t:.1f} 0 0 0 0 0 1\n" for t in (0.0, 0.1, 0.2, 0.3, 0.4)))
+    argv = [
+        scene,
+        "-o",
+        tmp_path / "seq",
+        "-v",
+        "--spp",
+        "1",
+        "--trajectory",
+        traj,
+        "--frames",
+        "3",
+    ]
+    status, _, err = call("render", argv)
+    assert status == 0, err
+    frames = [ln for ln in err.splitlines() if "nidar_mi.sequence: frame " in ln]
+    assert [ln.split("frame ")[1].split()[0] for ln in frames] == ["1/3", "2/3", "3/3"]
+    assert all(ln.startswith("DEBUG ") and " rendered in " in ln for ln in frames)
 
 
 # ------------------------------------------------------------------------ 16: encodings, previews

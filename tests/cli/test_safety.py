@@ -18,6 +18,9 @@ import time
 import numpy as np
 import pytest
 
+from nidar_mi.eval.suite import OWNER
+from nidar_mi.io.atomic import write_record
+from nidar_mi.io.ownership import RECORD
 from tests.helpers.synthetic_kitti import make_kitti
 
 # ------------------------------------------------------------------ outputs that hold inputs
@@ -156,7 +159,8 @@ def test_the_old_dataset_stays_until_the_cluster_is_connected(
     argv = ["--scenes", scenes, "-o", data, "-q", "--spp", "1", "-D", "width=20"]
     status, _, err = call("dataset", [*argv, "--ray-address", "x:1"])
     one_error_line(status, err, "refused the connection")
-    assert {k: v for k, v in snapshot(data).items() if not k.startswith(".")} == before
+    hidden = [k for k in snapshot(data) if k.startswith(".") and k != RECORD]
+    assert {k: v for k, v in snapshot(data).items() if k not in hidden} == before
 
 
 def test_a_bad_kitti_folder_leaves_no_stray_frame(tmp_path, call, one_error_line):
@@ -174,6 +178,7 @@ def test_evaluating_nothing_keeps_the_earlier_results(tmp_path, call, one_error_
     out.mkdir()
     (out / "results.json").write_text("{}")
     (out / "results.md").write_text("# earlier results\n")
+    write_record(out, OWNER)  # an earlier evaluation's
     (tmp_path / "empty").mkdir()
     before = snapshot(out)
     status, _, err = call("evaluate", ["--photos", tmp_path / "empty", "-o", out, "-q"])
@@ -201,17 +206,15 @@ def test_assign_input_modes_exclude_each_other(
     assert not out.exists()
 
 
-def test_assign_with_an_image_far_too_small_is_refused(tmp_path, call, capsys):
+def test_assign_with_an_image_far_too_small_is_refused(tmp_path, call, one_error_line):
     from nidar_mi.io.images import write_png
 
     argv = _kitti_args(tmp_path)
     write_png(argv[1] / "image_2" / "000000.png", np.zeros((1, 1, 3), np.uint8))
     out = tmp_path / "out"
     status, _, err = call("assign", [*argv, "-o", out])
-    lines = err.strip().splitlines()
-    assert status == 2 and not out.exists() and "Traceback" not in err
-    assert lines[0].startswith("warning: camera 'P2': the image is 1x1") and "far too small" in err
-    assert lines[-1].startswith("error: 0 of ") and "points observed" in lines[-1]
+    one_error_line(status, err, "000000.png is 1x1 but calib P2's principal point (600, 180)")
+    assert "does not match the calibration" in err and not out.exists()
 
 
 def test_scenegen_refuses_a_folder_of_something_else(tmp_path, call, one_error_line, snapshot):
@@ -220,17 +223,30 @@ def test_scenegen_refuses_a_folder_of_something_else(tmp_path, call, one_error_l
     (render / "manifest.json").write_text("{}")
     before = snapshot(render)
     status, _, err = call("scenegen", ["--count", "1", "-o", render, "-q"])
-    one_error_line(status, err, "holds no scenegen output")
+    one_error_line(status, err, "holds 1 file(s) that 'scenegen' did not write (manifest.json)")
     assert "--overwrite" in err and snapshot(render) == before
     assert call("scenegen", ["--count", "1", "-o", render, "-q", "--overwrite"])[0] == 0
     assert call("scenegen", ["--count", "2", "-o", render, "-q"])[0] == 0  # its own output now
+    assert (render / "manifest.json").read_text() == "{}"  # kept
+
+
+def test_scenegen_refuses_another_commands_output(
+    tmp_path, call, one_error_line, snapshot, assign_inputs
+):
+    out = tmp_path / "a"
+    assert call("assign", [*assign_inputs, "-o", out, "--formats", "npz"])[0] == 0
+    before = snapshot(out)
+    for extra in ([], ["--overwrite"]):
+        status, _, err = call("scenegen", ["--count", "1", "-o", out, "-q", *extra])
+        one_error_line(status, err, "is the output of 'assign' (points)")
+        assert snapshot(out) == before
 
 
 @pytest.mark.parametrize(
     ("argv", "needle"),
     [
-        (["--kind", "city", "--speed", "inf"], "--speed finite and > 0"),
-        (["--kind", "city", "--rate", "nan"], "--rate and --speed finite"),
+        (["--kind", "city", "--speed", "inf"], "--speed must lie in (0, 70] m/s (got inf)"),
+        (["--kind", "city", "--rate", "nan"], "--rate must lie in (0, 100] Hz (got nan)"),
         (["--kind", "urban", "--blocks", "2,2", "--frames", "7"], "--blocks, --frames: options"),
         (["--speed", "5"], "--speed: options of --kind city or suburb (got no --kind)"),
     ],
@@ -268,8 +284,8 @@ def test_dataset_kitti_refuses_the_options_of_scenes(tmp_path, call, one_error_l
     assert not out.exists()
 
 
-@pytest.mark.parametrize("flag", ["--no-incidence", "--incidence"])
-def test_calibrate_incidence_needs_the_gbm_form(flag, tmp_path, call, one_error_line):
+def test_calibrate_incidence_needs_the_gbm_form(tmp_path, call, one_error_line):
+    flag = "--no-incidence"
     kitti = make_kitti(tmp_path / "kitti", frames=1, cols=90)
     out = tmp_path / "p.json"
     status, _, err = call("calibrate", [kitti, "-o", out, "--form", "range_ring", flag])
@@ -309,12 +325,12 @@ def test_train_overwrite_reruns_the_same_command(tmp_path, call, one_error_line,
     argv = [synthetic_data, out, "--reduced", "--device", "cpu", "--no-progress", "-q"]
     argv += ["--stage", "stn", "--max-steps", "1"]
     assert call("train", argv)[0] == 0
-    (out / "earlier.txt").write_text("a file of the earlier run")
     status, _, err = call("train", argv)
     one_error_line(status, err, "pass --resume to continue it or --overwrite to replace it")
+    (out / "stn.safetensors").write_bytes(b"the earlier run's")
     status, _, err = call("train", [*argv, "--overwrite"])
     assert status == 0, err
-    assert (out / "stn.safetensors").is_file() and not (out / "earlier.txt").exists()
+    assert (out / "stn.safetensors").read_bytes() != b"the earlier run's"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
     status, _, err = call("train", [*argv, "--overwrite", "--resume"])
     one_error_line(status, err, "--overwrite replaces the run that --resume continues")

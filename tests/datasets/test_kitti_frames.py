@@ -10,18 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nidar_mi.datasets.kitti import load_frame as load_kitti
 from nidar_mi.datasets.kitti_frames import (
     DEFAULT_HELD_OUT,
     build_kitti_frames,
     kitti_training_data,
     kitti_training_frame,
 )
+from nidar_mi.datasets.kitti_objects import load_kitti_frame as load_kitti
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import FRAME_SOURCES, list_frames, load_frame
 from nidar_mi.geometry import project
 from nidar_mi.io.images import write_png
 from nidar_mi.io.kitti import write_kitti_bin
+from nidar_mi.training_frames import FRAME_SOURCES, list_frames, load_frame
 from tests.helpers.synthetic_kitti import CALIB as _SYNTHETIC_KITTI
 from tests.helpers.synthetic_kitti import kitti_order_scan
 

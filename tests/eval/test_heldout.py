@@ -39,7 +39,7 @@ def test_noise_free_physics_of_a_render_is_the_reference_up_to_the_receiver_nois
     """The street LiDAR (raw mode, intensity noise σ = 2e-4 per m² of the raw value): the
     compensated reference minus ``g·ρ·cos θ`` (α = 0) is the noise scaled by d², so
     within a few σ·d² at every return and unbiased."""
-    from nidar_mi.eval.frames import load_render_frames
+    from nidar_mi.eval.rendered import load_render_frames
 
     (d,) = render_scenes(
         [os.path.join(REPO, "scenes", "street.xml")], str(tmp_path), params=TINY, spp=1
@@ -57,7 +57,7 @@ def test_noise_free_physics_of_a_render_is_the_reference_up_to_the_receiver_nois
 
 
 def _result(seed: int, physics: bool):
-    from nidar_mi.eval.frames import FrameData, FrameResult
+    from nidar_mi.eval.rendered import FrameData, FrameResult
 
     rng = np.random.default_rng(seed)
     n = 200

@@ -62,7 +62,7 @@ def test_shape_mismatch_and_empty_frames_are_errors():
 
 
 def test_scores_over_frame_files(tmp_path):
-    from nidar_mi.frames import list_frames, load_frame
+    from nidar_mi.training_frames import list_frames, load_frame
     from tests.helpers.synthetic_frames import write_synthetic_dataset
 
     data = write_synthetic_dataset(tmp_path / "d", height=24, width=32)

@@ -47,7 +47,8 @@ def test_a_layout_agrees_with_its_own_scan(variant, write_scene, tmp_path):
     """A per-laser scan of a closed room, stored KITTI-style (ring by ring, each from azimuth 0
     counter-clockwise): the storage order gives back the rings and every return lies on its own
     laser's beam (offsets included)."""
-    from nidar_mi.eval.layout_agreement import elevation_agreement, storage_rings
+    from nidar_mi.datasets.kitti_rings import scan_rings
+    from nidar_mi.eval.layout_agreement import elevation_agreement
     from nidar_mi.io.kitti import write_kitti_bin
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
@@ -67,8 +68,6 @@ def test_a_layout_agrees_with_its_own_scan(variant, write_scene, tmp_path):
     order = np.lexsort((az, p["ring"]))
     velodyne = tmp_path / "velodyne"
     write_kitti_bin(velodyne / "000000.bin", p["xyz"][order], p["intensity"][order])
-    np.testing.assert_array_equal(
-        storage_rings(p["xyz"][order].astype(np.float64)), p["ring"][order]
-    )
+    np.testing.assert_array_equal(scan_rings(p["xyz"][order].astype(np.float64)), p["ring"][order])
     a = elevation_agreement(L.lidars[0].config.pattern, velodyne)
     assert a.ring_matched_median < 1e-4 and a.ring_matched_p90 < 1e-3

@@ -158,10 +158,23 @@ def test_spearman_with_ties_by_hand():
     assert M.spearman([1, 2, 2, 3], [1, 3, 2, 4]) == pytest.approx(np.sqrt(0.9), rel=1e-12)
 
 
-def test_spearman_of_a_constant_is_nan():
+def test_spearman_of_a_constant_or_of_fewer_than_three_pairs_is_nan():
     assert np.isnan(M.spearman([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]))
     assert np.isnan(M.spearman([1.0, 2.0, 3.0], [2.0, 2.0, 2.0]))
     assert np.isnan(M.spearman([1.0], [2.0]))
+    assert np.isnan(M.spearman([1.0, 2.0], [2.0, 1.0]))  # scipy: -1, whatever the values
+    assert np.isnan(M.spearman([], []))
+    # three pairs are scored: ranks [1, 2, 3] and [1, 3, 2] -> 1 - 6 * 2 / (3 * 8)
+    assert M.spearman([1.0, 2.0, 3.0], [1.0, 3.0, 2.0]) == pytest.approx(0.5, rel=1e-12)
+
+
+def test_spearman_refuses_non_finite_values_and_other_shapes():
+    with pytest.raises(NidarError, match="pred has non-finite values"):
+        M.spearman([1.0, np.nan, 3.0], [1.0, 2.0, 3.0])
+    with pytest.raises(NidarError, match="shapes differ"):
+        M.spearman([1.0, 2.0, 3.0], [1.0, 2.0])
+    with pytest.raises(NidarError, match="expected 1-D"):
+        M.spearman(np.ones((2, 2)), np.ones((2, 2)))
 
 
 # --- bundles ------------------------------------------------------------------------------------

@@ -38,7 +38,7 @@ def synthetic_frame(
         intensity_scale: intensity of a white (``rho = 1``), fully lit surface.
 
     Returns:
-        Dict of arrays with the dtypes and shapes of :data:`nidar_mi.frames.FRAME_KEYS`.
+        Dict of arrays with the dtypes and shapes of :data:`nidar_mi.training_frames.FRAME_KEYS`.
     """
     n_mat = 6
     albedo = rng.uniform(0.05, 0.9, size=(n_mat, 3))

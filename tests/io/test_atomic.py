@@ -8,6 +8,7 @@ import pytest
 from nidar_mi.errors import NidarError
 from nidar_mi.io import atomic
 from nidar_mi.io.atomic import atomic_path, atomic_write_json, atomic_write_text, reading
+from nidar_mi.io.ownership import RECORD, Owner, read_record
 
 
 def test_atomic_path_temp_name_and_replace(tmp_path):
@@ -88,16 +89,20 @@ def test_reading_missing_and_failing(tmp_path):
 
 # --- staged_directory ---------------------------------------------------------------------
 
+#: A command for these tests: it writes x.txt, new.txt, newer.txt.
+OWNER = Owner("test", "run", names=("*.txt",))
+
 
 def test_staged_directory_publishes_whole_folder(tmp_path):
     from nidar_mi.io.atomic import staged_directory
 
     out = tmp_path / "a" / "out"
-    with staged_directory(out) as stage:
+    with staged_directory(out, owner=OWNER) as stage:
         assert stage.parent == out.parent and stage.name.startswith(".out.partial-")
         (stage / "x.txt").write_text("1")
         assert not out.exists()
-    assert sorted(p.name for p in out.iterdir()) == ["x.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [RECORD, "x.txt"]
+    assert read_record(out)["files"] == ["x.txt"] and read_record(out)["command"] == "test"
     assert [p.name for p in out.parent.iterdir()] == ["out"]
     assert out.stat().st_mode & 0o777 == 0o777 & ~_umask()
 
@@ -115,19 +120,27 @@ def test_staged_directory_never_mixes_runs(tmp_path):
 
     out = tmp_path / "out"
     out.mkdir()
-    (out / "mine.txt").write_text("user data")
-    with pytest.raises(NidarError, match="not empty.*`overwrite`"):
-        with staged_directory(out) as stage:
+    (out / "mine.md").write_text("user data")
+    for overwrite in (False, True):  # a file the command did not write is never deleted
+        with pytest.raises(
+            NidarError, match=r"holds 1 file\(s\) that 'test' did not write \(mine.md\)"
+        ):
+            with staged_directory(out, owner=OWNER, overwrite=overwrite):
+                raise AssertionError("not reached")
+    assert (out / "mine.md").read_text() == "user data"
+    # a folder of nidar_mi 0.1.0 (no record) whose files are all the command's: --overwrite
+    (out / "mine.md").unlink()
+    (out / "old.txt").write_text("0")
+    with pytest.raises(NidarError, match="no record of what wrote it.*`overwrite`"):
+        with staged_directory(out, owner=OWNER):
             raise AssertionError("not reached")
-    assert (out / "mine.txt").read_text() == "user data"
-    # an earlier output of the same kind (marker file) is replaced whole
-    (out / "manifest.json").write_text("{}")
-    with staged_directory(out, marker="manifest.json") as stage:
+    with staged_directory(out, owner=OWNER, overwrite=True) as stage:
         (stage / "new.txt").write_text("2")
-    assert sorted(p.name for p in out.iterdir()) == ["new.txt"]
-    with staged_directory(out, overwrite=True) as stage:
+    assert sorted(p.name for p in out.iterdir()) == [RECORD, "new.txt"]
+    # an earlier output (its record) is replaced whole without overwrite
+    with staged_directory(out, owner=OWNER) as stage:
         (stage / "newer.txt").write_text("3")
-    assert sorted(p.name for p in out.iterdir()) == ["newer.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [RECORD, "newer.txt"]
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
 
 
@@ -137,7 +150,7 @@ def test_staged_directory_failure_leaves_target_untouched(tmp_path, exc):
 
     out = tmp_path / "out"
     with pytest.raises(exc):
-        with staged_directory(out) as stage:
+        with staged_directory(out, owner=OWNER) as stage:
             (stage / "half.txt").write_text("x")
             raise exc()
     assert list(tmp_path.iterdir()) == []
@@ -149,20 +162,21 @@ def test_staged_directory_bad_targets(tmp_path):
     f = tmp_path / "file"
     f.write_text("x")
     with pytest.raises(NidarError, match="not a folder"):
-        with staged_directory(f):
+        with staged_directory(f, owner=OWNER):
             pass
     with pytest.raises(NidarError, match="cannot write"):
-        with staged_directory(f / "sub" / "out"):
+        with staged_directory(f / "sub" / "out", owner=OWNER):
             pass
 
 
 _KILLED_WRITER = """
 import os, signal, sys
 from nidar_mi.io.atomic import atomic_path, staged_directory
+from nidar_mi.io.ownership import Owner
 folder = sys.argv[1]
 with atomic_path(os.path.join(folder, "frame.npz")) as tmp:
     tmp.write_bytes(b"half")
-    with staged_directory(os.path.join(folder, "scene.v1")) as stage:
+    with staged_directory(os.path.join(folder, "scene.v1"), owner=Owner("t", "t")) as stage:
         (stage / "manifest.json").write_text("{")
         os.kill(os.getpid(), signal.SIGKILL)
 """

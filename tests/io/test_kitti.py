@@ -70,8 +70,14 @@ def test_poses_and_times_round_trip_at_full_precision(tmp_path):
     np.testing.assert_allclose(np.loadtxt(tmp_path / "times.txt"), [0.0, 0.1, 0.25])
     np.testing.assert_array_equal(read_kitti_times(tmp_path / "times.txt"), [0.0, 0.1, 0.25])
     (tmp_path / "bad.txt").write_text("1 2 3\n")
-    with pytest.raises(NidarError, match="expected 12 numbers per line, got 3"):
+    with pytest.raises(NidarError, match="bad.txt:1: expected 12 numbers per line, got 3"):
         read_kitti_poses(tmp_path / "bad.txt")
+    # comments and blank lines are skipped; a line is named by its number
+    (tmp_path / "c.txt").write_text("# header\n\n" + lines[0] + "\n2 0 0 0 0 1 0 0 0 0 1 0\n")
+    with pytest.raises(NidarError, match="c.txt:4: the 3x3 part is not a rotation matrix"):
+        read_kitti_poses(tmp_path / "c.txt")
+    (tmp_path / "c.txt").write_text("# header\n\n" + lines[0] + "\n")
+    np.testing.assert_allclose(read_kitti_poses(tmp_path / "c.txt"), poses[:1], rtol=1e-12)
     with pytest.raises(NidarError, match="absent.txt: not a times file"):
         read_kitti_times(tmp_path / "absent.txt")
 

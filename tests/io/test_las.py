@@ -123,8 +123,24 @@ def test_las_malformed(tmp_path):
         read_las(tmp_path / "g.las")
 
 
-@pytest.mark.skipif(bool(laspy.LazBackend.detect_available()), reason="a LAZ back end exists")
-def test_laz_without_backend(tmp_path, points):
-    with pytest.raises(NidarError, match=r"s\.laz"):
+def test_laz_without_backend(tmp_path, points, monkeypatch):
+    """Without lazrs (laspy then finds no LAZ back end): one line naming the ``laz`` extra."""
+    monkeypatch.setattr(laspy.LazBackend, "detect_available", staticmethod(lambda: ()))
+    with pytest.raises(NidarError, match=r"s\.laz.*pip install 'nidar_mi\[laz\]'"):
         write_las(tmp_path / "s.laz", points)
     assert os.listdir(tmp_path) == []
+
+
+def test_laz_holds_what_las_holds(tmp_path, points):
+    """``.laz`` (lazrs) stores the same records as ``.las``, compressed: both read back equal,
+    and the LAZ file is the LAS file's point data compressed (laspy decompresses it to the
+    same bytes)."""
+    write_las(tmp_path / "s.las", points)
+    write_las(tmp_path / "s.laz", points)
+    las, laz = read_las(tmp_path / "s.las"), read_las(tmp_path / "s.laz")
+    assert sorted(las) == sorted(laz)
+    for k in las:
+        np.testing.assert_array_equal(laz[k], las[k], err_msg=k)
+    raw_las, raw_laz = laspy.read(str(tmp_path / "s.las")), laspy.read(str(tmp_path / "s.laz"))
+    assert raw_laz.header.are_points_compressed and not raw_las.header.are_points_compressed
+    assert raw_laz.points.array.tobytes() == raw_las.points.array.tobytes()

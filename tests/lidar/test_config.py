@@ -87,7 +87,7 @@ def test_elevation_angles_imply_channels():
     ],
 )
 def test_invalid_values_name_the_parameter(values, param):
-    with pytest.raises(ValueError, match=f"parameter '{param}'"):
+    with pytest.raises(NidarError, match=f"parameter '{param}'"):
         LidarConfig.from_mapping("l", values)
 
 
@@ -141,7 +141,7 @@ def test_calibration_file_keeps_the_preset_timing(tmp_path):
     c = LidarConfig.from_mapping("l", {"preset": "vlp16", "calibration_file": str(path)})
     assert c.layout == "per_laser" and c.laser_table.firing_offset_s == ref.firing_offset_s
     assert not c.laser_table.has_origins  # the file has no offsets
-    with pytest.raises(ValueError, match="has 16 lasers .* the preset 32"):
+    with pytest.raises(NidarError, match="has 16 lasers .* the preset 32"):
         LidarConfig.from_mapping("l", {"preset": "hdl32e", "calibration_file": str(path)})
     alone = LidarConfig.from_mapping("l", {"calibration_file": str(path)})
     assert alone.preset is None and not any(alone.laser_table.firing_offset_s)

@@ -141,10 +141,10 @@ def test_scanned_flat_road_follows_the_closed_form_detection(variant):
     Lambertian road is a step at the closed-form reach."""
     from nidar_mi.lidar.scan import scan
     from nidar_mi.materials import get_material, reflectance
+    from nidar_mi.scene import load_scene_text
     from nidar_mi.studies.ground_coverage import (
         LAMBERTIAN_ASPHALT,
         ROUGH_ASPHALT,
-        _load_xml,
         flat_road_scene_xml,
     )
 
@@ -152,7 +152,9 @@ def test_scanned_flat_road_follows_the_closed_form_detection(variant):
     p = get_material("asphalt_old").params
     args = (rho, p["sigma"], p["opposition_amplitude"], 1.73)
     cols = 2048
-    loaded = _load_xml(flat_road_scene_xml("hdl64e", ROUGH_ASPHALT, layout="uniform", cols=cols))
+    loaded = load_scene_text(
+        flat_road_scene_xml("hdl64e", ROUGH_ASPHALT, layout="uniform", cols=cols)
+    )
     r = scan(loaded.scene, loaded.lidars[0], seed=5)
     el = np.radians(r.config.elevations)
     below = el < 0
@@ -166,7 +168,7 @@ def test_scanned_flat_road_follows_the_closed_form_detection(variant):
     assert r.intensity[r.valid].min() >= T64 * (1 - 1e-6)
 
     reach = ground_reach(rho, 0.0, 0.0, 1.73, 5e-5)
-    loaded = _load_xml(
+    loaded = load_scene_text(
         flat_road_scene_xml(
             "hdl64e", LAMBERTIAN_ASPHALT, layout="uniform", cols=64, threshold=5e-5, noise=0.0
         )

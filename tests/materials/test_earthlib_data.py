@@ -91,3 +91,22 @@ def test_library_shape_and_bands():
 def test_missing_library_folder_is_a_user_error(tmp_path):
     with pytest.raises(NidarError, match="cannot read"):
         load_earthlib.__wrapped__(str(tmp_path))
+
+
+def test_shipped_catalog_spectra_are_earthlibs(earthlib_ref):
+    """materials/data/earthlib_catalog.json holds exactly the catalogue's spectra, each the
+    installed library's float32 row and metadata (what renders use without earthlib)."""
+    from nidar_mi.materials.catalog import catalog_spectra
+    from nidar_mi.materials.earthlib_data import catalog_library
+
+    shipped, lib = catalog_library(), load_earthlib()
+    assert list(zip(shipped.level_2, shipped.level_3, shipped.names)) == catalog_spectra()
+    np.testing.assert_array_equal(shipped.wavelengths_nm, lib.wavelengths_nm)
+    for i, key in enumerate(catalog_spectra()):
+        j = lib.index(*key)
+        np.testing.assert_array_equal(shipped.data[i], lib.data[j], err_msg=str(key))
+        assert (shipped.level_4[i], shipped.sources[i], shipped.notes[i]) == (
+            lib.level_4[j],
+            lib.sources[j],
+            lib.notes[j],
+        )

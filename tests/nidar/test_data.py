@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
-from nidar_mi.nidar.data import IRNetDataset, STNDataset
+from nidar_mi.nidar.data import IntrinsicTargets, IRNetDataset, STNDataset
 from nidar_mi.nidar.preprocess import prepare_nir, prepare_rgb
+from nidar_mi.training_frames import FRAME_KEYS, FRAME_SOURCES, list_frames, load_frame, load_meta
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
@@ -124,7 +124,7 @@ def test_irnet_dataset_keeps_input_and_supervision_aligned(tmp_path, data_dir):
     rgb = IRNetDataset(frames, 255.0, 32, train=False)[0]
     assert rgb["x"].shape == (3, 32, 32) and set(np.unique(rgb["mask"].numpy())) <= {0.0, 1.0}
     # with the true reflectance and shading: R_true * S_true = π * NIR under the same crop/flip
-    ds = IRNetDataset(frames, 255.0, 32, seed=2, input_dir=tmp_path, intrinsic_targets=True)
+    ds = IRNetDataset(frames, 255.0, 32, seed=2, input_dir=tmp_path, intrinsic=IntrinsicTargets())
     for epoch in range(3):
         ds.set_epoch(epoch)
         item = ds[1]
@@ -143,7 +143,7 @@ def test_reflectance_targets_read_the_surface_or_its_colour(data_dir):
     items = {}
     for target in ("monostatic", "surface", "colour"):
         ds = IRNetDataset(
-            frames, 255.0, (48, 64), train=False, intrinsic_targets=True, r_target=target
+            frames, 255.0, (48, 64), train=False, intrinsic=IntrinsicTargets(r_target=target)
         )
         items[target] = ds[0]["R_true"].numpy()[0]
     np.testing.assert_allclose(items["surface"], arrays["R_surface"], rtol=1e-6)

@@ -12,12 +12,12 @@ import torch
 from safetensors.numpy import load_file
 
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.config import IRNetConfig, STNConfig, TrainConfig
 from nidar_mi.nidar.data import IRNetDataset, area_resize, reduce_sparse
 from nidar_mi.nidar.model_io import build_stn, save_stn
 from nidar_mi.nidar.pipeline import NidarModel
-from nidar_mi.nidar.train import train_irnet
+from nidar_mi.nidar.training import train_irnet
+from nidar_mi.training_frames import list_frames, load_frame
 from tests.helpers.synthetic_kitti import make_kitti
 
 SCALE = 0.25

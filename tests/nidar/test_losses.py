@@ -61,7 +61,7 @@ def test_gaussian_window_sums_to_one_and_is_symmetric():
 def test_ssim_map_matches_explicit_window_reference():
     x, y = _rand(1, 1, 12, 14, seed=3, dtype=torch.float64), _rand(1, 1, 12, 14, seed=4).double()
     ref = _ssim_reference(x[0, 0].numpy(), y[0, 0].numpy())
-    np.testing.assert_allclose(L.ssim_map(x, y)[0, 0].numpy(), ref, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(L.ssim_map_torch(x, y)[0, 0].numpy(), ref, rtol=1e-9, atol=1e-12)
 
 
 def test_ssim_map_interior_matches_scikit_image():
@@ -78,7 +78,7 @@ def test_ssim_map_interior_matches_scikit_image():
         data_range=1.0,
         full=True,
     )
-    got = L.ssim_map(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])[0, 0]
+    got = L.ssim_map_torch(torch.from_numpy(x)[None, None], torch.from_numpy(y)[None, None])[0, 0]
     # scikit-image truncates its Gaussian at 3.5 sigma (the same 11x11 window) and leaves the
     # 5 px border to padding; only the pixels whose window fits are compared
     np.testing.assert_allclose(got.numpy()[5:-5, 5:-5], ref[5:-5, 5:-5], rtol=1e-9, atol=1e-12)
@@ -89,23 +89,23 @@ def test_ssim_map_works_on_images_smaller_than_the_window(shape):
     x = _rand(1, 1, *shape, seed=8, dtype=torch.float64)
     y = _rand(1, 1, *shape, seed=9, dtype=torch.float64)
     ref = _ssim_reference(x[0, 0].numpy(), y[0, 0].numpy())
-    np.testing.assert_allclose(L.ssim_map(x, y)[0, 0].numpy(), ref, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(L.ssim_map_torch(x, y)[0, 0].numpy(), ref, rtol=1e-9, atol=1e-12)
 
 
 def test_ssim_map_is_per_channel_and_per_image():
     x, y = _rand(2, 3, 9, 10, seed=10), _rand(2, 3, 9, 10, seed=11)
-    got = L.ssim_map(x, y)
+    got = L.ssim_map_torch(x, y)
     for b in range(2):
         for c in range(3):
-            one = L.ssim_map(x[b : b + 1, c : c + 1], y[b : b + 1, c : c + 1])
+            one = L.ssim_map_torch(x[b : b + 1, c : c + 1], y[b : b + 1, c : c + 1])
             torch.testing.assert_close(got[b : b + 1, c : c + 1], one, rtol=1e-4, atol=1e-5)
 
 
 def test_ssim_map_rejects_bad_inputs():
     with pytest.raises(ValueError, match="equal"):
-        L.ssim_map(torch.zeros(1, 1, 4, 4), torch.zeros(1, 1, 4, 5))
+        L.ssim_map_torch(torch.zeros(1, 1, 4, 4), torch.zeros(1, 1, 4, 5))
     with pytest.raises(ValueError, match="odd"):
-        L.ssim_map(torch.zeros(1, 1, 4, 4), torch.zeros(1, 1, 4, 4), window_size=4)
+        L.ssim_map_torch(torch.zeros(1, 1, 4, 4), torch.zeros(1, 1, 4, 4), window_size=4)
 
 
 def test_masked_ssim_loss_is_one_minus_the_reported_metric():
@@ -128,8 +128,8 @@ def test_ssim_of_constant_images_is_the_luminance_term():
     x = torch.full((1, 1, 8, 8), a, dtype=torch.float64)
     y = torch.full((1, 1, 8, 8), b, dtype=torch.float64)
     expected = (2 * a * b + C1) / (a * a + b * b + C1)
-    torch.testing.assert_close(L.ssim_map(x, y), torch.full_like(x, expected))
-    torch.testing.assert_close(L.ssim_map(x, x), torch.ones_like(x))
+    torch.testing.assert_close(L.ssim_map_torch(x, y), torch.full_like(x, expected))
+    torch.testing.assert_close(L.ssim_map_torch(x, x), torch.ones_like(x))
 
 
 # --------------------------------------------------------------------------- intrinsic terms
@@ -289,7 +289,7 @@ def test_irnet_objective_is_the_weighted_sum():
 
 def test_stn_loss_single_scale_value():
     p, t = _rand(1, 1, 8, 8, seed=24), _rand(1, 1, 8, 8, seed=25)
-    expected = 0.85 * ((1 - L.ssim_map(p, t)) / 2).mean() + 0.15 * (p - t).abs().mean()
+    expected = 0.85 * ((1 - L.ssim_map_torch(p, t)) / 2).mean() + 0.15 * (p - t).abs().mean()
     torch.testing.assert_close(L.stn_loss([p], [t], 0.85), expected)
     assert float(L.stn_loss([p, p[..., :4, :4]], [p, p[..., :4, :4]])) == 0.0
 
@@ -303,7 +303,7 @@ def test_stn_loss_single_scale_value():
         ("ms_l1", lambda p, t, m: L.masked_multiscale_l1(p, t, m)),
         ("l2", lambda p, t, m: L.masked_l2(p, t, m)),
         ("ssim", lambda p, t, m: L.masked_ssim_loss(p, t, m)),
-        ("ssim_map", lambda p, t, m: L.ssim_map(p, t)),
+        ("ssim_map", lambda p, t, m: L.ssim_map_torch(p, t)),
         ("int", lambda p, t, m: L.intensity_loss(p, t, m)),
         ("smooth", lambda p, t, m: L.reflectance_smoothness_loss(p, t, 10.0)),
         ("shading", lambda p, t, m: L.shading_prior_loss(p, 3)),

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.config import INPUT_CHANNELS, INPUT_MODES, IRNetConfig, STNConfig, TrainConfig
 from nidar_mi.nidar.data import IRNetDataset
 from nidar_mi.nidar.infer import predict
 from nidar_mi.nidar.irnet import IRNet
 from nidar_mi.nidar.model_io import build_irnet, build_stn, load_pipeline, save_stn
 from nidar_mi.nidar.preprocess import chromaticity, colour_input, prepare_rgb
-from nidar_mi.nidar.train import train_irnet
+from nidar_mi.nidar.training import train_irnet
+from nidar_mi.training_frames import list_frames, load_frame
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

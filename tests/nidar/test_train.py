@@ -11,12 +11,12 @@ from safetensors.numpy import load_file
 
 from nidar_mi.cli.train import main
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import list_frames, load_frame
 from nidar_mi.nidar.checkpoint import latest_checkpoint
 from nidar_mi.nidar.config import TrainConfig
 from nidar_mi.nidar.infer import predict
 from nidar_mi.nidar.model_io import load_pipeline
-from nidar_mi.nidar.train import train, train_irnet, train_stn
+from nidar_mi.nidar.training import train, train_irnet, train_stn
+from nidar_mi.training_frames import list_frames, load_frame
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 

@@ -13,9 +13,9 @@ from safetensors.numpy import load_file
 
 from nidar_mi.cli.train import main
 from nidar_mi.errors import NidarError
-from nidar_mi.frames import list_frames
 from nidar_mi.nidar.config import LossConfig, TrainConfig
-from nidar_mi.nidar.train import train_irnet
+from nidar_mi.nidar.training import train_irnet
+from nidar_mi.training_frames import list_frames
 from tests.helpers.synthetic_frames import write_synthetic_dataset
 
 
@@ -138,11 +138,11 @@ def test_cli_init_irnet_needs_the_irnet_stage(supervised, data_dir, tmp_path, ca
 
 
 def test_mixed_dataset_gives_renders_true_maps_and_real_frames_intensity(data_dir, tmp_path):
-    from nidar_mi.nidar.data import IRNetDataset, MixedDataset
+    from nidar_mi.nidar.data import IntrinsicTargets, IRNetDataset, MixedDataset
 
     real = _without_true_maps(data_dir, tmp_path / "real")
     real_frames, renders = list_frames(real, "train"), list_frames(data_dir, "train")
-    common = dict(crop_size=16, intrinsic_targets=True, missing_targets_zero=True)
+    common = dict(crop_size=16, intrinsic=IntrinsicTargets(missing_zero=True))
     a = IRNetDataset(real_frames, 255.0, **common)
     b = IRNetDataset(renders, 255.0, supervise_intensity=False, **common)
     mixed = MixedDataset(a, b)

@@ -49,13 +49,14 @@ def test_readme_and_docstring_tables_agree(variant):
     from nidar_mi.plugins import plugin_module
 
     from nidar_mi.lidar.config import PARAMETERS
+    from nidar_mi.weather.conditions import PARAMETERS as WEATHER
 
     doc = plugin_module("lidar", variant).LidarSensor.__doc__
     readme = _readme_table()
     docstring = _docstring_table(doc)
     assert len(readme) >= len(PARAMETERS)
     assert readme == docstring
-    assert [n for n, _, _ in readme if n != "to_world"] == list(PARAMETERS)
+    assert [n for n, _, _ in readme if n != "to_world"] == [*PARAMETERS, *WEATHER]
 
 
 def test_defaults_in_the_tables_are_the_resolved_defaults():

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from nidar_mi.materials.oren_nayar import brdf, coefficients, monostatic_reflectance
+from nidar_mi.materials.oren_nayar import brdf, coefficients, oren_nayar_monostatic
 
 RHO = 0.3
 
@@ -99,11 +99,11 @@ def test_monostatic_reflectance_closed_form(mi):
     for theta in (0.0, 40.0, 85.0, 88.0):
         wi = direction(theta, 33.0)
         got = math.pi * eval_f(mi, bsdf, wi, wi)
-        want = monostatic_reflectance(RHO, math.cos(math.radians(theta)), 45.0, 0.5)
+        want = oren_nayar_monostatic(RHO, math.cos(math.radians(theta)), 45.0, 0.5)
         assert got == pytest.approx(float(want), rel=5e-5)
     # the received rho_eff cos(theta) tends to rho B (1 + B0) at grazing incidence
     _, b = coefficients(45.0)
-    grazing = monostatic_reflectance(RHO, 1e-4, 45.0, 0.5) * 1e-4
+    grazing = oren_nayar_monostatic(RHO, 1e-4, 45.0, 0.5) * 1e-4
     assert float(grazing) == pytest.approx(RHO * b * 1.5, rel=1e-3)
 
 

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from nidar_mi.scenegen.city import CITY_KINDS, drive_route, sample_city, sample_grid
+from nidar_mi.scenegen.city import sample_city
 from nidar_mi.scenegen.primitives import Block, Cylinder, Sphere
-from nidar_mi.scenegen.trajectory import drive
+from nidar_mi.scenegen.route import drive
+from nidar_mi.scenegen.streets import CITY_KINDS, drive_route, sample_grid
 from nidar_mi.scenegen.xml import scene_xml
 
 

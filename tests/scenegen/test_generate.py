@@ -38,7 +38,10 @@ def test_run_writes_scenes_and_index(tmp_path):
     out = tmp_path / "gen"
     index = generate(str(out), 3, 9, progress=False)
     files = sorted(p.name for p in out.iterdir())
-    assert files == ["index.json", "scene_9_0.xml", "scene_9_1.xml", "scene_9_2.xml"]
+    scenes = ["index.json", "scene_9_0.xml", "scene_9_1.xml", "scene_9_2.xml"]
+    assert files == [".nidar_mi-output.json", *scenes]
+    record = json.loads((out / ".nidar_mi-output.json").read_text())
+    assert (record["command"], record["files"]) == ("scenegen", scenes)
     on_disk = json.loads((out / "index.json").read_text())
     assert on_disk["scenes"] == index["scenes"]
     assert [e["id"] for e in index["scenes"]] == ["scene_9_0", "scene_9_1", "scene_9_2"]

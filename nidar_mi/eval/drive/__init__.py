@@ -5,6 +5,9 @@
 * :mod:`.scan_context`: Scan Context / Intensity Scan Context descriptors and their matching.
 * :mod:`.loops`: loop-closure detection on a drive and its precision/recall.
 * :mod:`.pose_graph`: pose-graph correction with the detected loops.
-* :mod:`.frames`: the frames of a drive, scanned and (for NIDAR) photographed along it.
-* :mod:`.study`: the whole study, its tables and figures (``python -m nidar_mi.drive_study``).
+* :mod:`.drive_sweeps`: the sweeps of a drive, scanned and (for NIDAR) photographed along it by the
+  trajectory renderer (:mod:`nidar_mi.sequence`), and read back.
+* :mod:`.kiss`: KISS-ICP's odometry and registration on the sweeps.
+* :mod:`.study`: the whole study (``python -m nidar_mi.drive``); :mod:`.report` its tables and
+  figures.
 """

@@ -6,9 +6,14 @@ every frame: ``T_{lidar_0 <- lidar_k}``. With per-point times and ``deskew`` the
 to [0, 1] over the sweep, the form KISS-ICP's de-skewing expects; it then corrects every point to
 the middle of the sweep, so its pose of frame k is the pose at mid-sweep.
 
-:func:`register_pair` aligns one scan to another with KISS-ICP's own registration (point to
-point, robust kernel) from an initial guess, for loop constraints; :func:`overlap` is the fraction
-of aligned points that land within a distance of the target (the check a loop must pass).
+KISS-ICP is used through its public odometry class (``KissICP(config).register_frame``,
+``last_pose``) and its configuration only.
+
+:func:`register_pair` aligns one scan to another for loop constraints, from an initial guess,
+with this module's own ICP in KISS-ICP's formulation (point to point, Geman-McClure kernel,
+Gauss-Newton on SE(3), voxel-downsampled scans) over correspondence distances from coarse to
+fine; :func:`aligned_overlap` is the fraction of aligned points that land within a distance of the
+target (the check a loop must pass).
 """
 
 from __future__ import annotations
@@ -19,11 +24,13 @@ import numpy as np
 
 __all__ = [
     "GROUND_Z_M",
+    "icp",
     "kiss_config",
     "run_odometry",
     "register_pair",
-    "overlap",
+    "aligned_overlap",
     "remove_ground",
+    "voxel_down_sample",
 ]
 
 
@@ -107,35 +114,102 @@ def remove_ground(xyz: np.ndarray, height_m: float = 1.73, band_m: float = 0.3) 
     return xyz[np.abs(xyz[:, 2] - A @ coef) > band_m]
 
 
-def register_pair(source: np.ndarray, target: np.ndarray, guess: np.ndarray) -> np.ndarray:
-    """(4, 4) transform taking ``source`` points (N, 3) onto ``target`` (M, 3), from ``guess``.
+def voxel_down_sample(xyz: np.ndarray, size: float) -> np.ndarray:
+    """The first point (in the given order) of each occupied cube of side ``size`` m: (M, 3)
+    float64, in their order (KISS-ICP's down-sampling)."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if len(xyz) == 0:
+        return xyz.reshape(0, 3)
+    _, first = np.unique(np.floor(xyz / size).astype(np.int64), axis=0, return_index=True)
+    return xyz[np.sort(first)]
 
-    Ground points (z < :data:`GROUND_Z_M`) are left out: they agree under any shift along the
-    road and would hold the alignment at its guess."""
-    source, target = _above_ground(source), _above_ground(target)
-    from kiss_icp.mapping import VoxelHashMap
-    from kiss_icp.registration import Registration
-    from kiss_icp.voxelization import voxel_down_sample
 
-    target_map = VoxelHashMap(voxel_size=1.0, max_distance=100.0, max_points_per_voxel=20)
-    target_map.add_points(voxel_down_sample(np.asarray(target, np.float64), 0.5))
-    src = voxel_down_sample(np.asarray(source, np.float64), 1.5)
-    reg = Registration(max_num_iterations=500, convergence_criterion=1e-4, max_num_threads=2)
-    T = np.asarray(guess, dtype=np.float64)
-    for sigma in (2.0, 1.0, 0.3):  # coarse to fine correspondence distances
-        T = reg.align_points_to_map(src, target_map, T, 3 * sigma, sigma)
+def icp(
+    source: np.ndarray,
+    target: np.ndarray,
+    guess: np.ndarray,
+    sigma: float,
+    *,
+    max_iterations: int = 500,
+    tolerance: float = 1e-4,
+) -> np.ndarray:
+    """(4, 4) pose taking ``source`` (N, 3) onto ``target`` (M, 3), refined from ``guess``.
+
+    Point-to-point ICP as KISS-ICP registers a scan to its map: each transformed source point
+    pairs with its nearest target point within ``3 sigma`` m; the pairs are weighted by the
+    Geman-McClure kernel ``sigma² / (sigma + |r|²)²`` of their residual ``r``; one Gauss-Newton
+    step on SE(3) (the update applied on the left) per iteration, until its norm is below
+    ``tolerance`` or after ``max_iterations``.
+    """
+    from pykdtree.kdtree import KDTree
+
+    from ...geometry.se3 import se3_exp
+
+    src = np.ascontiguousarray(source, dtype=np.float64)
+    tgt = np.ascontiguousarray(target, dtype=np.float64)
+    tree = KDTree(tgt)
+    T = np.asarray(guess, dtype=np.float64).copy()
+    for _ in range(max_iterations):
+        q = np.ascontiguousarray(src @ T[:3, :3].T + T[:3, 3])
+        d, j = tree.query(q, k=1, distance_upper_bound=3.0 * sigma)
+        ok = np.isfinite(d)
+        if ok.sum() < 6:
+            break
+        q = q[ok]
+        r = q - tgt[j[ok]]
+        w = sigma**2 / (sigma + (r * r).sum(axis=1)) ** 2
+        J = np.zeros((len(q), 3, 6))
+        J[:, :, :3] = np.eye(3)
+        J[:, :, 3:] = -_hat(q)
+        H = np.einsum("n,nai,naj->ij", w, J, J)
+        g = np.einsum("n,nai,na->i", w, J, r)
+        dx = np.linalg.solve(H, -g)
+        T = se3_exp(dx) @ T
+        if np.linalg.norm(dx) < tolerance:
+            break
     return T
 
 
-def overlap(source: np.ndarray, target: np.ndarray, T: np.ndarray, within_m: float = 0.3) -> float:
+def _hat(v: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (N, 3, 3) skew-symmetric matrices, ``hat(a) b = a x b``."""
+    z = np.zeros(len(v))
+    return np.stack(
+        [
+            np.stack([z, -v[:, 2], v[:, 1]], -1),
+            np.stack([v[:, 2], z, -v[:, 0]], -1),
+            np.stack([-v[:, 1], v[:, 0], z], -1),
+        ],
+        -2,
+    )
+
+
+def register_pair(source: np.ndarray, target: np.ndarray, guess: np.ndarray) -> np.ndarray:
+    """(4, 4) transform taking ``source`` points (N, 3) onto ``target`` (M, 3), from ``guess``.
+
+    The target down-sampled to 0.5 m cubes and the source to 1.5 m (KISS-ICP's map and
+    keypoints), :func:`icp` with correspondence distances from coarse to fine (sigma 2, 1 and
+    0.3 m). Ground points (z < :data:`GROUND_Z_M`) are left out: they agree under any shift
+    along the road and would hold the alignment at its guess."""
+    tgt = voxel_down_sample(_above_ground(target), 0.5)
+    src = voxel_down_sample(_above_ground(source), 1.5)
+    T = np.asarray(guess, dtype=np.float64)
+    for sigma in (2.0, 1.0, 0.3):  # coarse to fine correspondence distances
+        T = icp(src, tgt, T, sigma)
+    return T
+
+
+def aligned_overlap(
+    source: np.ndarray, target: np.ndarray, T: np.ndarray, within_m: float = 0.3
+) -> float:
     """Fraction of ``source`` points above the ground and within 40 m of its origin that ``T``
     puts within ``within_m`` of a ``target`` point above the ground."""
-    from scipy.spatial import cKDTree
+    from pykdtree.kdtree import KDTree  # the package's k-d tree (geometry/normals.py)
 
     s = _above_ground(source)
     s = s[np.linalg.norm(s[:, :2], axis=1) < 40.0]
     if len(s) == 0:
         return 0.0
-    moved = s @ T[:3, :3].T + T[:3, 3]
-    d, _ = cKDTree(_above_ground(target)).query(moved, k=1, distance_upper_bound=within_m)
+    moved = np.ascontiguousarray(s @ T[:3, :3].T + T[:3, 3])
+    tree = KDTree(np.ascontiguousarray(_above_ground(target)))
+    d, _ = tree.query(moved, k=1, distance_upper_bound=within_m)
     return float(np.isfinite(d).mean())

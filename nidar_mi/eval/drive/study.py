@@ -3,9 +3,10 @@
 :func:`run_study` reads as its steps:
 
 1. **drive**: a ``city`` (or ``suburb``) layout and its drive (:mod:`nidar_mi.scenegen`);
-2. **frames**: the drive scanned from every pose (:func:`.frames.render_drive`), once with the
-   spectral materials (plus the camera at every pose) and once on the RGB-only twin; NIDAR's
-   intensity from the camera images (:func:`.frames.nidar_columns`);
+2. **frames**: the drive scanned from every pose (:func:`.drive_sweeps.render_sweeps`: the package's
+   trajectory renderer, :mod:`nidar_mi.sequence`, one instantaneous sweep per pose), once with
+   the spectral materials (plus the camera at every pose) and once on the RGB-only twin; NIDAR's
+   intensity from the camera images (:func:`.drive_sweeps.nidar_intensity`);
 3. **odometry**: KISS-ICP on the frames (:func:`.kiss.run_odometry`), ATE / RPE / end drift
    against the true poses (:mod:`.odometry`), on the whole sweeps, on the same sweeps written in
    the KITTI odometry layout and read by kiss-icp's own loader (:data:`KITTI_LAYOUT`: a client
@@ -20,21 +21,23 @@
 6. **report**: ``results.json``, ``report.md`` and the figures (:mod:`.report`).
 
 The five intensity sources share each frame's geometry and differ only in the value scan context
-keeps per bin (:data:`SOURCES`). Everything is cached under ``OUT`` (frames per request, NIDAR per
-weights), so running the same command again after new NIDAR weights ship recomputes only NIDAR's
-columns and the steps after them.
+keeps per bin (:data:`SOURCES`). Everything is cached under ``OUT`` (the sweeps of each kind as a
+sequence folder per request, NIDAR per weights), so running the same command again after new
+NIDAR weights ship recomputes only NIDAR's columns and the steps after them.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from ...errors import NidarError
+from ...io.ownership import Owner
 
 __all__ = [
     "GROUND_REMOVED",
@@ -45,6 +48,8 @@ __all__ = [
     "run_study",
     "gt_at_mid_sweep",
 ]
+
+log = logging.getLogger("nidar_mi.drive")
 
 #: Intensity sources: the per-point value each puts into the descriptor.
 SOURCES = {
@@ -85,7 +90,7 @@ class StudyConfig:
         loop_candidates: the best-scoring matches of each source that are registered (and, when
             they pass the overlap check, enter the pose graph).
         sequence: a ``render --trajectory`` folder of the same drive (optional).
-        body_motion: the body rolls, pitches and heaves (:func:`nidar_mi.scenegen.trajectory.drive`).
+        body_motion: the body rolls, pitches and heaves (:func:`nidar_mi.scenegen.route.drive`).
     """
 
     kind: str = "city"
@@ -117,8 +122,11 @@ class StudyConfig:
             raise NidarError(
                 f"`sources`: unknown '{','.join(bad)}' (choose from {', '.join(SOURCES)})"
             )
+        from ...scenegen.route import check_drive
+
         if self.frames < 10:
             raise NidarError(f"`frames` must be >= 10 (got {self.frames})")
+        check_drive(self.frames, self.rate_hz, self.speed)
         if self.cols < 16 or self.width < 16 or self.height < 16 or self.spp < 1:
             raise NidarError("`cols`, `width` and `height` must be >= 16 and `spp` >= 1")
 
@@ -133,7 +141,7 @@ def source_values(source: str, xyz, intensity, rng_m, nidar=None) -> np.ndarray:
         rng_m: (N,) range, m.
         nidar: (N,) NIDAR intensity (0 where no camera saw the point), for ``nidar``.
     """
-    from ...scenegen.city import LIDAR_HEIGHT_M
+    from ...scenegen.streets import LIDAR_HEIGHT_M
 
     if source in ("physics", "rgb_twin"):
         return np.asarray(intensity, np.float64) * np.asarray(rng_m, np.float64) ** 2
@@ -149,26 +157,44 @@ def source_values(source: str, xyz, intensity, rng_m, nidar=None) -> np.ndarray:
 
 
 def gt_at_mid_sweep(poses: np.ndarray, times: np.ndarray, period: float) -> np.ndarray:
-    """Poses interpolated at ``times + period / 2`` (translation linear, rotation slerp; the last
-    frame extrapolates with the last step's motion)."""
-    from scipy.spatial.transform import Rotation, Slerp
+    """(N, 4, 4) poses at ``times + period / 2``, SE(3)-interpolated
+    (:func:`nidar_mi.geometry.se3.interpolate_poses`); past the last frame the motion of the
+    last step goes on. ``period`` is at most the last step."""
+    from ...geometry.se3 import interpolate_poses
 
-    t_mid = np.asarray(times) + period / 2
+    times = np.asarray(times, dtype=np.float64)
     ext_t = np.r_[times, times[-1] + (times[-1] - times[-2])]
     step = np.linalg.inv(poses[-2]) @ poses[-1]
     ext = np.concatenate([poses, (poses[-1] @ step)[None]])
-    slerp = Slerp(ext_t, Rotation.from_matrix(ext[:, :3, :3]))
-    out = np.tile(np.eye(4), (len(times), 1, 1))
-    out[:, :3, :3] = slerp(t_mid).as_matrix()
-    for a in range(3):
-        out[:, a, 3] = np.interp(t_mid, ext_t, ext[:, a, 3])
-    return out
+    return interpolate_poses(ext_t, ext, times + period / 2)
 
 
 # ---------------------------------------------------------------- steps
 
 
-def _drive(out: str, cfg: StudyConfig):
+@dataclass
+class _Drive:
+    """The drive of a study: its scene, trajectory and true poses.
+
+    Attributes:
+        scene: the scene XML.
+        trajectory: the rig's TUM file.
+        poses: (N, 4, 4) ``T_world_lidar`` per frame.
+        info: the drive's entry of the scene index.
+    """
+
+    scene: str
+    trajectory: str
+    poses: np.ndarray
+    info: dict
+
+    @property
+    def gt(self) -> np.ndarray:
+        """(N, 4, 4) true poses ``T_{lidar_0 <- lidar_k}``."""
+        return np.linalg.inv(self.poses[0]) @ self.poses
+
+
+def _drive(out: str, cfg: StudyConfig) -> _Drive:
     from ...io.trajectory import read_trajectory
     from ...scenegen.generate import generate, scene_id
 
@@ -186,17 +212,64 @@ def _drive(out: str, cfg: StudyConfig):
             "speed": cfg.speed,
             "body_motion": cfg.body_motion,
         },
+        nested=True,
     )
     sid = scene_id(cfg.seed, 0)
     entry = next(e for e in index["scenes"] if e["id"] == sid)
-    traj = read_trajectory(os.path.join(folder, entry["drive"]["files"]["tum"]))
-    times, rig = traj.times, traj.poses
-    poses = rig @ np.array(entry["lidar"]["T_world_lidar"])  # the LiDAR on the rig
-    return os.path.join(folder, entry["file"]), times, poses, entry["drive"]
+    tum = os.path.join(folder, entry["drive"]["files"]["tum"])
+    poses = read_trajectory(tum).poses @ np.array(entry["lidar"]["T_world_lidar"])  # on the rig
+    return _Drive(os.path.join(folder, entry["file"]), tum, poses, entry["drive"])
 
 
-def _odometry_runs(cfg: StudyConfig, phys: str, gt: np.ndarray, progress: bool) -> dict:
-    from .frames import load_frame
+@dataclass
+class _Sweeps:
+    """The rendered sweeps of a study, per kind (``physics``, ``rgb_twin``), and NIDAR's
+    columns.
+
+    Attributes:
+        folders: kind -> its sequence folder.
+        loads: kind -> ``load(k) -> Sweep`` (:func:`.drive_sweeps.read_sequence`).
+        nidar: the folder of NIDAR's columns (None without the ``nidar`` source).
+    """
+
+    folders: dict
+    loads: dict
+    nidar: str | None = None
+
+    def nidar_columns(self, k: int) -> dict[str, np.ndarray]:
+        """NIDAR's ``intensity_nidar`` and ``nidar_observed`` of frame ``k``."""
+        with np.load(os.path.join(self.nidar, f"{k:06d}.npz")) as f:
+            return {key: f[key] for key in f.files}
+
+
+def _render(out: str, cfg: StudyConfig, drive: _Drive, timings: dict, progress: bool) -> _Sweeps:
+    """The sweeps of every kind the sources need and NIDAR's columns, timed into ``timings``."""
+    from .drive_sweeps import SweepRequest, nidar_intensity, read_sequence, render_sweeps
+
+    params = {"cols": str(cfg.cols), "width": str(cfg.width), "height": str(cfg.height)}
+    base = SweepRequest(drive.scene, drive.trajectory, cfg.rate_hz, cfg.frames, params=params)
+    kinds = {"physics": replace(base, cameras="nidar" in cfg.sources, spp=cfg.spp)}
+    if "rgb_twin" in cfg.sources:
+        kinds["rgb_twin"] = replace(base, rgb_twin=True)
+    sweeps = _Sweeps({}, {})
+    for kind, request in kinds.items():
+        t0 = time.perf_counter()
+        folder = os.path.join(out, "frames", kind)
+        sweeps.folders[kind] = render_sweeps(request, folder, progress=progress)
+        sweeps.loads[kind] = read_sequence(folder)[2]
+        timings[f"frames_{kind}"] = time.perf_counter() - t0
+        log.debug("frames_%s: %.1f s", kind, timings[f"frames_{kind}"])
+    if "nidar" in cfg.sources:
+        t0 = time.perf_counter()
+        sweeps.nidar = nidar_intensity(
+            sweeps.folders["physics"], os.path.join(out, "frames"), cfg.weights, progress=progress
+        )
+        timings["nidar"] = time.perf_counter() - t0
+        log.debug("nidar: %.1f s", timings["nidar"])
+    return sweeps
+
+
+def _odometry_runs(cfg: StudyConfig, out: str, sweeps: _Sweeps, gt, progress: bool) -> dict:
     from .kiss import remove_ground, run_odometry
     from .odometry import ate, end_drift, rpe_kitti
 
@@ -208,58 +281,63 @@ def _odometry_runs(cfg: StudyConfig, phys: str, gt: np.ndarray, progress: bool) 
             "seconds": time.perf_counter() - t0,
         }
 
+    load = sweeps.loads["physics"]
     runs = {}
     t0 = time.perf_counter()
-    est = run_odometry(lambda k: (load_frame(phys, k).xyz, None), cfg.frames, progress=progress)
+    est = run_odometry(lambda k: (load(k).xyz, None), cfg.frames, progress=progress)
     runs["instantaneous"] = metrics(gt, est, t0) | {"poses": est}
     t0 = time.perf_counter()
-    est = run_odometry(
-        lambda k: (remove_ground(load_frame(phys, k).xyz), None), cfg.frames, progress=progress
-    )
+    est = run_odometry(lambda k: (remove_ground(load(k).xyz), None), cfg.frames, progress=progress)
     runs[GROUND_REMOVED] = metrics(gt, est, t0) | {"poses": est}
     t0 = time.perf_counter()
-    est, truth = _kiss_on_kitti_layout(cfg, phys, gt, progress)
+    est, truth = _kiss_on_kitti_layout(cfg, out, load, gt, progress)
     runs[KITTI_LAYOUT] = metrics(truth, est, t0) | {"poses": est}
     if cfg.sequence:
-        from .frames import read_sequence
-
-        seq_poses, seq_times, load = read_sequence(cfg.sequence)
-        # the renderer needs each sweep inside the trajectory, so it may hold a frame less
-        n = min(len(seq_poses), cfg.frames)
-        seq_poses, seq_times = seq_poses[:n], seq_times[:n]
-        period = 1.0 / cfg.rate_hz
-        mid = gt_at_mid_sweep(seq_poses, seq_times, period)
-        mid = np.linalg.inv(mid[0]) @ mid
-        # a distorted sweep mixes the poses of its whole firing time and KISS-ICP's de-skewing
-        # corrects it to the middle: both are scored against the pose at mid-sweep
-        for name, deskew in (("distorted", False), ("distorted + KISS-ICP de-skew", True)):
-            t0 = time.perf_counter()
-
-            def frame(k):
-                f = load(k)
-                return f.xyz, f.t
-
-            est = run_odometry(frame, n, deskew=deskew, progress=progress)
-            runs[name] = metrics(mid, est, t0) | {"poses": est}
+        runs |= _distorted_runs(cfg, metrics, progress)
     return runs
 
 
-def _kiss_on_kitti_layout(cfg: StudyConfig, phys: str, gt: np.ndarray, progress: bool):
+def _distorted_runs(cfg: StudyConfig, metrics, progress: bool) -> dict:
+    """KISS-ICP on the motion-distorted sweeps of ``cfg.sequence``, with and without its
+    de-skewing, scored against the poses at mid-sweep."""
+    from .drive_sweeps import read_sequence
+    from .kiss import run_odometry
+
+    seq_poses, seq_times, load = read_sequence(cfg.sequence)
+    # the renderer needs each sweep inside the trajectory, so it may hold a frame less
+    n = min(len(seq_poses), cfg.frames)
+    mid = gt_at_mid_sweep(seq_poses[:n], seq_times[:n], 1.0 / cfg.rate_hz)
+    mid = np.linalg.inv(mid[0]) @ mid
+    # a distorted sweep mixes the poses of its whole firing time and KISS-ICP's de-skewing
+    # corrects it to the middle: both are scored against the pose at mid-sweep
+    runs = {}
+    for name, deskew in (("distorted", False), ("distorted + KISS-ICP de-skew", True)):
+        t0 = time.perf_counter()
+
+        def frame(k):
+            f = load(k)
+            return f.xyz, f.t
+
+        est = run_odometry(frame, n, deskew=deskew, progress=progress)
+        runs[name] = metrics(mid, est, t0) | {"poses": est}
+    return runs
+
+
+def _kiss_on_kitti_layout(cfg: StudyConfig, out: str, load, gt: np.ndarray, progress: bool):
     """The frames written in the KITTI odometry layout and read back by kiss-icp's own KITTI
     loader (which also applies its 0.205° vertical-angle correction for KITTI's HDL-64E): the
     estimate and the loader's ground truth."""
     from kiss_icp.datasets.kitti import KITTIOdometryDataset
 
     from ...io.kitti import write_sequence
-    from .frames import load_frame
     from .kiss import run_odometry
 
-    root = os.path.join(os.path.dirname(phys), "..", "kitti")
+    root = os.path.join(out, "kitti")
     seq = os.path.join(root, "sequences", "00")
     if not os.path.exists(os.path.join(seq, "poses.txt")):
         clouds = []
         for k in range(cfg.frames):
-            f = load_frame(phys, k)
+            f = load(k)
             clouds.append({"xyz": f.xyz, "intensity": f.intensity})
         times = np.arange(cfg.frames) / cfg.rate_hz
         write_sequence(seq, clouds, gt, times)
@@ -272,21 +350,18 @@ def _kiss_on_kitti_layout(cfg: StudyConfig, phys: str, gt: np.ndarray, progress:
     return est, np.asarray(data.gt_poses)
 
 
-def _descriptors(cfg: StudyConfig, folders: dict, nidar_dir: str | None, progress: bool):
+def _descriptors(cfg: StudyConfig, sweeps: _Sweeps, progress: bool):
     """Per source: (N, rings, sectors) grids and occupancies."""
     from ...progress import progress_bar
-    from .frames import load_frame
     from .scan_context import descriptor, normalise
 
     out = {}
     for source in cfg.sources:
-        folder = folders["rgb_twin" if source == "rgb_twin" else "physics"]
+        load = sweeps.loads["rgb_twin" if source == "rgb_twin" else "physics"]
         vals, pts = [], []
         for k in range(cfg.frames):
-            f = load_frame(folder, k)
-            nid = None
-            if source == "nidar":
-                nid = np.load(os.path.join(nidar_dir, f"{k:06d}.npz"))["intensity_nidar"]
+            f = load(k)
+            nid = sweeps.nidar_columns(k)["intensity_nidar"] if source == "nidar" else None
             keep = f.xyz[:, 2] > ISC_MIN_Z_M
             v = source_values(source, f.xyz, f.intensity, f.range, nid)
             vals.append(v[keep])
@@ -329,7 +404,7 @@ def _loops(cfg: StudyConfig, desc: dict, gt: np.ndarray, odo: np.ndarray) -> dic
     return res
 
 
-def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -> dict:
+def _pose_graphs(cfg: StudyConfig, sweeps: _Sweeps, loops: dict, odo, gt) -> dict:
     """Per source: verified loops -> pose graph -> ATE (skipped, with a warning, without GTSAM)."""
     try:
         import gtsam  # noqa: F401
@@ -342,34 +417,15 @@ def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -
             stacklevel=2,
         )
         return {}
-    from .frames import load_frame
-    from .kiss import overlap, register_pair
     from .odometry import ate
     from .pose_graph import optimise
-    from .scan_context import SECTORS
 
     out = {}
     cache: dict[tuple[str, int, int], tuple[np.ndarray, float]] = {}
     for source, entry in loops.items():
-        folder = twin if source == "rgb_twin" else phys
-        m = entry["matches"]
         t0 = time.perf_counter()
-        found = []
-        matched = np.nonzero(m.match >= 0)[0]
-        best = matched[np.argsort(-m.score[matched], kind="stable")[: cfg.loop_candidates]]
-        for i in np.sort(best):
-            j = int(m.match[i])
-            key = (folder, int(i), j)
-            if key not in cache:
-                yaw = -2 * np.pi * m.shift[i] / SECTORS
-                guess = np.eye(4)
-                guess[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
-                a, b = load_frame(folder, int(i)).xyz, load_frame(folder, j).xyz
-                T = register_pair(b, a, guess)
-                cache[key] = (T, overlap(b, a, T))
-            T, ov = cache[key]
-            if ov >= cfg.loop_overlap:
-                found.append((int(i), j, T, bool(m.correct[i])))
+        kind = "rgb_twin" if source == "rgb_twin" else "physics"
+        found = _verified_loops(cfg, sweeps.loads[kind], kind, entry["matches"], cache)
         fixed = optimise(odo, [(i, j, T) for i, j, T, _ in found])
         out[source] = {
             "loops": len(found),
@@ -381,8 +437,41 @@ def _pose_graphs(cfg: StudyConfig, phys: str, twin: str, loops: dict, odo, gt) -
     return out
 
 
-#: A folder holding this file (the scene index, written first) is an earlier study's output.
-MARKER = os.path.join("scene", "index.json")
+def _verified_loops(cfg: StudyConfig, load, kind: str, m, cache: dict) -> list:
+    """The best-scoring matches of a source that registration confirms: ``(i, j, T, correct)``
+    each; registrations are cached per ``(kind, i, j)`` (sources on the same sweeps share
+    them)."""
+    from .kiss import aligned_overlap, register_pair
+    from .scan_context import SECTORS
+
+    found = []
+    matched = np.nonzero(m.match >= 0)[0]
+    best = matched[np.argsort(-m.score[matched], kind="stable")[: cfg.loop_candidates]]
+    for i in np.sort(best):
+        j = int(m.match[i])
+        key = (kind, int(i), j)
+        if key not in cache:
+            yaw = -2 * np.pi * m.shift[i] / SECTORS
+            guess = np.eye(4)
+            guess[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+            a, b = load(int(i)).xyz, load(j).xyz
+            T = register_pair(b, a, guess)
+            cache[key] = (T, aligned_overlap(b, a, T))
+        T, ov = cache[key]
+        if ov >= cfg.loop_overlap:
+            found.append((int(i), j, T, bool(m.correct[i])))
+    return found
+
+
+#: Who writes a study's folder (:mod:`nidar_mi.io.ownership`): it adds to it (the scene, the
+#: frames and NIDAR's columns are its cache), and its files are those below.
+OWNER = Owner(
+    "drive",
+    "study",
+    names=("scene/*", "frames/*", "kitti/*", "results.json", "report.md", "*.png", "*.tmp-*"),
+    replaces=False,
+    whole=False,
+)
 
 
 def run_study(
@@ -390,98 +479,87 @@ def run_study(
 ) -> dict:
     """Run every step into ``out`` and return the results.
 
-    ``out`` is created; an earlier study's folder (:data:`MARKER`) is reused as the cache, any
-    other non-empty folder is refused unless ``overwrite`` (then the study's files are added to
-    it; nothing else there is touched).
+    ``out`` is created; an earlier study's folder is reused as the cache, any other non-empty
+    folder is refused unless ``overwrite`` (then the study's files are added to it; nothing
+    else there is touched), another command's output always (:data:`OWNER`,
+    :func:`nidar_mi.io.ownership.check_owner`).
     """
-    from ...io.atomic import check_output_folder
-    from .frames import nidar_columns, render_drive
-    from .report import write_report
+    from ...io.atomic import check_output_folder, write_record
 
     cfg.check()
-    check_output_folder(out, overwrite=overwrite, marker=MARKER, inputs=[cfg.weights, cfg.sequence])
+    out = str(
+        check_output_folder(
+            out, owner=OWNER, overwrite=overwrite, inputs=[cfg.weights, cfg.sequence]
+        )
+    )
     os.makedirs(out, exist_ok=True)
+    write_record(out, OWNER, [])  # an interrupted study is known as one
     timings = {}
     t0 = time.perf_counter()
-    scene, times, poses, drive_info = _drive(out, cfg)
-    gt = np.linalg.inv(poses[0]) @ poses
+    drive = _drive(out, cfg)
     timings["drive"] = time.perf_counter() - t0
-
-    params = {"cols": str(cfg.cols), "width": str(cfg.width), "height": str(cfg.height)}
-    frames_dir = os.path.join(out, "frames")
+    log.debug("drive: %.1f s", timings["drive"])
+    sweeps = _render(out, cfg, drive, timings, progress)
     t0 = time.perf_counter()
-    phys = render_drive(
-        scene,
-        poses,
-        os.path.join(frames_dir, "physics"),
-        cameras="nidar" in cfg.sources,
-        params=params,
-        spp=cfg.spp,
-        progress=progress,
-    )
-    timings["frames_physics"] = time.perf_counter() - t0
-    twin = None
-    if "rgb_twin" in cfg.sources:
-        t0 = time.perf_counter()
-        twin = render_drive(
-            scene,
-            poses,
-            os.path.join(frames_dir, "rgb_twin"),
-            rgb_twin=True,
-            params=params,
-            progress=progress,
-        )
-        timings["frames_rgb_twin"] = time.perf_counter() - t0
-    nidar_dir = None
-    if "nidar" in cfg.sources:
-        t0 = time.perf_counter()
-        nidar_dir = nidar_columns(phys, cfg.frames, cfg.weights, progress=progress)
-        timings["nidar"] = time.perf_counter() - t0
-
-    observed = None
-    if nidar_dir is not None:
-        seen = [
-            np.load(os.path.join(nidar_dir, f"{k:06d}.npz"))["nidar_observed"]
-            for k in range(cfg.frames)
-        ]
-        observed = float(np.mean([s.mean() for s in seen]))
-
-    t0 = time.perf_counter()
-    odometry = _odometry_runs(cfg, phys, gt, progress)
+    odometry = _odometry_runs(cfg, out, sweeps, drive.gt, progress)
     timings["odometry"] = time.perf_counter() - t0
+    log.debug("odometry: %.1f s", timings["odometry"])
     odo = odometry[GROUND_REMOVED]["poses"]
-
     t0 = time.perf_counter()
-    desc = _descriptors(cfg, {"physics": phys, "rgb_twin": twin}, nidar_dir, progress)
-    loops = _loops(cfg, desc, gt, odo)
+    desc = _descriptors(cfg, sweeps, progress)
+    loops = _loops(cfg, desc, drive.gt, odo)
     timings["loops"] = time.perf_counter() - t0
+    log.debug("loops: %.1f s", timings["loops"])
     t0 = time.perf_counter()
-    graphs = _pose_graphs(cfg, phys, twin, loops, odo, gt)
+    graphs = _pose_graphs(cfg, sweeps, loops, odo, drive.gt)
     timings["pose_graph"] = time.perf_counter() - t0
-
+    log.debug("pose_graph: %.1f s", timings["pose_graph"])
     cfg.timings = timings
-    results = {
+    results = _results(out, cfg, drive, sweeps, odometry, loops, graphs)
+    _report(out, cfg, results, drive, odometry, loops, graphs, desc)
+    write_record(out, OWNER, _own_files(out))
+    return results
+
+
+def _own_files(out: str) -> list[str]:
+    """The files of ``out`` the study wrote (by name; any other file there is not listed)."""
+    from ...io.ownership import folder_files
+
+    return [f for f in folder_files(out) if OWNER.writes(f)]
+
+
+def _results(out, cfg, drive: _Drive, sweeps: _Sweeps, odometry, loops, graphs) -> dict:
+    """What ``results.json`` holds (the poses of each run left out)."""
+    observed = None
+    if sweeps.nidar is not None:
+        seen = [sweeps.nidar_columns(k)["nidar_observed"] for k in range(cfg.frames)]
+        observed = float(np.mean([s.mean() for s in seen]))
+    return {
         "config": asdict(cfg),
-        "scene": os.path.relpath(scene, out),
-        "drive": drive_info,
+        "scene": os.path.relpath(drive.scene, out),
+        "drive": drive.info,
         "odometry": {k: {a: b for a, b in v.items() if a != "poses"} for k, v in odometry.items()},
         "loops": {s: v["summary"] for s, v in loops.items()},
         "pose_graph": {s: {a: b for a, b in v.items() if a != "poses"} for s, v in graphs.items()},
         "nidar_observed_fraction": observed,
     }
+
+
+def _report(out, cfg, results, drive: _Drive, odometry, loops, graphs, desc) -> None:
+    """``results.json``, ``report.md`` and the figures (:func:`.report.write_report`)."""
     from ...scenegen.city import sample_city
     from ...scenegen.generate import scene_rng
+    from .report import write_report
 
     layout = sample_city(scene_rng(cfg.seed, 0), cfg.kind, tuple(cfg.blocks))[0]
     write_report(
         out,
         results,
-        gt=gt,
+        gt=drive.gt,
         odometry=odometry,
         loops=loops,
         graphs=graphs,
         desc=desc,
         layout=layout,
-        world_poses=poses,
+        world_poses=drive.poses,
     )
-    return results

@@ -4,11 +4,12 @@ on, 0.3 m to the side and turned by 9 degrees (a revisit of the drive's shared s
 import numpy as np
 import pytest
 
-from nidar_mi.eval.drive.frames import load_frame, render_drive
+from nidar_mi.eval.drive.drive_sweeps import SweepRequest, read_sequence, render_sweeps
 from nidar_mi.eval.drive.loops import match_drive, pr_summary
 from nidar_mi.eval.drive.scan_context import descriptor, normalise
 from nidar_mi.eval.drive.study import ISC_MIN_Z_M, source_values
-from nidar_mi.scenegen.city import LIDAR_HEIGHT_M, sample_city
+from nidar_mi.scenegen.city import sample_city
+from nidar_mi.scenegen.streets import LIDAR_HEIGHT_M
 
 
 @pytest.fixture(scope="module")
@@ -30,9 +31,15 @@ def drive(tmp_path_factory, variant):
         T[:3, 3] = x + g.lane_w / 2 + (0.3 if second else 0.0), y, LIDAR_HEIGHT_M
         poses.append(T)
     poses = np.stack(poses)
-    folder = render_drive(
-        str(scene), poses, str(out / "f"), params={"cols": "1024"}, progress=False
-    )
+    from nidar_mi.geometry.se3 import transform_matrix
+    from nidar_mi.io.trajectory import write_tum
+    from nidar_mi.scene import load_scene
+
+    # the rig carries the LiDAR at its scene pose: the rig's poses put the LiDAR at `poses`
+    mount = transform_matrix(load_scene(str(scene), labels=False).lidars[0].world_transform())
+    write_tum(out / "d.tum", np.arange(len(poses)), poses @ np.linalg.inv(mount))
+    request = SweepRequest(str(scene), str(out / "d.tum"), 1.0, len(poses), {"cols": "1024"})
+    folder = render_sweeps(request, str(out / "f"), progress=False)
     # distance along the drive: 12 m north, a lap round the block (~160 m), 12 m north again
     dist = np.r_[np.arange(7) * 2.0, 172.0 + np.arange(7) * 2.0]
     return folder, poses, dist
@@ -41,7 +48,8 @@ def drive(tmp_path_factory, variant):
 @pytest.mark.parametrize("source", ["physics", "carla", "none"])
 def test_the_second_pass_is_recognised(drive, source):
     folder, poses, dist = drive
-    frames = [load_frame(folder, k) for k in range(len(poses))]
+    load = read_sequence(folder)[2]
+    frames = [load(k) for k in range(len(poses))]
     vals = [source_values(source, f.xyz, f.intensity, f.range) for f in frames]
     keep = [f.xyz[:, 2] > ISC_MIN_Z_M for f in frames]
     scale = float(np.percentile(np.concatenate([v[m] for v, m in zip(vals, keep)]), 99))

@@ -1,0 +1,8 @@
+"""``python -m nidar_mi.reconstruct``: the ``reconstruct`` command (:mod:`nidar_mi.cli.reconstruct`)."""
+
+if __name__ == "__main__":
+    import sys
+
+    from nidar_mi.cli.reconstruct import main
+
+    sys.exit(main())

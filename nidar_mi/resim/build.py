@@ -1,0 +1,85 @@
+"""The drive's poses and surfaces: poses from the drive or KISS-ICP (:mod:`.poses`), then the
+training scans meshed, fused and carved (:mod:`.mesh`, :mod:`.carve`)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .beam_rays import concat, return_rays
+from .drive_folder import Drive
+from .frames import Frames
+from .mesh import Mesh, fuse_meshes, scan_mesh
+
+__all__ = ["drive_poses", "build_surfaces", "training_rays", "scratch_scene", "drop_scratch"]
+
+
+def drive_poses(drive: Drive, frames: Frames, *, progress: bool = False) -> np.ndarray:
+    """(F, 4, 4) every frame's LiDAR pose in frame 0's LiDAR frame."""
+    from .poses import odometry_poses
+
+    if drive.poses is not None:
+        poses = drive.poses
+    else:
+        poses = odometry_poses(lambda k: frames.xyz[k], len(drive.ids), progress=progress)
+    return np.linalg.inv(poses[0]) @ poses
+
+
+def training_rays(drive: Drive, frames: Frames, poses: np.ndarray):
+    """The rays of every training return, and their intensities."""
+    idx = [drive.index(i) for i in drive.train]
+    rays = concat(
+        [return_rays(frames.xyz[k], frames.grid[k], frames.layout, poses[k], k) for k in idx]
+    )
+    return rays, np.concatenate([frames.intensity[k] for k in idx])
+
+
+def scratch_scene(stage: str):
+    """``load(mesh) -> mi.Scene`` of a mesh alone, through a PLY file in ``stage`` (removed by
+    the caller with :func:`drop_scratch`)."""
+    from .scene_files import write_surfaces_ply
+    from .surfaces import surface_scene
+
+    path = os.path.join(stage, ".scratch.ply")
+
+    def load(mesh: Mesh, rho: np.ndarray | None = None):
+        values = np.full(len(mesh.vertices), 0.5) if rho is None else rho
+        write_surfaces_ply(path, mesh, {"rho": values})
+        return surface_scene(path)
+
+    return load
+
+
+def drop_scratch(stage: str) -> None:
+    """Remove the scratch PLY of :func:`scratch_scene`."""
+    path = os.path.join(stage, ".scratch.ply")
+    if os.path.exists(path):
+        os.remove(path)
+
+
+def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, stage: str):
+    """The carved mesh of the training frames (world = frame 0's LiDAR frame).
+
+    Returns:
+        ``(mesh, carved)``: the mesh and the triangles each carving pass removed.
+    """
+    from ..errors import NidarError
+
+    meshes = []
+    for fid in drive.train:
+        k = drive.index(fid)
+        m = scan_mesh(frames.xyz[k], frames.grid[k], wrap=not frames.cut)
+        meshes.append(m.transformed(poses[k]))
+    mesh = fuse_meshes(meshes, options.voxel_m)
+    if len(mesh.faces) == 0:
+        raise NidarError(f"{drive.root}: the training scans gave no surface to mesh")
+    if options.carve_passes > 0:
+        from .carve import carve
+
+        rays, _ = training_rays(drive, frames, poses)
+        mesh, carved = carve(mesh, rays, scratch_scene(stage), passes=options.carve_passes)
+        drop_scratch(stage)
+    else:
+        carved = []
+    return mesh, carved

@@ -1,0 +1,78 @@
+"""Free-space carving: the triangles a training ray passed through are removed.
+
+A return at range ``d`` along a ray says the space before it is empty. A triangle that the ray
+hits at ``t`` well before ``d`` is therefore wrong for that view: a skirt that a single-scan mesh
+stretched across a depth discontinuity, a car that has since moved, a misplaced layer. The hit
+counts as *through* when ``(d - t) · max(|cos θ|, 0.05) > through_m`` (the gap measured across
+the surface, so that a grazing hit on the road, where a centimetre of height is a metre of
+range, is not taken for a hole) and ``d - t > 0.3`` m; as *on* when ``|d - t| · max(|cos θ|,
+0.05) <= through_m``. A triangle with at least two *through* hits and more *through* than *on*
+hits is removed; removing it uncovers what was behind, so carving repeats ``passes`` times.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .beam_rays import Rays, jit_rays
+from .mesh import Mesh, compact
+
+__all__ = ["carve", "hit_depths"]
+
+#: Rays cast per Dr.Jit launch.
+BLOCK = 1 << 20
+
+
+def hit_depths(scene, rays: Rays):
+    """Cast ``rays`` into ``scene``.
+
+    Returns:
+        ``(t, prim, cos)``: (N,) hit distance (inf: none), triangle index (-1: none), |cos θ|
+        of the hit (geometric normal).
+    """
+    import drjit as dr
+
+    t, prim, cos = [], [], []
+    for start in range(0, len(rays.range_m), BLOCK):
+        ray = jit_rays(rays, start, start + BLOCK)
+        si = scene.ray_intersect(ray)
+        valid = si.is_valid()
+        c = dr.abs(dr.dot(si.n, ray.d))
+        dr.eval(si.t, si.prim_index, c, valid)
+        v = valid.numpy()
+        t.append(np.where(v, si.t.numpy(), np.inf))
+        prim.append(np.where(v, si.prim_index.numpy().astype(np.int64), -1))
+        cos.append(np.where(v, c.numpy(), 0.0))
+    if not t:
+        return np.zeros(0), np.zeros(0, np.int64), np.zeros(0)
+    return np.concatenate(t), np.concatenate(prim), np.concatenate(cos)
+
+
+def carve(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, passes: int = 2):
+    """The mesh without the triangles the rays passed through (module docstring).
+
+    Args:
+        mesh: the fused mesh (world coordinates).
+        rays: the training returns' rays (finite ranges).
+        load_scene: ``load_scene(mesh) -> mi.Scene`` of the mesh alone.
+        through_m: the gap across the surface that counts as passing through, m.
+        passes: carving rounds.
+
+    Returns:
+        ``(mesh, removed)``: the carved mesh and how many triangles each pass removed.
+    """
+    removed = []
+    for _ in range(passes):
+        t, prim, cos = hit_depths(load_scene(mesh), rays)
+        gap = (rays.range_m - t) * np.maximum(cos, 0.05)
+        hit = prim >= 0
+        through = hit & (gap > through_m) & (rays.range_m - t > 0.3)
+        on = hit & (np.abs(gap) <= through_m)
+        n_through = np.bincount(prim[through], minlength=len(mesh.faces))
+        n_on = np.bincount(prim[on], minlength=len(mesh.faces))
+        drop = (n_through >= 2) & (n_through > n_on)
+        removed.append(int(drop.sum()))
+        if not drop.any():
+            break
+        mesh = Mesh(mesh.vertices, mesh.faces[~drop])
+    return compact(mesh), removed

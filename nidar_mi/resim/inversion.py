@@ -1,0 +1,342 @@
+"""The surfaces' reflectance and the sensor's response, fitted jointly by differentiating the
+``lidar`` plugin's own return model with Dr.Jit.
+
+For a training sample (:mod:`.observations`) of laser ``l`` hitting the surfaces at range
+``d`` with incidence cosine ``cos θ``, the plugin's model in ``compensated`` mode without
+extinction gives
+
+    E = G_l · ρ(x) · cos θ · r(d)        (:func:`nidar_mi.lidar.return_model.expected_intensity`
+                                          times :func:`~nidar_mi.lidar.return_model.range_response`)
+
+with ``ρ(x)`` read by the surfaces' BSDF (a ``mesh_attribute`` texture interpolating the
+per-vertex ``vertex_rho``; :func:`nidar_mi.lidar.raycast.monostatic_reflectance`), ``G_l`` the
+per-laser gain (``laser_gains``) and ``r(d)`` the range response (``range_response``: piecewise
+linear through :data:`KNOTS_M`). The sensor reports ``max(E - b, 0)`` (``intensity_offset``
+b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
+returns) and detects a return with probability ``Φ((E - T) / σ_n)`` (``detection_threshold``,
+``receiver_noise_std``; :func:`~nidar_mi.lidar.return_model.detection_probability`).
+
+The loss, minimised with :class:`mitsuba.ad.Adam` on the gradients of ``dr.backward``:
+
+* intensity: mean over returns of ``(max(E - b, 0) - y)²``, where a return read as 0 counts
+  only when ``E - b`` exceeds 0 (it says ``E <= b``, nothing more);
+* detection: ``w_det`` times the mean binary cross-entropy of ``Φ((E - T)/σ_n)`` against
+  hit/miss over the detection samples;
+* smoothness: ``w_smooth`` times the mean of ``(ρ_a - ρ_b)²`` over the mesh's edges (the prior
+  where the data are thin);
+* prior: ``w_prior`` times the mean of ``(ρ_v - s·R_v)²`` over the vertices that NIDAR's
+  reflectance ``R`` sees (``s`` the median ratio of the fitted ρ to R, refreshed every step),
+  weighted by how rarely the LiDAR hit the vertex.
+
+Scale: ``ρ`` and the sensor's gains trade off (``G·ρ``), so the gains are normalised to a
+geometric mean of 1 and ``r`` to 1 at :data:`REFERENCE_M`; ρ is thus the intensity a surface
+gives at normal incidence at that range with the average laser (KITTI's [0, 1] scale).
+Without per-laser gains (``per_laser=False``) every ``G_l`` stays 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .observations import Samples
+
+__all__ = [
+    "FitOptions",
+    "SensorFit",
+    "KNOTS_M",
+    "REFERENCE_M",
+    "fit_drive",
+    "edges_of",
+    "predict_returns",
+]
+
+#: Knots of the fitted range response, m; the response is 1 at REFERENCE_M.
+KNOTS_M = (2.0, 4.0, 7.0, 10.0, 15.0, 20.0, 30.0, 45.0, 70.0, 120.0)
+REFERENCE_M = 10.0
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Settings of the inversion (defaults used on the real drives)."""
+
+    iterations: int = 100
+    lr_rho: float = 0.01
+    lr_sensor: float = 0.01
+    lr_gains: float = 0.0002
+    w_det: float = 0.02
+    w_smooth: float = 0.2
+    w_prior: float = 0.05
+    per_laser: bool = True
+    fit_response: bool = True
+    fit_offset: bool = True
+
+
+@dataclass
+class SensorFit:
+    """The recovered sensor and the fit's record.
+
+    Attributes:
+        gains: (R,) per-laser gains (geometric mean 1).
+        knots_m, response: the range response r(d) at the knots.
+        offset: the intensity offset b.
+        threshold, noise: T and σ_n of detection.
+        history: per iteration the loss terms.
+    """
+
+    gains: np.ndarray
+    knots_m: tuple[float, ...]
+    response: np.ndarray
+    offset: float
+    threshold: float
+    noise: float
+    history: list[dict] = field(default_factory=list)
+
+    def response_at(self, d):
+        """r(d) (NumPy)."""
+        from ..lidar.return_model import range_response
+
+        return range_response(np.asarray(d, dtype=np.float64), self.knots_m, list(self.response))
+
+
+def edges_of(faces: np.ndarray) -> np.ndarray:
+    """(E, 2) the unique undirected edges of (T, 3) triangles."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.sort(e, axis=1)
+    return np.unique(e, axis=0)
+
+
+def hit_reflectance(samples: Samples, rho):
+    """ρ at each sample's hit: the barycentric interpolation of the per-vertex ``rho`` (Dr.Jit,
+    differentiable in ``rho``), as the surfaces' ``mesh_attribute`` texture computes it."""
+    import drjit as dr
+    import mitsuba as mi
+
+    return sum(w * dr.gather(mi.Float, rho, c) for w, c in zip(samples.weights, samples.corners))
+
+
+def _expected(samples: Samples, rho, gains, response):
+    """E of every sample (Dr.Jit), differentiable in ρ, the gains and the response."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..lidar.return_model import expected_intensity, range_response
+
+    g = dr.gather(mi.Float, gains, samples.ring)
+    d = samples.beams.path_m
+    values = [dr.gather(mi.Float, response, i) for i in range(len(KNOTS_M))]
+    e = expected_intensity(g, hit_reflectance(samples, rho), d, samples.cos_t, 0.0, "compensated")
+    return e * range_response(d, KNOTS_M, values)
+
+
+def predict_returns(samples: Samples, rho: np.ndarray, fitted: SensorFit) -> np.ndarray:
+    """(S,) expected intensity E of the samples with per-vertex ``rho`` and the fitted sensor
+    (NumPy)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    with dr.suspend_grad():
+        e = _expected(
+            samples,
+            mi.Float(np.asarray(rho, dtype=np.float32)),
+            mi.Float(fitted.gains.astype(np.float32)),
+            mi.Float(fitted.response.astype(np.float32)),
+        )
+        dr.eval(e)
+    return e.numpy()
+
+
+class _Problem:
+    """The fit's data on the device: samples, edges, the prior."""
+
+    def __init__(self, samples: Samples, edges: np.ndarray, prior, prior_weight):
+        import mitsuba as mi
+
+        self.samples = samples
+        self.det = mi.Bool(samples.detected)
+        self.y = mi.Float(samples.intensity)
+        self.zero = mi.Bool(samples.intensity <= 0.005)
+        self.n_det = max(int(samples.detected.sum()), 1)
+        self.e0 = mi.UInt32(edges[:, 0].astype(np.uint32))
+        self.e1 = mi.UInt32(edges[:, 1].astype(np.uint32))
+        self.prior = None
+        if prior is not None:
+            seen = np.isfinite(prior)
+            self.prior_idx = mi.UInt32(np.flatnonzero(seen).astype(np.uint32))
+            self.prior = mi.Float(prior[seen].astype(np.float32))
+            self.prior_w = mi.Float(np.asarray(prior_weight)[seen].astype(np.float32))
+            self.prior_host = prior[seen]
+
+
+def _sensor_values(opt, rings: int):
+    """The normalised gains and response, offset, threshold and noise from the optimiser's
+    variables (Dr.Jit)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    log_g = opt["log_g"]
+    gains = dr.exp(log_g - dr.sum(log_g) / rings)
+    log_r = opt["log_r"]
+    ref = dr.gather(mi.Float, log_r, KNOTS_M.index(REFERENCE_M))
+    response = dr.exp(log_r - ref)
+    return gains, response, opt["b"], dr.exp(opt["log_t"]), dr.exp(opt["log_s"])
+
+
+def _loss(pb: _Problem, opt, sensor, options: FitOptions, rings: int):
+    """The total loss and its terms (Dr.Jit scalars); ``sensor``: the variables of
+    :func:`_sensor_values` (the optimiser's, or frozen values)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..lidar.return_model import detection_probability
+
+    gains, response, b, t, s = _sensor_values(sensor, rings)
+    rho = opt["rho"]
+    e = _expected(pb.samples, rho, gains, response)
+    shown = dr.maximum(e - b, 0.0)
+    resid = dr.select(pb.zero, shown, shown - pb.y)
+    l_int = dr.sum(dr.select(pb.det, dr.square(resid), 0.0)) / pb.n_det
+    p = dr.clip(detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
+    l_det = -dr.mean(dr.select(pb.det, dr.log(p), dr.log(1.0 - p)))
+    diff = dr.gather(mi.Float, rho, pb.e0) - dr.gather(mi.Float, rho, pb.e1)
+    l_smooth = dr.mean(dr.square(diff))
+    terms = {"intensity": l_int, "detection": l_det, "smooth": l_smooth}
+    total = l_int + options.w_det * l_det + options.w_smooth * l_smooth
+    if pb.prior is not None and options.w_prior > 0:
+        rv = dr.gather(mi.Float, rho, pb.prior_idx)
+        scale = float(np.median(rv.numpy() / np.maximum(pb.prior_host, 1e-3)))
+        l_prior = dr.sum(pb.prior_w * dr.square(rv - scale * pb.prior)) / dr.sum(pb.prior_w)
+        terms["prior"] = l_prior
+        total = total + options.w_prior * l_prior
+    return total, terms
+
+
+def alternate(samples: Samples, vertices: int, rings: int, rounds: int = 25, per_laser=True):
+    """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d)`` (each sample assigned to
+    the corner of its triangle with the largest weight): ρ per vertex, then the gains, then the
+    range response's knot values (a linear least-squares problem in them), each the exact
+    minimiser with the others fixed, normalised after each round (gains' geometric mean 1,
+    ``r(REFERENCE_M) = 1``). Levinson and Thrun's alternation between the beams' responses and
+    the map's reflectance; it starts the gradient fit near the optimum.
+
+    Returns:
+        ``(rho (V,), gains (R,), response (K,))`` NumPy float64.
+    """
+    from ..lidar.return_model import range_response
+
+    det = samples.detected
+    y = samples.intensity[det].astype(np.float64)
+    corners = np.stack([c.numpy() for c in samples.corners], axis=1)[det]
+    weights = np.stack([w.numpy() for w in samples.weights], axis=1)[det]
+    v = corners[np.arange(len(corners)), weights.argmax(axis=1)].astype(np.int64)
+    ring = samples.ring.numpy().astype(np.int64)[det]
+    q = samples.cos[det].astype(np.float64)
+    d = samples.range_m[det].astype(np.float64)
+    eye = np.eye(len(KNOTS_M))
+    hat = np.stack([range_response(d, KNOTS_M, list(eye[k])) for k in range(len(KNOTS_M))], 1)
+    gains, resp = np.ones(rings), np.ones(len(KNOTS_M))
+    rho = np.zeros(vertices)
+    ref = KNOTS_M.index(REFERENCE_M)
+    for _ in range(rounds):
+        a = gains[ring] * (hat @ resp) * q
+        rho = np.bincount(v, y * a, vertices) / np.maximum(np.bincount(v, a * a, vertices), 1e-9)
+        if per_laser:
+            a = rho[v] * (hat @ resp) * q
+            num, den = np.bincount(ring, y * a, rings), np.bincount(ring, a * a, rings)
+            gains = np.where(den > 1e-9, num / np.maximum(den, 1e-9), 1.0)
+        m = (gains[ring] * rho[v] * q)[:, None] * hat
+        resp = np.linalg.solve(m.T @ m + 1e-6 * eye, m.T @ y)
+        resp = np.where(resp > 1e-3, resp, 1e-3)
+        g0 = float(np.exp(np.mean(np.log(np.maximum(gains, 1e-6)))))
+        scale = g0 * resp[ref]
+        gains, resp, rho = gains / g0, resp / resp[ref], rho * scale
+    seen = np.bincount(v, minlength=vertices) > 0
+    rho = np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
+    return np.clip(rho, 0.0, 4.0), gains, resp
+
+
+def _start(pb: _Problem, start, rings: int, options: FitOptions):
+    """The optimiser at the alternating least squares' solution (``start``: ρ, gains,
+    response), the offset at 0 and the detection threshold and noise at a low quantile of the
+    returns' intensities."""
+    import mitsuba as mi
+
+    rho, gains, resp = start
+    e = pb.samples.intensity[pb.samples.detected]
+    opt = mi.ad.Adam(lr=options.lr_sensor)
+    opt["rho"] = mi.Float(rho.astype(np.float32))
+    opt["log_g"] = mi.Float(np.log(np.maximum(gains, 1e-3)).astype(np.float32))
+    opt["log_r"] = mi.Float(np.log(np.maximum(resp, 1e-3)).astype(np.float32))
+    opt["b"] = mi.Float(np.zeros(1, np.float32))
+    low = float(np.percentile(e[e > 0], 2)) if (e > 0).any() else 0.01
+    opt["log_t"] = mi.Float(np.float32([np.log(max(low, 1e-3))]))
+    opt["log_s"] = mi.Float(np.float32([np.log(max(low, 1e-3) / 2)]))
+    opt.set_learning_rate(rho=options.lr_rho, log_g=options.lr_gains, log_r=options.lr_gains)
+    return opt
+
+
+def _clamp(opt, options: FitOptions) -> None:
+    """Keep the variables in their domain; freeze what is not fitted."""
+    import drjit as dr
+    import mitsuba as mi
+
+    opt["rho"] = dr.clip(opt["rho"], 0.0, 4.0)
+    opt["b"] = dr.maximum(opt["b"], 0.0) if options.fit_offset else mi.Float(0.0)
+    if not options.per_laser:
+        opt["log_g"] = dr.zeros(mi.Float, dr.width(opt["log_g"]))
+    if not options.fit_response:
+        opt["log_r"] = dr.zeros(mi.Float, dr.width(opt["log_r"]))
+
+
+def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOptions, **kw):
+    """Fit ρ and the sensor to the samples (module docstring): alternating least squares
+    (:func:`alternate`) for ρ, the gains and the range response, then every variable jointly by
+    Adam on the gradients of the full loss (offset, detection, smoothness, prior included).
+
+    Args:
+        samples: the training samples (cast into ``scene``).
+        scene: the surfaces (:func:`.surfaces.surface_scene`); its ``vertex_rho`` (its
+            ``mi.traverse`` parameter) is set to the fitted reflectance.
+        edges: (E, 2) the mesh's edges (:func:`edges_of`).
+        rings: lasers of the sensor.
+        options: the settings.
+        kw: ``prior`` (V,) NIDAR's R per vertex (NaN unseen), ``prior_weight`` (V,),
+            ``progress`` (bool).
+
+    Returns:
+        ``(rho, sensor)``: (V,) fitted reflectance and the :class:`SensorFit`.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..progress import progress_bar
+    from .surfaces import RHO_KEY
+
+    params = mi.traverse(scene)
+    pb = _Problem(samples, edges, kw.get("prior"), kw.get("prior_weight"))
+    start = alternate(samples, dr.width(params[RHO_KEY]), rings, per_laser=options.per_laser)
+    opt = _start(pb, start, rings, options)
+    _clamp(opt, options)
+    history: list[dict] = []
+    steps = progress_bar(range(options.iterations), show=kw.get("progress", False), desc="fit")
+    for _ in steps:
+        total, terms = _loss(pb, opt, opt, options, rings)
+        dr.backward(total)
+        opt.step()
+        _clamp(opt, options)
+        history.append({k: float(v.numpy()[0]) for k, v in terms.items()})
+    params[RHO_KEY] = dr.detach(opt["rho"])
+    params.update()
+    with dr.suspend_grad():
+        g, r, b, t, s = _sensor_values(opt, rings)
+    fitted = SensorFit(
+        gains=g.numpy().astype(np.float64),
+        knots_m=KNOTS_M,
+        response=r.numpy().astype(np.float64),
+        offset=float(b.numpy()[0]),
+        threshold=float(t.numpy()[0]),
+        noise=float(s.numpy()[0]),
+        history=history,
+    )
+    return opt["rho"].numpy().astype(np.float64), fitted

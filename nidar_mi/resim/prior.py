@@ -1,0 +1,63 @@
+"""NIDAR's reflectance R at the mesh's vertices: the prior of the inversion where the camera
+sees a surface the LiDAR rarely hit, and the ρ of the "NIDAR's ρ" baseline.
+
+For up to :data:`MAX_FRAMES` training frames that have an ``image_2`` picture and a
+calibration (KITTI layout: P2, R0_rect, Tr_velo_to_cam), the vertices are moved into the
+frame's LiDAR frame and NIDAR (:meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity`,
+branch R, occlusion test on) gives R at those its camera sees; a vertex's prior is the mean over
+the frames that saw it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .drive_folder import Drive
+
+__all__ = ["MAX_FRAMES", "nidar_prior"]
+
+#: Training frames NIDAR runs on (evenly spread over the drive).
+MAX_FRAMES = 4
+
+
+def _frames_with_images(drive: Drive) -> list[str]:
+    usable = [i for i in drive.train if drive.image_path(i) and drive.calib_path(i)]
+    if len(usable) <= MAX_FRAMES:
+        return usable
+    pick = np.linspace(0, len(usable) - 1, MAX_FRAMES).round().astype(int)
+    return [usable[k] for k in pick]
+
+
+def nidar_prior(drive: Drive, vertices: np.ndarray, poses: np.ndarray, *, weights=None):
+    """(V,) NIDAR's R at each vertex (NaN where no camera saw it), or None when the drive has
+    no images or NIDAR cannot run.
+
+    Args:
+        drive: the drive (its images and calibration).
+        vertices: (V, 3) world coordinates.
+        poses: (F, 4, 4) LiDAR-to-world poses of every frame.
+        weights: NIDAR weights folder (None: the shipped model).
+    """
+    from ..datasets.kitti_objects import load_kitti_frame
+    from ..errors import NidarError
+    from ..nidar.pipeline import NidarModel
+
+    frames = _frames_with_images(drive)
+    if not frames:
+        return None
+    try:
+        model = NidarModel.load(weights)
+    except NidarError:
+        return None
+    total = np.zeros(len(vertices))
+    count = np.zeros(len(vertices))
+    for fid in frames:
+        f = load_kitti_frame(drive.root, fid)
+        T = np.linalg.inv(poses[drive.index(fid)])
+        local = (vertices @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
+        res = model.point_intensity(local, [f.camera], [f.rgb], occlusion=True, branch="R")
+        seen = np.asarray(res.observed, bool)
+        total[seen] += np.asarray(res.reflectance, np.float64)[seen]
+        count[seen] += 1
+    with np.errstate(invalid="ignore"):
+        return np.where(count > 0, total / np.maximum(count, 1), np.nan)

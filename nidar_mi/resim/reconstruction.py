@@ -1,0 +1,157 @@
+"""``reconstruct``: a recorded drive in, a re-simulation folder out (the steps of
+:mod:`nidar_mi.resim`, in order).
+
+Output folder (published whole, with the record of :data:`OWNER`)::
+
+    OUT/scene.xml, sensor_*.xml, surfaces.ply, layout.yaml    the scene (:mod:`.scene_files`)
+    OUT/poses.txt          every frame's LiDAR pose in frame 0's LiDAR frame (KITTI format)
+    OUT/heldout/<id>.bin   the re-simulated scan of each held-out frame (KITTI .bin: x, y, z,
+                           intensity on the real sensor's [0, 1] scale; LiDAR frame; the
+                           drive's coverage only; the expected scan: detected where E >= T,
+                           intensity max(E - b, 0) without noise)
+    OUT/report.json        inputs, timings, the recovered sensor, the fit's residuals, the
+                           held-out metrics of the re-simulation and of the baselines
+
+Held-out frames enter only the odometry (for their poses) and the evaluation: the layout, the
+mesh, the prior and the fit see the training frames alone.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+
+from ..errors import NidarError
+from ..io.ownership import Owner
+from .drive_folder import Drive, open_drive
+
+__all__ = ["ReconstructOptions", "OWNER", "check", "reconstruct", "MAX_FRAMES"]
+
+log = logging.getLogger("nidar_mi.reconstruct")
+
+#: Who writes a re-simulation folder (:mod:`nidar_mi.io.ownership`): it replaces it whole.
+OWNER = Owner(
+    "reconstruct",
+    "drive",
+    names=(
+        "scene.xml",
+        "sensor_*.xml",
+        "surfaces.ply",
+        "layout.yaml",
+        "poses.txt",
+        "heldout/*",
+        "report.json",
+    ),
+)
+
+#: The most frames a drive may have (bounds memory and time before any work).
+MAX_FRAMES = 400
+
+
+@dataclass(frozen=True)
+class ReconstructOptions:
+    """What ``reconstruct`` does (the command's flags)."""
+
+    drive: str
+    out: str
+    holdout: tuple[str, ...] = ()
+    poses: str | None = None
+    voxel_m: float = 0.1
+    iterations: int = 150
+    carve_passes: int = 2
+    prior: bool = True
+    weights: str | None = None
+    seed: int = 0
+    max_frames: int = MAX_FRAMES
+    progress: bool = False
+    overwrite: bool = False
+
+
+def check(options: ReconstructOptions) -> Drive:
+    """Every check that needs no work: the drive, the held-out ids, the poses, the bounds, the
+    output folder. Raises NidarError."""
+    from ..io.atomic import check_output_folder
+
+    if not 0.02 <= options.voxel_m <= 1.0:
+        raise NidarError(f"`voxel` must lie in [0.02, 1] m (got {options.voxel_m:g})")
+    if options.iterations < 1:
+        raise NidarError(f"`iterations` must be >= 1 (got {options.iterations})")
+    drive = open_drive(options.drive, holdout=list(options.holdout), poses_file=options.poses)
+    if len(drive.ids) > options.max_frames:
+        raise NidarError(
+            f"{options.drive} has {len(drive.ids)} scans, more than `max_frames` "
+            f"({options.max_frames})"
+        )
+    check_output_folder(
+        options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
+    )
+    return drive
+
+
+def reconstruct(options: ReconstructOptions) -> dict:
+    """Run the whole reconstruction into ``options.out``; returns the report."""
+    from ..io.atomic import staged_directory
+
+    drive = check(options)
+    with staged_directory(
+        options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
+    ) as stage:
+        report = _run(drive, options, str(stage))
+    return report
+
+
+class _Clock:
+    """Wall times of the steps, s."""
+
+    def __init__(self) -> None:
+        self.times: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.times[name] = round(now - self._t, 3)
+        self._t = now
+        log.debug("%s: %.1f s", name, self.times[name])
+
+
+def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
+    from ..io.atomic import atomic_write_json
+    from .build import build_surfaces, drive_poses
+    from .frames import load_frames
+    from .heldout_scans import evaluate_heldout
+    from .invert import invert
+    from .write import write_outputs
+
+    clock = _Clock()
+    frames = load_frames(drive, progress=options.progress)
+    clock.lap("read")
+    poses = drive_poses(drive, frames, progress=options.progress)
+    clock.lap("poses")
+    mesh, carved = build_surfaces(drive, frames, poses, options, stage)
+    clock.lap("mesh")
+    inv = invert(drive, frames, poses, mesh, options, stage)
+    clock.lap("fit")
+    scene_path = write_outputs(stage, drive, frames, poses, mesh, inv)
+    clock.lap("write")
+    held = evaluate_heldout(scene_path, drive, frames, poses, inv, stage)
+    clock.lap("evaluate")
+    report = {
+        "drive": os.path.abspath(drive.root),
+        "frames": list(drive.ids),
+        "holdout": list(drive.holdout),
+        "poses_source": drive.poses_source,
+        "columns": frames.columns,
+        "coverage": float(frames.coverage.mean()),
+        "mesh": {"vertices": len(mesh.vertices), "faces": len(mesh.faces), "carved": carved},
+        "layout": {
+            "elevation_deg": frames.layout.elevation_deg.tolist(),
+            "vertical_offset_m": frames.layout.vertical_offset_m.tolist(),
+        },
+        "fit": inv.summary(),
+        "heldout": held,
+        "timings_s": clock.times,
+    }
+    atomic_write_json(os.path.join(stage, "report.json"), report)
+    return report

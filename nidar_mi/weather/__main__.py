@@ -1,0 +1,8 @@
+"""``python -m nidar_mi.weather``: the ``weather`` command (:mod:`nidar_mi.cli.weather`)."""
+
+if __name__ == "__main__":
+    import sys
+
+    from nidar_mi.cli.weather import main
+
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""``reconstruct``: bad drives are one ``error:`` line, status 2, before any work, and nothing is
+written."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nidar_mi.cli.reconstruct import main
+
+
+def _drive(root, frames: int = 3, poses=None):
+    vel = root / "velodyne"
+    vel.mkdir(parents=True)
+    for k in range(frames):
+        np.zeros((8, 4), "<f4").tofile(vel / f"{k:06d}.bin")
+    if poses is not None:
+        np.savetxt(root / "poses.txt", np.asarray(poses).reshape(len(poses), -1)[:, :12])
+    return root
+
+
+def _eye(n):
+    return np.tile(np.eye(4)[:3].ravel(), (n, 1))
+
+
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("one scan", "at least 2"),
+        ("no velodyne", "no velodyne/"),
+        ("pose count", "3 poses for 4 scans"),
+        ("nan pose", "poses.txt:2: a value is not finite"),
+        ("not rigid", "poses.txt:1: the 3x3 part is not a rotation"),
+        ("unknown holdout", "--holdout names frames that are not in"),
+        ("all held out", "--holdout holds out every frame"),
+        ("bad range", "not a range"),
+        ("missing poses file", "does not exist"),
+    ],
+)
+def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsys):
+    root = tmp_path / "drive"
+    extra: list[str] = []
+    if case == "one scan":
+        _drive(root, 1)
+    elif case == "no velodyne":
+        root.mkdir()
+    elif case == "pose count":
+        _drive(root, 4, _eye(3))
+    elif case == "nan pose":
+        p = _eye(3)
+        p[1, 3] = np.nan
+        _drive(root, 3, p)
+    elif case == "not rigid":
+        p = _eye(3)
+        p[0, 0] = 2.0
+        _drive(root, 3, p)
+    elif case == "unknown holdout":
+        _drive(root, 3)
+        extra = ["--holdout", "000001,000009"]
+    elif case == "all held out":
+        _drive(root, 3)
+        extra = ["--holdout", "000000:000002"]
+    elif case == "bad range":
+        _drive(root, 3)
+        extra = ["--holdout", "000002:000001"]
+    elif case == "missing poses file":
+        _drive(root, 3)
+        extra = ["--poses", str(tmp_path / "nope.txt")]
+    out = tmp_path / "out"
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    status = main([str(root), "-o", str(out), *extra])
+    err = capsys.readouterr().err
+    assert status == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert needle in lines[0], lines[0]
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+
+
+def test_holdout_ranges_expand_with_their_width():
+    from nidar_mi.resim.drive_folder import parse_ids
+
+    assert parse_ids("000008:000011, r5") == ["000008", "000009", "000010", "000011", "r5"]
+    assert parse_ids("") == []
