@@ -28,7 +28,7 @@ the same machine load; medians of the wall time and of the process CPU time):
   profile at the observed points).
 
 ``--profile``: the profile applied (default: the weights' own): a profile file, or
-``context-gbm`` / ``context-mlp``, a ``context`` profile of every input (its trees, or its small
+``context-gbm`` / ``context-mlp``, a ``context`` profile of its default inputs (its trees, or its small
 head) with the form's own settings, fitted on the benchmark's procedural frame (an intensity
 made up from the range, the incidence and the image; the time a profile takes depends on its
 size and inputs, not on what it learnt).
@@ -206,7 +206,7 @@ def _context_stages(xyz, cam, maps, out: dict, profile, rgb) -> int:
 
 
 def synthetic_profile(model, kind: str, width: int = 1242, height: int = 375):
-    """A ``context`` profile of every input (``kind`` ``gbm`` or ``mlp``, the form's own
+    """A ``context`` profile of its default inputs (``kind`` ``gbm`` or ``mlp``, the form's own
     settings) fitted on the procedural frame of that size: its intensity made up from the
     range, the incidence and the image's luminance, with noise (seeded)."""
     from nidar_mi.geometry import locate_in_cameras, sample_cameras

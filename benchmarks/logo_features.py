@@ -58,7 +58,7 @@ from nidar_mi.eval.metrics import spearman  # noqa: E402
 from nidar_mi.eval.scan_metrics import binned_spearman  # noqa: E402
 from nidar_mi.geometry.local_features import GEOMETRY_FEATURES  # noqa: E402
 from nidar_mi.profiles.image_context import IMAGE_FEATURES, RELATIVE_FEATURES  # noqa: E402
-from nidar_mi.profiles.inputs import NIDAR_MAPS, RETURN_FEATURES  # noqa: E402
+from nidar_mi.profiles.inputs import DEFAULT_INPUTS, NIDAR_MAPS, RETURN_FEATURES  # noqa: E402
 
 #: Version of the cached inputs (bump when an input's definition changes).
 CACHE_VERSION = 3
@@ -110,8 +110,8 @@ ROWS: dict[str, tuple[str, tuple[str, ...], str]] = {
         "intensity",
     ),
     "context": (
-        "+ NIDAR's R, S, pseudo-NIR, Î (the context profile)",
-        (*RETURN_FEATURES, "ring", *GEOMETRY_FEATURES, *IMAGE_FEATURES, *NIDAR_MAPS),
+        "+ NIDAR's R, S, pseudo-NIR, Î (the context profile's default inputs)",
+        DEFAULT_INPUTS,
         "intensity",
     ),
     "context_rank": (

@@ -28,8 +28,10 @@ beat the generic profiles (docs/NIDAR.md, "Calibrating from a few frames"). ``--
 fits the closed form of the generic profiles (gain and range exponent). ``--form context`` reads
 each return's named inputs (:mod:`nidar_mi.profiles.inputs`): range, elevation and incidence,
 the laser index, the local geometry of the scan around it, the image around its pixel and all
-of NIDAR's maps there; ``--inputs`` names the groups (default all: ``return,ring,geometry,
-image,nidar``; without ``image`` and ``nidar`` the profile needs no image); ``--kind mlp`` puts
+of NIDAR's maps there; ``--inputs`` names the groups (default: ``return,ring,geometry,image,
+nidar``, the recipe measured leave one group out; ``image_rel`` adds the image inputs with the
+exposure divided out; without ``image``, ``image_rel`` and ``nidar`` the profile needs no
+image); ``--kind mlp`` puts
 the small learned head (:mod:`nidar_mi.profiles.head`) in place of the trees, some thirty times
 cheaper to apply. The profile file
 (:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
@@ -97,8 +99,9 @@ def build_parser():
     p.add_argument(
         "--inputs",
         metavar="GROUP,...",
-        help="context: the input groups read, of return, ring, geometry, image, nidar "
-        "(default: all)",
+        help="context: the input groups read, of return, ring, geometry, image, image_rel, "
+        "nidar (default: return,ring,geometry,image,nidar; image_rel: the image inputs with "
+        "the exposure divided out)",
     )
     p.add_argument(
         "--kind",

@@ -262,7 +262,7 @@ def fit_scan_profile(
         provenance: extra provenance entries (the data, the command).
         progress: show a progress bar.
         **options: passed to :func:`fit_values_profile` (``incidence``) and the form's fit
-            (a ``context`` profile's ``features``: default every input, the image's too).
+            (a ``context`` profile's ``features``: default its default inputs, the image's among them).
     """
     values = lambda s: scan_values(model, s, branch)  # noqa: E731
     if form == "context":

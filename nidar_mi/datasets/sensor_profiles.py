@@ -95,7 +95,8 @@ GENERIC_RAW_GAIN = GENERIC_RAW_LEVEL * 10.0**2 / 0.1
 #: ahead of the ``gbm`` recipe of value, range, elevation and incidence on every group of the
 #: leave-one-group-out evaluation (docs/NIDAR.md, "Local geometry and image context").
 KITTI_PROFILE_FORM = "context"
-#: The ``context`` form's options of ``kitti-hdl64e`` (every input: its default ``features``).
+#: The ``context`` form's options of ``kitti-hdl64e`` (its default ``features``, the inputs of
+#: :data:`nidar_mi.profiles.inputs.DEFAULT_GROUPS`).
 KITTI_PROFILE_OPTIONS: dict = {"kind": "gbm"}
 #: Whether a ``gbm`` profile reads the returns' incidence by default (it lifted every
 #: leave-one-frame-out metric but the camera-map SSIM, docs/RESULTS.md).

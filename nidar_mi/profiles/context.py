@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import NidarError
 from .gbm import MAX_LEAVES, MAX_TREES, lightgbm_module, load_booster, predict_threads
 from .head import fit_head, head_from_dict, head_predict, head_to_dict
-from .inputs import GROUPS, IMAGE_GROUPS, feature_group
+from .inputs import DEFAULT_INPUTS, GROUPS, IMAGE_GROUPS, feature_group
 
 __all__ = [
     "DEFAULT_LEARNING_RATE",
@@ -82,8 +82,8 @@ class ContextFitOptions:
     """How a ``context`` map is fitted (keyword options of :func:`nidar_mi.profiles.fit`).
 
     Attributes:
-        features: the input names to read (:mod:`nidar_mi.profiles.inputs`); None: every
-            input the fitting data give.
+        features: the input names to read (:mod:`nidar_mi.profiles.inputs`); None: those
+            of :data:`~nidar_mi.profiles.inputs.DEFAULT_INPUTS` the fitting data give.
         target: ``"intensity"`` or ``"rank"`` (module docstring).
         kind: ``"gbm"`` (LightGBM) or ``"mlp"`` (the head of :mod:`nidar_mi.profiles.head`,
             its own fixed settings).
@@ -447,5 +447,6 @@ def _booster_predict(model: str, feats: tuple[str, ...]):
 
 
 def _known(context: Mapping[str, Any]) -> tuple[str, ...]:
-    """The names of ``context`` that are inputs, in the order of :data:`GROUPS`."""
-    return tuple(f for names in GROUPS.values() for f in names if f in context)
+    """The names of ``context`` that are default inputs
+    (:data:`~nidar_mi.profiles.inputs.DEFAULT_INPUTS`), in their order."""
+    return tuple(f for f in DEFAULT_INPUTS if f in context)

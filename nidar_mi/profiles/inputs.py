@@ -12,8 +12,9 @@ place in the scan (the local geometry). Each input has a name; the names fall in
   (multi-scale linearity / planarity / scatter, ``|n_z|``, height in the sensor frame and above
   the ground, neighbour spacing raw and over the range);
 * ``image``: colour, chromaticity, HSV, window means, texture and contrast at the return's
-  pixel, and those that scale with the exposure over the image's mean luminance
-  (:mod:`nidar_mi.profiles.image_context`); needs the camera image;
+  pixel (:mod:`nidar_mi.profiles.image_context`); needs the camera image;
+* ``image_rel``: those of them that scale with the exposure, over the image's mean luminance;
+  needs the camera image; not read by default (:data:`DEFAULT_GROUPS`);
 * ``nidar``: NIDAR's maps ``R``, ``S``, ``pseudo_nir`` and ``I_hat`` at the return (bilinear,
   as :func:`nidar_mi.geometry.sample_cameras` samples ``R``); needs the image and the networks.
 
@@ -41,6 +42,8 @@ from ..geometry.local_features import (
 from .image_context import IMAGE_FEATURES, RELATIVE_FEATURES, image_context
 
 __all__ = [
+    "DEFAULT_GROUPS",
+    "DEFAULT_INPUTS",
     "GROUPS",
     "IMAGE_GROUPS",
     "NIDAR_MAPS",
@@ -60,11 +63,18 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "return": RETURN_FEATURES,
     "ring": ("ring",),
     "geometry": GEOMETRY_FEATURES,
-    "image": (*IMAGE_FEATURES, *RELATIVE_FEATURES),
+    "image": IMAGE_FEATURES,
+    "image_rel": RELATIVE_FEATURES,
     "nidar": NIDAR_MAPS,
 }
 #: The groups that need the camera image.
-IMAGE_GROUPS = ("image", "nidar")
+IMAGE_GROUPS = ("image", "image_rel", "nidar")
+#: The groups a ``context`` profile reads unless told (``calibrate --form context``,
+#: ``kitti-hdl64e``): every group but ``image_rel``, the inputs measured leave one group out
+#: (docs/NIDAR.md, "Local geometry and image context").
+DEFAULT_GROUPS = ("return", "ring", "geometry", "image", "nidar")
+#: The inputs of :data:`DEFAULT_GROUPS`, in column order.
+DEFAULT_INPUTS = tuple(f for g in DEFAULT_GROUPS for f in GROUPS[g])
 
 
 def feature_group(name: str) -> str:

@@ -139,5 +139,30 @@ def test_fit_refuses_what_it_cannot_read():
         fit("context", ctx["R"], ctx["range_m"], y, context=ctx, kind="forest")
     with pytest.raises(NidarError, match="unknown profile input"):
         fit("context", ctx["R"], ctx["range_m"], y, context=ctx, features=("range_m", "x"))
-    assert set(GROUPS) == {"return", "ring", "geometry", "image", "nidar"}
+    assert set(GROUPS) == {"return", "ring", "geometry", "image", "image_rel", "nidar"}
     assert ContextMap.reads_context
+
+
+def test_the_exposure_divided_inputs_only_when_named():
+    """By default a context map reads the inputs of DEFAULT_GROUPS the data give (the recipe
+    measured leave one group out), not the image's exposure-divided copies; named, it reads
+    them."""
+    from nidar_mi.profiles.inputs import DEFAULT_GROUPS, DEFAULT_INPUTS
+
+    ctx, y, frame = _data(1500)
+    ctx = ctx | {"g_rel": ctx["r_lin"] * 2.0, "ring": np.zeros(len(y))}
+    m = fit("context", ctx["R"], ctx["range_m"], y, context=ctx | {"frame": frame}, trees=5)
+    order = ("range_m", "elevation_deg", "cos_incidence", "ring", "planarity_k20", "r_lin", "R")
+    assert m.features == order
+    assert set(m.features) <= set(DEFAULT_INPUTS) and "image_rel" not in DEFAULT_GROUPS
+    named = (*m.features, "g_rel")
+    m = fit(
+        "context",
+        ctx["R"],
+        ctx["range_m"],
+        y,
+        context=ctx | {"frame": frame},
+        trees=5,
+        features=named,
+    )
+    assert m.features == named and "image_rel" in m.groups and m.needs_image
