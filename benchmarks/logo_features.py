@@ -52,7 +52,7 @@ _HERE = os.path.dirname(os.path.abspath(__file__))
 if _HERE not in sys.path:
     sys.path.insert(0, _HERE)
 
-from calibrate_frames import FOLDERS, group_of  # noqa: E402
+from calibrate_frames import group_of  # noqa: E402
 
 from nidar_mi.eval.metrics import spearman  # noqa: E402
 from nidar_mi.eval.scan_metrics import binned_spearman  # noqa: E402
@@ -419,19 +419,15 @@ def _parse(argv):
 
 
 def main(argv=None) -> int:
-    from nidar_mi.datasets.paths import cache_dir, data_root
-    from nidar_mi.datasets.scans import load_scans
-    from nidar_mi.nidar.pipeline import NidarModel
+    from calibrate_frames import kitti_scans
+
+    from nidar_mi.datasets.paths import cache_dir
 
     args = _parse(argv)
     t0 = time.perf_counter()
-    root = Path(args.data) if args.data else data_root()
-    dirs = [root / s for s in FOLDERS if (root / s / "velodyne").is_dir()]
-    if not dirs:
-        print(f"no KITTI folders under {root}", file=sys.stderr)
+    scans, model = kitti_scans(args.data, args.weights)
+    if not scans:
         return 2
-    scans = load_scans(dirs, progress=False)
-    model = NidarModel.load(args.weights, device="cpu")
     cache = Path(args.cache) if args.cache else cache_dir("logo_features")
     inputs = load_inputs(scans, model, cache)
     groups: dict[str, list[dict]] = {}

@@ -143,11 +143,16 @@ def _near_points(p: np.ndarray, notes: list[str] | None) -> np.ndarray:
             f"{int((~near).sum())} point(s) beyond {MAX_COORDINATE:g} m: no neighbourhood "
             "descriptors, incidence taken as head-on"
         )
-        if notes is None:
-            warnings.warn(message, stacklevel=3)
-        else:
-            notes.append(message)
+        _note(message, notes, stacklevel=3)
     return near
+
+
+def _note(message: str, notes: list[str] | None, stacklevel: int) -> None:
+    """Warn ``message`` (``stacklevel`` as the caller's own), or append it to ``notes``."""
+    if notes is None:
+        warnings.warn(message, stacklevel=stacklevel + 1)
+    else:
+        notes.append(message)
 
 
 def local_geometry(
@@ -224,10 +229,7 @@ def _fill(q, near, ks, feats, normals, notes) -> None:
             f"{int(flat.sum())} of {len(q)} points have neighbours that coincide or lie on one "
             "line (no plane): incidence taken as head-on"
         )
-        if notes is None:
-            warnings.warn(message, stacklevel=4)
-        else:
-            notes.append(message)
+        _note(message, notes, stacklevel=4)
     feats["nz"][near] = np.abs(vec[2])
     k0 = min(SPACING_NEIGHBOURS, kmax)
     gap = np.linalg.norm(q[idx[:, 1:k0]] - q[:, None, :], axis=2).mean(axis=1)
