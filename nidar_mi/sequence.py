@@ -199,7 +199,9 @@ def _frame_times(
     return np.minimum(t0 + np.arange(frames) / rate, t1 - sweep_s)
 
 
-def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool = False) -> dict:
+def render_sequence(
+    options: SequenceOptions, out_dir: str, *, overwrite: bool = False, nested: bool = False
+) -> dict:
     """Render a scene along a trajectory into ``out_dir`` (layout: module docstring), in the
     active Mitsuba variant (:func:`nidar_mi.backend.set_variant`).
 
@@ -208,6 +210,8 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
         out_dir: the sequence folder (an earlier sequence folder is replaced whole, any other
             folder as :func:`nidar_mi.io.ownership.check_owner` says).
         overwrite: the user passed ``overwrite`` (:func:`~nidar_mi.io.ownership.check_owner`).
+        nested: ``out_dir`` is a cache inside an output of the caller's own (the drive study's
+            sweeps).
 
     Returns:
         The sequence manifest.
@@ -222,7 +226,8 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
     session.check_memory()
     _check_bounds(session, options, len(times), out_dir)
     rig = _rig(session)
-    with staged_directory(out_dir, owner=rf.SEQUENCE_OWNER, overwrite=overwrite) as stage:
+    publish = dict(owner=rf.SEQUENCE_OWNER, overwrite=overwrite, nested=nested)
+    with staged_directory(out_dir, **publish) as stage:
         frames = _render_frames(stage, session, options, traj, times, rig)
         frames.written += _write_poses_and_times(stage, frames.start_poses, times)
         request = _sequence_request(session, options, rate, len(times))
@@ -234,7 +239,8 @@ def render_sequence(options: SequenceOptions, out_dir: str, *, overwrite: bool =
 
 def ensure_sequence(options: SequenceOptions, out_dir: str) -> dict:
     """The manifest of ``out_dir`` when it holds this sequence complete, else
-    :func:`render_sequence` (replacing ``out_dir`` whole, as ``overwrite``).
+    :func:`render_sequence` (replacing ``out_dir`` whole, as ``overwrite``). ``out_dir`` is a
+    cache, inside an output of the caller's own or anywhere else.
 
     The request of the manifest is compared with that of ``options``: the frames' cache key
     (the scene file's hash included), the trajectory file's hash and every sequence option; a
@@ -257,7 +263,7 @@ def ensure_sequence(options: SequenceOptions, out_dir: str) -> dict:
         and all(os.path.isfile(os.path.join(out_dir, f)) for f in files)
     ):
         return manifest
-    return render_sequence(options, out_dir, overwrite=True)
+    return render_sequence(options, out_dir, overwrite=True, nested=True)
 
 
 def check_sequence(options: SequenceOptions):

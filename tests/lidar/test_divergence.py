@@ -148,17 +148,21 @@ def test_glass_pane_gives_its_own_echo(variant, write_scene):
 
 
 def test_ideal_beam_is_the_single_ray_scan(variant, write_scene):
-    """Without divergence every return mode is the one-ray scan (nothing to split)."""
+    """Without divergence every single-return mode is the one-ray scan (nothing to split), and
+    ``dual`` (which would silently be single) is refused in one line naming the fix."""
+    from nidar_mi.errors import NidarError
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
 
     base = _scene(0.0, quality=3).replace(f'value="{DIV_MRAD}"', 'value="0"')
     out = []
-    for mode in ("strongest", "dual"):
+    for mode in ("strongest", "first", "last"):
         L = load_scene(write_scene(base.replace('value="dual"', f'value="{mode}"')))
         out.append(scan(L.scene, L.lidars[0]))
-    assert not out[1].further
-    assert out[0].range[0, 0] == out[1].range[0, 0]
+    assert not any(r.further for r in out)
+    assert out[0].range[0, 0] == out[1].range[0, 0] == out[2].range[0, 0]
+    with pytest.raises(NidarError, match=r"'return_mode' 'dual' needs beam_divergence > 0"):
+        load_scene(write_scene(base))
 
 
 def test_echo_receiver_draws_are_per_beam_and_standard_normal():
