@@ -196,8 +196,7 @@ def build_config(args: argparse.Namespace):
     }
     cfg = TrainConfig.from_dict(
         {"irnet": irnet, "stn_optim": optim, "irnet_optim": optim, **top}, base=cfg
-    )
-    cfg.validate()
+    )  # checks every value, the flags' too
     return cfg
 
 

@@ -4,8 +4,12 @@ The parameters, their types, meanings, ranges and defaults are tabled in the doc
 plugin class, :class:`nidar_mi.plugins.lidar.LidarSensor`. Two pydantic
 models enforce them: :class:`LayoutParameters` which lasers (preset, layout, angles, calibration
 file, checked together), then :class:`SensorParameters` every other value, one by one, with the
-preset's defaults. :meth:`LidarConfig.from_mapping` turns the first error into the plugin's
-one-line message (``lidar '<id>': parameter '<name>' <why>``) and reads the laser table.
+preset's defaults. Ranges and choices are constraints of the fields' type hints (an
+``Annotated`` pydantic ``Field``, a ``Literal``); validators remain only for what pydantic does
+not parse (the comma-separated lists of the XML strings) and for rules between parameters.
+:meth:`LidarConfig.from_mapping` turns the first error into the plugin's one-line message
+(``lidar '<id>': parameter '<name>' <why>``, worded by :func:`nidar_mi.errors.validation_problem`)
+and reads the laser table.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
@@ -21,12 +25,13 @@ from pydantic import (
     BaseModel,
     BeforeValidator,
     ConfigDict,
+    Field,
     ValidationError,
     ValidationInfo,
     model_validator,
 )
 
-from ..errors import NidarError
+from ..errors import NidarError, validation_problem
 from .echoes import RETURN_MODES
 from .layouts import TABLE_FILES, LaserTable, preset_table, read_calibration, uniform_table
 from .pattern import PRESETS, BeamPattern, RisleyPattern, parse_angles
@@ -220,19 +225,14 @@ class LidarConfig:
         try:
             lasers = LayoutParameters.model_validate(dict(values))
         except ValidationError as e:
-            raise _first_error(e, fail) from None
+            raise _first_error(e, fail, LayoutParameters) from None
         table = _laser_table(lasers, fail)
         try:
             given = lasers.defaults(values.get("intensity_mode", "raw")) | dict(values)
             v = SensorParameters.model_validate(given)
         except ValidationError as e:
-            raise _first_error(e, fail) from None
-        if v.return_mode == "dual" and v.beam_divergence <= 0.0:
-            raise fail(
-                "return_mode",
-                "'dual' needs beam_divergence > 0 (a beam of no width has one return); set "
-                "beam_divergence or choose strongest, first or last",
-            )
+            raise _first_error(e, fail, SensorParameters) from None
+        # checked here, not in a model: the number of lasers is known once the table is read
         if table is not None:
             elevations = table.elevation_deg
         elif v.elevation_angles is not None:
@@ -265,72 +265,27 @@ class _Problem(ValueError):
         self.why, self.param = why, param
 
 
-def _number(*, lo: float | None = None, lo_open: bool = False, hi: float | None = None):
-    """A finite number in [lo, hi] (``lo_open``: > lo)."""
-
-    def check(raw: Any) -> float:
-        try:
-            v = float(raw)
-        except (TypeError, ValueError):
-            raise _Problem(f"must be a number (got '{raw}')") from None
-        if isinstance(raw, bool) or not math.isfinite(v):
-            raise _Problem(f"must be a finite number (got '{raw}')")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            raise _Problem(f"must be {'>' if lo_open else '>='} {lo:g} (got {v:g})")
-        if hi is not None and v > hi:
-            raise _Problem(f"must be <= {hi:g} (got {v:g})")
-        return v
-
-    return BeforeValidator(check)
-
-
-def _integer(*, lo: int, hi: int | None = None):
-    """A whole number in [lo, hi] (``10.0`` is 10, ``10.5`` is refused)."""
-
-    def check(raw: Any) -> int:
-        try:
-            f = float(raw)
-        except (TypeError, ValueError):
-            raise _Problem(f"must be an integer (got '{raw}')") from None
-        if not math.isfinite(f) or f != int(f):
-            raise _Problem(f"must be an integer (got '{raw}')")
-        if int(f) < lo:
-            raise _Problem(f"must be >= {lo} (got {int(f)})")
-        if hi is not None and int(f) > hi:
-            raise _Problem(f"must be <= {hi} (got {int(f)})")
-        return int(f)
-
-    return BeforeValidator(check)
-
-
-def _choice(options: tuple[str, ...]):
-    """One of ``options``, case and surrounding blanks ignored."""
-
-    def check(raw: Any) -> str:
-        v = str(raw).strip().lower()
-        if v not in options:
-            raise _Problem(f"must be one of {', '.join(options)} (got '{v}')")
-        return v
-
-    return BeforeValidator(check)
-
-
-def _boolean(raw: Any) -> bool:
+def _not_bool(raw: Any) -> Any:
+    """``raw``, unless a boolean (pydantic's lax mode reads ``true`` as the number 1)."""
     if isinstance(raw, bool):
-        return raw
-    text = str(raw).strip().lower()
-    if text not in ("true", "false"):
-        raise _Problem(f"must be true or false (got '{raw}')")
-    return text == "true"
+        raise _Problem(f"should be a valid number (got {raw!r})")
+    return raw
 
 
-def _preset(raw: Any) -> str | None:
-    if raw is None:
-        return None
-    preset = str(raw).strip().lower()
-    if preset not in PRESETS:
-        raise _Problem(f"is unknown: '{preset}' (known: {', '.join(PRESETS)})")
-    return preset
+def _word(raw: Any) -> Any:
+    """``raw`` in lower case without surrounding blanks when text (pydantic matches a
+    ``Literal`` or a boolean's words as written; XML values are matched ignoring both)."""
+    return raw.strip().lower() if isinstance(raw, str) else raw
+
+
+#: A number parameter (finite: the models refuse inf and NaN; its interval: a ``Field``).
+_Number = Annotated[float, BeforeValidator(_not_bool)]
+#: A whole-number parameter (``10.0`` is 10, ``10.5`` is refused; its interval: a ``Field``).
+_Whole = Annotated[int, BeforeValidator(_not_bool)]
+
+
+# The three list parameters are comma-separated text in XML, which pydantic does not split:
+# read by hand (their items' ranges, where a type can say them, stay in the field's type).
 
 
 def _angles(raw: Any) -> tuple[float, ...] | None:
@@ -343,15 +298,15 @@ def _angles(raw: Any) -> tuple[float, ...] | None:
 
 
 def _gains(raw: Any) -> tuple[float, ...] | None:
-    """Comma-separated per-laser gains, each finite and > 0."""
+    """Comma-separated per-laser gains, read (the field's type bounds each one)."""
     if raw is None:
         return None
     try:
         gains = tuple(float(g) for g in str(raw).replace(",", " ").split())
     except ValueError:
-        raise _Problem(f"must be comma-separated numbers (got '{raw}')") from None
-    if not gains or not all(math.isfinite(g) and g > 0 for g in gains):
-        raise _Problem("must be finite numbers > 0, one per laser")
+        gains = ()
+    if not gains:
+        raise _Problem(f"must be comma-separated numbers > 0, one per laser (got '{raw}')")
     return gains
 
 
@@ -374,13 +329,8 @@ def _response(raw: Any) -> tuple[tuple[float, float], ...] | None:
     return pairs
 
 
-def _optional(validator: BeforeValidator) -> BeforeValidator:
-    """``validator`` for a value given; None (not given) is left for the preset's default."""
-    return BeforeValidator(lambda raw: None if raw is None else validator.func(raw))
-
-
-def _text(raw: Any) -> str | None:
-    return None if raw is None else str(raw)
+#: A choice given in XML: case and surrounding blanks ignored.
+_CHOICE = BeforeValidator(_word)
 
 
 class LayoutParameters(BaseModel):
@@ -392,12 +342,12 @@ class LayoutParameters(BaseModel):
     or a calibration file), and checks that they go together.
     """
 
-    model_config = ConfigDict(extra="ignore")
+    model_config = ConfigDict(extra="ignore", coerce_numbers_to_str=True)
 
-    preset: Annotated[str | None, BeforeValidator(_preset)] = None
-    layout: Annotated[str | None, _optional(_choice(LAYOUTS))] = None
-    elevation_angles: Annotated[str | None, BeforeValidator(_text)] = None
-    calibration_file: Annotated[str | None, BeforeValidator(_text)] = None
+    preset: Annotated[Literal[tuple(PRESETS)] | None, _CHOICE] = None
+    layout: Annotated[Literal[LAYOUTS] | None, _CHOICE] = None
+    elevation_angles: str | None = None
+    calibration_file: str | None = None
 
     @model_validator(mode="after")
     def _together(self) -> LayoutParameters:
@@ -449,49 +399,64 @@ def _below_range_max(range_max: float, info: ValidationInfo) -> float:
 class SensorParameters(BaseModel):
     """Every other parameter of a ``lidar`` sensor (meanings, units, ranges, defaults:
     :class:`nidar_mi.plugins.lidar.LidarSensor`), each checked alone from its raw XML value,
-    in this order; ``range_min < range_max`` with ``range_max``. The preset-dependent values
-    have no default here: :meth:`LayoutParameters.defaults` gives them.
+    in this order; ``range_min < range_max`` with ``range_max``, and a ``dual`` return mode
+    with a beam divergence after all. The preset-dependent values have no default here:
+    :meth:`LayoutParameters.defaults` gives them.
     """
 
-    model_config = ConfigDict(extra="ignore", validate_default=True)
+    model_config = ConfigDict(extra="ignore", validate_default=True, allow_inf_nan=False)
 
     elevation_angles: Annotated[tuple[float, ...] | None, BeforeValidator(_angles)] = None
-    horizontal_resolution: Annotated[int, _integer(lo=1)]
-    fov_h: Annotated[float, _number(lo=0.0, lo_open=True, hi=360.0)] = 360.0
-    wavelength: Annotated[float, _number(lo=360.0, hi=1700.0)] = 905.0
-    gain: Annotated[float, _number(lo=0.0, lo_open=True)] = 1.0
-    laser_gains: Annotated[tuple[float, ...] | None, BeforeValidator(_gains)] = None
+    horizontal_resolution: Annotated[_Whole, Field(ge=1)]
+    fov_h: Annotated[_Number, Field(gt=0.0, le=360.0)] = 360.0
+    wavelength: Annotated[_Number, Field(ge=360.0, le=1700.0)] = 905.0
+    gain: Annotated[_Number, Field(gt=0.0)] = 1.0
+    laser_gains: Annotated[
+        tuple[Annotated[float, Field(gt=0.0)], ...] | None, BeforeValidator(_gains)
+    ] = None
     range_response: Annotated[
         tuple[tuple[float, float], ...] | None, BeforeValidator(_response)
     ] = None
-    intensity_offset: Annotated[float, _number(lo=0.0)] = 0.0
-    range_min: Annotated[float, _number(lo=0.0)]
-    range_max: Annotated[float, _number(lo=0.0, lo_open=True), AfterValidator(_below_range_max)]
-    atmospheric_extinction: Annotated[float, _number(lo=0.0)] = 0.0
-    intensity_mode: Annotated[str, _choice(INTENSITY_MODES)] = "raw"
-    beam_sample_quality: Annotated[int, _integer(lo=1, hi=MAX_SAMPLE_QUALITY)] = 3
-    noise_intensity_std: Annotated[float, _number(lo=0.0)] = 0.0
-    noise_range_std: Annotated[float, _number(lo=0.0)] = 0.0
-    detection_threshold: Annotated[float, _number(lo=0.0)]
-    receiver_noise_std: Annotated[float, _number(lo=0.0)]
-    dropout: Annotated[float, _number(lo=0.0, hi=1.0)] = 0.0
-    seed: Annotated[int, _integer(lo=0)] = 0
-    fov_h_centred: Annotated[bool, BeforeValidator(_boolean)] = False
-    rotation_rate: Annotated[float, _number(lo=0.0, lo_open=True, hi=100.0)] = 10.0
-    spin: Annotated[str, _choice(SPINS)] = "cw"
-    scan_start_azimuth: Annotated[float, _number(lo=-360.0, hi=360.0)] = 180.0
-    beam_divergence: Annotated[float, _number(lo=0.0, hi=100.0)] = 0.0
-    return_mode: Annotated[str, _choice(RETURN_MODES)] = "strongest"
-    return_separation: Annotated[float, _number(lo=0.0, lo_open=True)] = 0.5
+    intensity_offset: Annotated[_Number, Field(ge=0.0)] = 0.0
+    range_min: Annotated[_Number, Field(ge=0.0)]
+    range_max: Annotated[_Number, Field(gt=0.0), AfterValidator(_below_range_max)]
+    atmospheric_extinction: Annotated[_Number, Field(ge=0.0)] = 0.0
+    intensity_mode: Annotated[Literal[INTENSITY_MODES], _CHOICE] = "raw"
+    beam_sample_quality: Annotated[_Whole, Field(ge=1, le=MAX_SAMPLE_QUALITY)] = 3
+    noise_intensity_std: Annotated[_Number, Field(ge=0.0)] = 0.0
+    noise_range_std: Annotated[_Number, Field(ge=0.0)] = 0.0
+    detection_threshold: Annotated[_Number, Field(ge=0.0)]
+    receiver_noise_std: Annotated[_Number, Field(ge=0.0)]
+    dropout: Annotated[_Number, Field(ge=0.0, le=1.0)] = 0.0
+    seed: Annotated[_Whole, Field(ge=0)] = 0
+    fov_h_centred: Annotated[bool, _CHOICE] = False
+    rotation_rate: Annotated[_Number, Field(gt=0.0, le=100.0)] = 10.0
+    spin: Annotated[Literal[SPINS], _CHOICE] = "cw"
+    scan_start_azimuth: Annotated[_Number, Field(ge=-360.0, le=360.0)] = 180.0
+    beam_divergence: Annotated[_Number, Field(ge=0.0, le=100.0)] = 0.0
+    return_mode: Annotated[Literal[RETURN_MODES], _CHOICE] = "strongest"
+    return_separation: Annotated[_Number, Field(gt=0.0)] = 0.5
+
+    @model_validator(mode="after")
+    def _dual_needs_divergence(self) -> SensorParameters:
+        if self.return_mode == "dual" and self.beam_divergence <= 0.0:
+            raise _Problem(
+                "'dual' needs beam_divergence > 0 (a beam of no width has one return); set "
+                "beam_divergence or choose strongest, first or last",
+                "return_mode",
+            )
+        return self
 
 
-def _first_error(error: ValidationError, fail: Callable[[str, str], NidarError]) -> NidarError:
-    """The first problem of a validation, as the plugin's one-line message."""
+def _first_error(
+    error: ValidationError, fail: Callable[[str, str], NidarError], model: type[BaseModel]
+) -> NidarError:
+    """The first problem of a validation of ``model``, as the plugin's one-line message."""
     e = error.errors()[0]
     problem = (e.get("ctx") or {}).get("error")
     field = str(e["loc"][0]) if e["loc"] else "?"
-    if not isinstance(problem, _Problem):  # not one of ours: pydantic's own words
-        return fail(field, e["msg"])
+    if not isinstance(problem, _Problem):  # a constraint of the field's type
+        return fail(field, validation_problem(model, e))
     return fail(problem.param or field, problem.why)
 
 

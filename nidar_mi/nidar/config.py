@@ -1,10 +1,13 @@
 """Configuration of the NIDAR networks and their training.
 
-Plain dataclasses, one per component; every field is documented where it is declared.
+Plain dataclasses, one per component; every field is documented where it is declared, and its
+allowed values are part of its type hint (``Literal[...]`` for a choice, an ``Annotated``
+pydantic ``Field`` for an interval; a ``model_validator`` for a rule between fields).
 :class:`TrainConfig` gathers them, converts to and from JSON-compatible dicts (validated by
-pydantic against the type hints: unknown keys and values of the wrong type are errors; the
-resolved configuration is written next to every set of weights) and offers :meth:`TrainConfig.reduced`,
-a tiny configuration that runs the real training loop in seconds on a CPU (used by the tests).
+pydantic against the type hints: unknown keys, values of the wrong type and values outside
+their range are errors, one line naming each; the resolved configuration is written next to
+every set of weights), checks one built in Python (:meth:`TrainConfig.validate`) and offers
+:meth:`TrainConfig.reduced`, a tiny configuration that runs the real training loop in seconds on a CPU (used by the tests).
 
 Defaults follow the paper (Sec. IV, "Implementation Details") where it states a value: Adam,
 learning rate 1e-4, weight decay 1e-5, batch 8, 10 epochs, loss weights
@@ -19,11 +22,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any, Literal, get_args
 
-from ..errors import NidarError, check_seed
+from pydantic import Field, model_validator
+
+from ..errors import MAX_SEED, NidarError, validation_problem
 
 __all__ = [
     "STNConfig",
@@ -39,10 +43,12 @@ __all__ = [
     "dataclass_from_dict",
 ]
 
+#: The two spectral translation networks (:attr:`STNConfig.kind`).
+StnKind = Literal["cs_stereo", "lowres"]
+STN_KINDS: tuple[str, ...] = get_args(StnKind)
 #: IRNet structures of the paper's ablation (Table "IRNet structural ablation"):
 #: ``backbone`` alone, or ``backbone+head``.
-STN_KINDS = ("cs_stereo", "lowres")
-IRNET_VARIANTS = (
+IRNetVariant = Literal[
     "unet",
     "deeplabv3",
     "unet+3conv",
@@ -53,19 +59,30 @@ IRNET_VARIANTS = (
     "deeplabv3+unet",
     "deeplabv3+deeplabv3",
     "unet+deeplabv3",
-)
+]
+IRNET_VARIANTS: tuple[str, ...] = get_args(IRNetVariant)
 
 #: What IRNet receives: the STN's pseudo-NIR image, the RGB image itself (the paper's
 #: pseudo-NIR-vs-RGB diagnostic), or both stacked (``rgb+pseudo_nir``: 4 channels, the colour
 #: that carries the reflectance beside the pseudo-NIR that ``R · S`` explains), or the RGB's
 #: chromaticity (shading-free by construction) and the pseudo-NIR (``chroma+pseudo_nir``).
-INPUT_MODES = ("pseudo_nir", "rgb", "rgb+pseudo_nir", "chroma+pseudo_nir")
+InputMode = Literal["pseudo_nir", "rgb", "rgb+pseudo_nir", "chroma+pseudo_nir"]
+INPUT_MODES: tuple[str, ...] = get_args(InputMode)
 #: Channels of each input mode.
 INPUT_CHANNELS = {"pseudo_nir": 1, "rgb": 3, "rgb+pseudo_nir": 4, "chroma+pseudo_nir": 4}
 
+#: A whole number >= 1 (a count or a size).
+Count = Annotated[int, Field(ge=1)]
+#: A number >= 0 (a weight or a penalty).
+NonNegative = Annotated[float, Field(ge=0)]
+#: A share, in [0, 1].
+Share = Annotated[float, Field(ge=0, le=1)]
+#: A scale factor, in (0, 1].
+Scale = Annotated[float, Field(gt=0, le=1)]
 
-#: pydantic configuration of every config dataclass: unknown keys are errors.
-_STRICT = {"extra": "forbid"}
+#: pydantic configuration of every config dataclass: unknown keys and non-finite numbers are
+#: errors, and an instance handed to the validator is checked field by field.
+_STRICT = {"extra": "forbid", "allow_inf_nan": False, "revalidate_instances": "always"}
 
 
 @dataclass
@@ -74,23 +91,31 @@ class STNConfig:
 
     __pydantic_config__ = _STRICT
 
-    kind: str = "cs_stereo"
+    kind: StnKind = "cs_stereo"
     """One of :data:`STN_KINDS`: ``"cs_stereo"`` (:class:`~nidar_mi.nidar.stn.STN`, trained on
     renders) or ``"lowres"`` (:class:`~nidar_mi.nidar.stn_lowres.LowResSTN`, trained on real
     RGB/NIR photos; the shipped model's)."""
-    width: int = 16
+    width: Count = 16
     """Base channel count; encoder level ``i`` has ``width * 2**min(i, 5)`` channels
     (cs-stereo uses 16)."""
-    levels: int = 5
+    levels: Count = 5
     """Number of stride-2 encoder levels; the network stride is ``2**levels`` (cs-stereo
     uses 7 on 582x429 images; 5 suits 128-256 px crops)."""
-    num_outputs: int = 4
-    """Pyramid scales with a weight output (full, 1/2, 1/4, 1/8 in cs-stereo); all are
-    supervised during training."""
-    depth: int = 3
+    num_outputs: Count = 4
+    """Pyramid scales with a weight output (full, 1/2, 1/4, 1/8 in cs-stereo), at most
+    :attr:`levels`; all are supervised during training."""
+    depth: Count = 3
     """``lowres``: down-sampling steps of its UNet."""
-    down: int = 2
+    down: Count = 2
     """``lowres``: average-pooling factor of the image before its UNet."""
+
+    @model_validator(mode="after")
+    def _outputs_within_levels(self) -> STNConfig:
+        if self.num_outputs > self.levels:
+            raise ValueError(
+                f"num_outputs must lie in [1, levels] = [1, {self.levels}] (got {self.num_outputs})"
+            )
+        return self
 
 
 @dataclass
@@ -99,12 +124,12 @@ class PhotoConfig:
 
     __pydantic_config__ = _STRICT
 
-    crops_per_epoch: int = 2000
+    crops_per_epoch: Count = 2000
     """Random crops drawn per epoch (epochs are a bookkeeping unit: crops are drawn anew)."""
-    zoom_min: float = 0.5
+    zoom_min: Scale = 0.5
     """Crops cover ``crop_size / z`` pixels of the photo, ``z`` uniform in ``[zoom_min, 1]``,
     resized to ``crop_size``."""
-    render_fraction: float = 0.0
+    render_fraction: Share = 0.0
     """Share of crops drawn from the rendered RGB/NIR pairs of the dataset (0: photos only)."""
     ssim_weight: float = 0.5
     """Loss ``(1 - r) + ssim_weight · (1 - SSIM)`` after the per-crop gain and offset."""
@@ -116,15 +141,15 @@ class IRNetConfig:
 
     __pydantic_config__ = _STRICT
 
-    variant: str = "unet+deeplabv3"
+    variant: IRNetVariant = "unet+deeplabv3"
     """One of :data:`IRNET_VARIANTS`; the paper's model is ``unet+deeplabv3``."""
-    input: str = "pseudo_nir"
+    input: InputMode = "pseudo_nir"
     """One of :data:`INPUT_MODES`."""
-    width: int = 16
+    width: Count = 16
     """Base channel count of every sub-network (package choice, sized for CPU training)."""
-    unet_depth: int = 4
+    unet_depth: Count = 4
     """Number of down-sampling steps of a UNet (its stride is ``2**unet_depth``)."""
-    output_stride: int = 8
+    output_stride: Literal[2, 4, 8, 16, 32] = 8
     """Output stride of a DeepLabV3 network (dilated convolutions replace striding beyond
     it)."""
     aspp_rates: tuple[int, ...] = (6, 12, 18)
@@ -134,7 +159,8 @@ class IRNetConfig:
 
 
 #: What the supervised reflectance term compares R with (``LossConfig.r_target``).
-R_TARGETS = ("monostatic", "surface", "colour")
+RTarget = Literal["monostatic", "surface", "colour"]
+R_TARGETS: tuple[str, ...] = get_args(RTarget)
 
 
 @dataclass
@@ -159,26 +185,26 @@ class LossConfig:
     """Weight of the masked L2 inside L_int."""
     w_ssim: float = 0.2
     """Weight of the masked SSIM term inside L_int."""
-    scales: tuple[float, ...] = (1.0, 0.5, 0.25)
-    """Scales of the masked multi-scale L1."""
+    scales: tuple[Scale, ...] = (1.0, 0.5, 0.25)
+    """Scales of the masked multi-scale L1, each in (0, 1]."""
     gamma: float = 10.0
     """Edge sensitivity of the smoothness weights exp(-gamma |grad I|) (package choice)."""
     shading_pool: int = 5
     """Kernel size of the AvgPool in the shading prior (package choice)."""
     m0: float = 0.5
     """Target mean of R."""
-    lambda_r_true: float = 0.0
+    lambda_r_true: NonNegative = 0.0
     """Weight of the supervised reflectance term ``mean |R - R_true|`` over the pixels with a
     surface (``R_true >= 1e-3``): rendered frames only, which know the true reflectance at the
     LiDAR wavelength (package addition; :func:`~nidar_mi.nidar.losses.reflectance_supervision_loss`)."""
-    r_target: str = "monostatic"
+    r_target: RTarget = "monostatic"
     """What ``lambda_r_true`` supervises R with, on rendered frames (:data:`R_TARGETS`):
     ``"monostatic"`` the frame's ``R_true`` (π·f_r(ω, ω) along the camera ray: gloss, opposition
     surge and incidence included); ``"surface"`` its ``R_surface`` (the surface's own diffuse
     reflectance at λ); ``"colour"`` the ρ(λ) its visible albedo colour ``A_true`` predicts
     (:func:`~nidar_mi.materials.visible_albedo.colour_reflectance_map`, fitted on the earthlib
     library): a target the image fixes once the shading is removed (package addition)."""
-    lambda_s_true: float = 0.0
+    lambda_s_true: NonNegative = 0.0
     """Weight of the supervised shading term, scale-invariant in log space (the network
     input's exposure normalisation leaves the scale of ``S`` free): rendered frames only
     (package addition; :func:`~nidar_mi.nidar.losses.shading_supervision_loss`)."""
@@ -197,17 +223,17 @@ class OptimConfig:
 
     __pydantic_config__ = _STRICT
 
-    lr: float = 1e-4
+    lr: Annotated[float, Field(gt=0)] = 1e-4
     """Learning rate."""
-    weight_decay: float = 1e-5
+    weight_decay: NonNegative = 1e-5
     """Adam weight decay (L2 penalty)."""
-    batch_size: int = 8
+    batch_size: Count = 8
     """Frames per step (incomplete last batches of an epoch are dropped)."""
-    epochs: int = 10
+    epochs: Count = 10
     """Passes over the training split."""
-    max_steps: int | None = None
+    max_steps: Count | None = None
     """Stop after this many optimiser steps in total (None: run all epochs)."""
-    schedule: str = "constant"
+    schedule: Literal["constant", "onecycle"] = "constant"
     """Learning rate over the run: ``"constant"`` or ``"onecycle"`` (a cosine rise from
     ``lr / 25`` to ``lr`` over the first 10 % of the steps, then a cosine fall to
     ``lr / 25 / 1e4``; :func:`nidar_mi.nidar.loop.learning_rate`)."""
@@ -231,36 +257,36 @@ class TrainConfig:
     """Optimiser of the IRNet stage (paper: Adam 1e-4, wd 1e-5, batch 8, 10 epochs)."""
     photos: PhotoConfig = field(default_factory=PhotoConfig)
     """Training of a ``lowres`` STN on real RGB/NIR photos (``train --photos``)."""
-    crop_size: int = 256
+    crop_size: Count = 256
     """Side of the square random training crops (centre crops for validation), in pixels at
     the network resolution (:attr:`scale`); a multiple of every network stride. With
     :attr:`crop_width` it is the crops' height."""
-    crop_width: int | None = None
+    crop_width: Count | None = None
     """Width of the training crops in pixels at the network resolution (None: square crops of
     :attr:`crop_size`); a multiple of every network stride (package choice: wide crops suit
     the wide, short band of a camera image that LiDAR returns cover)."""
-    scale: float = 1.0
+    scale: Scale = 1.0
     """Network resolution relative to the frames, in (0, 1]. IRNet trains on frames resized to
     ``round(scale · H) x round(scale · W)`` (the input area-averaged as at inference, the
     sparse intensity re-projected with the nearest return winning each pixel), and
     :class:`~nidar_mi.nidar.pipeline.NidarModel` runs at this scale by default. The STN stage
     trains at full resolution."""
-    render_scale: float = 1.0
+    render_scale: Scale = 1.0
     """Network resolution of rendered frames mixed into an IRNet run on real frames
     (``train --renders``), relative to the renders, in (0, 1] (package choice: renders are
     smaller than camera frames; 1.0 on 320 x 192 renders matches KITTI at 0.25 in pixels per
     degree)."""
-    threads: int | None = None
+    threads: Count | None = None
     """torch intra-op threads while training (None: torch's default). On a loaded machine one
     thread can be several times faster than more (OpenMP threads spin-wait for busy cores);
     the result does not depend on it beyond floating-point summation order."""
-    seed: int = 0
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = 0
     """Seed of weight initialisation, shuffling, crops and flips."""
-    device: str = "auto"
+    device: Annotated[str, Field(pattern=r"^(auto|cpu|cuda(:\d+)?)$")] = "auto"
     """``"auto"`` (CUDA when available, else CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``."""
-    checkpoint_every: int = 500
+    checkpoint_every: Count = 500
     """Write a resumable checkpoint every this many steps (and at the end of every epoch)."""
-    keep_checkpoints: int = 3
+    keep_checkpoints: Count = 3
     """Checkpoints kept per stage (older ones are deleted)."""
     num_workers: int = 0
     """DataLoader worker processes."""
@@ -290,79 +316,13 @@ class TrainConfig:
         return int(self.crop_size), int(self.crop_width or self.crop_size)
 
     def validate(self) -> None:
-        """Raise :class:`NidarError` for values that cannot work."""
-        if self.irnet.variant not in IRNET_VARIANTS:
-            raise NidarError(
-                f"unknown IRNet variant {self.irnet.variant!r}; choose one of "
-                + ", ".join(IRNET_VARIANTS)
-            )
-        if self.irnet.input not in INPUT_MODES:
-            raise NidarError(
-                f"unknown IRNet input {self.irnet.input!r}; choose one of " + ", ".join(INPUT_MODES)
-            )
-        if self.stn.kind not in STN_KINDS:
-            raise NidarError(
-                f"unknown STN kind {self.stn.kind!r}; choose one of " + ", ".join(STN_KINDS)
-            )
-        if not 0.0 < self.photos.zoom_min <= 1.0:
-            raise NidarError(f"photos.zoom_min must lie in (0, 1], got {self.photos.zoom_min}")
-        if not 0.0 <= self.photos.render_fraction <= 1.0:
-            raise NidarError(
-                f"photos.render_fraction must lie in [0, 1], got {self.photos.render_fraction}"
-            )
-        if self.stn.num_outputs < 1 or self.stn.num_outputs > self.stn.levels:
-            raise NidarError("stn.num_outputs must lie in [1, stn.levels]")
-        if self.loss.r_target not in R_TARGETS:
-            raise NidarError(
-                f"unknown loss.r_target {self.loss.r_target!r}; choose one of "
-                + ", ".join(R_TARGETS)
-            )
-        if self.irnet.output_stride not in (2, 4, 8, 16, 32):
-            raise NidarError("irnet.output_stride must be 2, 4, 8, 16 or 32")
-        for name, value in (
-            ("stn.width", self.stn.width),
-            ("stn.levels", self.stn.levels),
-            ("stn.depth", self.stn.depth),
-            ("stn.down", self.stn.down),
-            ("photos.crops_per_epoch", self.photos.crops_per_epoch),
-            ("irnet.width", self.irnet.width),
-            ("irnet.unet_depth", self.irnet.unet_depth),
-            ("crop_size", self.crop_size),
-            ("crop_width", 1 if self.crop_width is None else self.crop_width),
-            ("threads", 1 if self.threads is None else self.threads),
-            ("checkpoint_every", self.checkpoint_every),
-            ("keep_checkpoints", self.keep_checkpoints),
-            ("stn_optim.batch_size", self.stn_optim.batch_size),
-            ("irnet_optim.batch_size", self.irnet_optim.batch_size),
-        ):
-            if int(value) < 1:
-                raise NidarError(f"{name} must be a positive integer, got {value}")
-        for name, optim in (("stn_optim", self.stn_optim), ("irnet_optim", self.irnet_optim)):
-            if int(optim.epochs) < 1:
-                raise NidarError(f"{name}.epochs must be >= 1, got {optim.epochs}")
-            if optim.max_steps is not None and int(optim.max_steps) < 1:
-                raise NidarError(f"{name}.max_steps must be >= 1 (or null), got {optim.max_steps}")
-            if optim.schedule not in ("constant", "onecycle"):
-                raise NidarError(
-                    f"{name}.schedule must be 'constant' or 'onecycle', got {optim.schedule!r}"
-                )
-            if not (math.isfinite(optim.lr) and optim.lr > 0):
-                raise NidarError(f"{name}.lr must be a positive number, got {optim.lr}")
-            if not (math.isfinite(optim.weight_decay) and optim.weight_decay >= 0):
-                raise NidarError(f"{name}.weight_decay must be >= 0, got {optim.weight_decay}")
-        check_seed(self.seed, "seed")
-        if not (math.isfinite(self.scale) and 0 < self.scale <= 1):
-            raise NidarError(f"scale must lie in (0, 1], got {self.scale}")
-        if not (math.isfinite(self.render_scale) and 0 < self.render_scale <= 1):
-            raise NidarError(f"render_scale must lie in (0, 1], got {self.render_scale}")
-        for name in ("lambda_r_true", "lambda_s_true"):
-            value = getattr(self.loss, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise NidarError(f"loss.{name} must be >= 0, got {value}")
-        if any(s <= 0 or s > 1 for s in self.loss.scales):
-            raise NidarError("loss.scales must lie in (0, 1]")
-        if self.device != "auto" and not self.device.startswith(("cpu", "cuda")):
-            raise NidarError(f"device must be 'auto', 'cpu' or 'cuda[:N]', got {self.device!r}")
+        """Check a configuration built in Python (:meth:`from_dict` checks its input itself).
+
+        Raises:
+            NidarError: one line naming each field whose value is outside its type, range or
+                choices, with what it allows and the value given.
+        """
+        _validated(type(self), "config", lambda adapter: adapter.validate_python(self, strict=True))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-compatible nested dict (tuples become lists)."""
@@ -406,39 +366,37 @@ def _adapter(kind: type):
     return TypeAdapter(kind)
 
 
-def _problem(error: dict[str, Any]) -> str:
-    """One pydantic validation error in words."""
-    kind = error["type"]
-    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
-        return "unknown key"
-    if kind in ("dataclass_type", "dict_type", "model_type"):
-        return "must be a JSON object"
-    return f"{error['msg'].replace('Input should', 'should')} (got {error['input']!r})"
-
-
 def dataclass_from_dict(kind: type, data: Any, where: str = "config") -> Any:
     """Build config dataclass ``kind`` (nested dataclasses too) from a JSON-compatible dict.
 
     Validated by pydantic against the dataclass's type hints, with JSON's types taken strictly
     (an int field takes no ``2.5``, ``"2"`` or ``true``; a float field takes an int; a tuple
-    field takes a list). Missing fields take their defaults.
+    field takes a list), and against the ranges and choices the hints set. Missing fields take
+    their defaults.
 
     Raises:
-        NidarError: ``data`` is not a dict, has keys ``kind`` does not know, or values of the
-            wrong type; one line naming each offending key under ``where``.
+        NidarError: ``data`` is not a dict, has keys ``kind`` does not know, values of the
+            wrong type or out of range; one line naming each offending key under ``where``.
     """
-    from pydantic import ValidationError
-
     if not isinstance(data, dict):
         raise NidarError(f"{where} must be a JSON object, got {type(data).__name__}")
     try:
         text = json.dumps(data, allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise NidarError(f"{where} is not JSON data: {exc}") from None
+    return _validated(kind, where, lambda adapter: adapter.validate_json(text, strict=True))
+
+
+def _validated(kind: type, where: str, validate) -> Any:
+    """``validate(adapter)`` with the pydantic adapter of ``kind``; a validation error as one
+    line, ``<where>.<key>: <problem>`` for each offending key (:func:`validation_problem`)."""
+    from pydantic import ValidationError
+
     try:
-        return _adapter(kind).validate_json(text, strict=True)
+        return validate(_adapter(kind))
     except ValidationError as exc:
         problems = [
-            f"{'.'.join([where, *map(str, e['loc'])])}: {_problem(e)}" for e in exc.errors()
+            f"{'.'.join([where, *map(str, e['loc'])])}: {validation_problem(kind, e)}"
+            for e in exc.errors()
         ]
         raise NidarError("; ".join(problems)) from None

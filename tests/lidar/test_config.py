@@ -92,6 +92,74 @@ def test_invalid_values_name_the_parameter(values, param):
 
 
 @pytest.mark.parametrize(
+    "values, message",
+    [
+        # an interval, one bound or two, open or closed
+        ({"gain": 0}, "parameter 'gain' must be > 0 (got 0)"),
+        ({"horizontal_resolution": 0}, "parameter 'horizontal_resolution' must be >= 1 (got 0)"),
+        ({"dropout": 1.5}, "parameter 'dropout' must lie in [0, 1] (got 1.5)"),
+        ({"fov_h": 400}, "parameter 'fov_h' must lie in (0, 360] (got 400)"),
+        ({"rotation_rate": 0}, "parameter 'rotation_rate' must lie in (0, 100] (got 0)"),
+        (
+            {"beam_sample_quality": 13},
+            "parameter 'beam_sample_quality' must lie in [1, 12] (got 13)",
+        ),
+        (
+            {"elevation_angles": "-10, -30", "laser_gains": "1, 0"},
+            "parameter 'laser_gains' must be > 0 (got 0)",
+        ),
+        # a choice
+        ({"spin": "left"}, "parameter 'spin' must be one of cw, ccw (got 'left')"),
+        ({"layout": "grid"}, "parameter 'layout' must be one of uniform, per_laser (got 'grid')"),
+        (
+            {"intensity_mode": "linear"},
+            "parameter 'intensity_mode' must be one of raw, compensated (got 'linear')",
+        ),
+        (
+            {"return_mode": "all"},
+            "parameter 'return_mode' must be one of strongest, first, last, dual (got 'all')",
+        ),
+        # the wrong kind of value
+        (
+            {"horizontal_resolution": 10.5},
+            "parameter 'horizontal_resolution' should be a valid integer (got 10.5)",
+        ),
+        (
+            {"receiver_noise_std": "nan"},
+            "parameter 'receiver_noise_std' should be a finite number (got 'nan')",
+        ),
+        ({"gain": True}, "parameter 'gain' should be a valid number (got True)"),
+        (
+            {"fov_h_centred": "maybe"},
+            "parameter 'fov_h_centred' should be a valid boolean (got 'maybe')",
+        ),
+    ],
+)
+def test_a_bad_value_is_one_line_naming_parameter_allowed_values_and_value(values, message):
+    with pytest.raises(NidarError) as e:
+        LidarConfig.from_mapping("l", values)
+    assert str(e.value) == f"lidar 'l': {message}"
+
+
+def test_xml_spellings_of_choices_and_numbers_are_read():
+    c = LidarConfig.from_mapping(
+        "l",
+        {
+            "spin": " CCW ",
+            "fov_h_centred": "TRUE",
+            "horizontal_resolution": "10.0",
+            "preset": "HDL64E",
+        },
+    )
+    assert (c.spin, c.fov_h_centred, c.horizontal_resolution, c.preset) == (
+        "ccw",
+        True,
+        10,
+        "hdl64e",
+    )
+
+
+@pytest.mark.parametrize(
     "prop, param",
     [
         ('<string name="preset" value="nope"/>', "preset"),

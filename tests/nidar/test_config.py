@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 
 from nidar_mi.errors import NidarError
-from nidar_mi.nidar.config import IRNET_VARIANTS, TrainConfig
+from nidar_mi.nidar.config import IRNET_VARIANTS, IRNetConfig, LossConfig, STNConfig, TrainConfig
 
 
 def test_defaults_are_the_papers_settings():
@@ -113,13 +114,88 @@ def test_shipped_config_json_loads():
 @pytest.mark.parametrize(
     "change,message",
     [
-        ({"irnet": {"variant": "resnet"}}, "unknown IRNet variant"),
-        ({"irnet": {"input": "nir"}}, "unknown IRNet input"),
-        ({"crop_size": 0}, "crop_size"),
-        ({"device": "tpu"}, "device"),
-        ({"loss": {"scales": [1.0, 2.0]}}, "scales"),
+        # a choice: every allowed value and the one given
+        (
+            {"irnet": {"variant": "resnet"}},
+            "config.irnet.variant: must be one of " + ", ".join(IRNET_VARIANTS) + " (got 'resnet')",
+        ),
+        (
+            {"irnet": {"input": "nir"}},
+            "config.irnet.input: must be one of pseudo_nir, rgb, rgb+pseudo_nir, "
+            "chroma+pseudo_nir (got 'nir')",
+        ),
+        (
+            {"stn": {"kind": "nope"}},
+            "config.stn.kind: must be one of cs_stereo, lowres (got 'nope')",
+        ),
+        (
+            {"loss": {"r_target": "albedo"}},
+            "config.loss.r_target: must be one of monostatic, surface, colour (got 'albedo')",
+        ),
+        (
+            {"irnet_optim": {"schedule": "cosine"}},
+            "config.irnet_optim.schedule: must be one of constant, onecycle (got 'cosine')",
+        ),
+        (
+            {"irnet": {"output_stride": 3}},
+            "config.irnet.output_stride: must be one of 2, 4, 8, 16, 32 (got 3)",
+        ),
+        # an interval: both bounds, open or closed, and the value given
+        ({"scale": 1.5}, r"config.scale: must lie in (0, 1] (got 1.5)"),
+        ({"render_scale": 0.0}, r"config.render_scale: must lie in (0, 1] (got 0)"),
+        ({"photos": {"zoom_min": 0}}, r"config.photos.zoom_min: must lie in (0, 1] (got 0)"),
+        (
+            {"photos": {"render_fraction": 2}},
+            "config.photos.render_fraction: must lie in [0, 1] (got 2)",
+        ),
+        ({"loss": {"scales": [1.0, 2.0]}}, "config.loss.scales.1: must lie in (0, 1] (got 2)"),
+        ({"seed": -1}, "config.seed: must lie in [0, 4294967295] (got -1)"),
+        # one bound
+        ({"crop_size": 0}, "config.crop_size: must be >= 1 (got 0)"),
+        ({"crop_width": 0}, "config.crop_width: must be >= 1 (got 0)"),
+        ({"stn_optim": {"max_steps": 0}}, "config.stn_optim.max_steps: must be >= 1 (got 0)"),
+        ({"irnet_optim": {"lr": 0}}, "config.irnet_optim.lr: must be > 0 (got 0)"),
+        ({"loss": {"lambda_s_true": -0.1}}, "config.loss.lambda_s_true: must be >= 0 (got -0.1)"),
+        # a pattern
+        ({"device": "tpu"}, r"config.device: must match ^(auto|cpu|cuda(:\d+)?)$ (got 'tpu')"),
+        # a rule between two fields
+        (
+            {"stn": {"levels": 3, "num_outputs": 4}},
+            "config.stn: num_outputs must lie in [1, levels] = [1, 3] (got 4)",
+        ),
     ],
 )
-def test_validate(change, message):
-    with pytest.raises(NidarError, match=message):
-        TrainConfig.from_dict(change).validate()
+def test_a_bad_value_is_one_line_naming_key_allowed_values_and_value(change, message):
+    with pytest.raises(NidarError) as info:
+        TrainConfig.from_dict(change)
+    assert str(info.value) == message
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"scale": 1.5},
+        {"irnet": IRNetConfig(variant="resnet")},
+        {"stn": STNConfig(levels=2, num_outputs=3)},
+        {"loss": LossConfig(scales=(1.0, 0.0))},
+        {"seed": 2**32},
+    ],
+)
+def test_validate_checks_a_config_built_in_python_as_from_dict_does(change):
+    cfg = dataclasses.replace(TrainConfig(), **change)
+    with pytest.raises(NidarError) as built:
+        cfg.validate()
+    with pytest.raises(NidarError) as read:
+        TrainConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
+    assert str(built.value) == str(read.value) and "\n" not in str(built.value)
+
+
+def test_validate_refuses_what_json_cannot_carry():
+    with pytest.raises(
+        NidarError, match=r"^config\.loss\.gamma: should be a finite number \(got nan\)$"
+    ):
+        dataclasses.replace(TrainConfig(), loss=LossConfig(gamma=float("nan"))).validate()
+    with pytest.raises(
+        NidarError, match=r"^config\.crop_size: should be a valid integer \(got 2\.5\)$"
+    ):
+        dataclasses.replace(TrainConfig(), crop_size=2.5).validate()

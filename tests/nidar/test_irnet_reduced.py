@@ -145,7 +145,7 @@ def test_model_infers_at_its_trained_scale_and_returns_full_size_maps(kitti_data
 
 def test_config_rejects_a_bad_scale_and_a_crop_off_the_stride(kitti_data, tmp_path):
     data, stn = kitti_data
-    with pytest.raises(NidarError, match="scale must lie in"):
+    with pytest.raises(NidarError, match=r"^config\.scale: must lie in \(0, 1\] \(got 1\.5\)$"):
         dataclasses.replace(_cfg(), scale=1.5).validate()
     with pytest.raises(NidarError, match="crop_size 50 is not a multiple"):
         train_irnet(dataclasses.replace(_cfg(), crop_width=50), data, tmp_path / "x", stn)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from nidar_mi.errors import NidarError
 from nidar_mi.nidar.config import STNConfig, TrainConfig
 from nidar_mi.nidar.fold import prepare_for_inference
 from nidar_mi.nidar.infer import pseudo_nir
@@ -56,9 +57,8 @@ def test_stride_and_output_size():
 
 def test_config_builds_the_kind():
     assert isinstance(build_stn(STNConfig(kind="lowres", width=4, depth=2, down=2)), LowResSTN)
-    cfg = TrainConfig.from_dict({"stn": {"kind": "nope"}})
-    with pytest.raises(Exception, match="unknown STN kind"):
-        cfg.validate()
+    with pytest.raises(NidarError, match=r"^config\.stn\.kind: must be one of cs_stereo, lowres"):
+        TrainConfig.from_dict({"stn": {"kind": "nope"}})
 
 
 def test_folding_keeps_outputs_and_reduced_scale_keeps_the_size():

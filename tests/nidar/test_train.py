@@ -149,7 +149,9 @@ def test_cli_user_errors_are_one_line(tmp_path, capsys):
         code == 2 and err.count("\n") == 1 and err.startswith("error:") and "Traceback" not in err
     )
     code = main([str(tmp_path), str(tmp_path / "out"), "--variant", "resnet", "-q"])
-    assert code == 2 and "unknown IRNet variant" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert code == 2 and "config.irnet.variant: must be one of unet, " in err
+    assert err.count("\n") == 1 and err.rstrip().endswith("(got 'resnet')")
     assert not (tmp_path / "out").exists()
 
 

@@ -89,7 +89,9 @@ def test_a_reflectance_target_the_frames_lack_is_refused(data_dir, tmp_path):
             _cfg(lambda_r_true=1.0, r_target="colour"), old, tmp_path / "out", progress=False
         )
     assert not (tmp_path / "out").exists()
-    with pytest.raises(NidarError, match="unknown loss.r_target 'albedo'"):
+    with pytest.raises(
+        NidarError, match=r"^config\.loss\.r_target: must be one of .* \(got 'albedo'\)$"
+    ):
         _cfg(lambda_r_true=1.0, r_target="albedo").validate()
 
 
