@@ -1,7 +1,8 @@
 """NIDAR inference speed: seconds per frame for pseudo-NIR, IRNet and the point assignment.
 
 ``python benchmarks/bench_nidar.py [--threads 2] [--repeats 5] [--sizes 1242x375,1600x900]
-[--weights DIR] [--configs before,fold,fold+cl,fold+cl+half] [--devices auto] [--json out.json]``
+[--weights DIR] [--configs before,fold,fold+cl,fold+cl+half] [--devices auto]
+[--profile FILE|context-gbm|context-mlp] [--json out.json]``
 
 Per frame, image size and device, the stages are timed separately, and the whole frame (after one warm-up call per
 configuration, size and device, ``repeats`` rounds that run every cell in turn, so that all see
@@ -16,11 +17,21 @@ the same machine load; medians of the wall time and of the process CPU time):
   only the maps it samples, and on the CPU they run beside the assignment's geometry
   (locating the points in the camera, their incidence); the figure a frame costs;
 * ``assign``: :meth:`nidar_mi.nidar.pipeline.NidarModel.point_intensity` with precomputed maps,
-  timed in its three stages (``assign`` is their sum): ``sampling`` (R brought to the host, the
+  timed in its stages (``assign`` is their sum): ``sampling`` (R brought to the host, the
   point cloud projected into the camera, the occlusion test against the cloud's own z-buffer
-  and bilinear sampling of R: :func:`nidar_mi.geometry.sample_cameras`), ``normals`` (the incidence cosines of the
-  observed points, :func:`nidar_mi.geometry.incidence_cosine`) and ``profile`` (the weights'
-  default profile at the observed points).
+  and bilinear sampling of R: :func:`nidar_mi.geometry.sample_cameras`), ``normals`` (the
+  incidence cosines of the observed points, :func:`nidar_mi.geometry.incidence_cosine`; for a
+  ``context`` profile their whole local geometry,
+  :func:`nidar_mi.geometry.local_features.local_geometry`), ``image`` (a ``context`` profile's
+  image inputs and NIDAR's maps at the observed points,
+  :func:`nidar_mi.profiles.inputs.camera_inputs`; 0 for another profile) and ``profile`` (the
+  profile at the observed points).
+
+``--profile``: the profile applied (default: the weights' own): a profile file, or
+``context-gbm`` / ``context-mlp``, a ``context`` profile of its default inputs (its trees, or its small
+head) with the form's own settings, fitted on the benchmark's procedural frame (an intensity
+made up from the range, the incidence and the image; the time a profile takes depends on its
+size and inputs, not on what it learnt).
 
 ``--devices``: ``cpu``, ``cuda`` or both, comma-separated; ``auto`` (default): the CPU, and
 CUDA when torch sees a GPU. The networks and the assignment run on that device.
@@ -55,9 +66,11 @@ __all__ = ["build_parser", "main", "run_benchmark", "street_image", "hdl64e_clou
 
 DEFAULT_SIZES = ((1242, 375), (1600, 900))
 DEFAULT_CONFIGS = ("before", "fold", "fold+cl", "fold+cl+half")
-STEPS = ("pseudo_nir", "irnet", "sampling", "normals", "profile")
+STEPS = ("pseudo_nir", "irnet", "sampling", "normals", "image", "profile")
 #: The stages of the point assignment, summed as ``assign``.
-ASSIGN = ("sampling", "normals", "profile")
+ASSIGN = ("sampling", "normals", "image", "profile")
+#: The context profiles ``--profile`` can fit on the procedural frame, by name -> model kind.
+SYNTHETIC_PROFILES = {"context-gbm": "gbm", "context-mlp": "mlp"}
 
 
 def street_image(width: int, height: int, seed: int = 0) -> np.ndarray:
@@ -131,11 +144,16 @@ def _time(fn, sync=None) -> tuple[float, float, object]:
     return time.perf_counter() - t0, time.process_time() - c0, out
 
 
-def _assign_stages(model, xyz, cam, maps, out: dict):
-    """:meth:`NidarModel.point_intensity` of the default profile, stage by stage, timed into
-    ``out``; ``maps`` on the networks' device (``sampling`` brings R to the host). Returns the
-    number of observed points."""
+def _assign_stages(model, xyz, cam, maps, out: dict, profile=None, rgb=None):
+    """:meth:`NidarModel.point_intensity` of ``profile`` (None: the default one), stage by
+    stage, timed into ``out``; ``maps`` on the networks' device (``sampling`` brings R to the
+    host; with ``pseudo_nir``; ``rgb`` the image, for a ``context`` profile). Returns the number
+    of observed points."""
     from nidar_mi.geometry import incidence_cosine, sample_cameras
+
+    profile = profile or model.default_profile()
+    if profile.reads_context:
+        return _context_stages(xyz, cam, maps, out, profile, rgb)
 
     def sample():
         r = maps["R"]
@@ -148,13 +166,67 @@ def _assign_stages(model, xyz, cam, maps, out: dict):
     p = xyz[observed]
     wall, cpu, cos = _time(lambda: incidence_cosine(p))
     out["normals"] = (wall, cpu)
-    profile = model.default_profile()
+    out["image"] = (0.0, 0.0)
     el = np.degrees(np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1])))
     rng = np.linalg.norm(p, axis=1)
     out["profile"] = _time(
         lambda: profile(values[observed], rng, elevation_deg=el, cos_incidence=cos)
     )[:2]
     return int(observed.sum())
+
+
+def _context_stages(xyz, cam, maps, out: dict, profile, rgb) -> int:
+    """:func:`_assign_stages` of a ``context`` profile (on the CPU, as it runs): sampling, the
+    observed points' local geometry, their image inputs and maps, the profile."""
+    from nidar_mi.geometry import locate_in_cameras, sample_cameras
+    from nidar_mi.geometry.local_features import local_geometry
+    from nidar_mi.profiles.inputs import NIDAR_MAPS, camera_inputs, return_inputs, scales_read
+
+    scales = scales_read(profile.mapping.features)
+    host = [
+        {k: np.asarray(v.detach().cpu() if hasattr(v, "detach") else v) for k, v in maps.items()}
+    ]
+
+    def sample():
+        sightings = locate_in_cameras(xyz, [cam])
+        return sightings, sample_cameras(xyz, [cam], [host[0]["R"]], sightings=sightings)
+
+    wall, cpu, (sightings, (values, observed, cam_idx)) = _time(sample)
+    out["sampling"] = (wall, cpu)
+    p = xyz[observed]
+    wall, cpu, geo = _time(lambda: local_geometry(p, scales, notes=[]))
+    out["normals"] = (wall, cpu)
+    keys = [{k: host[0][k] for k in NIDAR_MAPS}]
+    run = lambda: camera_inputs(sightings, [rgb], np.where(observed, cam_idx, -1), keys)  # noqa: E731
+    wall, cpu, pics = _time(run)
+    out["image"] = (wall, cpu)
+    named = return_inputs(p, None, geo, scales) | {k: v[observed] for k, v in pics.items()}
+    out["profile"] = _time(lambda: profile(values[observed], named["range_m"], context=named))[:2]
+    return int(observed.sum())
+
+
+def synthetic_profile(model, kind: str, width: int = 1242, height: int = 375):
+    """A ``context`` profile of its default inputs (``kind`` ``gbm`` or ``mlp``, the form's own
+    settings) fitted on the procedural frame of that size: its intensity made up from the
+    range, the incidence and the image's luminance, with noise (seeded)."""
+    from nidar_mi.geometry import locate_in_cameras, sample_cameras
+    from nidar_mi.profiles import SensorProfile, fit
+    from nidar_mi.profiles.inputs import NIDAR_MAPS, camera_inputs, return_inputs
+
+    rgb, cam, xyz = street_image(width, height), kitti_like_camera(width, height), hdl64e_cloud()
+    sightings = locate_in_cameras(xyz, [cam])
+    maps = [model.predict_image(rgb, outputs=NIDAR_MAPS)]
+    _, seen, cam_idx = sample_cameras(xyz, [cam], [maps[0]["R"]], sightings=sightings)
+    named = return_inputs(xyz[seen]) | {
+        k: v[seen]
+        for k, v in camera_inputs(sightings, [rgb], np.where(seen, cam_idx, -1), maps).items()
+    }
+    rng = np.random.default_rng(0)
+    y = 0.4 * np.exp(-named["range_m"] / 40.0) * named["cos_incidence"] + 0.3 * named["r_lin"]
+    y = np.clip(y + rng.normal(0.0, 0.05, y.size), 0.0, 1.0)
+    ctx = named | {"frame": np.arange(y.size) % 8}  # 8 frames' worth of draws
+    mapping = fit("context", named["R"], named["range_m"], y, context=ctx, kind=kind, threads=2)
+    return SensorProfile("bench-" + kind, "procedural", "context", "nidar:R", mapping)
 
 
 def _devices(spec: str) -> list[str]:
@@ -174,8 +246,10 @@ def run_benchmark(
     weights: str | None = None,
     cols: int = 2048,
     devices: str = "auto",
+    profile: str | None = None,
 ) -> dict:
-    """Time the stages per configuration, size and device; returns a JSON-safe dict.
+    """Time the stages per configuration, size and device; returns a JSON-safe dict
+    (``profile``: the ``--profile`` applied, None: the weights' own).
 
     Every cell is warmed up once; then the timed rounds run them all in turn, ``repeats``
     times, so that every cell sees the same machine load. Medians are reported, of the wall
@@ -188,8 +262,9 @@ def run_benchmark(
     cells = []
     for device in _devices(devices):
         base = _model(weights, device)
+        prof = _profile(profile, base)
         for name in configs:
-            cells += _cells(base, name, sizes, xyz, device)
+            cells += _cells(base, name, sizes, xyz, device, prof)
     for cell in cells:  # warm-up
         cell["observed"] = cell["run"]()[1]
     for _ in range(int(repeats)):
@@ -200,6 +275,7 @@ def run_benchmark(
         "threads": int(threads),
         "repeats": int(repeats),
         "weights": str(base.weights_dir),
+        "profile": profile,
         "load_average": list(os.getloadavg()),
         "machine": {
             "cpu": _cpu_name(),
@@ -218,7 +294,18 @@ def _model(weights, device: str):
     return NidarModel.load(weights, device=device, optimize=False)
 
 
-def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
+def _profile(spec: str | None, model):
+    """The profile of ``--profile`` (module docstring), None for the weights' own."""
+    if spec is None:
+        return None
+    if spec in SYNTHETIC_PROFILES:
+        return synthetic_profile(model, SYNTHETIC_PROFILES[spec])
+    from nidar_mi.profiles import load_profile
+
+    return load_profile(spec)
+
+
+def _cells(base, name: str, sizes, xyz, device: str, profile=None) -> list[dict]:
     """One timed cell per size for a configuration of the networks on a device."""
     import torch
 
@@ -258,8 +345,9 @@ def _cells(base, name: str, sizes, xyz, device: str) -> list[dict]:
             run = lambda: run_irnet(irnet, x, scale=scale, as_tensors=True)  # noqa: E731
             wall, cpu, maps = _time(run, sync)
             out["irnet"] = (wall, cpu)
-            observed = _assign_stages(base, xyz, cam, maps, out)
-            run = lambda: model.point_intensity(xyz, [cam], [rgb])  # noqa: E731
+            maps = {**maps, "pseudo_nir": p}
+            observed = _assign_stages(base, xyz, cam, maps, out, profile, rgb)
+            run = lambda: model.point_intensity(xyz, [cam], [rgb], profile=profile)  # noqa: E731
             out["end_to_end"] = _time(run, sync)[:2]
             return out, observed
 
@@ -304,9 +392,10 @@ def markdown(result: dict) -> str:
     """The results as a Markdown table (seconds per frame)."""
     lines = [
         "| configuration | size | device | pseudo-NIR (s) | IRNet (s) | sampling (s) | normals (s) "
-        "| profile (s) | assignment (s) | stages' sum (s) | stages' CPU (s) "
+        "| image (s) | profile (s) | assignment (s) | stages' sum (s) | stages' CPU (s) "
         "| end to end (s) | end to end CPU (s) |",
-        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+        "| ---: |",
     ]
     for r in result["results"]:
         s, c = r["seconds"], r["cpu_seconds"]
@@ -331,6 +420,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
     p.add_argument(
         "--devices", default="auto", help="cpu, cuda or both; auto: cpu and cuda if available"
+    )
+    p.add_argument(
+        "--profile",
+        help="the profile applied: a file, or context-gbm / context-mlp (fitted on the "
+        "procedural frame); default: the weights' own",
     )
     p.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     return p
@@ -365,6 +459,7 @@ def main(argv=None) -> int:
             weights=args.weights,
             cols=args.cols,
             devices=args.devices,
+            profile=args.profile,
         )
         gpu = result["machine"]["gpu"]
         print(f"{result['machine']['cpu']}, {result['threads']} torch threads, GPU: {gpu}")

@@ -464,20 +464,29 @@ def _ks(text: str) -> list[int | None]:
     return [None if k.strip() == "all" else int(k) for k in text.split(",")]
 
 
-def main(argv=None) -> int:
-    args = _parse(argv)
-    t0 = time.perf_counter()
-    root = Path(args.data) if args.data else data_root()
+def kitti_scans(data: str | None, weights: str | None) -> tuple[list[ScanFrame], NidarModel]:
+    """The scans of the :data:`FOLDERS` under ``data`` (default: the data root) and the NIDAR
+    model of ``weights`` (default: the shipped one) on the CPU; no scans, with a line on
+    stderr, when there are no such folders (the model is then not loaded: None)."""
+    root = Path(data) if data else data_root()
     dirs = [root / s for s in FOLDERS if (root / s / "velodyne").is_dir()]
     if not dirs:
         print(f"no KITTI folders under {root}", file=sys.stderr)
+        return [], None
+    return load_scans(dirs, progress=False), NidarModel.load(weights, device="cpu")
+
+
+def main(argv=None) -> int:
+    args = _parse(argv)
+    t0 = time.perf_counter()
+    scans, model = kitti_scans(args.data, args.weights)
+    if not scans:
         return 2
-    scans = load_scans(dirs, progress=False)
-    model = NidarModel.load(args.weights, device="cpu")
     linear_nir = None
     if "linnir" in args.sources:
         from nidar_mi.eval.real import fit_linear_nir
 
+        root = Path(args.data) if args.data else data_root()
         linear_nir, _ = fit_linear_nir(root / "rgbnir")
     values = source_values(model, scans, args.sources, linear_nir)
     groups: dict[str, list] = {}

@@ -37,13 +37,37 @@ def test_main_writes_json(tmp_path, capsys):
     r = json.loads(out.read_text())
     assert [x["config"] for x in r["results"]] == ["before", "fold+cl+s0.5"]
     for x in r["results"]:
-        stages = {"pseudo_nir", "irnet", "sampling", "normals", "profile", "assign"}
+        stages = {"pseudo_nir", "irnet", "sampling", "normals", "image", "profile", "assign"}
         assert set(x["seconds"]) == stages | {"end_to_end"}
         assert x["observed"] > 0 and x["device"] == "cpu"
         assert x["total_s"] > 0 and x["seconds"]["end_to_end"] > 0
         s = x["seconds"]
-        assert s["assign"] == pytest.approx(s["sampling"] + s["normals"] + s["profile"])
+        assert s["assign"] == pytest.approx(
+            s["sampling"] + s["normals"] + s["image"] + s["profile"]
+        )
+        assert s["image"] == 0.0  # the weights' own profile reads no image
     assert "| before | 96x48 | cpu |" in capsys.readouterr().out
+
+
+def test_a_context_profile_is_timed_with_its_image_stage(tmp_path):
+    """A context profile file (a few trees on made-up inputs) runs through every stage: its
+    image inputs are timed, and the whole frame gives it the observed points."""
+    from nidar_mi.profiles import SensorProfile, fit
+    from nidar_mi.profiles.inputs import GROUPS
+
+    rng = np.random.default_rng(0)
+    names = [f for g in ("return", "geometry", "image", "nidar") for f in GROUPS[g]]
+    ctx = {f: rng.uniform(0, 1, 400) for f in names}
+    m = fit("context", ctx["R"], ctx["range_m"], rng.uniform(0, 1, 400), context=ctx, trees=3)
+    path = tmp_path / "ctx.json"
+    SensorProfile("ctx", "test", "context", "nidar:R", m).save(path)
+    out = tmp_path / "b.json"
+    args = ["--sizes", "96x48", "--configs", "fold+cl", "--repeats", "1", "--cols", "64"]
+    assert bench.main([*args, "--threads", "1", "--profile", str(path), "--json", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["profile"] == str(path)
+    (x,) = r["results"]
+    assert x["observed"] > 0 and x["seconds"]["image"] > 0 and x["seconds"]["normals"] > 0
 
 
 def test_bad_arguments(capsys):

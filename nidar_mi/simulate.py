@@ -166,7 +166,8 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
     """
     from .io.calib import render_calib_model
 
-    maps = {cid: model.predict_image(r.srgb8()) for cid, (r, _) in renders.items()}
+    rgbs = {cid: r.srgb8() for cid, (r, _) in renders.items()}
+    maps = {cid: model.predict_image(rgb) for cid, rgb in rgbs.items()}
     out = {}
     for lid, result in results.items():
         cams, depth, cam_maps = [], [], []
@@ -178,7 +179,7 @@ def nidar_columns(model, results: dict, renders: dict, branch: str, profile=None
         res = model.point_intensity(
             pts["xyz"],
             cams,
-            [None] * len(cams),
+            list(rgbs.values()),  # read by a profile of the image context
             depth_images=depth,
             maps=cam_maps,
             branch=branch,

@@ -35,11 +35,14 @@ PATHS = (
 MAX_LINES = 80
 MAX_PARAMETERS = 8
 #: ``module:function`` -> its parameter count: each parameter is one term of the return model,
-#: one per-laser column, or one input of the point sampling.
+#: one per-laser column, one input of the point sampling, or one column of the returns a
+#: profile is fitted on (the forms' ``fit``, the ``context`` form's named inputs besides).
 ALLOWED = {
     "lidar/return_model.py:detect": 10,
     "lidar/layouts.py:_sorted_table": 9,
     "nidar/pipeline.py:point_intensity": 10,
+    "profiles/forms.py:fit": 9,
+    "profiles/context.py:fit": 9,
 }
 
 

@@ -1,29 +1,39 @@
 """``python -m nidar_mi.calibrate``: fit a sensor profile on a sensor's own scans.
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
-                                 [--form gbm|range_ring|distance_quantile|physical] [--branch R|I_hat]
+                                 [--form context|gbm|range_ring|distance_quantile|physical]
+                                 [--inputs GROUP,...] [--kind gbm|mlp] [--branch R|I_hat]
                                  [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
 
-A ``gbm`` profile reads the incidence unless ``--no-incidence``.
+The default form is ``kitti-hdl64e``'s, ``context`` (below). A ``gbm`` profile reads the
+incidence unless ``--no-incidence``.
 
 ``SCANS`` are folders (:mod:`nidar_mi.datasets.scans`): KITTI layouts (``velodyne/``,
 ``image_2/``, ``calib/``), NIDAR data folders (``meta.json``), or generic folders with
 ``points/<id>.<ext>`` (an ``intensity`` field, optionally ``ring``), ``images/`` and
 ``calib.yaml``. The NIDAR model (``--weights``, default the shipped one) is run on every image;
 its ``--branch`` map at the returns a camera sees is fitted to the sensor's intensities
-(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile (the default
-form) also reads each return's ``|cos θ|``, from normals estimated on the scan's own points
-(:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence``: the recipe of
-``kitti-hdl64e``. ``assign`` and ``render`` then estimate it the same way on the clouds they
-are given. With ``--no-geometry`` the profile reads the value and the
+(:func:`nidar_mi.datasets.profile_fitting.fit_scan_profile`). A ``gbm`` profile also reads each
+return's ``|cos θ|``, from normals estimated on the scan's own points
+(:func:`nidar_mi.geometry.incidence_cosine`), unless ``--no-incidence`` (the former recipe of
+``kitti-hdl64e`` reads it). ``assign`` and ``render`` then estimate it the same way on the clouds
+they are given. With ``--no-geometry`` the profile reads the value and the
 incidence only, not the range and elevation: the form of a range-compensated intensity
 ``g·ρ·cos θ``, which learns no range response and no scene layout (the simulator's ``sim-905``).
 ``--max-frames K`` fits on K of the frames, evenly spaced over their order
 (:func:`nidar_mi.datasets.profile_fitting.select_frames`): one to ten frames of a sensor already
 beat the generic profiles (docs/NIDAR.md, "Calibrating from a few frames"). ``--form physical``
-fits the closed form of the generic profiles (gain and range exponent). The profile file
+fits the closed form of the generic profiles (gain and range exponent). ``--form context`` reads
+each return's named inputs (:mod:`nidar_mi.profiles.inputs`): range, elevation and incidence,
+the laser index, the local geometry of the scan around it, the image around its pixel and all
+of NIDAR's maps there; ``--inputs`` names the groups (default: ``return,ring,geometry,image,
+nidar``, the recipe measured leave one group out; ``image_rel`` adds the image inputs with the
+exposure divided out; without ``image``, ``image_rel`` and ``nidar`` the profile needs no
+image); ``--kind mlp`` puts
+the small learned head (:mod:`nidar_mi.profiles.head`) in place of the trees, some thirty times
+cheaper to apply. The profile file
 (:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -37,7 +47,11 @@ import json
 import os
 import sys
 
-from ..datasets.sensor_profiles import KITTI_PROFILE_FORM, KITTI_PROFILE_INCIDENCE
+from ..datasets.sensor_profiles import (
+    KITTI_PROFILE_FORM,
+    KITTI_PROFILE_INCIDENCE,
+    KITTI_PROFILE_OPTIONS,
+)
 from ..errors import NidarError
 from ..extras import require
 from ._common import out_path, parser, run, show_progress
@@ -63,9 +77,11 @@ def build_parser():
     p.add_argument(
         "--form",
         default=KITTI_PROFILE_FORM,
-        choices=("gbm", "range_ring", "distance_quantile", "physical"),
-        help="gbm: gradient-boosted regression on value, range and elevation, monotone in the "
-        "value (default); range_ring: monotone map per range bin + ring gains; "
+        choices=("gbm", "context", "range_ring", "distance_quantile", "physical"),
+        help="context: gradient-boosted regression on the return's inputs (--inputs; the "
+        "default, the recipe of kitti-hdl64e); gbm: gradient-boosted regression on value, range "
+        "and elevation, monotone in the value; "
+        "range_ring: monotone map per range bin + ring gains; "
         "distance_quantile: the paper's distance encoding + quantile map; physical: "
         "gain * R * |cos θ| / d^p, the generic profiles' closed form",
     )
@@ -79,6 +95,19 @@ def build_parser():
         action="store_true",
         help="gbm: read the value and the incidence only, not the range and elevation (a "
         "range-compensated sensor; carries over to other layouts)",
+    )
+    p.add_argument(
+        "--inputs",
+        metavar="GROUP,...",
+        help="context: the input groups read, of return, ring, geometry, image, image_rel, "
+        "nidar (default: return,ring,geometry,image,nidar; image_rel: the image inputs with "
+        "the exposure divided out)",
+    )
+    p.add_argument(
+        "--kind",
+        choices=("gbm", "mlp"),
+        help="context: LightGBM's trees or the small learned head (default: kitti-hdl64e's, "
+        f"{KITTI_PROFILE_OPTIONS.get('kind', 'gbm')})",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -139,6 +168,7 @@ def _calibrate(args, argv) -> None:
 
     if args.no_incidence and args.form not in ("gbm", "physical"):
         raise NidarError(f"--no-incidence needs --form gbm or physical (got --form {args.form})")
+    options = _context_options(args)
     if args.max_frames is not None and args.max_frames < 1:
         raise NidarError(f"--max-frames must be at least 1 (got {args.max_frames})")
     incidence = args.form in ("gbm", "physical") and (
@@ -174,6 +204,7 @@ def _calibrate(args, argv) -> None:
         progress=show_progress(args),
         incidence=incidence,
         **({"use_geometry": False} if args.no_geometry else {}),
+        **options,
     )
     profile.save(target)
     if not args.quiet:
@@ -185,8 +216,30 @@ def _calibrate(args, argv) -> None:
         )
 
 
+def _context_options(args) -> dict:
+    """The ``context`` form's options from ``--inputs`` (``features``: the groups' inputs) and
+    ``--kind``."""
+    given = [f for f, v in (("--inputs", args.inputs), ("--kind", args.kind)) if v is not None]
+    if given and args.form != "context":
+        raise NidarError(f"{given[0]} needs --form context (got --form {args.form})")
+    options = {}
+    if args.form == "context":
+        options["kind"] = args.kind or KITTI_PROFILE_OPTIONS.get("kind", "gbm")
+    if args.inputs is None:
+        return options
+    from ..profiles.inputs import GROUPS
+
+    groups = [g.strip() for g in args.inputs.split(",") if g.strip()]
+    bad = [g for g in groups if g not in GROUPS]
+    if bad or not groups:
+        raise NidarError(f"--inputs: groups of {', '.join(GROUPS)} (got {args.inputs!r})")
+    return options | {"features": tuple(f for g in GROUPS if g in groups for f in GROUPS[g])}
+
+
 def _reads(profile) -> str:
-    """What the summary line adds about the incidence."""
+    """What the summary line adds about the incidence (or the inputs of a context profile)."""
+    if profile.form == "context":
+        return f" ({profile.mapping.kind}; inputs: {', '.join(profile.mapping.groups)})"
     if not profile.uses_incidence:
         return ""
     if profile.form == "physical":

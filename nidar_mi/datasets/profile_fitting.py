@@ -7,6 +7,10 @@ intensity) and hand them to :func:`nidar_mi.profiles.fit`, the one fitting entry
   method's) against the intensities of a sensor's scans
   (:class:`~nidar_mi.datasets.scans.ScanFrame`); ``python -m nidar_mi.calibrate``, the ``kitti-hdl64e`` profile and the leave-one-frame-out
   evaluation use it.
+* a ``context`` profile (:mod:`nidar_mi.profiles.context`) reads named inputs besides: the
+  scan's local geometry and, when it reads the image, the image around each return and all of
+  NIDAR's maps there (:func:`scan_inputs`); at most its ``points_per_frame`` returns of each
+  frame are kept (seeded), so memory grows with the frames, not their returns.
 * :func:`fit_split_calibration`: the paper's distance encoding and quantile map of a NIDAR map
   on the pixels of a training split that carry a LiDAR return (``python -m nidar_mi.train``
   writes its mapping as ``calibration.json`` beside the weights).
@@ -35,6 +39,7 @@ __all__ = [
     "fit_split_calibration",
     "fit_values_profile",
     "scan_branches",
+    "scan_inputs",
     "scan_values",
     "select_frames",
 ]
@@ -75,6 +80,32 @@ def scan_values(model: NidarModel, scan: ScanFrame, branch: str) -> np.ndarray:
     return scan_branches(model, scan, (branch,))[branch]
 
 
+def scan_inputs(
+    model: NidarModel | None, scan: ScanFrame, *, image: bool = True
+) -> dict[str, np.ndarray]:
+    """The named inputs of a scan's returns (:mod:`nidar_mi.profiles.inputs`): name -> (N,)
+    float64, NaN where missing.
+
+    The image-free groups come from the points (:attr:`ScanFrame.local_geometry`, computed once
+    per scan); with ``image``, the image inputs at each return's pixel and NIDAR's four maps
+    there (the networks run once per image; the returns of a scan are the visible ones, so no
+    second occlusion test).
+    """
+    from ..geometry import locate_in_cameras, sample_cameras
+    from ..profiles.inputs import NIDAR_MAPS, camera_inputs, return_inputs
+
+    out = return_inputs(scan.xyz, scan.ring, scan.local_geometry)
+    if not image:
+        return out
+    if model is None:
+        raise NidarError("the image inputs need the NIDAR model")
+    images = scan.images
+    sightings = locate_in_cameras(scan.xyz, scan.cameras, occlusion=False)
+    maps = [model.predict_image(im, outputs=NIDAR_MAPS) for im in images]
+    _, _, cam = sample_cameras(scan.xyz, scan.cameras, [m["R"] for m in maps], sightings=sightings)
+    return out | camera_inputs(sightings, images, cam, maps)
+
+
 def select_frames(scans: Sequence[ScanFrame], k: int | None) -> list[ScanFrame]:
     """``k`` of ``scans`` evenly spaced over their order (the first and the last among them;
     consecutive frames of a drive are alike, spread ones are not); None or ``k >= len``: all.
@@ -90,27 +121,40 @@ def select_frames(scans: Sequence[ScanFrame], k: int | None) -> list[ScanFrame]:
     return [scans[i] for i in idx]
 
 
-def _scan_returns(scans, values, incidence: bool, progress: bool, name: str) -> dict:
+def _scan_returns(scans, values, incidence: bool, progress: bool, name: str, inputs=None) -> dict:
     """The returns of ``scans`` with a finite value, concatenated: ``values``, ``range_m``,
     ``ring``, ``elevation_deg``, ``intensity`` and ``cos_incidence`` (None without
-    ``incidence``) as (N,) arrays."""
+    ``incidence``) as (N,) arrays. With ``inputs`` (``(inputs(scan), rows(n))``: a scan's
+    named inputs and the rows of its ``n`` returns to keep) also ``context``, name -> (N,), with
+    ``"frame"``, (N,) the index of each return's scan; only the kept returns."""
     from ..progress import progress_bar
 
-    cols: dict[str, list] = {k: [] for k in ("v", "d", "ring", "el", "y", "cos")}
-    for scan in progress_bar(scans, show=progress, desc=f"profile {name}", unit="frame"):
+    cols: dict[str, list] = {k: [] for k in ("v", "d", "ring", "el", "y", "cos", "frame")}
+    ctx: dict[str, list] = {}
+    for i, scan in enumerate(
+        progress_bar(scans, show=progress, desc=f"profile {name}", unit="frame")
+    ):
         v = np.asarray(values(scan), dtype=np.float64).reshape(-1)
         log.debug("%s: %d returns", scan.name, v.size)
         if v.shape != scan.intensity.shape:
             raise NidarError(f"{scan.name}: {v.size} values for {scan.intensity.size} returns")
-        ok = np.isfinite(v)
+        ok = np.flatnonzero(np.isfinite(v))
+        named = None
+        if inputs is not None:
+            named = inputs[0](scan)
+            ok = ok[inputs[1](len(ok))]
+            for k, col in named.items():
+                ctx.setdefault(k, []).append(np.asarray(col, dtype=np.float64)[ok])
         cols["v"].append(v[ok])
         cols["d"].append(scan.range_m[ok])
         cols["ring"].append(scan.ring[ok].astype(np.int64))
         cols["el"].append(scan.elevation_deg[ok])
         cols["y"].append(scan.intensity[ok])
+        cols["frame"].append(np.full(len(ok), i))
         if incidence:
-            cols["cos"].append(scan.cos_incidence[ok])
-    return {
+            cos = named["cos_incidence"] if named is not None else scan.cos_incidence
+            cols["cos"].append(cos[ok])
+    out = {
         "values": np.concatenate(cols["v"]),
         "range_m": np.concatenate(cols["d"]),
         "ring": np.concatenate(cols["ring"]),
@@ -118,6 +162,10 @@ def _scan_returns(scans, values, incidence: bool, progress: bool, name: str) -> 
         "intensity": np.concatenate(cols["y"]),
         "cos_incidence": np.concatenate(cols["cos"]) if incidence else None,
     }
+    if inputs is not None:
+        out["context"] = {k: np.concatenate(v) for k, v in ctx.items()}
+        out["context"]["frame"] = np.concatenate(cols["frame"])
+    return out
 
 
 def fit_values_profile(
@@ -146,14 +194,27 @@ def fit_values_profile(
         progress: show a progress bar.
         incidence: the profile also reads the returns' incidence cosines, estimated from each
             scan's points (``ScanFrame.cos_incidence``; ``gbm`` form only).
-        **options: the form's fitting options (:func:`nidar_mi.profiles.fit`).
+        **options: the form's fitting options (:func:`nidar_mi.profiles.fit`), and for the
+            ``context`` form ``inputs``: a scan's named inputs, name -> (N,)
+            (:func:`scan_inputs`; required), of which the form's ``points_per_frame`` returns
+            of each scan are kept (drawn with its ``seed``).
 
     Raises:
         NidarError: no scans, or no return with a finite value.
     """
     if not scans:
         raise NidarError("no scans to fit a profile on")
-    data = _scan_returns(scans, values, incidence, progress, name)
+    draw, inputs = None, options.pop("inputs", None)
+    if form == "context":
+        from ..profiles.context import ContextFitOptions, frame_rows
+
+        if inputs is None:
+            raise NidarError("a context profile is fitted on the returns' named inputs")
+        o = ContextFitOptions(**options)
+        rng = np.random.default_rng(o.seed)
+        draw = (inputs, lambda n: frame_rows(n, o.points_per_frame, rng))
+        incidence = False  # the incidence is one of the inputs
+    data = _scan_returns(scans, values, incidence, progress, name, draw)
     n = int(data["values"].size)
     if n == 0:
         raise NidarError("no return of these scans has a value")
@@ -166,6 +227,8 @@ def fit_values_profile(
         "rings": "given" if has_rings else "none (elevation only)",
     }
     mapping = fit(form, **data, input=input, **options)
+    if form == "context":
+        info["inputs"] = list(mapping.groups)
     return SensorProfile(
         name=name,
         sensor=sensor,
@@ -198,11 +261,15 @@ def fit_scan_profile(
         branch: the NIDAR map (``"R"`` or ``"I_hat"``).
         provenance: extra provenance entries (the data, the command).
         progress: show a progress bar.
-        **options: passed to :func:`fit_values_profile` (``incidence``) and the form's fit.
+        **options: passed to :func:`fit_values_profile` (``incidence``) and the form's fit
+            (a ``context`` profile's ``features``: default its default inputs, the image's among them).
     """
+    values = lambda s: scan_values(model, s, branch)  # noqa: E731
+    if form == "context":
+        values, options["inputs"] = _context_values(model, branch, options.get("features"))
     profile = fit_values_profile(
         scans,
-        lambda s: scan_values(model, s, branch),
+        values,
         name=name,
         sensor=sensor,
         input=f"nidar:{branch}",
@@ -212,6 +279,24 @@ def fit_scan_profile(
     )
     record = {"branch": branch, "weights": str(model.weights_dir)} | dict(provenance or {})
     return replace(profile, model=model.identity(), provenance=profile.provenance | record)
+
+
+def _context_values(model: NidarModel, branch: str, features) -> tuple[Callable, Callable]:
+    """``(values, inputs)`` of a scan for a ``context`` profile reading ``features`` (None:
+    all): one run of the networks per scan gives both when the profile reads the image."""
+    from ..profiles.inputs import IMAGE_GROUPS, feature_group
+
+    image = features is None or any(feature_group(f) in IMAGE_GROUPS for f in features)
+    memo: dict[str, Any] = {}
+
+    def inputs(scan: ScanFrame) -> dict:
+        if memo.get("scan") is not scan:
+            memo.update(scan=scan, inputs=scan_inputs(model, scan, image=image))
+        return memo["inputs"]
+
+    if image:
+        return (lambda s: inputs(s)[branch]), inputs
+    return (lambda s: scan_values(model, s, branch)), inputs
 
 
 def fit_split_calibration(

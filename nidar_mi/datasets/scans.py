@@ -91,6 +91,14 @@ class ScanFrame:
 
         return incidence_cosine(self.xyz)
 
+    @functools.cached_property
+    def local_geometry(self):
+        """The returns' neighbourhood descriptors and incidence from one neighbour query
+        (:func:`nidar_mi.geometry.local_features.local_geometry`; computed once)."""
+        from ..geometry.local_features import local_geometry
+
+        return local_geometry(self.xyz)
+
     @property
     def elevation_deg(self) -> np.ndarray:
         """(N,) float64 elevation of each return above the LiDAR's xy plane, degrees."""

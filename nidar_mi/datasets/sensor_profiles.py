@@ -12,9 +12,11 @@ Names :func:`resolve_profile` knows (besides a path to a profile file):
   (``../shared/data/kitti`` and ``kitti_raw_0926``, or ``$NIDAR_MI_DATA``; or the folders given)
   for the weights in use, and cached in the user's cache folder
   (``<cache>/profiles/kitti-hdl64e-<key>.json``, :func:`~nidar_mi.datasets.paths.cache_dir`;
-  the key covers the weights, the folders and the form). Form :data:`KITTI_PROFILE_FORM` with
-  the incidence (:data:`KITTI_PROFILE_INCIDENCE`), input the ``R`` branch, fitted on every frame
-  of those folders. The default of ``assign --kitti``, where it is fitted instead on up to
+  the key covers the weights, the folders and the recipe). Form :data:`KITTI_PROFILE_FORM`: a
+  ``context`` profile (:mod:`nidar_mi.profiles.context`, :data:`KITTI_PROFILE_OPTIONS`) of the
+  returns' range, elevation, incidence, laser, local geometry, image context and NIDAR's maps,
+  input the ``R`` branch, fitted on every frame of those folders; it reads the camera image.
+  The default of ``assign --kitti``, where it is fitted instead on up to
   :data:`KITTI_ASSIGN_FRAMES` other frames of the ``--kitti`` folder, never on the frame it
   assigns (:func:`kitti_frame_profile`; cached per set of frames).
 * ``generic-compensated``: a range-compensated sensor of unknown make, from physics, not from
@@ -63,6 +65,7 @@ __all__ = [
     "KITTI_ASSIGN_FRAMES",
     "KITTI_PROFILE_FORM",
     "KITTI_PROFILE_INCIDENCE",
+    "KITTI_PROFILE_OPTIONS",
     "PROFILE_NAMES",
     "default_profile",
     "generic_profile",
@@ -88,14 +91,18 @@ PROFILE_NAMES = (
 GENERIC_RAW_LEVEL = 0.05
 #: ``generic-raw``'s gain k, m²: ``k · 0.1 / 10² = GENERIC_RAW_LEVEL``.
 GENERIC_RAW_GAIN = GENERIC_RAW_LEVEL * 10.0**2 / 0.1
-#: Form of the ``kitti-hdl64e`` profile (the one that generalised better in the
-#: leave-one-frame-out evaluation, docs/RESULTS.md).
-KITTI_PROFILE_FORM = "gbm"
-#: Whether ``kitti-hdl64e`` reads the returns' incidence (it lifted every leave-one-frame-out
-#: metric but the camera-map SSIM, docs/RESULTS.md).
+#: Form of the ``kitti-hdl64e`` profile and of ``calibrate`` by default: the ``context`` form,
+#: ahead of the ``gbm`` recipe of value, range, elevation and incidence on every group of the
+#: leave-one-group-out evaluation (docs/NIDAR.md, "Local geometry and image context").
+KITTI_PROFILE_FORM = "context"
+#: The ``context`` form's options of ``kitti-hdl64e`` (its default ``features``, the inputs of
+#: :data:`nidar_mi.profiles.inputs.DEFAULT_GROUPS`).
+KITTI_PROFILE_OPTIONS: dict = {"kind": "gbm"}
+#: Whether a ``gbm`` profile reads the returns' incidence by default (it lifted every
+#: leave-one-frame-out metric but the camera-map SSIM, docs/RESULTS.md).
 KITTI_PROFILE_INCIDENCE = True
 #: Version of the fitting procedure (part of the cache key).
-_FIT_VERSION = 3
+_FIT_VERSION = 5
 _KITTI_SENSOR = "Velodyne HDL-64E (KITTI), stored reflectance in [0, 1]"
 
 
@@ -141,7 +148,7 @@ def _cached_fit(model: NidarModel, data: dict, where: str, scans, progress: bool
     from .paths import cache_dir
     from .profile_fitting import fit_scan_profile
 
-    settings = {"form": KITTI_PROFILE_FORM, "incidence": KITTI_PROFILE_INCIDENCE}
+    settings = {"form": KITTI_PROFILE_FORM, "options": KITTI_PROFILE_OPTIONS}
     key = cache_key({"model": model.identity(), **data, **settings, "version": _FIT_VERSION})
     path = cache_dir("profiles", f"{DEFAULT_KITTI_PROFILE}-{key}.json")
     if path.is_file():
@@ -159,7 +166,7 @@ def _cached_fit(model: NidarModel, data: dict, where: str, scans, progress: bool
         branch="R",
         provenance={**data, "cache": str(path)},
         progress=progress,
-        incidence=KITTI_PROFILE_INCIDENCE,
+        **KITTI_PROFILE_OPTIONS,
     )
     atomic_write_json(path, profile.to_dict())
     return profile

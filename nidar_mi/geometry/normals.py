@@ -4,7 +4,7 @@ A LiDAR return's intensity falls with the angle between the ray and the surface 
 ``cos θ`` for a diffuse surface, :mod:`nidar_mi.lidar`); a point cloud carries that angle in its
 geometry. :func:`estimate_normals` fits a plane to each point's ``k`` nearest neighbours
 (principal component analysis: the normal is the eigenvector of the neighbourhood's covariance
-with the smallest eigenvalue, from a closed-form 3×3 eigen-solver: :func:`_plane_eigen`) and :func:`incidence_cosine` gives ``|cos θ| = |n · d|`` with
+with the smallest eigenvalue, from a closed-form 3×3 eigen-solver: :func:`plane_eigen`) and :func:`incidence_cosine` gives ``|cos θ| = |n · d|`` with
 ``d`` the unit ray from the sensor at the origin to the point. Only the points are needed (no
 rings, no mesh), so it applies to any sensor's scans, real or simulated.
 
@@ -107,7 +107,7 @@ def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
 
     k = min(int(k), len(p))
     p = np.ascontiguousarray(p)
-    tree = _tree(p)
+    tree = neighbour_tree(p)
     normals = np.empty((3, len(p)))
     flat = np.empty(len(p), dtype=bool)
     with ThreadPoolExecutor(WORKERS) as pool:
@@ -115,7 +115,7 @@ def _plane_normals(p: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
             q = p[start : start + CHUNK]
             cuts = np.linspace(0, len(q), min(WORKERS, -(-len(q) // BLOCK)) + 1).astype(int)
             shares = [q[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-            fits = pool.map(lambda share: _planes(p, _neighbours(tree, share, k)), shares)
+            fits = pool.map(lambda share: _planes(p, neighbour_indices(tree, share, k)), shares)
             vec, no_plane = (np.concatenate(a, axis=-1) for a in zip(*fits, strict=True))
             normals[:, start : start + CHUNK] = vec
             flat[start : start + CHUNK] = no_plane
@@ -128,20 +128,20 @@ def _planes(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Plane fits of (n, k) neighbourhoods (indices into (N, 3) points ``p``): ``(normal,
     flat)``, (3, n) unit normals (any sign; zero where ``flat``) and (n,) bool, True where the
     neighbours coincide or lie on one line (or the normal is zero)."""
-    cov, scale = _covariances(p, idx)
-    second, smallest = _plane_eigen(cov)
+    cov, scale = neighbour_covariances(p, idx)
+    second, smallest = plane_eigen(cov)
     smallest[:, ~(second > DEGENERATE * scale)] = 0.0  # a point or a line: no plane
     return smallest, ~smallest.any(axis=0)
 
 
-def _tree(p: np.ndarray):
+def neighbour_tree(p: np.ndarray):
     """A k-d tree of (N, 3) C-contiguous float64 points (pykdtree's, leaves of 16 points)."""
     from pykdtree.kdtree import KDTree
 
     return KDTree(p, leafsize=16)
 
 
-def _neighbours(tree, q: np.ndarray, k: int) -> np.ndarray:
+def neighbour_indices(tree, q: np.ndarray, k: int) -> np.ndarray:
     """(n, k) int64 indices of the ``k`` nearest points of ``tree`` to each of the (n, 3)
     C-contiguous query points ``q``, nearest first (exact Euclidean search; among points at
     equal distance the tree's order decides)."""
@@ -149,7 +149,7 @@ def _neighbours(tree, q: np.ndarray, k: int) -> np.ndarray:
     return idx.astype(np.int64, copy=False).reshape(len(q), k)
 
 
-def _covariances(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def neighbour_covariances(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Scatter matrices of neighbourhoods, in blocks of :data:`BLOCK` neighbourhoods.
 
     The coordinates of a block are gathered neighbour-major, ``(3, k, m)``, so that the sums
@@ -181,7 +181,7 @@ def _covariances(p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
-def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closed-form eigen-analysis of symmetric 3×3 matrices, vectorised.
 
     The eigenvalues come from the trigonometric solution of the characteristic cubic (on the
@@ -200,6 +200,21 @@ def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = np.abs(cov).max(axis=0)
     s[s <= 0] = 1.0
     a00, a11, a22, a01, a02, a12 = cov / s
+    q, top, low = trig_eigenvalues(a00, a11, a22, a01, a02, a12)
+    for _ in range(2):  # Newton on det(A - λI), whose derivative is minus the minors' sum
+        m00, m11, m22 = a00 - low, a11 - low, a22 - low
+        slope = -(m11 * m22 - a12 * a12 + m00 * m22 - a02 * a02 + m00 * m11 - a01 * a01)
+        f = _det(m00, m11, m22, a01, a02, a12)
+        low = low - np.divide(f, slope, out=np.zeros_like(f), where=slope != 0)
+    second = (3.0 * q - top - low) * s
+    return second, _null_vector(a00 - low, a11 - low, a22 - low, a01, a02, a12)
+
+
+def trig_eigenvalues(a00, a11, a22, a01, a02, a12):
+    """``(q, top, low)``: the mean of the three eigenvalues, the largest and the smallest, of
+    symmetric 3×3 matrices given by their (n,) entries, by the trigonometric solution of the
+    characteristic cubic (exact to rounding where the eigenvalues are apart; about 1e-8 of the
+    largest where two coincide)."""
     q = (a00 + a11 + a22) / 3.0
     off = a01 * a01 + a02 * a02 + a12 * a12
     p2 = ((a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * off) / 6.0
@@ -209,13 +224,7 @@ def _plane_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     phi = np.arccos(r) / 3.0
     top = q + 2.0 * pp * np.cos(phi)
     low = q + 2.0 * pp * np.cos(phi + 2.0 * np.pi / 3.0)
-    for _ in range(2):  # Newton on det(A - λI), whose derivative is minus the minors' sum
-        m00, m11, m22 = a00 - low, a11 - low, a22 - low
-        slope = -(m11 * m22 - a12 * a12 + m00 * m22 - a02 * a02 + m00 * m11 - a01 * a01)
-        f = _det(m00, m11, m22, a01, a02, a12)
-        low = low - np.divide(f, slope, out=np.zeros_like(f), where=slope != 0)
-    second = (3.0 * q - top - low) * s
-    return second, _null_vector(a00 - low, a11 - low, a22 - low, a01, a02, a12)
+    return q, top, low
 
 
 def _null_vector(m00, m11, m22, m01, m02, m12) -> np.ndarray:

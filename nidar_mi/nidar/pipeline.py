@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import NidarError
 from ..geometry import CameraModel, incidence_cosine, locate_in_cameras, sample_cameras
+from ..geometry.local_features import local_geometry
 from ..profiles import DistanceQuantileMap, SensorProfile, load_profile
 
 __all__ = [
@@ -258,10 +259,9 @@ class NidarModel:
         ``branch="R"`` (default, the paper's NIDAR-Full): the reflectance branch through the
         weights' own profile (:meth:`default_profile`: ``profiles/sim-905.json`` when the
         folder has one, else ``calibration.json``'s distance encoding and quantile map).
-        ``branch="I_hat"``: IRNet's dense intensity head
-        sampled at the points and clipped to [0, 1], no calibration (it is trained on the
-        range-compensated intensity directly); on the held-out scenes of docs/RESULTS.md it
-        ranks points far better than R (method (f)).
+        ``branch="I_hat"``: IRNet's dense intensity head sampled at the points and clipped to
+        [0, 1], no calibration. A ``context`` profile reads the observed points' local geometry,
+        the image around them and NIDAR's maps there (:meth:`_context_intensity`).
 
         Args:
             xyz_lidar: (N, 3) points in the LiDAR frame, m (the LiDAR sits at the origin).
@@ -295,8 +295,10 @@ class NidarModel:
             raise NidarError(f"{np.asarray(ring).size} rings for {len(xyz)} points")
         if len(cameras) != len(images):
             raise NidarError("one image per camera is needed")
-        wants_cos = profile is not None and profile.uses_incidence and cos_incidence is None
         opts = {"depth_images": depth_images, "occlusion": occlusion}
+        if profile is not None and profile.reads_context:
+            return self._context_intensity(xyz, cameras, images, maps, profile, opts, ring)
+        wants_cos = profile is not None and profile.uses_incidence and cos_incidence is None
         values, observed, cam_idx, r_vals, seen_cos = self._sampled_maps(
             xyz, cameras, images, maps, branch, opts, wants_cos
         )
@@ -331,7 +333,10 @@ class NidarModel:
         ``(seen, cos, notes)``, (N,) bool, the cosines of ``xyz[seen]`` and the messages of
         the estimate's warnings (warned only if the cosines are used), else None. Both halves
         release the GIL for most of their work, so on a CPU of two or more cores they overlap
-        (docs/BENCHMARKS.md); the results are those of running them in turn."""
+        (docs/BENCHMARKS.md); the results are those of running them in turn. ``wants_cos`` a
+        tuple of neighbourhood sizes: ``seen_cos`` holds the seen points'
+        :func:`~nidar_mi.geometry.local_features.local_geometry` at them in place of the
+        cosines."""
         from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(1) as pool:
@@ -343,9 +348,14 @@ class NidarModel:
             try:
                 sightings = locate_in_cameras(xyz, cameras, **opts)
                 seen_cos = None
-                if wants_cos:
+                if wants_cos:  # scales: the local geometry at them, incidence among it
                     seen, notes = sightings.seen, []
-                    seen_cos = (seen, incidence_cosine(xyz[seen], notes=notes), notes)
+                    p = xyz[seen]
+                    if wants_cos is True:
+                        est = incidence_cosine(p, notes=notes)
+                    else:
+                        est = local_geometry(p, wants_cos, notes=notes)
+                    seen_cos = (seen, est, notes)
             except BaseException:
                 if pending is not None:
                     pending.cancel()  # leaving the pool waits for a running one
@@ -353,6 +363,57 @@ class NidarModel:
             if pending is not None:
                 maps = pending.result()
         return maps, sightings, seen_cos
+
+    def _context_intensity(self, xyz, cameras, images, maps, profile, opts, ring) -> PointIntensity:
+        """:meth:`point_intensity` through a ``context`` profile, on the CPU: the networks
+        give the branch, R and the NIDAR maps the profile reads (on a second thread while the
+        points are located and the seen points' local geometry computed); the observed points'
+        inputs (:mod:`nidar_mi.profiles.inputs`) go to the profile.
+
+        Raises:
+            NidarError: a profile that reads the image given no image (``images`` of None).
+        """
+        from ..profiles.inputs import camera_inputs, return_inputs, scales_read
+
+        if profile.needs_image and any(im is None for im in images):
+            raise NidarError(
+                f"profile {profile.name} reads the camera image at the returns; give the images"
+            )
+        keys = tuple(dict.fromkeys((profile.branch, "R", *_nidar_inputs(profile))))
+        scales = scales_read(profile.mapping.features)  # only the sizes it reads
+        maps, sightings, seen_geo = self._maps_beside_geometry(
+            xyz, cameras, images, maps, keys, opts, scales
+        )
+        values, observed, cam_idx = sample_cameras(
+            xyz, cameras, [_array(m[profile.branch]) for m in maps], sightings=sightings
+        )
+        observed &= np.isfinite(values)
+        seen, geo, notes = seen_geo
+        if not np.array_equal(seen, observed):
+            geo, notes = None, []  # estimated again from the observed points, as fitted
+        for message in notes:
+            warnings.warn(message, stacklevel=3)
+        rings = None if ring is None else np.asarray(ring).reshape(-1)[observed]
+        named = return_inputs(xyz[observed], rings, geo, scales)
+        if profile.needs_image:
+            cam = np.where(observed, cam_idx, -1)
+            pics = camera_inputs(sightings, images, cam, [{k: m[k] for k in keys} for m in maps])
+            named |= {k: v[observed] for k, v in pics.items()}
+        out = np.zeros(len(xyz), dtype=np.float32)
+        out[observed] = profile(values[observed], named["range_m"], context=named)
+        raw = np.where(observed, values, 0.0).astype(np.float32)
+        r_vals = sample_cameras(xyz, cameras, [_array(m["R"]) for m in maps], sightings=sightings)[
+            0
+        ]
+        refl = np.where(observed, r_vals, 0.0).astype(np.float32)
+        return PointIntensity(out, observed, raw, np.where(observed, cam_idx, -1), refl)
+
+
+def _nidar_inputs(profile: SensorProfile) -> tuple[str, ...]:
+    """The NIDAR maps a ``context`` profile reads."""
+    from ..profiles.inputs import NIDAR_MAPS
+
+    return tuple(k for k in NIDAR_MAPS if k in profile.mapping.features)
 
 
 def _sample(xyz, cameras, maps, branch: str, **opts):

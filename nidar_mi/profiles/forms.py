@@ -4,7 +4,8 @@ Every form is a class with the same interface (:class:`ProfileMap`): its ``form`
 it ``reads_incidence`` at all, ``__call__(values, range_m, *, ring=None, elevation_deg=None,
 cos_incidence=None)`` giving (N,) float64 intensities in [0, 1], ``to_dict`` / ``from_dict``
 (a profile file's ``mapping``), a classmethod ``fit`` of the same data and ``fit_options``, the
-dataclass of its fitting options.
+dataclass of its fitting options. A form that reads named inputs (``reads_context``: the
+``context`` form, :mod:`nidar_mi.profiles.inputs`) also takes ``context=`` when called and fitted.
 :data:`FORMS` is the only place that lists them.
 """
 
@@ -15,6 +16,7 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 
 from ..errors import NidarError
+from .context import ContextMap
 from .distance_quantile import DistanceQuantileMap
 from .gbm import GbmMap
 from .physical import PhysicalMap
@@ -48,7 +50,7 @@ class ProfileMap(Protocol):
 
 #: Form name -> its map class.
 FORMS: dict[str, type] = {
-    cls.form: cls for cls in (DistanceQuantileMap, RangeRingMap, GbmMap, PhysicalMap)
+    cls.form: cls for cls in (DistanceQuantileMap, RangeRingMap, GbmMap, PhysicalMap, ContextMap)
 }
 
 
@@ -69,6 +71,7 @@ def fit(
     elevation_deg: Any = None,
     cos_incidence: Any = None,
     input: str = "R",
+    context: Any = None,
     **form_options: Any,
 ) -> ProfileMap:
     """Fit a map of the given form on training returns.
@@ -85,6 +88,10 @@ def fit(
             ``gbm`` can; another form is an error).
         input: the value the map is fitted on (a profile's ``input``, e.g. ``"nidar:R"``), kept
             by forms that record it (``distance_quantile``'s ``branch``).
+        context: name -> (N,) named inputs of the returns (:mod:`nidar_mi.profiles.inputs`),
+            read by the ``context`` form (required there; another form is an error); its
+            optional ``"frame"`` entry, (N,) the frame of each return, is not an input (the
+            form draws its training returns per frame).
         **form_options: the form's own fitting options (its class's ``fit_options``), e.g. ``gbm``'s
             ``use_value=False`` (geometry only), ``use_geometry=False`` (value and incidence
             only), ``trees``; ``range_ring``'s ``width``; ``distance_quantile``'s ``tau``;
@@ -99,6 +106,11 @@ def fit(
         raise NidarError(
             f"only a gbm or physical profile reads the incidence (form {form!r} does not)"
         )
+    extra = {}
+    if getattr(cls, "reads_context", False):
+        extra = {"context": context}
+    elif context is not None:
+        raise NidarError(f"only a context profile reads named inputs (form {form!r} does not)")
     return cls.fit(
         values,
         range_m,
@@ -108,4 +120,5 @@ def fit(
         cos_incidence=cos_incidence,
         input=input,
         options=cls.fit_options(**form_options),
+        **extra,
     )

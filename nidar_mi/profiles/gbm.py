@@ -101,7 +101,7 @@ _FEATURE_SETS = (
 )
 
 
-def _lgb():
+def lightgbm_module():
     try:
         import lightgbm
     except ImportError:  # the `nidar` extra
@@ -205,7 +205,7 @@ class GbmMap:
             raise NidarError("gbm: 'monotone' must be true or false")
         if not isinstance(self.params, Mapping):
             raise NidarError("gbm: 'params' must be an object")
-        object.__setattr__(self, "_booster", _load_booster(self.model, feats))
+        object.__setattr__(self, "_booster", load_booster(self.model, feats))
 
     @property
     def uses_value(self) -> bool:
@@ -278,7 +278,7 @@ class GbmMap:
             object.__setattr__(self, "_table", table)
         if table:
             return table(x)
-        out = self._booster.predict(x, num_threads=_predict_threads())
+        out = self._booster.predict(x, num_threads=predict_threads())
         return np.asarray(out, dtype=np.float64)
 
     def to_dict(self) -> dict[str, Any]:
@@ -286,7 +286,7 @@ class GbmMap:
         return {
             "features": list(self.features),
             "monotone": self.monotone,
-            "lightgbm": _lgb().__version__,
+            "lightgbm": lightgbm_module().__version__,
             "params": dict(self.params),
             "model": self.model,
         }
@@ -422,7 +422,7 @@ def train_booster(x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: GbmFi
         min_leaf=o.min_leaf,
         seed=o.seed,
     )
-    lgb = _lgb()
+    lgb = lightgbm_module()
     data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
     return lgb.train(params, data, num_boost_round=int(o.trees))
 
@@ -480,7 +480,7 @@ class _CellTable:
         # one beyond the largest threshold
         reps = [np.append(t, t[-1] + abs(t[-1]) + 1.0) if len(t) else np.zeros(1) for t in th]
         grid = np.stack([g.ravel() for g in np.meshgrid(*reps, indexing="ij")], axis=1)
-        values = booster.predict(grid, num_threads=_predict_threads())
+        values = booster.predict(grid, num_threads=predict_threads())
         return cls(th, np.asarray(values, dtype=np.float64))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
@@ -504,7 +504,7 @@ def _split_thresholds(text: str, n_features: int) -> tuple[np.ndarray, ...]:
     return tuple(np.unique(t[f == j]) for j in range(n_features))
 
 
-def _predict_threads() -> int:
+def predict_threads() -> int:
     """Threads for prediction: the cores this process may use, at most 8 and at most
     ``$OMP_NUM_THREADS`` when set (rows are independent, so the output does not depend on it)."""
     import os
@@ -583,8 +583,9 @@ def _numbers(text: str, pattern: re.Pattern, what: str) -> list[float]:
     return vals
 
 
-def _check_tree(block: str, k: int, n_features: int) -> None:
-    """Checks one ``Tree=k`` block: every field, lengths, a proper binary tree."""
+def _check_tree(block: str, k: int, n_features: int, missing: bool = False) -> None:
+    """Checks one ``Tree=k`` block: every field, lengths, a proper binary tree; ``missing``:
+    numerical splits may send missing values (NaN) one way (LightGBM's missing type)."""
     lines = block.rstrip("\n").split("\n")
     if lines[0] != f"Tree={k}" or len(lines) != len(_TREE_KEYS) + 1:
         raise NidarError(f"gbm: tree {k} is malformed")
@@ -619,7 +620,8 @@ def _check_tree(block: str, k: int, n_features: int) -> None:
         raise NidarError(f"gbm: tree {k}: one split per internal node expected")
     if any(not 0 <= int(j) < n_features for j in ints["split_feature"]):
         raise NidarError(f"gbm: tree {k}: split on a feature the model does not have")
-    if any(int(t) not in (0, 2) for t in ints["decision_type"]):
+    kinds = (0, 2, 8, 10) if missing else (0, 2)  # bit 1: default left; bits 2-3: NaN missing
+    if any(int(t) not in kinds for t in ints["decision_type"]):
         raise NidarError(f"gbm: tree {k}: only numerical splits without missing values")
     # every node but the root, and every leaf, is a child exactly once, of an earlier node
     seen_nodes, seen_leaves = set(), set()
@@ -637,8 +639,9 @@ def _check_tree(block: str, k: int, n_features: int) -> None:
         raise NidarError(f"gbm: tree {k}: not a binary tree")
 
 
-def _check_model_text(text: Any, features: tuple[str, ...]) -> str:
-    """The header and trees of a LightGBM text model, after checking every line of them.
+def _check_model_text(text: Any, features: tuple[str, ...], missing: bool = False) -> str:
+    """The header and trees of a LightGBM text model, after checking every line of them
+    (``missing``: splits may route missing values, :func:`_check_tree`).
 
     LightGBM's own parser can abort the process on a malformed text, so nothing reaches it
     that is not, line by line, a regression model of numerical splits on ``features``.
@@ -689,15 +692,16 @@ def _check_model_text(text: Any, features: tuple[str, ...]) -> str:
         raise NidarError("gbm: the trees do not match the model's tree_sizes")
     pos = 0
     for k, n in enumerate(sizes):
-        _check_tree(trees[pos : pos + n], k, len(features))
+        _check_tree(trees[pos : pos + n], k, len(features), missing)
         pos += n
     return body + sep
 
 
-def _load_booster(text: Any, features: tuple[str, ...]):
-    """LightGBM booster of a model text, after checks that it is one this module could write."""
-    checked = _check_model_text(text, features)
-    lgb = _lgb()
+def load_booster(text: Any, features: tuple[str, ...], missing: bool = False):
+    """LightGBM booster of a model text, after checks that it is one this module could write
+    (``missing``: or one whose splits route missing values, the ``context`` form's)."""
+    checked = _check_model_text(text, features, missing)
+    lgb = lightgbm_module()
     try:
         booster = lgb.Booster(model_str=checked)
     except Exception as e:  # LightGBMError, ValueError: a malformed text

@@ -9,7 +9,7 @@ the profile calls it, after checking the inputs, and gives float32.
       "schema": "nidar_mi.sensor_profile/1",
       "name": "kitti-hdl64e",                 # letters, digits, '-', '_', '.'
       "sensor": "Velodyne HDL-64E (KITTI)",   # free text
-      "form": "range_ring",                   # or "distance_quantile", "gbm", "physical"
+      "form": "range_ring",                   # or "distance_quantile", "gbm", "physical", "context"
       "input": "nidar:R",                     # the value it maps (nidar:<branch>, or a baseline)
       "model": {"irnet_sha256": "...", "stn_sha256": "..."},   # or null: any model
       "mapping": {...},                       # the form's parameters (its to_dict())
@@ -75,6 +75,17 @@ class SensorProfile:
         return self.mapping.uses_incidence
 
     @property
+    def reads_context(self) -> bool:
+        """Whether calling the profile needs the returns' named inputs (``context=``: a
+        ``context`` profile, :mod:`nidar_mi.profiles.inputs`)."""
+        return bool(getattr(self.mapping, "reads_context", False))
+
+    @property
+    def needs_image(self) -> bool:
+        """Whether the profile reads the camera image at the returns (image or NIDAR inputs)."""
+        return bool(getattr(self.mapping, "needs_image", False))
+
+    @property
     def branch(self) -> str | None:
         """The NIDAR map the profile reads (``"R"``, ``"I_hat"``, ...), None for other inputs."""
         return self.input.split(":", 1)[1] if self.input.startswith("nidar:") else None
@@ -87,6 +98,7 @@ class SensorProfile:
         ring: Any = None,
         elevation_deg: Any = None,
         cos_incidence: Any = None,
+        context: Any = None,
     ) -> np.ndarray:
         """The sensor's intensity of returns with these model values.
 
@@ -100,6 +112,8 @@ class SensorProfile:
             cos_incidence: optional (N,) ``|cos θ|`` of the rays on the surfaces, in [0, 1]
                 (:func:`nidar_mi.geometry.incidence_cosine`); required when
                 :attr:`uses_incidence`, ignored otherwise.
+            context: name -> (N,) named inputs (:mod:`nidar_mi.profiles.inputs`); required
+                when :attr:`reads_context`, ignored otherwise.
 
         Returns:
             (N,) float32 intensities in [0, 1].
@@ -114,8 +128,9 @@ class SensorProfile:
             raise NidarError(f"profile {self.name}: {v.size} values but {d.size} ranges")
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d))):
             raise NidarError(f"profile {self.name}: values and ranges must be finite")
+        extra = {"context": context} if self.reads_context else {}
         out = self.mapping(
-            v, d, ring=ring, elevation_deg=elevation_deg, cos_incidence=cos_incidence
+            v, d, ring=ring, elevation_deg=elevation_deg, cos_incidence=cos_incidence, **extra
         )
         return out.astype(np.float32)
 

@@ -17,7 +17,7 @@ from tests.helpers.synthetic_kitti import make_kitti
 def test_kitti_folder_to_profile(tmp_path, capsys):
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "hdl.json"
-    argv = [str(kitti), "-o", str(out), "--sensor", "my HDL-64E", "--no-incidence"]
+    argv = [str(kitti), "-o", str(out), "--sensor", "my HDL-64E", "--form", "gbm", "--no-incidence"]
     assert main(argv) == 0
     p = load_profile(out)
     assert (p.name, p.form, p.input, p.sensor) == ("hdl", "gbm", "nidar:R", "my HDL-64E")
@@ -38,20 +38,20 @@ def test_kitti_folder_to_profile(tmp_path, capsys):
     assert load_profile(out).form == "distance_quantile"
     other = tmp_path / "notes.json"
     other.write_text('{"a": 1}')
-    assert main([str(kitti), "-o", str(other), "-q"]) == 2
+    assert main([str(kitti), "-o", str(other), "-q", "--form", "gbm"]) == 2
     assert "not a sensor profile" in capsys.readouterr().err and json.loads(other.read_text()) == {
         "a": 1
     }
-    assert main([str(kitti), "-o", str(other), "-q", "--overwrite"]) == 0
+    assert main([str(kitti), "-o", str(other), "-q", "--overwrite", "--form", "gbm"]) == 0
 
 
 def test_incidence_aware_profile(tmp_path, capsys):
-    """The gbm form reads |cos θ| (estimated on the scans' points) by default, as
-    kitti-hdl64e does, and is non-decreasing in it; --no-incidence only with the gbm or
+    """The gbm form reads |cos θ| (estimated on the scans' points) by default, as the former
+    kitti-hdl64e did, and is non-decreasing in it; --no-incidence only with the gbm or
     physical form; --incidence is no option."""
     kitti = make_kitti(tmp_path / "drive", frames=2)
     out = tmp_path / "inc.json"
-    assert main([str(kitti), "-o", str(out)]) == 0
+    assert main([str(kitti), "-o", str(out), "--form", "gbm"]) == 0
     assert "(with incidence) fitted on 2 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.uses_incidence and p.mapping.features[-1] == "cos_incidence"
@@ -62,7 +62,7 @@ def test_incidence_aware_profile(tmp_path, capsys):
     assert "--no-incidence needs --form gbm" in capsys.readouterr().err
     assert load_profile(out).uses_incidence  # the earlier file is untouched
     # --no-geometry: the value and the incidence only; range and elevation are not read
-    assert main([str(kitti), "-o", str(out), "--no-geometry"]) == 0
+    assert main([str(kitti), "-o", str(out), "--form", "gbm", "--no-geometry"]) == 0
     assert "(value and incidence only) fitted on 2 frames" in capsys.readouterr().out
     p = load_profile(out)
     assert p.mapping.features == ("v", "cos_incidence") and not p.mapping.uses_geometry
@@ -71,8 +71,8 @@ def test_incidence_aware_profile(tmp_path, capsys):
         p(v, np.full(9, 5.0), cos_incidence=np.full(9, 0.7)),
         p(v, np.full(9, 50.0), elevation_deg=np.full(9, -20.0), cos_incidence=np.full(9, 0.7)),
     )
-    for bad in (["--no-incidence"], ["--form", "range_ring"]):
-        assert main([str(kitti), "-o", str(out), "--no-geometry", "-q", *bad]) == 2
+    for bad in (["--no-incidence"], ["--form", "range_ring"]):  # the last --form wins
+        assert main([str(kitti), "-o", str(out), "--form", "gbm", "--no-geometry", "-q", *bad]) == 2
         assert "--no-geometry needs the incidence" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
         main([str(kitti), "-o", str(out), "--incidence", "-q"])
@@ -282,3 +282,61 @@ def test_calibrate_on_the_simulators_points_does_not_rescale(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "255" not in err, err
     assert load_profile(out).provenance["frames"] == 2
+
+
+def _striped_folder(root, seed: int):
+    """A generic scan folder of two frames whose images are vertical stripes 16 pixels wide,
+    each of a random grey, and whose intensities are the grey of the stripe each return
+    projects into (plus noise): what the image says at the pixel, and nothing the geometry
+    knows."""
+    from nidar_mi.geometry import project
+    from nidar_mi.io.calib import load_calib
+    from nidar_mi.io.images import write_png
+    from nidar_mi.io.points import write_npz
+    from tests.helpers.synthetic_kitti import kitti_order_scan
+
+    root = _generic_folder(root, lambda r, g: np.zeros(len(r)), with_rings=True)
+    (cam,) = load_calib(root / "calib.yaml")
+    xyz, ring, _ = kitti_order_scan(cols=360, front_only=True, rings=32)
+    u = project(xyz, cam)[0][:, 0]
+    rng = np.random.default_rng(seed)
+    for k in range(2):
+        grey = rng.integers(0, 256, 20)
+        img = np.repeat(np.repeat(grey, 16)[None, :, None], 120, axis=0).repeat(3, axis=2)
+        write_png(root / "images" / f"{k:04d}.png", img.astype(np.uint8))
+        stripe = np.clip(np.nan_to_num(np.rint(u), nan=0).astype(int) // 16, 0, 19)
+        inten = np.clip(grey[stripe] / 255.0 + rng.normal(0, 0.02, len(xyz)), 0, 1)
+        cols = {"xyz": xyz, "intensity": inten.astype(np.float32), "ring": ring.astype(np.uint16)}
+        write_npz(root / "points" / f"{k:04d}.npz", cols)
+    return root
+
+
+def test_a_context_profile_reads_the_image_where_the_intensity_comes_from(tmp_path, capsys):
+    """Fitted on two frames, a context profile ranks the returns of frames of other images
+    by the image at their pixel; without the image inputs it cannot. It refuses to run
+    without the image."""
+    from nidar_mi.datasets.scans import load_scans
+    from nidar_mi.errors import NidarError
+    from nidar_mi.eval.metrics import spearman
+    from nidar_mi.nidar.pipeline import NidarModel
+
+    train = _striped_folder(tmp_path / "train", seed=0)
+    test = load_scans([_striped_folder(tmp_path / "test", seed=1)], progress=False)[0]
+    model = NidarModel.load(device="cpu")
+    rho, profiles = {}, {}
+    for inputs in ("return,ring,geometry,image,nidar", "return,ring,geometry"):
+        out = tmp_path / f"{len(inputs)}.json"
+        assert main([str(train), "-o", str(out), "--form", "context", "--inputs", inputs]) == 0
+        assert "context profile" in capsys.readouterr().out
+        p = profiles[inputs] = load_profile(out)
+        res = model.point_intensity(test.xyz, test.cameras, test.images, profile=p, ring=test.ring)
+        assert res.observed.all()  # the scan's returns are the visible ones
+        rho[p.needs_image] = spearman(res.intensity, test.intensity)
+    assert rho[True] > 0.95 and rho[False] < 0.45  # geometry: the training stripes by azimuth
+    maps = [model.predict_image(im) for im in test.images]
+    p = profiles["return,ring,geometry,image,nidar"]
+    with pytest.raises(NidarError, match="reads the camera image"):
+        model.point_intensity(test.xyz, test.cameras, [None], maps=maps, profile=p)
+    x = str(tmp_path / "x.json")
+    assert main([str(train), "-o", x, "--form", "gbm", "--inputs", "image", "-q"]) == 2
+    assert "--inputs needs --form context" in capsys.readouterr().err

@@ -84,7 +84,8 @@ def test_kitti_profile_is_fitted_at_first_use_and_cached(tmp_path, monkeypatch):
     model = NidarModel.load(device="cpu")
     with pytest.warns(UserWarning, match="fitting the kitti-hdl64e profile"):
         p = resolve_profile("kitti-hdl64e", model, progress=False)
-    assert p.form == "gbm" and p.model == model.identity() and p.uses_incidence
+    assert p.form == "context" and p.model == model.identity() and p.uses_incidence
+    assert p.needs_image and p.mapping.groups == ("return", "ring", "geometry", "image", "nidar")
     assert p.provenance["frames"] == 2 and p.provenance["rings"] == "given"
     cached = list((tmp_path / "cache" / "profiles").glob("kitti-hdl64e-*.json"))
     assert len(cached) == 1

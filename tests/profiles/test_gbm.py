@@ -308,9 +308,9 @@ def test_prediction_does_not_depend_on_the_threads(monkeypatch):
 
     p = _profile()
     v, d, e, _ = _sample(20_000, seed=2)
-    monkeypatch.setattr(gbm, "_predict_threads", lambda: 1)
+    monkeypatch.setattr(gbm, "predict_threads", lambda: 1)
     one = p(v, d, elevation_deg=e)
-    monkeypatch.setattr(gbm, "_predict_threads", lambda: 4)
+    monkeypatch.setattr(gbm, "predict_threads", lambda: 4)
     np.testing.assert_array_equal(p(v, d, elevation_deg=e), one)
 
 

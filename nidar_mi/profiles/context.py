@@ -1,0 +1,452 @@
+"""The ``context`` profile form: a gradient-boosted regression on a return's named inputs.
+
+A sensor-profile form (:mod:`nidar_mi.profiles`). Where the ``gbm`` form reads the model value,
+range, elevation and incidence, this one reads any of the inputs of
+:mod:`nidar_mi.profiles.inputs` by name: the return's range, elevation and incidence, the laser
+index, the local geometry of the scan around it, the image around its pixel, and NIDAR's maps
+there:
+
+    I = clip(F(x), 0, 1)
+
+with ``F`` a LightGBM regression on the inputs ``x`` (:attr:`ContextMap.features`; ``kind``
+``"gbm"``), or a small learned head in its place (``kind`` ``"mlp"``: a two-layer perceptron,
+:mod:`nidar_mi.profiles.head`, some thirty times cheaper to evaluate). The profile
+file says which inputs it reads (``features``, and their ``groups``); a profile that reads the
+image or NIDAR's maps (:attr:`ContextMap.needs_image`) refuses, in one line, to run without the
+camera image. ``F`` is free in every input (no monotone constraint): which way the geometry and
+the image act on the intensity is what it learns.
+
+Fitting (:class:`ContextFitOptions`, fixed before any held-out result:
+docs/NIDAR.md, "Local geometry and image context"): :data:`DEFAULT_TREES` trees of at most
+:data:`DEFAULT_LEAVES` leaves, learning rate :data:`DEFAULT_LEARNING_RATE`, on
+:data:`POINTS_PER_FRAME` returns drawn per frame (seeded: each frame weighs the same, and a
+frame's neighbouring returns, which say the same thing, are thinned), deterministic and
+single-threaded unless ``threads`` says otherwise. ``target="rank"`` fits the per-frame rank of
+the intensity (in [0, 1]) instead and maps the prediction back through the quantiles of the
+training intensities (:data:`QUANTILES` of them, stored): the same ranking, on the sensor's
+scale.
+
+Missing inputs (NaN: no ring, a neighbourhood without a shape) take the branch LightGBM learnt
+for them; the model is stored as LightGBM's text model, checked line by line before LightGBM
+parses it (:func:`nidar_mi.profiles.gbm.load_booster`), never pickled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..errors import NidarError
+from .gbm import MAX_LEAVES, MAX_TREES, lightgbm_module, load_booster, predict_threads
+from .head import fit_head, head_from_dict, head_predict, head_to_dict
+from .inputs import DEFAULT_INPUTS, GROUPS, IMAGE_GROUPS, feature_group
+
+__all__ = [
+    "DEFAULT_LEARNING_RATE",
+    "DEFAULT_LEAVES",
+    "DEFAULT_TREES",
+    "KINDS",
+    "POINTS_PER_FRAME",
+    "QUANTILES",
+    "TARGETS",
+    "ContextFitOptions",
+    "ContextMap",
+    "frame_rows",
+    "train_context_booster",
+    "training_rows",
+]
+
+#: Boosting rounds.
+DEFAULT_TREES = 400
+#: Most leaves per tree.
+DEFAULT_LEAVES = 63
+#: Shrinkage per round.
+DEFAULT_LEARNING_RATE = 0.05
+#: Fewest training returns in a leaf (LightGBM's default).
+DEFAULT_MIN_LEAF = 20
+#: Training returns drawn per frame (all of a smaller frame).
+POINTS_PER_FRAME = 4000
+#: What the regression is fitted on: the intensity, or its per-frame rank.
+TARGETS = ("intensity", "rank")
+#: The models a context map may hold: LightGBM's trees, or the small learned head.
+KINDS = ("gbm", "mlp")
+#: Quantiles of the training intensities a ``rank`` map keeps (its output scale).
+QUANTILES = 101
+
+
+@dataclass(frozen=True)
+class ContextFitOptions:
+    """How a ``context`` map is fitted (keyword options of :func:`nidar_mi.profiles.fit`).
+
+    Attributes:
+        features: the input names to read (:mod:`nidar_mi.profiles.inputs`); None: those
+            of :data:`~nidar_mi.profiles.inputs.DEFAULT_INPUTS` the fitting data give.
+        target: ``"intensity"`` or ``"rank"`` (module docstring).
+        kind: ``"gbm"`` (LightGBM) or ``"mlp"`` (the head of :mod:`nidar_mi.profiles.head`,
+            its own fixed settings).
+        trees, leaves, learning_rate, min_leaf: LightGBM's rounds, leaves per tree,
+            shrinkage and fewest returns per leaf (``gbm``).
+        points_per_frame: training returns drawn per frame.
+        threads: LightGBM's threads while fitting (the model does not depend on them).
+        seed: the seed of the draw and of LightGBM.
+    """
+
+    features: tuple[str, ...] | None = None
+    target: str = "intensity"
+    kind: str = "gbm"
+    trees: int = DEFAULT_TREES
+    leaves: int = DEFAULT_LEAVES
+    learning_rate: float = DEFAULT_LEARNING_RATE
+    min_leaf: int = DEFAULT_MIN_LEAF
+    points_per_frame: int = POINTS_PER_FRAME
+    threads: int = 1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.target not in TARGETS:
+            raise NidarError(f"fit context: target must be one of {', '.join(TARGETS)}")
+        if self.kind not in KINDS:
+            raise NidarError(f"fit context: kind must be one of {', '.join(KINDS)}")
+        if not 1 <= int(self.trees) <= MAX_TREES or not 2 <= int(self.leaves) <= MAX_LEAVES:
+            raise NidarError(f"fit context: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
+        if not 0 < self.learning_rate <= 1 or self.min_leaf < 1 or self.points_per_frame < 1:
+            raise NidarError(
+                "fit context: learning_rate in (0, 1], min_leaf and points_per_frame >= 1"
+            )
+        if int(self.threads) < 1:
+            raise NidarError("fit context: threads must be at least 1")
+
+
+def _params(o: ContextFitOptions) -> dict[str, Any]:
+    return {
+        "objective": "regression",
+        "num_leaves": int(o.leaves),
+        "learning_rate": float(o.learning_rate),
+        "min_data_in_leaf": int(o.min_leaf),
+        "max_bin": 255,
+        "deterministic": True,
+        "force_row_wise": True,
+        "num_threads": int(o.threads),
+        "seed": int(o.seed),
+        "verbose": -1,
+    }
+
+
+def train_context_booster(
+    x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: ContextFitOptions
+):
+    """A LightGBM regression of ``y`` (N,) on ``x`` (N, F) (columns ``feats``) with the
+    options' settings; the trained ``lightgbm.Booster``."""
+    lgb = lightgbm_module()
+    data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
+    return lgb.train(_params(o), data, num_boost_round=int(o.trees))
+
+
+def _rank01(y: np.ndarray) -> np.ndarray:
+    """(N,) average ranks of ``y`` scaled to [0, 1] (ties share their mean rank)."""
+    from scipy.stats import rankdata
+
+    return (rankdata(y) - 1.0) / max(len(y) - 1, 1)
+
+
+def frame_rows(n: int, limit: int, rng: np.random.Generator) -> np.ndarray:
+    """(m,) sorted indices of the returns of a frame of ``n`` kept for training: all when
+    ``n <= limit``, else ``limit`` drawn without replacement by ``rng``."""
+    if n <= limit:
+        return np.arange(n)
+    return np.sort(rng.choice(n, limit, replace=False))
+
+
+def training_rows(
+    designs: Sequence[np.ndarray], intensities: Sequence[np.ndarray], o: ContextFitOptions
+) -> tuple[np.ndarray, np.ndarray]:
+    """The training rows of frames: ``(x, y)``, at most ``o.points_per_frame`` returns of each
+    frame drawn without replacement (one seeded generator over the frames in order), ``y``
+    the intensity or its rank within the frame (``o.target``).
+
+    Args:
+        designs: per frame, (N_f, F) inputs.
+        intensities: per frame, (N_f,) intensities in [0, 1].
+    """
+    rng = np.random.default_rng(o.seed)
+    xs, ys = [], []
+    for x, y in zip(designs, intensities, strict=True):
+        y = np.asarray(y, dtype=np.float64).reshape(-1)
+        if len(x) != len(y):
+            raise NidarError(f"fit context: {len(x)} returns but {len(y)} intensities")
+        t = _rank01(y) if o.target == "rank" else y
+        keep = frame_rows(len(y), o.points_per_frame, rng)
+        xs.append(x[keep])
+        ys.append(t[keep])
+    if not xs:
+        raise NidarError("fit context: no frames")
+    return np.concatenate(xs).astype(np.float64), np.concatenate(ys)
+
+
+@dataclass(frozen=True, eq=False)
+class ContextMap:
+    """A fitted ``context`` sensor response (module docstring).
+
+    Attributes:
+        features: the input names in column order.
+        target: ``"intensity"`` or ``"rank"``.
+        kind: ``"gbm"`` or ``"mlp"``.
+        model: LightGBM's text model (``gbm``; empty for ``mlp``).
+        head: the head's JSON numbers (``mlp``, :func:`nidar_mi.profiles.head.head_to_dict`;
+            None for ``gbm``).
+        quantiles: a ``rank`` map's :data:`QUANTILES` quantiles of the training intensities
+            (the output scale); empty for an ``intensity`` map.
+        params: the fitting parameters (for the record).
+    """
+
+    form: ClassVar[str] = "context"
+    reads_incidence: ClassVar[bool] = True
+    #: Whether the form reads named inputs (``context=`` of :meth:`__call__` and of the fit).
+    reads_context: ClassVar[bool] = True
+    fit_options: ClassVar[type] = ContextFitOptions
+
+    features: tuple[str, ...]
+    target: str
+    model: str = ""
+    kind: str = "gbm"
+    head: Mapping[str, Any] | None = None
+    quantiles: tuple[float, ...] = ()
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        feats = tuple(self.features)
+        if not feats or len(set(feats)) != len(feats):
+            raise NidarError("context: 'features' must be distinct input names")
+        for name in feats:
+            feature_group(name)  # an unknown name is an error
+        object.__setattr__(self, "features", feats)
+        if self.target not in TARGETS:
+            raise NidarError(f"context: 'target' must be one of {', '.join(TARGETS)}")
+        q = np.asarray(self.quantiles, dtype=np.float64)
+        if self.target == "rank" and (
+            q.shape != (QUANTILES,) or not np.all(np.isfinite(q)) or np.any(np.diff(q) < 0)
+        ):
+            raise NidarError(f"context: a rank map needs {QUANTILES} rising finite quantiles")
+        object.__setattr__(self, "quantiles", tuple(float(v) for v in q))
+        if not isinstance(self.params, Mapping):
+            raise NidarError("context: 'params' must be an object")
+        if self.kind not in KINDS:
+            raise NidarError(f"context: 'kind' must be one of {', '.join(KINDS)}")
+        if self.kind == "gbm":
+            if self.head is not None:
+                raise NidarError("context: a gbm map holds no 'head'")
+            object.__setattr__(self, "_predict", _booster_predict(self.model, feats))
+        else:
+            if self.model:
+                raise NidarError("context: an mlp map holds no LightGBM 'model'")
+            head = head_from_dict(self.head, len(feats))
+            object.__setattr__(self, "_predict", lambda x: head_predict(head, x))
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """The input groups the map reads (:data:`nidar_mi.profiles.inputs.GROUPS`), in order."""
+        used = {feature_group(f) for f in self.features}
+        return tuple(g for g in GROUPS if g in used)
+
+    @property
+    def needs_image(self) -> bool:
+        """Whether the map reads the camera image (or NIDAR's maps of it)."""
+        return any(g in IMAGE_GROUPS for g in self.groups)
+
+    @property
+    def uses_incidence(self) -> bool:
+        """Whether the map reads the returns' incidence cosine."""
+        return "cos_incidence" in self.features
+
+    def __call__(
+        self,
+        values: Any,
+        range_m: Any,
+        *,
+        ring: Any = None,
+        elevation_deg: Any = None,
+        cos_incidence: Any = None,
+        context: Mapping[str, Any] | None = None,
+    ) -> np.ndarray:
+        """Intensities of returns from their named inputs.
+
+        Args:
+            values: (N,) model values (their length is checked; the map reads its inputs from
+                ``context``, NIDAR's maps among them).
+            range_m: (N,) ranges, m (length check).
+            ring, elevation_deg, cos_incidence: not read (they are inputs in ``context``).
+            context: name -> (N,) inputs, at least :attr:`features` (NaN: missing).
+
+        Returns:
+            (N,) float64 in [0, 1].
+
+        Raises:
+            NidarError: no inputs, an input missing (the image, for a map that reads it) or of
+                another length.
+        """
+        n = np.asarray(range_m).reshape(-1).size
+        if np.asarray(values).reshape(-1).size != n:
+            raise NidarError("context profile: values and ranges differ in length")
+        x = _design(self.features, context, n)
+        out = self._predict(x)
+        if self.target == "rank":
+            grid = np.linspace(0.0, 1.0, QUANTILES)
+            out = np.interp(np.clip(out, 0.0, 1.0), grid, np.asarray(self.quantiles))
+        return np.clip(out, 0.0, 1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe representation: the inputs and their groups, the target, the model."""
+        return {
+            "features": list(self.features),
+            "groups": list(self.groups),
+            "needs_image": self.needs_image,
+            "target": self.target,
+            "kind": self.kind,
+            "quantiles": list(self.quantiles),
+            "params": dict(self.params),
+        } | (
+            {"lightgbm": lightgbm_module().__version__, "model": self.model}
+            if self.kind == "gbm"
+            else {"head": dict(self.head)}
+        )
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ContextMap:
+        """Inverse of :meth:`to_dict`; :class:`NidarError` on malformed input (``groups`` and
+        ``needs_image`` are checked against the features)."""
+        if not isinstance(data, Mapping):
+            raise NidarError("context: expected an object")
+        keys = {"features", "groups", "needs_image", "target", "kind", "quantiles", "lightgbm"}
+        missing = [k for k in ("features", "target") if k not in data]
+        if missing or ("model" not in data and "head" not in data):
+            raise NidarError(f"context: missing key(s) {', '.join(missing) or 'model'}")
+        unknown = sorted(set(data) - keys - {"params", "model", "head"})
+        if unknown:
+            raise NidarError(f"context: unknown key(s) {', '.join(unknown)}")
+        feats = data["features"]
+        if not isinstance(feats, list) or not all(isinstance(f, str) for f in feats):
+            raise NidarError("context: 'features' must be a list of input names")
+        q = data.get("quantiles") or []
+        if not isinstance(q, list) or not all(isinstance(v, int | float) for v in q):
+            raise NidarError("context: 'quantiles' must be a list of numbers")
+        out = cls(
+            features=tuple(feats),
+            target=data["target"],
+            model=data.get("model", ""),
+            kind=data.get("kind", "gbm"),
+            head=data.get("head"),
+            quantiles=tuple(q),
+            params=data.get("params") or {},
+        )
+        if "groups" in data and list(data["groups"]) != list(out.groups):
+            raise NidarError("context: 'groups' do not match the features")
+        if "needs_image" in data and data["needs_image"] is not out.needs_image:
+            raise NidarError("context: 'needs_image' does not match the features")
+        return out
+
+    @classmethod
+    def fit(
+        cls,
+        values: Any,
+        range_m: Any,
+        intensity: Any,
+        *,
+        ring: Any = None,
+        elevation_deg: Any = None,
+        cos_incidence: Any = None,
+        input: str = "R",
+        context: Mapping[str, Any] | None = None,
+        options: ContextFitOptions | None = None,
+    ) -> ContextMap:
+        """Fit the map on training returns (:func:`nidar_mi.profiles.fit` is the entry point).
+
+        Args:
+            values, range_m: (N,) the returns' model values and ranges (length checks).
+            intensity: (N,) the sensor's intensities in [0, 1].
+            ring, elevation_deg, cos_incidence, input: not read (inputs are in ``context``).
+            context: name -> (N,) inputs (:mod:`nidar_mi.profiles.inputs`), and optionally
+                ``"frame"``: (N,) the frame of each return (any labels); without it, one frame.
+            options: :class:`ContextFitOptions`.
+
+        Raises:
+            NidarError: no inputs, unknown or missing input names, mismatched lengths,
+                intensities not finite, too few returns.
+        """
+        o = options or ContextFitOptions()
+        if context is None:
+            raise NidarError("fit context: the returns' named inputs are needed (context=)")
+        feats = tuple(o.features) if o.features is not None else _known(context)
+        y = np.asarray(intensity, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(y)):
+            raise NidarError("fit context: intensities must be finite")
+        if y.size < 2 * o.min_leaf:
+            raise NidarError(f"fit context: {y.size} returns are too few")
+        x = _design(feats, context, y.size)
+        frame = context.get("frame")
+        labels = np.zeros(y.size) if frame is None else np.asarray(frame).reshape(-1)
+        if labels.shape != y.shape:
+            raise NidarError(f"fit context: {labels.size} frame labels for {y.size} returns")
+        _, inverse = np.unique(labels, return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        cuts = np.flatnonzero(np.diff(inverse[order])) + 1
+        parts = np.split(order, cuts)
+        xt, yt = training_rows([x[p] for p in parts], [y[p] for p in parts], o)
+        q = np.quantile(y, np.linspace(0, 1, QUANTILES)) if o.target == "rank" else ()
+        record = {"samples": int(yt.size), "points_per_frame": int(o.points_per_frame)}
+        record["seed"] = int(o.seed)
+        if o.kind == "mlp":
+            head = head_to_dict(fit_head(xt, yt, seed=o.seed, threads=o.threads))
+            return cls(
+                features=feats,
+                target=o.target,
+                kind="mlp",
+                head=head,
+                quantiles=tuple(float(v) for v in q),
+                params=record,
+            )
+        booster = train_context_booster(xt, yt, feats, o)
+        record |= {k: v for k, v in _params(o).items() if k not in ("verbose", "num_threads")}
+        record["trees"] = int(booster.num_trees())
+        return cls(
+            features=feats,
+            target=o.target,
+            model=booster.model_to_string(),
+            quantiles=tuple(float(v) for v in q),
+            params=record,
+        )
+
+
+def _design(features: tuple[str, ...], context: Mapping[str, Any] | None, n: int) -> np.ndarray:
+    """(n, F) float64 inputs in ``features`` order; an error naming what is missing."""
+    missing = [f for f in features if context is None or f not in context]
+    if missing:
+        groups = sorted({feature_group(f) for f in missing})
+        if any(g in IMAGE_GROUPS for g in groups):
+            raise NidarError(
+                "context profile: this profile reads the camera image "
+                f"({', '.join(g for g in groups if g in IMAGE_GROUPS)} inputs); give the "
+                "image of a camera that sees the returns"
+            )
+        raise NidarError(f"context profile: inputs missing: {', '.join(missing)}")
+    cols = [np.asarray(context[f], dtype=np.float64).reshape(-1) for f in features]
+    if any(c.shape != (n,) for c in cols):
+        raise NidarError(f"context profile: every input needs {n} values")
+    x = np.stack(cols, axis=1)
+    if np.isinf(x).any():
+        raise NidarError("context profile: inputs must be finite or NaN (missing)")
+    return x
+
+
+def _booster_predict(model: str, feats: tuple[str, ...]):
+    """The prediction function of a checked LightGBM text model on ``feats``."""
+    booster = load_booster(model, feats, missing=True)
+    return lambda x: np.asarray(booster.predict(x, num_threads=predict_threads()), np.float64)
+
+
+def _known(context: Mapping[str, Any]) -> tuple[str, ...]:
+    """The names of ``context`` that are default inputs
+    (:data:`~nidar_mi.profiles.inputs.DEFAULT_INPUTS`), in their order."""
+    return tuple(f for f in DEFAULT_INPUTS if f in context)

@@ -1,0 +1,168 @@
+"""The ``context`` profile form: fits on named inputs, survives its file, refuses what it cannot
+read (the image it needs, a tampered file)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from nidar_mi.errors import NidarError
+from nidar_mi.profiles import SensorProfile, fit, load_profile
+from nidar_mi.profiles.context import QUANTILES, ContextMap
+from nidar_mi.profiles.inputs import GROUPS
+
+
+def _data(n=6000, frames=3, seed=0):
+    """Inputs of three groups and an intensity that depends on range, planarity and the
+    pixel's luminance-like value: (context, intensity, frame)."""
+    rng = np.random.default_rng(seed)
+    ctx = {
+        "range_m": rng.uniform(2, 60, n),
+        "elevation_deg": rng.uniform(-24, 2, n),
+        "cos_incidence": rng.uniform(0, 1, n),
+        "planarity_k20": rng.uniform(0, 1, n),
+        "r_lin": rng.uniform(0, 1, n),
+        "R": rng.uniform(0, 1, n),
+    }
+    y = 0.5 * np.exp(-ctx["range_m"] / 30) + 0.3 * ctx["planarity_k20"] * ctx["r_lin"]
+    y = np.clip(y + rng.normal(0, 0.01, n), 0, 1)
+    return ctx, y, np.repeat(np.arange(frames), n // frames)
+
+
+def _profile(kind="gbm", **options) -> SensorProfile:
+    ctx, y, frame = _data()
+    m = fit(
+        "context", ctx["R"], ctx["range_m"], y, context=ctx | {"frame": frame}, kind=kind, **options
+    )
+    return SensorProfile(name="ctx", sensor="test", form="context", input="nidar:R", mapping=m)
+
+
+@pytest.mark.parametrize("kind", ["gbm", "mlp"])
+def test_fit_predict_and_the_file_round_trip(tmp_path, kind):
+    """Fitted on three frames, the map follows the intensity on fresh returns; written and read
+    back it predicts the same values, and the file names what it reads."""
+    p = _profile(kind, trees=60)
+    ctx, y, _ = _data(3000, seed=1)
+    pred = p(ctx["R"], ctx["range_m"], context=ctx)
+    assert pred.dtype == np.float32 and 0 <= pred.min() and pred.max() <= 1
+    assert np.corrcoef(pred, y)[0, 1] > 0.95
+    path = tmp_path / "ctx.json"
+    p.save(path)
+    data = json.loads(path.read_text())
+    assert data["form"] == "context" and data["mapping"]["kind"] == kind
+    assert data["mapping"]["groups"] == ["return", "geometry", "image", "nidar"]
+    assert data["mapping"]["needs_image"] is True
+    q = load_profile(path)
+    np.testing.assert_array_equal(q(ctx["R"], ctx["range_m"], context=ctx), pred)
+    assert q.reads_context and q.needs_image and q.mapping.features == p.mapping.features
+
+
+def test_a_profile_that_reads_the_image_refuses_without_it():
+    p = _profile(trees=20)
+    ctx, _, _ = _data(100)
+    without = {k: v for k, v in ctx.items() if k not in ("r_lin", "R")}
+    with pytest.raises(NidarError, match="reads the camera image .image, nidar inputs"):
+        p(ctx["R"], ctx["range_m"], context=without)
+    with pytest.raises(NidarError, match="inputs missing: planarity_k20"):
+        p(ctx["R"], ctx["range_m"], context={k: v for k, v in ctx.items() if k != "planarity_k20"})
+    with pytest.raises(NidarError, match="reads the camera image"):
+        p(ctx["R"], ctx["range_m"])
+    # one that reads no image input needs none
+    ctx2, y, frame = _data()
+    geo = {k: ctx2[k] for k in ("range_m", "elevation_deg", "cos_incidence", "planarity_k20")}
+    m = fit("context", ctx2["R"], ctx2["range_m"], y, context=geo | {"frame": frame}, trees=20)
+    assert m.groups == ("return", "geometry") and not m.needs_image
+    assert m(ctx2["R"], ctx2["range_m"], context=geo).shape == y.shape
+
+
+def test_missing_inputs_take_their_branch_and_ranks_map_to_the_intensity_scale():
+    """NaN inputs (no ring) are read as missing, not refused; a rank map's output follows the
+    training intensities' quantiles (the same ranking on the sensor's scale)."""
+    ctx, y, frame = _data()
+    ctx = ctx | {"ring": np.where(np.arange(y.size) % 2 == 0, np.nan, 3.0)}
+    m = fit(
+        "context",
+        ctx["R"],
+        ctx["range_m"],
+        y,
+        context=ctx | {"frame": frame},
+        target="rank",
+        trees=30,
+    )
+    assert (
+        len(m.quantiles) == QUANTILES and m.quantiles[0] == y.min() and m.quantiles[-1] == y.max()
+    )
+    out = m(ctx["R"], ctx["range_m"], context=ctx)
+    assert np.all(np.isfinite(out)) and y.min() <= out.min() and out.max() <= y.max()
+    assert "ring" in m.features and "ring" in m.groups
+
+
+def test_a_tampered_or_malformed_file_is_refused(tmp_path):
+    p = _profile(trees=10)
+    good = p.to_dict()
+
+    def load(change):
+        data = json.loads(json.dumps(good))
+        change(data["mapping"])
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps(data))
+        return load_profile(path)
+
+    with pytest.raises(NidarError, match="'groups' do not match"):
+        load(lambda m: m.update(groups=["return"]))
+    with pytest.raises(NidarError, match="'needs_image' does not match"):
+        load(lambda m: m.update(needs_image=False))
+    with pytest.raises(NidarError, match="unknown profile input"):
+        load(lambda m: m.update(features=[*m["features"][:-1], "colour"]))
+    with pytest.raises(NidarError, match="not a regression on"):
+        load(lambda m: m.update(features=m["features"][::-1]))
+    with pytest.raises(NidarError, match="unknown key"):
+        load(lambda m: m.update(pickle="x"))
+    h = _profile("mlp").to_dict()
+    data = json.loads(json.dumps(h))
+    data["mapping"]["head"]["layers"][1]["weight"] = [[1.0, 2.0]]
+    path = tmp_path / "head.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(NidarError, match="do not chain"):
+        load_profile(path)
+
+
+def test_fit_refuses_what_it_cannot_read():
+    ctx, y, frame = _data(200)
+    with pytest.raises(NidarError, match="named inputs"):
+        fit("context", ctx["R"], ctx["range_m"], y)
+    with pytest.raises(NidarError, match="only a context profile reads named inputs"):
+        fit("gbm", ctx["R"], ctx["range_m"], y, elevation_deg=ctx["elevation_deg"], context=ctx)
+    with pytest.raises(NidarError, match="kind must be one of"):
+        fit("context", ctx["R"], ctx["range_m"], y, context=ctx, kind="forest")
+    with pytest.raises(NidarError, match="unknown profile input"):
+        fit("context", ctx["R"], ctx["range_m"], y, context=ctx, features=("range_m", "x"))
+    assert set(GROUPS) == {"return", "ring", "geometry", "image", "image_rel", "nidar"}
+    assert ContextMap.reads_context
+
+
+def test_the_exposure_divided_inputs_only_when_named():
+    """By default a context map reads the inputs of DEFAULT_GROUPS the data give (the recipe
+    measured leave one group out), not the image's exposure-divided copies; named, it reads
+    them."""
+    from nidar_mi.profiles.inputs import DEFAULT_GROUPS, DEFAULT_INPUTS
+
+    ctx, y, frame = _data(1500)
+    ctx = ctx | {"g_rel": ctx["r_lin"] * 2.0, "ring": np.zeros(len(y))}
+    m = fit("context", ctx["R"], ctx["range_m"], y, context=ctx | {"frame": frame}, trees=5)
+    order = ("range_m", "elevation_deg", "cos_incidence", "ring", "planarity_k20", "r_lin", "R")
+    assert m.features == order
+    assert set(m.features) <= set(DEFAULT_INPUTS) and "image_rel" not in DEFAULT_GROUPS
+    named = (*m.features, "g_rel")
+    m = fit(
+        "context",
+        ctx["R"],
+        ctx["range_m"],
+        y,
+        context=ctx | {"frame": frame},
+        trees=5,
+        features=named,
+    )
+    assert m.features == named and "image_rel" in m.groups and m.needs_image
