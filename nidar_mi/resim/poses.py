@@ -2,10 +2,14 @@
 
 KISS-ICP (Vizzo et al., RA-L 2023; the ``kiss-icp`` package, through its public
 :class:`kiss_icp.kiss_icp.KissICP` and :func:`kiss_icp.config.load_config`) registers each scan
-to a local map of the scans before it and returns ``T_{lidar_0 <- lidar_k}``. Every frame, held
-out or not, is registered, because the re-simulated scan of a held-out frame needs its pose
-(a vehicle's localisation gives that pose at run time); the held-out scans enter nothing else
-(:mod:`.reconstruction`). Scans are not de-skewed: the re-simulation casts each frame from one pose.
+to a local map of the scans before it and returns ``T_{lidar_0 <- lidar_k}``; on a slow drive its
+poses jitter by a few tenths of a degree and centimetres from frame to frame, which blurs a fused
+mesh. :func:`refine_poses` then registers every frame again, point to plane (Open3D's
+``registration_icp``, Zhou, Park and Koltun 2018), to the returns of its training neighbours on
+both sides, over a few passes. Every frame, held out or not, is registered, because the
+re-simulated scan of a held-out frame needs its pose (a vehicle's localisation gives that pose at
+run time); the held-out scans enter nothing else (:mod:`.reconstruction`), nor any refinement's
+map. Scans are not de-skewed: the re-simulation casts each frame from one pose.
 
 :func:`pose_quality` measures what the mesh's Chamfer target cares about: how far the returns of
 each frame lie from those of its neighbours once both are placed with their poses (the median
@@ -85,7 +89,11 @@ def refine_poses(
     ``TransformationEstimationPointToPlane`` and a Tukey kernel, correspondence distances
     :data:`REFINE_DISTANCES_M`) to a local map: the returns of the ``neighbours`` training frames
     nearest to k in sequence order (k itself left out), placed with their current poses,
-    down-sampled to ``voxel_m`` cubes, normals from their 20 nearest neighbours within 0.5 m.
+    down-sampled to ``voxel_m`` cubes, normals from their 30 nearest neighbours within
+    ``normal_radius_m``. The cubes and the radius are wider than a ring's point spacing and
+    narrower than the spacing of its rings on the road: with finer ones the normals of the road's
+    rings are fitted along each ring and lie in the road, and the registration pulls each scan's
+    rings onto its neighbours' (their sensor's position) instead of the surfaces onto each other.
     Its pose is replaced at once (Gauss-Seidel), and the pass over all frames repeated
     ``sweeps`` times: a frame's error is averaged with its neighbours' until consecutive poses
     agree. Held-out frames are registered like the others but their returns never enter a map.
@@ -97,6 +105,7 @@ def refine_poses(
         neighbours: training frames per local map.
         sweeps: passes over the drive.
         voxel_m: down-sampling cube side, m.
+        normal_radius_m: the radius of the normals' neighbourhoods, m.
         progress: progress bar on stderr.
     """
     import open3d as o3d
@@ -126,7 +135,9 @@ def refine_poses(
         for dist in REFINE_DISTANCES_M:
             estimation = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=dist))
             criteria = reg.ICPConvergenceCriteria(max_iteration=30)
-            T = reg.registration_icp(clouds[k], target, dist, T, estimation, criteria).transformation
+            T = reg.registration_icp(
+                clouds[k], target, dist, T, estimation, criteria
+            ).transformation
         poses[k] = T
     return poses
 
