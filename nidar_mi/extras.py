@@ -14,6 +14,8 @@ extra           modules                     what needs it
                                             ``evaluate``, ``drive --sources nidar``
 ``drive``       kiss_icp, gtsam             the drive study (``drive``): odometry, loop
                                             registration, pose-graph correction
+``resim``       open3d                      ``reconstruct`` of a drive without a poses
+                                            file: the odometry's pose refinement
 ``ray``         ray                         ``--workers`` / ``--ray-address``
 ``ros``         rosbags                     ``render --sequence-formats rosbag``
 ``laz``         lazrs                       ``render --formats laz``; reading ``.laz``
@@ -38,6 +40,7 @@ __all__ = ["EXTRAS", "extra_of", "missing_extra", "require"]
 EXTRAS: dict[str, tuple[str, ...]] = {
     "nidar": ("torch", "safetensors", "lightgbm"),
     "drive": ("kiss_icp", "gtsam"),
+    "resim": ("open3d",),
     "ray": ("ray",),
     "ros": ("rosbags",),
     "laz": ("lazrs",),

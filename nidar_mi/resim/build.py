@@ -16,13 +16,16 @@ __all__ = ["drive_poses", "build_surfaces", "training_rays", "scratch_scene", "d
 
 
 def drive_poses(drive: Drive, frames: Frames, *, progress: bool = False) -> np.ndarray:
-    """(F, 4, 4) every frame's LiDAR pose in frame 0's LiDAR frame."""
-    from .poses import odometry_poses
+    """(F, 4, 4) every frame's LiDAR pose in frame 0's LiDAR frame: the drive's poses file, or
+    KISS-ICP odometry refined against the training frames' returns (:mod:`.poses`)."""
+    from .poses import odometry_poses, refine_poses
 
     if drive.poses is not None:
         poses = drive.poses
     else:
         poses = odometry_poses(lambda k: frames.xyz[k], len(drive.ids), progress=progress)
+        train = np.isin(np.arange(len(drive.ids)), [drive.index(i) for i in drive.train])
+        poses = refine_poses(lambda k: frames.xyz[k], poses, train, progress=progress)
     return np.linalg.inv(poses[0]) @ poses
 
 

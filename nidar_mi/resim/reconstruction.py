@@ -72,6 +72,7 @@ class ReconstructOptions:
 def check(options: ReconstructOptions) -> Drive:
     """Every check that needs no work: the drive, the held-out ids, the poses, the bounds, the
     output folder. Raises NidarError."""
+    from ..extras import require
     from ..io.atomic import check_output_folder
 
     if not 0.02 <= options.voxel_m <= 1.0:
@@ -84,6 +85,9 @@ def check(options: ReconstructOptions) -> Drive:
             f"{options.drive} has {len(drive.ids)} scans, more than `max_frames` "
             f"({options.max_frames})"
         )
+    if drive.poses is None:  # KISS-ICP's odometry, refined by Open3D's registration
+        require("drive", "reconstruct of a drive without poses")
+        require("resim", "reconstruct of a drive without poses")
     check_output_folder(
         options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
     )
