@@ -469,12 +469,14 @@ def _lerp(table, pos, size: int, xp, active=True):
         return np.interp(pos, np.arange(size, dtype=np.float64), table)
     import drjit as dr
 
-    p = dr.clip(pos, 0.0, size - 1.000001)
-    i = type(p)(dr.floor(p))
-    t = p - i
-    idx = dr.uint32_array_t(type(p))(i)
+    # The lower index is clamped as an integer: a float bound such as ``size - 1.000001``
+    # rounds to ``size - 1`` in float32 (for size > ~16), and ``idx + 1`` would then read one
+    # element past the table.
+    p = dr.clip(pos, 0.0, size - 1.0)
+    idx = dr.minimum(dr.uint32_array_t(type(p))(dr.floor(p)), max(size - 2, 0))
+    t = p - type(p)(idx)
     lo = dr.gather(type(p), table, idx, active)
-    hi = dr.gather(type(p), table, idx + 1, active)
+    hi = dr.gather(type(p), table, dr.minimum(idx + 1, size - 1), active)
     return lo + (hi - lo) * t
 
 

@@ -199,6 +199,45 @@ def test_drops_on_an_ideal_beam():
     assert seen.sum() / met.sum() == pytest.approx(share, abs=0.02)
 
 
+def test_device_candidates_read_only_inside_their_tables(variant, capfd):
+    """On the Dr.Jit backend the soft return and the particles are read from the tables by
+    linear interpolation; at and beyond the soft table's last range (the sky beams, whose
+    limit is ``range_max`` plus a pulse) the read must stay inside the table and give the
+    NumPy path's value (np.interp). Dr.Jit's debug mode reports any out-of-bounds gather on
+    stderr: none may appear."""
+    import drjit as dr
+    import mitsuba as mi
+
+    cfg = SensorTerms(905.0, 1.0, "raw", 0.0, 0.0, 0.0, 120.0)
+    model = weather_model(Weather(rain=10.0, fog=40.0), cfg)
+    end = float(model.soft.limits[-1])
+    assert model.soft.limits.size > 16  # float32 cannot hold size - 1 - 1e-6 apart from size - 1
+    limit = np.tile([0.0, 0.37 * end, end * (1 - 1e-7), end, end + 5.0, 1e6], 200)
+    rng = np.random.default_rng(3)
+    draws = [rng.random(limit.size).astype(np.float32) for _ in range(64)]
+    host = candidates(model, limit, device_tables(model, np), iter(draws).__next__)
+    previous = dr.flag(dr.JitFlag.Debug)
+    dr.set_flag(dr.JitFlag.Debug, True)
+    try:
+        it = iter(draws)
+        dev = candidates(
+            model, mi.Float(limit), device_tables(model, mi.Float), lambda: mi.Float(next(it))
+        )
+        got = [np.asarray(e.numpy(), dtype=np.float64) for e in dev.energy]
+        ranges = [np.asarray(r.numpy(), dtype=np.float64) for r in dev.range_m]
+    finally:
+        dr.set_flag(dr.JitFlag.Debug, previous)
+    assert "out-of-bounds" not in capfd.readouterr().err
+    for a, b in zip(got, host.energy, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-12)
+    # the soft return's range everywhere; a particle's where it is present (the device reads
+    # only those lanes)
+    np.testing.assert_allclose(ranges[0], host.range_m[0], rtol=1e-5, atol=1e-4)
+    for a, b, e in zip(ranges[1:], host.range_m[1:], host.energy[1:], strict=True):
+        np.testing.assert_allclose(a[e > 0], b[e > 0], rtol=1e-4, atol=1e-4)
+    assert any((e > 0).any() for e in host.energy[1:])  # some drop was met
+
+
 # ------------------------------------------------------------------ scans
 
 
