@@ -249,11 +249,16 @@ def fit_rows(train: Sequence[dict], names, target: str, seed: int, kind: str = "
         o = ContextFitOptions(
             seed=seed, target=target, kind=kind, threads=THREADS, points_per_frame=points
         )
-    x, y = training_rows([design(f, names) for f in train], [f["intensity"] for f in train], o)
+    x, y, w = training_rows(
+        [design(f, names) for f in train],
+        [f["intensity"] for f in train],
+        o,
+        [group_of(f["frame"]) for f in train],
+    )
     if kind == "mlp":
-        head = fit_head(x, y, seed=seed, threads=THREADS)
+        head = fit_head(x, y, seed=seed, threads=THREADS, weight=w)
         return lambda x: head_predict(head, x)
-    booster = train_context_booster(x, y, tuple(names), o)
+    booster = train_context_booster(x, y, tuple(names), o, w)
     return lambda x: booster.predict(x, num_threads=o.threads)
 
 

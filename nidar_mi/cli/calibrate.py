@@ -2,7 +2,8 @@
 
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form context|gbm|range_ring|distance_quantile|physical]
-                                 [--inputs GROUP,...] [--kind gbm|mlp] [--branch R|I_hat]
+                                 [--inputs GROUP,...] [--kind gbm|mlp] [--balance group|frame]
+                                 [--branch R|I_hat]
                                  [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
                                  [--max-frames K] [--overwrite] [-q | -v] [--progress | --no-progress]
@@ -33,7 +34,10 @@ nidar``, the recipe measured leave one group out; ``image_rel`` adds the image i
 exposure divided out; without ``image``, ``image_rel`` and ``nidar`` the profile needs no
 image); ``--kind mlp`` puts
 the small learned head (:mod:`nidar_mi.profiles.head`) in place of the trees, some thirty times
-cheaper to apply. The profile file
+cheaper to apply. A context profile weighs each recording alike (``--balance group``, the
+default: a recording is a scan folder, or for a KITTI frame named ``<source>__<id>`` its source,
+:func:`nidar_mi.datasets.scans.recording_of`; the frames of a recording share its weight, so
+that a long drive does not outweigh short ones) or each frame (``--balance frame``). The profile file
 (:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -108,6 +112,12 @@ def build_parser():
         choices=("gbm", "mlp"),
         help="context: LightGBM's trees or the small learned head (default: kitti-hdl64e's, "
         f"{KITTI_PROFILE_OPTIONS.get('kind', 'gbm')})",
+    )
+    p.add_argument(
+        "--balance",
+        choices=("group", "frame"),
+        help="context: weigh each recording (scan folder) alike, its frames sharing its weight "
+        "(group, the default), or each frame alike (frame)",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -217,14 +227,17 @@ def _calibrate(args, argv) -> None:
 
 
 def _context_options(args) -> dict:
-    """The ``context`` form's options from ``--inputs`` (``features``: the groups' inputs) and
-    ``--kind``."""
-    given = [f for f, v in (("--inputs", args.inputs), ("--kind", args.kind)) if v is not None]
+    """The ``context`` form's options from ``--inputs`` (``features``: the groups' inputs),
+    ``--kind`` and ``--balance``."""
+    flags = (("--inputs", args.inputs), ("--kind", args.kind), ("--balance", args.balance))
+    given = [f for f, v in flags if v is not None]
     if given and args.form != "context":
         raise NidarError(f"{given[0]} needs --form context (got --form {args.form})")
     options = {}
     if args.form == "context":
         options["kind"] = args.kind or KITTI_PROFILE_OPTIONS.get("kind", "gbm")
+    if args.balance is not None:
+        options["balance"] = args.balance
     if args.inputs is None:
         return options
     from ..profiles.inputs import GROUPS

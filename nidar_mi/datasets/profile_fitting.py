@@ -126,10 +126,12 @@ def _scan_returns(scans, values, incidence: bool, progress: bool, name: str, inp
     ``ring``, ``elevation_deg``, ``intensity`` and ``cos_incidence`` (None without
     ``incidence``) as (N,) arrays. With ``inputs`` (``(inputs(scan), rows(n))``: a scan's
     named inputs and the rows of its ``n`` returns to keep) also ``context``, name -> (N,), with
-    ``"frame"``, (N,) the index of each return's scan; only the kept returns."""
+    ``"frame"`` and ``"group"``, (N,) the index of each return's scan and of its recording
+    (``ScanFrame.group``); only the kept returns."""
     from ..progress import progress_bar
 
-    cols: dict[str, list] = {k: [] for k in ("v", "d", "ring", "el", "y", "cos", "frame")}
+    cols: dict[str, list] = {k: [] for k in ("v", "d", "ring", "el", "y", "cos", "frame", "group")}
+    groups: dict[str, int] = {}
     ctx: dict[str, list] = {}
     for i, scan in enumerate(
         progress_bar(scans, show=progress, desc=f"profile {name}", unit="frame")
@@ -151,6 +153,7 @@ def _scan_returns(scans, values, incidence: bool, progress: bool, name: str, inp
         cols["el"].append(scan.elevation_deg[ok])
         cols["y"].append(scan.intensity[ok])
         cols["frame"].append(np.full(len(ok), i))
+        cols["group"].append(np.full(len(ok), groups.setdefault(scan.group, len(groups))))
         if incidence:
             cos = named["cos_incidence"] if named is not None else scan.cos_incidence
             cols["cos"].append(cos[ok])
@@ -165,6 +168,7 @@ def _scan_returns(scans, values, incidence: bool, progress: bool, name: str, inp
     if inputs is not None:
         out["context"] = {k: np.concatenate(v) for k, v in ctx.items()}
         out["context"]["frame"] = np.concatenate(cols["frame"])
+        out["context"]["group"] = np.concatenate(cols["group"])
     return out
 
 

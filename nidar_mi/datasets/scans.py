@@ -41,6 +41,7 @@ __all__ = [
     "frames_from_data",
     "frames_from_generic",
     "load_scans",
+    "recording_of",
     "scan_frame",
     "scan_kind",
     "simulator_scale",
@@ -63,6 +64,9 @@ class ScanFrame:
         ring: (N,) int16 ring of each return (0 = the highest beam), -1 unknown.
         cameras: the C camera models (``T_cam_lidar`` from this LiDAR).
         source: where the frame came from (a path).
+        group: the recording the frame belongs to (:func:`recording_of`): a profile fitted on
+            frames of several recordings weighs each recording alike
+            (:attr:`nidar_mi.profiles.context.ContextFitOptions.balance`).
     """
 
     name: str
@@ -71,6 +75,7 @@ class ScanFrame:
     ring: np.ndarray
     cameras: list
     source: str = ""
+    group: str = ""
     _images: Callable[[], list[np.ndarray]] = field(default=lambda: [], repr=False)
 
     @property
@@ -169,8 +174,19 @@ def scan_frame(
         ring=f["points_ring"],
         cameras=[cam],
         source=source,
+        group=recording_of(name, source),
         _images=images,
     )
+
+
+def recording_of(name: str, source: str) -> str:
+    """The recording of a frame: the ``<source>`` of a name ``<source>__<id>`` (a KITTI frame
+    of a converted folder names its folder so), else the folder of ``source`` (a data
+    folder's frames: the data folder, above its split)."""
+    if "__" in name:
+        return name.split("__", 1)[0]
+    parent = Path(source).parent
+    return str(parent.parent if parent.name in ("train", "val", "test") else parent)
 
 
 def _auto_scale(values: np.ndarray, given: float | None, where: str) -> float:
@@ -290,6 +306,7 @@ def frames_from_generic(
                 ring=ring[seen].astype(np.int16),
                 cameras=list(cameras),
                 source=str(pts_path),
+                group=str(folder),
                 _images=images,
             )
         )

@@ -16,15 +16,19 @@ image or NIDAR's maps (:attr:`ContextMap.needs_image`) refuses, in one line, to 
 camera image. ``F`` is free in every input (no monotone constraint): which way the geometry and
 the image act on the intensity is what it learns.
 
-Fitting (:class:`ContextFitOptions`, fixed before any held-out result:
-docs/NIDAR.md, "Local geometry and image context"): :data:`DEFAULT_TREES` trees of at most
-:data:`DEFAULT_LEAVES` leaves, learning rate :data:`DEFAULT_LEARNING_RATE`, on
-:data:`POINTS_PER_FRAME` returns drawn per frame (seeded: each frame weighs the same, and a
-frame's neighbouring returns, which say the same thing, are thinned), deterministic and
-single-threaded unless ``threads`` says otherwise. ``target="rank"`` fits the per-frame rank of
-the intensity (in [0, 1]) instead and maps the prediction back through the quantiles of the
-training intensities (:data:`QUANTILES` of them, stored): the same ranking, on the sensor's
-scale.
+Fitting (:class:`ContextFitOptions`): :data:`DEFAULT_TREES` trees of at most
+:data:`DEFAULT_LEAVES` leaves, learning rate :data:`DEFAULT_LEARNING_RATE`, at least
+:data:`DEFAULT_MIN_LEAF` returns per leaf, each tree grown on :data:`DEFAULT_FEATURE_FRACTION` of
+the inputs and :data:`DEFAULT_BAGGING_FRACTION` of the rows, L2 penalty :data:`DEFAULT_L2`, on
+:data:`POINTS_PER_FRAME` returns drawn per frame (seeded: a frame's neighbouring returns, which
+say the same thing, are thinned), every recording weighing the same (``balance="group"``: the
+frames of a drive share its weight, so that 78 frames of one drive do not outweigh five of
+another), deterministic and single-threaded unless ``threads`` says otherwise. The weighing and
+the regularisation were chosen by nested leave one group out on the KITTI groups (each held-out
+group's choice made on the other seven alone; docs/NIDAR.md, "Each drive weighs the same").
+``target="rank"`` fits the per-frame rank of the intensity (in [0, 1]) instead and maps the
+prediction back through the quantiles of the training intensities (:data:`QUANTILES` of them,
+stored): the same ranking, on the sensor's scale.
 
 Missing inputs (NaN: no ring, a neighbourhood without a shape) take the branch LightGBM learnt
 for them; the model is stored as LightGBM's text model, checked line by line before LightGBM
@@ -45,6 +49,10 @@ from .head import fit_head, head_from_dict, head_predict, head_to_dict
 from .inputs import DEFAULT_INPUTS, GROUPS, IMAGE_GROUPS, feature_group
 
 __all__ = [
+    "BALANCES",
+    "DEFAULT_BAGGING_FRACTION",
+    "DEFAULT_FEATURE_FRACTION",
+    "DEFAULT_L2",
     "DEFAULT_LEARNING_RATE",
     "DEFAULT_LEAVES",
     "DEFAULT_TREES",
@@ -55,6 +63,7 @@ __all__ = [
     "ContextFitOptions",
     "ContextMap",
     "frame_rows",
+    "frame_weights",
     "train_context_booster",
     "training_rows",
 ]
@@ -65,8 +74,14 @@ DEFAULT_TREES = 400
 DEFAULT_LEAVES = 63
 #: Shrinkage per round.
 DEFAULT_LEARNING_RATE = 0.05
-#: Fewest training returns in a leaf (LightGBM's default).
-DEFAULT_MIN_LEAF = 20
+#: Fewest training returns in a leaf.
+DEFAULT_MIN_LEAF = 100
+#: Share of the inputs each tree may split on (drawn per tree).
+DEFAULT_FEATURE_FRACTION = 0.5
+#: Share of the training rows each tree is grown on (drawn per tree).
+DEFAULT_BAGGING_FRACTION = 0.7
+#: L2 penalty on the leaves' values.
+DEFAULT_L2 = 10.0
 #: Training returns drawn per frame (all of a smaller frame).
 POINTS_PER_FRAME = 4000
 #: What the regression is fitted on: the intensity, or its per-frame rank.
@@ -75,6 +90,9 @@ TARGETS = ("intensity", "rank")
 KINDS = ("gbm", "mlp")
 #: Quantiles of the training intensities a ``rank`` map keeps (its output scale).
 QUANTILES = 101
+#: How the training frames weigh: each recording (``group``) alike, its frames sharing its
+#: weight, or each frame alike.
+BALANCES = ("group", "frame")
 
 
 @dataclass(frozen=True)
@@ -89,7 +107,13 @@ class ContextFitOptions:
             its own fixed settings).
         trees, leaves, learning_rate, min_leaf: LightGBM's rounds, leaves per tree,
             shrinkage and fewest returns per leaf (``gbm``).
+        feature_fraction, bagging_fraction, l2: the share of the inputs and of the rows each
+            tree sees (drawn with ``seed``) and the L2 penalty on leaf values (``gbm``).
         points_per_frame: training returns drawn per frame.
+        balance: ``"group"``: every recording (the ``"group"`` labels of the fit's inputs: a
+            drive, a folder) weighs the same and its frames share that weight, so that a long
+            drive does not outweigh short ones; ``"frame"``: every frame weighs the same.
+            Without group labels the two agree.
         threads: LightGBM's threads while fitting (the model does not depend on them).
         seed: the seed of the draw and of LightGBM.
     """
@@ -101,7 +125,11 @@ class ContextFitOptions:
     leaves: int = DEFAULT_LEAVES
     learning_rate: float = DEFAULT_LEARNING_RATE
     min_leaf: int = DEFAULT_MIN_LEAF
+    feature_fraction: float = DEFAULT_FEATURE_FRACTION
+    bagging_fraction: float = DEFAULT_BAGGING_FRACTION
+    l2: float = DEFAULT_L2
     points_per_frame: int = POINTS_PER_FRAME
+    balance: str = "group"
     threads: int = 1
     seed: int = 0
 
@@ -110,6 +138,8 @@ class ContextFitOptions:
             raise NidarError(f"fit context: target must be one of {', '.join(TARGETS)}")
         if self.kind not in KINDS:
             raise NidarError(f"fit context: kind must be one of {', '.join(KINDS)}")
+        if self.balance not in BALANCES:
+            raise NidarError(f"fit context: balance must be one of {', '.join(BALANCES)}")
         if not 1 <= int(self.trees) <= MAX_TREES or not 2 <= int(self.leaves) <= MAX_LEAVES:
             raise NidarError(f"fit context: 1-{MAX_TREES} trees of 2-{MAX_LEAVES} leaves expected")
         if not 0 < self.learning_rate <= 1 or self.min_leaf < 1 or self.points_per_frame < 1:
@@ -118,6 +148,9 @@ class ContextFitOptions:
             )
         if int(self.threads) < 1:
             raise NidarError("fit context: threads must be at least 1")
+        fractions = (self.feature_fraction, self.bagging_fraction)
+        if not all(0 < f <= 1 for f in fractions) or not self.l2 >= 0:
+            raise NidarError("fit context: feature_fraction, bagging_fraction in (0, 1], l2 >= 0")
 
 
 def _params(o: ContextFitOptions) -> dict[str, Any]:
@@ -126,6 +159,10 @@ def _params(o: ContextFitOptions) -> dict[str, Any]:
         "num_leaves": int(o.leaves),
         "learning_rate": float(o.learning_rate),
         "min_data_in_leaf": int(o.min_leaf),
+        "feature_fraction": float(o.feature_fraction),
+        "bagging_fraction": float(o.bagging_fraction),
+        "bagging_freq": 1 if o.bagging_fraction < 1 else 0,
+        "lambda_l2": float(o.l2),
         "max_bin": 255,
         "deterministic": True,
         "force_row_wise": True,
@@ -136,12 +173,17 @@ def _params(o: ContextFitOptions) -> dict[str, Any]:
 
 
 def train_context_booster(
-    x: np.ndarray, y: np.ndarray, feats: tuple[str, ...], o: ContextFitOptions
+    x: np.ndarray,
+    y: np.ndarray,
+    feats: tuple[str, ...],
+    o: ContextFitOptions,
+    weight: np.ndarray | None = None,
 ):
     """A LightGBM regression of ``y`` (N,) on ``x`` (N, F) (columns ``feats``) with the
-    options' settings; the trained ``lightgbm.Booster``."""
+    options' settings, rows weighted by ``weight`` (N,) (None: alike); the trained
+    ``lightgbm.Booster``."""
     lgb = lightgbm_module()
-    data = lgb.Dataset(x, label=y, feature_name=list(feats), params={"verbose": -1})
+    data = lgb.Dataset(x, label=y, weight=weight, feature_name=list(feats), params={"verbose": -1})
     return lgb.train(_params(o), data, num_boost_round=int(o.trees))
 
 
@@ -161,19 +203,30 @@ def frame_rows(n: int, limit: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def training_rows(
-    designs: Sequence[np.ndarray], intensities: Sequence[np.ndarray], o: ContextFitOptions
-) -> tuple[np.ndarray, np.ndarray]:
-    """The training rows of frames: ``(x, y)``, at most ``o.points_per_frame`` returns of each
-    frame drawn without replacement (one seeded generator over the frames in order), ``y``
-    the intensity or its rank within the frame (``o.target``).
+    designs: Sequence[np.ndarray],
+    intensities: Sequence[np.ndarray],
+    o: ContextFitOptions,
+    groups: Sequence[Any] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The training rows of frames: ``(x, y, w)``, at most ``o.points_per_frame`` returns of
+    each frame drawn without replacement (one seeded generator over the frames in order), ``y``
+    the intensity or its rank within the frame (``o.target``), ``w`` the rows' weights: a
+    row weighs its frame's share (:func:`frame_weights`), scaled to a mean of 1 (all 1 when
+    every frame weighs the same).
 
     Args:
         designs: per frame, (N_f, F) inputs.
         intensities: per frame, (N_f,) intensities in [0, 1].
+        groups: per frame, the recording it belongs to (any hashable label); with
+            ``o.balance == "group"`` every recording weighs the same and its frames share that
+            weight equally; None (or ``balance="frame"``): every frame weighs the same.
     """
     rng = np.random.default_rng(o.seed)
-    xs, ys = [], []
-    for x, y in zip(designs, intensities, strict=True):
+    if groups is not None and len(groups) != len(designs):
+        raise NidarError(f"fit context: {len(groups)} group labels for {len(designs)} frames")
+    share = frame_weights(groups if o.balance == "group" else None, len(designs))
+    xs, ys, ws = [], [], []
+    for x, y, s in zip(designs, intensities, share, strict=True):
         y = np.asarray(y, dtype=np.float64).reshape(-1)
         if len(x) != len(y):
             raise NidarError(f"fit context: {len(x)} returns but {len(y)} intensities")
@@ -181,9 +234,45 @@ def training_rows(
         keep = frame_rows(len(y), o.points_per_frame, rng)
         xs.append(x[keep])
         ys.append(t[keep])
+        ws.append(np.full(len(keep), s))
     if not xs:
         raise NidarError("fit context: no frames")
-    return np.concatenate(xs).astype(np.float64), np.concatenate(ys)
+    w = np.concatenate(ws)
+    return np.concatenate(xs).astype(np.float64), np.concatenate(ys), w / w.mean()
+
+
+def frame_weights(groups: Sequence[Any] | None, n: int) -> np.ndarray:
+    """(n,) each frame's share of the training weight: ``1 / (G · n_g)`` for a frame of a
+    group of ``n_g`` frames among ``G`` groups (None: ``1 / n`` each); the shares sum to 1."""
+    if groups is None:
+        return np.full(n, 1.0 / max(n, 1))
+    labels = list(groups)
+    count = {g: labels.count(g) for g in set(labels)}
+    return np.array([1.0 / (len(count) * count[g]) for g in labels])
+
+
+def _frames(context: Mapping[str, Any], n: int) -> tuple[list[np.ndarray], list | None]:
+    """The rows of each frame of ``n`` returns (the ``"frame"`` labels of ``context``; one frame
+    without them) and each frame's ``"group"`` label (None without group labels).
+
+    Raises:
+        NidarError: labels of another length, or a frame in two groups.
+    """
+    frame, group = context.get("frame"), context.get("group")
+    labels = np.zeros(n) if frame is None else np.asarray(frame).reshape(-1)
+    if labels.shape != (n,):
+        raise NidarError(f"fit context: {labels.size} frame labels for {n} returns")
+    _, inverse = np.unique(labels, return_inverse=True)
+    order = np.argsort(inverse, kind="stable")
+    parts = np.split(order, np.flatnonzero(np.diff(inverse[order])) + 1)
+    if group is None:
+        return parts, None
+    g = np.asarray(group).reshape(-1)
+    if g.shape != (n,):
+        raise NidarError(f"fit context: {g.size} group labels for {n} returns")
+    if any(np.any(g[p] != g[p[0]]) for p in parts):
+        raise NidarError("fit context: the returns of one frame carry different group labels")
+    return parts, [g[p[0]].item() for p in parts]
 
 
 @dataclass(frozen=True, eq=False)
@@ -368,7 +457,9 @@ class ContextMap:
             intensity: (N,) the sensor's intensities in [0, 1].
             ring, elevation_deg, cos_incidence, input: not read (inputs are in ``context``).
             context: name -> (N,) inputs (:mod:`nidar_mi.profiles.inputs`), and optionally
-                ``"frame"``: (N,) the frame of each return (any labels); without it, one frame.
+                ``"frame"``: (N,) the frame of each return (any labels; without it, one frame)
+                and ``"group"``: (N,) the recording of each return (any labels; the frames of
+                one recording must share it; :attr:`ContextFitOptions.balance`).
             options: :class:`ContextFitOptions`.
 
         Raises:
@@ -385,20 +476,15 @@ class ContextMap:
         if y.size < 2 * o.min_leaf:
             raise NidarError(f"fit context: {y.size} returns are too few")
         x = _design(feats, context, y.size)
-        frame = context.get("frame")
-        labels = np.zeros(y.size) if frame is None else np.asarray(frame).reshape(-1)
-        if labels.shape != y.shape:
-            raise NidarError(f"fit context: {labels.size} frame labels for {y.size} returns")
-        _, inverse = np.unique(labels, return_inverse=True)
-        order = np.argsort(inverse, kind="stable")
-        cuts = np.flatnonzero(np.diff(inverse[order])) + 1
-        parts = np.split(order, cuts)
-        xt, yt = training_rows([x[p] for p in parts], [y[p] for p in parts], o)
+        parts, groups = _frames(context, y.size)
+        xt, yt, wt = training_rows([x[p] for p in parts], [y[p] for p in parts], o, groups)
         q = np.quantile(y, np.linspace(0, 1, QUANTILES)) if o.target == "rank" else ()
         record = {"samples": int(yt.size), "points_per_frame": int(o.points_per_frame)}
-        record["seed"] = int(o.seed)
+        record |= {"seed": int(o.seed), "balance": o.balance, "groups": len(set(groups or [0]))}
+        weight = None if np.all(wt == 1.0) else wt
         if o.kind == "mlp":
-            head = head_to_dict(fit_head(xt, yt, seed=o.seed, threads=o.threads))
+            head = fit_head(xt, yt, seed=o.seed, threads=o.threads, weight=weight)
+            head = head_to_dict(head)
             return cls(
                 features=feats,
                 target=o.target,
@@ -407,7 +493,7 @@ class ContextMap:
                 quantiles=tuple(float(v) for v in q),
                 params=record,
             )
-        booster = train_context_booster(xt, yt, feats, o)
+        booster = train_context_booster(xt, yt, feats, o, weight)
         record |= {k: v for k, v in _params(o).items() if k not in ("verbose", "num_threads")}
         record["trees"] = int(booster.num_trees())
         return cls(

@@ -90,8 +90,9 @@ def fit(
             by forms that record it (``distance_quantile``'s ``branch``).
         context: name -> (N,) named inputs of the returns (:mod:`nidar_mi.profiles.inputs`),
             read by the ``context`` form (required there; another form is an error); its
-            optional ``"frame"`` entry, (N,) the frame of each return, is not an input (the
-            form draws its training returns per frame).
+            optional ``"frame"`` and ``"group"`` entries, (N,) the frame and the recording of
+            each return, are not inputs (the form draws its training returns per frame and
+            weighs the recordings alike).
         **form_options: the form's own fitting options (its class's ``fit_options``), e.g. ``gbm``'s
             ``use_value=False`` (geometry only), ``use_geometry=False`` (value and incidence
             only), ``trees``; ``range_ring``'s ``width``; ``distance_quantile``'s ``tau``;

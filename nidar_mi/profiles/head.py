@@ -63,8 +63,9 @@ def _standardise(x: np.ndarray, mean: np.ndarray, scale: np.ndarray) -> np.ndarr
     return np.clip(z, -CLIP, CLIP, out=z)
 
 
-def fit_head(x: np.ndarray, y: np.ndarray, *, seed: int = 0, threads: int = 1) -> dict:
-    """Fit the head on (N, F) inputs (NaN: missing) and (N,) targets (module docstring).
+def fit_head(x: np.ndarray, y: np.ndarray, *, seed: int = 0, threads: int = 1, weight=None) -> dict:
+    """Fit the head on (N, F) inputs (NaN: missing) and (N,) targets (module docstring), the
+    squared errors weighted by ``weight`` (N,) when given.
 
     Returns:
         ``{"mean", "scale", "layers"}``: (F,) float64 standardisation and the three layers as
@@ -79,6 +80,7 @@ def fit_head(x: np.ndarray, y: np.ndarray, *, seed: int = 0, threads: int = 1) -
     scale = np.where(sd > 1e-12, sd, 1.0)
     z = torch.from_numpy(_standardise(x, mean, scale))
     t = torch.from_numpy(np.asarray(y, dtype=np.float32).reshape(-1, 1))
+    w = None if weight is None else torch.from_numpy(np.asarray(weight, np.float32).reshape(-1, 1))
     previous = torch.get_num_threads()
     torch.set_num_threads(int(threads))
     try:
@@ -97,7 +99,8 @@ def fit_head(x: np.ndarray, y: np.ndarray, *, seed: int = 0, threads: int = 1) -
             while steps < STEPS:
                 for batch in torch.randperm(len(z), generator=gen).split(BATCH)[: STEPS - steps]:
                     opt.zero_grad()
-                    loss = torch.nn.functional.mse_loss(net(z[batch]), t[batch])
+                    err = torch.square(net(z[batch]) - t[batch])
+                    loss = err.mean() if w is None else (err * w[batch]).sum() / w[batch].sum()
                     loss.backward()
                     opt.step()
                     steps += 1

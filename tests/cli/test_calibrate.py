@@ -340,3 +340,34 @@ def test_a_context_profile_reads_the_image_where_the_intensity_comes_from(tmp_pa
     x = str(tmp_path / "x.json")
     assert main([str(train), "-o", x, "--form", "gbm", "--inputs", "image", "-q"]) == 2
     assert "--inputs needs --form context" in capsys.readouterr().err
+
+
+def test_balance_weighs_each_folder_alike_or_each_frame(tmp_path, capsys):
+    """Two recordings that disagree on the same geometry: six frames of a folder read 0.2, two
+    of another 0.8. Least squares gives their weighted mean: 0.5 with each folder weighing the
+    same (the default), (6·0.2 + 2·0.8) / 8 = 0.35 with each frame."""
+    import shutil
+
+    from nidar_mi.datasets.scans import load_scans
+    from nidar_mi.profiles.inputs import return_inputs
+
+    a = _generic_folder(tmp_path / "a", lambda r, g: np.full(len(r), 0.2), with_rings=True)
+    b = _generic_folder(tmp_path / "b", lambda r, g: np.full(len(r), 0.8), with_rings=True)
+    for k in (2, 3, 4, 5):
+        shutil.copy(a / "points" / "0000.npz", a / "points" / f"{k:04d}.npz")
+        shutil.copy(a / "images" / "0000.png", a / "images" / f"{k:04d}.png")
+    scan = load_scans([b], progress=False)[0]
+    for balance, want in ((None, 0.5), ("frame", 0.35)):
+        out = tmp_path / f"{balance}.json"
+        argv = [str(a), str(b), "-o", str(out), "--form", "context", "--inputs", "return", "-q"]
+        assert main(argv + (["--balance", balance] if balance else [])) == 0
+        p = load_profile(out)
+        assert p.mapping.params["balance"] == (balance or "group")
+        assert p.mapping.params["groups"] == 2 and p.provenance["frames"] == 8
+        ctx = return_inputs(scan.xyz, scan.ring)
+        pred = p(np.zeros(len(scan.xyz)), scan.range_m, context=ctx)
+        assert np.median(pred) == pytest.approx(want, abs=0.02), balance
+    assert (
+        main([str(a), "-o", str(tmp_path / "g.json"), "--form", "gbm", "--balance", "frame"]) == 2
+    )
+    assert "--balance needs --form context" in capsys.readouterr().err

@@ -166,3 +166,55 @@ def test_the_exposure_divided_inputs_only_when_named():
         features=named,
     )
     assert m.features == named and "image_rel" in m.groups and m.needs_image
+
+
+def test_frame_weights_give_each_group_an_equal_share():
+    """Groups of 3 and 1 frames: each group half the weight, shared by its frames."""
+    from nidar_mi.profiles.context import frame_weights
+
+    np.testing.assert_allclose(frame_weights(["a", "a", "a", "b"], 4), [1 / 6, 1 / 6, 1 / 6, 0.5])
+    np.testing.assert_allclose(frame_weights(None, 4), [0.25] * 4)
+    assert frame_weights([0, 1, 1, 2, 2, 2], 6).sum() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("kind", ["gbm", "mlp"])
+def test_a_long_recording_does_not_outweigh_a_short_one(kind):
+    """Two recordings that disagree, read through one input: nine frames where I = 0.2 and one
+    where I = 0.8. Least squares predicts the weighted mean: 0.5 when each recording weighs
+    the same (``balance="group"``), 0.9·0.2 + 0.1·0.8 = 0.26 when each frame does."""
+    rng = np.random.default_rng(0)
+    frames, per = 10, 400
+    n = frames * per
+    frame = np.repeat(np.arange(frames), per)
+    group = np.where(frame < 9, 7, 3)
+    ctx = {"range_m": rng.uniform(2, 60, n)}
+    y = np.where(group == 7, 0.2, 0.8)
+    expected = {"group": 0.5, "frame": 0.26}
+    for balance, want in expected.items():
+        m = fit(
+            "context",
+            ctx["range_m"],
+            ctx["range_m"],
+            y,
+            context=ctx | {"frame": frame, "group": group},
+            kind=kind,
+            balance=balance,
+            trees=50,
+        )
+        pred = m(ctx["range_m"], ctx["range_m"], context=ctx)
+        assert np.median(pred) == pytest.approx(want, abs=0.02), balance
+        assert m.params["balance"] == balance and m.params["groups"] == 2
+
+
+def test_a_frame_in_two_groups_is_refused():
+    ctx = {"range_m": np.linspace(2, 50, 400)}
+    frame = np.repeat([0, 1], 200)
+    group = np.repeat([0, 1, 1, 1], 100)  # frame 0 half in group 0, half in group 1
+    with pytest.raises(NidarError, match="one frame carry different group labels"):
+        fit(
+            "context",
+            ctx["range_m"],
+            ctx["range_m"],
+            np.full(400, 0.5),
+            context=ctx | {"frame": frame, "group": group},
+        )
