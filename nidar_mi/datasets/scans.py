@@ -181,10 +181,13 @@ def scan_frame(
 
 def recording_of(name: str, source: str) -> str:
     """The recording of a frame: the ``<source>`` of a name ``<source>__<id>`` (a KITTI frame
-    of a converted folder names its folder so), else the folder of ``source`` (a data
-    folder's frames: the data folder, above its split)."""
+    of a converted folder names its folder so); else ``source`` when it is a folder (a KITTI
+    folder read frame by frame), or the folder of the file ``source`` (a data folder's frames:
+    the data folder, above its split)."""
     if "__" in name:
         return name.split("__", 1)[0]
+    if Path(source).is_dir():
+        return str(source)
     parent = Path(source).parent
     return str(parent.parent if parent.name in ("train", "val", "test") else parent)
 

@@ -25,3 +25,17 @@ def test_incidence_fit_survives_a_scan_with_too_few_returns():
             form="gbm", incidence=True, trees=5,
         )  # fmt: skip
     assert p.uses_incidence and p.provenance["returns"] == 4002
+
+
+def test_the_recording_of_a_frame(tmp_path):
+    """A converted KITTI frame's recording is its source folder's name; a data folder's frame
+    belongs to the data folder above its split; a frame read from a KITTI folder, that folder."""
+    from nidar_mi.datasets.scans import recording_of
+
+    assert recording_of("kitti_more__r0005_0140", "/x/train/kitti_more__r0005_0140.npz") == (
+        "kitti_more"
+    )
+    data = tmp_path / "data"
+    assert recording_of("0007", str(data / "val" / "0007.npz")) == str(data)
+    assert recording_of("0007", str(tmp_path / "points" / "0007.npz")) == str(tmp_path / "points")
+    assert recording_of("000003", str(tmp_path)) == str(tmp_path)
