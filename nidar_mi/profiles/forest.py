@@ -1,13 +1,13 @@
 """A LightGBM regression's trees evaluated by one compiled loop: LightGBM's sums, faster.
 
 ``Booster.predict`` walks every tree of every row with a data-dependent branch per node; on a
-``context`` profile's 400 trees of up to 63 leaves (depth 17 on average, up to 30) over the
+``context`` profile's 400 trees of up to 63 leaves (depths of 16 to 17 on average, up to 30) over the
 ~17 000 returns of a KITTI frame that is 0.8 to 0.9 s of CPU, most of it the branches the
 processor mispredicts. :class:`Forest` holds the same trees as flat arrays and walks a block of
-:data:`BLOCK` rows through one tree at a time in lock step until every row of the block has
-reached its leaf, choosing each child by arithmetic rather than by a branch; a leaf is a node
-whose two children are itself, so a row that reached its leaf stays there. That takes about
-half the CPU (docs/BENCHMARKS.md, "NIDAR per frame with a ``context`` profile").
+:data:`BLOCK` rows through one tree at a time, a level per step, choosing each child by
+arithmetic rather than by a branch and keeping in a list the rows still at a split (the rows
+of a block are independent, so the processor overlaps their steps). That takes about half
+LightGBM's CPU (docs/BENCHMARKS.md, "NIDAR per frame with a ``context`` profile").
 
 The rules are LightGBM's own (``Tree::NumericalDecision``, and the dense-row reading of its C
 API): a value within :data:`ZERO` of zero is read as 0; a split sends ``x <= threshold`` left;
@@ -35,8 +35,8 @@ import numpy as np
 
 __all__ = ["BLOCK", "ZERO", "Forest", "compile_forest"]
 
-#: Rows walked through a tree together (their coordinates, BLOCK × features × 8 bytes, stay
-#: in cache while every tree is walked).
+#: Rows walked through a tree together (their inputs, BLOCK × features × 8 bytes, stay in
+#: cache while every tree is walked).
 BLOCK = 128
 #: Magnitude at and below which LightGBM reads a value as zero (its ``kZeroThreshold``, the
 #: float ``1e-35f`` as a double).
@@ -45,28 +45,26 @@ ZERO = float(np.float32(1e-35))
 
 @dataclass(frozen=True)
 class Forest:
-    """The trees of a LightGBM regression as flat arrays over all trees' nodes (module
-    docstring); leaves are nodes too.
+    """The trees of a LightGBM regression as flat arrays over all trees' splits and leaves
+    (module docstring).
 
     Attributes:
-        feature: (M,) int64 the feature a node splits on (0 for a leaf).
-        threshold: (M,) float64 the split value (``+inf`` for a leaf).
-        nan_right: (M,) int64 1 where a missing value goes right.
-        child: (2M,) int64 node ``k``'s left child at ``2k``, right at ``2k + 1`` (itself twice
-            for a leaf).
-        value: (M,) float64 the leaf values (0 for a split).
-        root: (T,) int64 each tree's first node.
-        depth: (T,) int64 each tree's depth (splits from the root to its deepest leaf).
+        split: (M,) int64 per split, ``2 × feature + nan_right``: the input column it reads and
+            1 where a missing value goes right.
+        threshold: (M,) float64 per split, the value at and below which a row goes left.
+        child: (2M,) int64 split ``k``'s left child at ``2k``, its right at ``2k + 1``: a split's
+            index, or ``~j`` (negative) for leaf ``j``.
+        value: (L,) float64 the leaves' values.
+        root: (T,) int64 each tree's first node (a split's index, or ``~j`` for a tree that is
+            one leaf).
         n_features: the number of input columns.
     """
 
-    feature: np.ndarray
+    split: np.ndarray
     threshold: np.ndarray
-    nan_right: np.ndarray
     child: np.ndarray
     value: np.ndarray
     root: np.ndarray
-    depth: np.ndarray
     n_features: int
 
     def __call__(self, x: np.ndarray, threads: int = 1) -> np.ndarray:
@@ -79,8 +77,7 @@ class Forest:
             raise ValueError(f"forest: expected (N, {self.n_features}) inputs, got {x.shape}")
         x = np.where(np.abs(x) <= ZERO, 0.0, x)  # C-contiguous, LightGBM's zeros
         out = np.empty(len(x))
-        arrays = (self.feature, self.threshold, self.nan_right, self.child, self.value)
-        arrays += (self.root, self.depth)
+        arrays = (self.split, self.threshold, self.child, self.value, self.root)
         blocks = -(-len(x) // BLOCK)
         cuts = np.linspace(0, blocks, min(max(int(threads), 1), blocks) + 1).astype(int) * BLOCK
         spans = [(a, min(b, len(x))) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
@@ -94,30 +91,37 @@ class Forest:
 
 def _walk(x, trees, out):  # pragma: no cover
     """Fill (N,) ``out`` with the sums over the trees of the leaf each row of (N, F) ``x``
-    reaches (compiled by :func:`_compiled`; ``trees``: :class:`Forest`'s arrays in order)."""
-    feature, threshold, nan_right, child, value, root, depth = trees
-    n = x.shape[0]
+    reaches (compiled by :func:`_compiled`; ``trees``: :class:`Forest`'s arrays in order).
+
+    Per block of rows and tree, every step moves the rows still at a split one level down
+    and keeps those that reached a split again in the list ``live`` (written without a
+    branch), until none is left."""
+    split, threshold, child, value, root = trees
     acc = np.zeros(BLOCK)
     node = np.zeros(BLOCK, np.int64)
-    for a in range(0, n, BLOCK):
-        m = min(a + BLOCK, n) - a
+    live = np.zeros(BLOCK, np.int64)
+    for a in range(0, x.shape[0], BLOCK):
+        m = min(a + BLOCK, x.shape[0]) - a
         acc[:] = 0.0
         for t in range(root.shape[0]):
             for i in range(m):
                 node[i] = root[t]
-            for _ in range(depth[t]):
-                moved = False
-                for i in range(m):
+                live[i] = i
+            count = m if root[t] >= 0 else 0
+            while count > 0:
+                kept = 0
+                for j in range(count):
+                    i = live[j]
                     k = node[i]
-                    v = x[a + i, feature[k]]
+                    v = x[a + i, split[k] >> 1]
                     # right: above the threshold, or missing and sent right (NaN compares false)
-                    right = np.int64(v > threshold[k]) | (np.int64(v != v) & nan_right[k])
+                    right = np.int64(v > threshold[k]) | (np.int64(v != v) & (split[k] & 1))
                     node[i] = child[2 * k + right]
-                    moved |= node[i] != k
-                if not moved:  # every row of the block at its leaf
-                    break
+                    live[kept] = i
+                    kept += node[i] >= 0
+                count = kept
             for i in range(m):
-                acc[i] += value[node[i]]
+                acc[i] += value[~node[i]]
         for i in range(m):
             out[a + i] = acc[i]
 
@@ -143,53 +147,36 @@ def compile_forest(text: str, n_features: int) -> Forest | None:
     head, _, trees = body.partition("\n\n")
     if "\nobjective=regression\n" not in f"\n{head}\n":
         return None
-    parts = {"feature": [], "threshold": [], "nan_right": [], "child": [], "value": []}
-    root, depth = [], []
+    parts = {"split": [], "threshold": [], "child": [], "value": []}
+    root = []
     for block in (b.strip("\n") for b in trees.split("\n\n")):
         if block.startswith("Tree="):
-            root.append(len(parts["value"]))
             lines = (ln.split("=", 1) for ln in block.split("\n")[1:] if "=" in ln)
-            depth.append(_add_tree(dict(lines), parts))
-    ints = {"feature", "nan_right", "child"}
-    arrays = {k: np.array(v, dtype=np.int64 if k in ints else np.float64) for k, v in parts.items()}
+            root.append(_add_tree(dict(lines), parts))
     return Forest(
-        **arrays,
+        split=np.array(parts["split"], dtype=np.int64),
+        threshold=np.array(parts["threshold"], dtype=np.float64),
+        child=np.array(parts["child"], dtype=np.int64),
+        value=np.array(parts["value"], dtype=np.float64),
         root=np.array(root, dtype=np.int64),
-        depth=np.array(depth, dtype=np.int64),
         n_features=int(n_features),
     )
 
 
 def _add_tree(f: dict[str, str], parts: dict[str, list]) -> int:
-    """Append one tree's nodes (its text fields ``f``) to ``parts``; its depth."""
-    base = len(parts["value"])
+    """Append one tree's splits and leaves (its text fields ``f``) to ``parts``; its root."""
+    first, base = len(parts["threshold"]), len(parts["value"])
     leaves = [float(v) for v in f["leaf_value"].split(" ")]
-    n_split = len(leaves) - 1
-    split = {k: f[k].split(" ") if n_split else [] for k in ("split_feature", "threshold")}
-    kinds = [int(v) for v in f["decision_type"].split(" ")] if n_split else []
-    left = [int(v) for v in f["left_child"].split(" ")] if n_split else []
-    right = [int(v) for v in f["right_child"].split(" ")] if n_split else []
-    node = lambda c: base + c if c >= 0 else base + n_split + ~c  # noqa: E731
-    level = [0] * max(n_split, 1)
-    deepest = 0
-    for j in range(n_split):
-        cut = float(split["threshold"][j])
-        nan_left = bool(kinds[j] & 2) if (kinds[j] >> 2) & 3 == 2 else 0.0 <= cut
-        parts["feature"].append(int(split["split_feature"][j]))
+    parts["value"] += leaves
+    if len(leaves) == 1:
+        return ~base
+    fields = ("split_feature", "threshold", "decision_type", "left_child", "right_child")
+    columns = zip(*(f[k].split(" ") for k in fields), strict=True)
+    node = lambda c: first + c if c >= 0 else ~(base + ~c)  # noqa: E731
+    for feature, cut, kind, left, right in columns:
+        cut, kind = float(cut), int(kind)
+        nan_left = bool(kind & 2) if (kind >> 2) & 3 == 2 else 0.0 <= cut
+        parts["split"].append(2 * int(feature) + (0 if nan_left else 1))
         parts["threshold"].append(cut)
-        parts["nan_right"].append(0 if nan_left else 1)
-        parts["child"] += [node(left[j]), node(right[j])]
-        parts["value"].append(0.0)
-        for c in (left[j], right[j]):  # children come after their parent
-            if c >= 0:
-                level[c] = level[j] + 1
-            else:
-                deepest = max(deepest, level[j] + 1)
-    for v in leaves:
-        k = len(parts["value"])
-        parts["feature"].append(0)
-        parts["threshold"].append(np.inf)
-        parts["nan_right"].append(0)
-        parts["child"] += [k, k]
-        parts["value"].append(v)
-    return deepest
+        parts["child"] += [node(int(left)), node(int(right))]
+    return first
