@@ -104,10 +104,20 @@ def _walk(x, trees, out):  # pragma: no cover
         m = min(a + BLOCK, x.shape[0]) - a
         acc[:] = 0.0
         for t in range(root.shape[0]):
-            for i in range(m):
-                node[i] = root[t]
-                live[i] = i
-            count = m if root[t] >= 0 else 0
+            k = root[t]
+            if k < 0:  # a tree of one leaf
+                for i in range(m):
+                    acc[i] += value[~k]
+                continue
+            kept = 0
+            left, right = child[2 * k], child[2 * k + 1]
+            for i in range(m):  # the root's split, the same for every row
+                v = x[a + i, split[k] >> 1]
+                go = (v > threshold[k]) | ((v != v) & ((split[k] & 1) == 1))
+                node[i] = right if go else left
+                live[kept] = i
+                kept += node[i] >= 0
+            count = kept
             while count > 0:
                 kept = 0
                 for j in range(count):
@@ -115,8 +125,8 @@ def _walk(x, trees, out):  # pragma: no cover
                     k = node[i]
                     v = x[a + i, split[k] >> 1]
                     # right: above the threshold, or missing and sent right (NaN compares false)
-                    right = np.int64(v > threshold[k]) | (np.int64(v != v) & (split[k] & 1))
-                    node[i] = child[2 * k + right]
+                    go = np.int64(v > threshold[k]) | (np.int64(v != v) & (split[k] & 1))
+                    node[i] = child[2 * k + go]
                     live[kept] = i
                     kept += node[i] >= 0
                 count = kept

@@ -104,3 +104,20 @@ def test_a_model_not_a_plain_sum_goes_to_lightgbm():
     """A transformed output (``regression sqrt``) is not compiled."""
     text = _booster().model_to_string().replace("objective=regression", "objective=regression sqrt")
     assert forest.compile_forest(text, len(FEATS)) is None
+
+
+def test_a_tree_of_one_leaf():
+    """A model whose only tree is one leaf (no split met the fewest returns per leaf) predicts
+    that leaf's value, as LightGBM does."""
+    lgb = pytest.importorskip("lightgbm")
+    rng = np.random.default_rng(0)
+    x = rng.uniform(size=(500, 4))
+    params = {"objective": "regression", "num_leaves": 4, "min_data_in_leaf": 400, "verbose": -1}
+    data = lgb.Dataset(x, label=x[:, 0] > 0.5, feature_name=list(FEATS))
+    b = lgb.train(params, data, num_boost_round=3)
+    text = b.model_to_string()
+    assert "num_leaves=1\n" in text
+    b = load_booster(text, FEATS, missing=True)
+    f = forest.compile_forest(text, len(FEATS))
+    np.testing.assert_array_equal(f(x), b.predict(x))
+    assert np.ptp(f(x)) == 0.0
