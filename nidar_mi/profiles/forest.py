@@ -94,12 +94,13 @@ def _walk(x, trees, out):  # pragma: no cover
     reaches (compiled by :func:`_compiled`; ``trees``: :class:`Forest`'s arrays in order).
 
     Per block of rows and tree, every step moves the rows still at a split one level down
-    and keeps those that reached a split again in the list ``live`` (written without a
-    branch), until none is left."""
+    and keeps those that reached a split again, with that split, in the lists ``live`` and
+    ``at`` (written without a branch), until none is left; ``node`` holds each row's leaf."""
     split, threshold, child, value, root = trees
     acc = np.zeros(BLOCK)
     node = np.zeros(BLOCK, np.int64)
-    live = np.zeros(BLOCK, np.int64)
+    live = np.zeros(BLOCK, np.int64)  # the rows still at a split
+    at = np.zeros(BLOCK, np.int64)  # and that split
     for a in range(0, x.shape[0], BLOCK):
         m = min(a + BLOCK, x.shape[0]) - a
         acc[:] = 0.0
@@ -115,19 +116,18 @@ def _walk(x, trees, out):  # pragma: no cover
                 v = x[a + i, split[k] >> 1]
                 go = (v > threshold[k]) | ((v != v) & ((split[k] & 1) == 1))
                 node[i] = right if go else left
-                live[kept] = i
+                live[kept], at[kept] = i, node[i]
                 kept += node[i] >= 0
             count = kept
             while count > 0:
                 kept = 0
                 for j in range(count):
-                    i = live[j]
-                    k = node[i]
+                    i, k = live[j], at[j]
                     v = x[a + i, split[k] >> 1]
                     # right: above the threshold, or missing and sent right (NaN compares false)
                     go = np.int64(v > threshold[k]) | (np.int64(v != v) & (split[k] & 1))
                     node[i] = child[2 * k + go]
-                    live[kept] = i
+                    live[kept], at[kept] = i, node[i]
                     kept += node[i] >= 0
                 count = kept
             for i in range(m):
