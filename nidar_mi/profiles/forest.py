@@ -6,8 +6,8 @@
 processor mispredicts. :class:`Forest` holds the same trees as flat arrays and walks a block of
 :data:`BLOCK` rows through one tree at a time, a level per step, choosing each child by
 arithmetic rather than by a branch and keeping in a list the rows still at a split (the rows
-of a block are independent, so the processor overlaps their steps). That takes about half
-LightGBM's CPU (docs/BENCHMARKS.md, "NIDAR per frame with a ``context`` profile").
+of a block are independent, so the processor overlaps their steps). That takes 0.3 to 0.35 s
+of CPU, some 2.5 times less (docs/BENCHMARKS.md, "NIDAR per frame with a ``context`` profile").
 
 The rules are LightGBM's own (``Tree::NumericalDecision``, and the dense-row reading of its C
 API): a value within :data:`ZERO` of zero is read as 0; a split sends ``x <= threshold`` left;
