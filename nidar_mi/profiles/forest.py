@@ -19,9 +19,11 @@ is read: a plain ``regression`` (identity output) of numerical splits; for any o
 :func:`compile_forest` gives None and the booster predicts.
 
 The loop is compiled by numba (``nidar`` extra; cached on disk after the first compilation).
-Compiled tree-evaluation libraries were weighed first: lleaves compiles one LLVM module per
-model (seconds to minutes for 400 trees, at every new profile) and treelite needs a C compiler
-at run time; numba compiles this one generic loop once for every model. Without numba
+Compiled tree-evaluation libraries were weighed first: lleaves (1.3.0, its latest release)
+compiles one LLVM module per model but does not run on the llvmlite that numba 0.68 needs
+(0.50: ``llvmlite.binding`` no longer has the ``PassManagerBuilder`` lleaves calls), and
+treelite needs a C compiler at run time; numba compiles this one generic loop once for every
+model. Without numba
 :func:`compile_forest` gives None (LightGBM predicts, the same values, slower).
 """
 
