@@ -1,17 +1,22 @@
-"""Moving objects out of the fused surfaces: a triangle that the training frames of a stretch of
-time saw through is transient.
+"""Moving objects out of the fused surfaces: the surfaces that consecutive training frames saw
+through are transient.
 
 Fusion (:mod:`.mesh`) keeps every surface that any training scan saw, and carving
-(:mod:`.carve`) weighs all the frames' rays together: a car parked beside the road for the first
-half of a drive and gone in the second is seen *on* by as many rays as pass *through* where it
-stood, and stays, hiding from every later view what stands behind it. Here the evidence is kept
-per frame: each frame that observes a triangle votes *on* (more of its rays end on the triangle
-than pass through it) or *through* (the reverse; the same per-ray tests as carving,
-:func:`.carve.hit_classes`). A static surface is seen on by the frames that observe it, bar a
-stray ray; a surface that was there and then left is seen through by every frame after it left.
-A triangle is removed when the frames that observe it, in time order, include a run of at least
-``run`` consecutive *through* votes: consecutive views agree that the space is empty. Removal
-uncovers the surfaces behind, which the later frames saw and the fusion already holds.
+(:mod:`.carve`) weighs all the frames' first hits together: a vehicle that stood beside the road
+for the first half of a drive and left in the second is seen *on* by about as many rays as pass
+*through* where it stood, and stays, hiding from every later view what stands behind it; one
+that crept forward leaves a stack of layers, of which carving sees only the front one. Here
+every ray is followed through each triangle it passes through to the next
+(:func:`.carve.layered_hits`, the carving's per-hit tests), each hit counts for the triangle's
+three corners, and the evidence is kept per frame: a frame that observes a vertex votes *on*
+(more of its hits end on the vertex's triangles than pass through them) or *through* (the
+reverse). A static surface is seen on by the frames that observe it, bar a stray ray; a surface
+that was there and then left is seen through by every frame after it left. A vertex is
+transient when the frames that observe it, in time order, include a run of at least ``run``
+consecutive *through* votes (consecutive views agree that the space is empty), and a triangle
+when its three corners are. Removing one can expose another behind it that no ray reached, so
+the test repeats until nothing is removed (at most ``passes`` rounds). What the removed
+surfaces hid, the later frames saw, and the fusion already holds it.
 """
 
 from __future__ import annotations
@@ -37,15 +42,16 @@ CORNERS = 3
 
 
 def frame_votes(prim, frame, through, on):
-    """Per (triangle, frame) pair that observed it: the frame's vote.
+    """Per (element, frame) pair that observed it: the frame's vote.
 
     Args:
-        prim: (N,) each ray's triangle (-1: none); frame: (N,) its frame index (time order);
-        through, on: (N,) bool per ray (:func:`.carve.hit_classes`).
+        prim: (N,) each hit's element, a triangle or a vertex (-1: none); frame: (N,) the
+        hit's frame index (time order); through, on: (N,) bool per hit
+        (:func:`.carve.hit_classes`).
 
     Returns:
-        ``(tri, frm, vote)``: (P,) sorted by triangle then frame; vote +1 on, -1 through (ties,
-        where as many rays end on it as pass through, are left out).
+        ``(elem, frm, vote)``: (P,) sorted by element then frame; vote +1 on, -1 through
+        (ties, where as many hits end on it as pass through, are left out).
     """
     sel = (prim >= 0) & (through | on)
     n_frames = int(frame.max(initial=0)) + 1
@@ -57,10 +63,10 @@ def frame_votes(prim, frame, through, on):
     return pairs[keep] // n_frames, pairs[keep] % n_frames, vote[keep]
 
 
-def longest_through_run(tri, vote, n_faces: int) -> np.ndarray:
-    """(n_faces,) the longest run of consecutive *through* votes of each triangle (votes sorted
-    by triangle, then time, as :func:`frame_votes` gives them)."""
-    run = np.zeros(n_faces, dtype=np.int64)
+def longest_through_run(tri, vote, n: int) -> np.ndarray:
+    """(n,) the longest run of consecutive *through* votes of each element (votes sorted by
+    element, then time, as :func:`frame_votes` gives them)."""
+    run = np.zeros(n, dtype=np.int64)
     if len(tri) == 0:
         return run
     start = np.concatenate([[True], (tri[1:] != tri[:-1]) | (vote[1:] != vote[:-1])])
@@ -87,8 +93,8 @@ def remove_transient(
         mesh: the fused, carved mesh (world coordinates).
         rays: the training returns' rays, ``rays.frame`` in time order.
         load_scene: ``load_scene(mesh) -> mi.Scene`` of the mesh alone.
-        run: consecutive *through* frames that make a triangle transient.
-        passes: rounds (each uncovers the layers behind what the last removed).
+        run: consecutive *through* frames that make a vertex transient.
+        passes: the most rounds (each exposes what the last one removed hid).
         through_m: the gap across the surface that counts as passing through, m.
 
     Returns:
@@ -109,8 +115,9 @@ def transient_faces(mesh: Mesh, prim, frame, through, on, *, run: int = RUN_FRAM
     """(T,) bool: the triangles whose corners are all transient (module docstring).
 
     Args:
-        mesh: the surfaces; prim, frame, through, on: (N,) per ray, as :func:`frame_votes`
-        takes them; run: consecutive *through* frames that make a vertex transient.
+        mesh: the surfaces; prim, frame, through, on: (H,) per hit (:func:`.carve.layered_hits`,
+        the frame of each hit's ray); run: consecutive *through* frames that make a vertex
+        transient.
     """
     hit = prim >= 0
     corners = mesh.faces[prim[hit]].ravel()
