@@ -79,7 +79,7 @@ def check(options: ReconstructOptions) -> Drive:
     if not 0.02 <= options.voxel_m <= 1.0:
         raise NidarError(f"`voxel` must lie in [0.02, 1] m (got {options.voxel_m:g})")
     if options.transient_frames < 0:
-        raise NidarError(f"`transient_frames` must be >= 0 (got {options.transient_frames})")
+        raise NidarError(f"`transient-frames` must be >= 0 (got {options.transient_frames})")
     if options.iterations < 1:
         raise NidarError(f"`iterations` must be >= 1 (got {options.iterations})")
     drive = open_drive(options.drive, holdout=list(options.holdout), poses_file=options.poses)
