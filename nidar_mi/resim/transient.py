@@ -11,12 +11,14 @@ every ray is followed through each triangle it passes through to the next
 three corners, and the evidence is kept per frame: a frame that observes a vertex votes *on*
 (more of its hits end on the vertex's triangles than pass through them) or *through* (the
 reverse). A static surface is seen on by the frames that observe it, bar a stray ray; a surface
-that was there and then left is seen through by every frame after it left. A vertex is
-transient when the frames that observe it, in time order, include a run of at least ``run``
-consecutive *through* votes (consecutive views agree that the space is empty), and a triangle
-when its three corners are. Removing one can expose another behind it that no ray reached, so
-the test repeats until nothing is removed (at most ``passes`` rounds). What the removed
-surfaces hid, the later frames saw, and the fusion already holds it.
+that was there and then left is seen through by every frame after it left (one that came, by
+every frame before it came). A vertex is transient when the frames that observe it, in time
+order, end (or start) with at least ``run`` consecutive *through* votes: the views after it
+left agree that the space is empty, where a stretch of stray *through* votes between *on*
+votes (neighbouring frames see alike, so the stray ones come in runs) says nothing. A triangle
+is transient when its three corners are. Removing one can expose another behind it that no ray
+reached, so the test repeats until nothing is removed (at most ``passes`` rounds). What the
+removed surfaces hid, the later frames saw, and the fusion already holds it.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from .mesh import Mesh, compact
 
 __all__ = [
     "frame_votes",
-    "longest_through_run",
+    "end_through_run",
     "transient_faces",
     "remove_transient",
     "RUN_FRAMES",
@@ -63,18 +65,21 @@ def frame_votes(prim, frame, through, on):
     return pairs[keep] // n_frames, pairs[keep] % n_frames, vote[keep]
 
 
-def longest_through_run(tri, vote, n: int) -> np.ndarray:
-    """(n,) the longest run of consecutive *through* votes of each element (votes sorted by
-    element, then time, as :func:`frame_votes` gives them)."""
+def end_through_run(elem, vote, n: int) -> np.ndarray:
+    """(n,) the run of consecutive *through* votes that ends or starts each element's votes
+    (sorted by element, then time, as :func:`frame_votes` gives them): the frames after it
+    left, or before it came; 0 where its first and last votes are *on*."""
     run = np.zeros(n, dtype=np.int64)
-    if len(tri) == 0:
+    if len(elem) == 0:
         return run
-    start = np.concatenate([[True], (tri[1:] != tri[:-1]) | (vote[1:] != vote[:-1])])
-    run_id = np.cumsum(start) - 1
-    length = np.bincount(run_id)
+    start = np.concatenate([[True], (elem[1:] != elem[:-1]) | (vote[1:] != vote[:-1])])
+    length = np.bincount(np.cumsum(start) - 1)
     first = np.flatnonzero(start)
-    through = vote[first] < 0
-    np.maximum.at(run, tri[first][through], length[through])
+    owner = elem[first]
+    new = np.concatenate([[True], owner[1:] != owner[:-1]])
+    at_end = new | np.concatenate([new[1:], [True]])  # an element's first or last run
+    ok = (vote[first] < 0) & at_end
+    np.maximum.at(run, owner[ok], length[ok])
     return run
 
 
@@ -124,5 +129,5 @@ def transient_faces(mesh: Mesh, prim, frame, through, on, *, run: int = RUN_FRAM
     vtx, _, vote = frame_votes(
         corners, np.repeat(frame[hit], 3), np.repeat(through[hit], 3), np.repeat(on[hit], 3)
     )
-    transient = longest_through_run(vtx, vote, len(mesh.vertices)) >= run
+    transient = end_through_run(vtx, vote, len(mesh.vertices)) >= run
     return transient[mesh.faces].sum(axis=1) >= CORNERS

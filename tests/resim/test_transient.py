@@ -94,15 +94,15 @@ def test_a_panel_that_left_is_removed_and_the_wall_behind_it_stays(variant, tmp_
 
 
 def test_votes_and_runs_per_frame():
-    from nidar_mi.resim.transient import frame_votes, longest_through_run
+    from nidar_mi.resim.transient import end_through_run, frame_votes
 
-    # triangle 0: frames 0-2 on, 3-5 through; triangle 1: on and through alternating; 2: unseen
-    prim = np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1])
-    frame = np.array([0, 1, 2, 3, 4, 5, 5, 0, 1, 2, 3, 4, 5])
-    through = np.array([0, 0, 0, 1, 1, 1, 1, 1, 0, 1, 0, 1, 0], bool)
-    on = ~through
-    tri, frm, vote = frame_votes(prim, frame, through, on)
-    np.testing.assert_array_equal(tri, [0] * 6 + [1] * 6)
-    np.testing.assert_array_equal(frm, list(range(6)) * 2)
-    np.testing.assert_array_equal(vote, [1, 1, 1, -1, -1, -1, -1, 1, -1, 1, -1, 1])
-    np.testing.assert_array_equal(longest_through_run(tri, vote, 3), [3, 1, 0])
+    # element 0: frames 0-2 on, 3-5 through (it left); 1: through and on alternating, from
+    # through; 2: on, through, through, on (a stray stretch in the middle); 3: unseen
+    prim = np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2])
+    frame = np.array([0, 1, 2, 3, 4, 5, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3])
+    through = np.array([0, 0, 0, 1, 1, 1, 1, 1, 0, 1, 0, 1, 0, 0, 1, 1, 0], bool)
+    tri, frm, vote = frame_votes(prim, frame, through, ~through)
+    np.testing.assert_array_equal(tri, [0] * 6 + [1] * 6 + [2] * 4)
+    np.testing.assert_array_equal(frm, list(range(6)) * 2 + list(range(4)))
+    np.testing.assert_array_equal(vote, [1, 1, 1, -1, -1, -1, -1, 1, -1, 1, -1, 1, 1, -1, -1, 1])
+    np.testing.assert_array_equal(end_through_run(tri, vote, 4), [3, 1, 0, 0])
