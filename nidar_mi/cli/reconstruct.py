@@ -57,6 +57,14 @@ def build_parser():
         help=f"free-space carving passes ({d.carve_passes}; 0: none)",
     )
     p.add_argument(
+        "--transient-frames",
+        type=int,
+        default=d.transient_frames,
+        metavar="N",
+        help="remove the surfaces that N consecutive training frames saw through (moving "
+        f"objects; {d.transient_frames}; 0: keep them)",
+    )
+    p.add_argument(
         "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"
     )
     p.add_argument("--weights", default=None, help="NIDAR weights folder (default: shipped)")
@@ -108,6 +116,7 @@ def main(argv=None) -> int:
             voxel_m=args.voxel,
             iterations=args.iterations,
             carve_passes=args.carve_passes,
+            transient_frames=args.transient_frames,
             prior=not args.no_prior,
             weights=args.weights,
             seed=check_seed(args.seed),

@@ -1,5 +1,6 @@
 """The drive's poses and surfaces: poses from the drive or KISS-ICP (:mod:`.poses`), then the
-training scans meshed, fused and carved (:mod:`.mesh`, :mod:`.carve`)."""
+training scans meshed, fused, carved and cleared of moving objects (:mod:`.mesh`,
+:mod:`.carve`, :mod:`.transient`)."""
 
 from __future__ import annotations
 
@@ -65,7 +66,8 @@ def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, sta
     """The carved mesh of the training frames (world = frame 0's LiDAR frame).
 
     Returns:
-        ``(mesh, carved)``: the mesh and the triangles each carving pass removed.
+        ``(mesh, carved, transient)``: the mesh, the triangles each carving pass removed and
+        the transient triangles removed (:mod:`.transient`).
     """
     from ..errors import NidarError
 
@@ -77,12 +79,21 @@ def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, sta
     mesh = fuse_meshes(meshes, options.voxel_m)
     if len(mesh.faces) == 0:
         raise NidarError(f"{drive.root}: the training scans gave no surface to mesh")
+    rays = None
     if options.carve_passes > 0:
         from .carve import carve
 
         rays, _ = training_rays(drive, frames, poses)
         mesh, carved = carve(mesh, rays, scratch_scene(stage), passes=options.carve_passes)
-        drop_scratch(stage)
     else:
         carved = []
-    return mesh, carved
+    transient = []
+    if options.transient_frames > 0:
+        from .transient import remove_transient
+
+        rays = training_rays(drive, frames, poses)[0] if rays is None else rays
+        mesh, transient = remove_transient(
+            mesh, rays, scratch_scene(stage), run=options.transient_frames
+        )
+    drop_scratch(stage)
+    return mesh, carved, transient

@@ -17,7 +17,7 @@ import numpy as np
 from .beam_rays import Rays, jit_rays
 from .mesh import Mesh, compact
 
-__all__ = ["carve", "hit_depths"]
+__all__ = ["carve", "hit_classes", "hit_depths", "layered_hits"]
 
 #: Rays cast per Dr.Jit launch.
 BLOCK = 1 << 20
@@ -48,6 +48,53 @@ def hit_depths(scene, rays: Rays):
     return np.concatenate(t), np.concatenate(prim), np.concatenate(cos)
 
 
+def _classes(range_m, t, prim, cos, through_m: float):
+    """(N,) bools: the hit passed *through* its triangle; the ray ended *on* it."""
+    gap = (range_m - t) * np.maximum(cos, 0.05)
+    hit = prim >= 0
+    through = hit & (gap > through_m) & (range_m - t > 0.3)
+    return through, hit & (np.abs(gap) <= through_m)
+
+
+def hit_classes(mesh: Mesh, rays: Rays, load_scene, through_m: float = 0.1):
+    """Each ray's first triangle and whether it passed through it or ended on it.
+
+    Returns:
+        ``(prim, through, on)``: (N,) triangle index (-1: no hit) and two (N,) bools (module
+        docstring).
+    """
+    t, prim, cos = hit_depths(load_scene(mesh), rays)
+    return (prim, *_classes(rays.range_m, t, prim, cos, through_m))
+
+
+def layered_hits(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, layers: int = 16):
+    """Every triangle each ray meets before it ends: its first hit and, past each hit it
+    passed *through*, the next one, up to ``layers`` hits per ray.
+
+    Returns:
+        ``(ray, prim, through, on)``: (H,) per hit the ray's index, the triangle (-1: none) and
+        the two classes of :func:`hit_classes`.
+    """
+    scene = load_scene(mesh)
+    idx, sub, out = np.arange(len(rays.range_m)), rays, []
+    for _ in range(layers):
+        t, prim, cos = hit_depths(scene, sub)
+        through, on = _classes(sub.range_m, t, prim, cos, through_m)
+        out.append((idx, prim, through, on))
+        if not through.any():
+            break
+        step = t[through] + 1e-3  # just past the surface passed through
+        sub = Rays(
+            sub.origin[through] + sub.direction[through] * step[:, None],
+            sub.direction[through],
+            sub.range_m[through] - step,
+            sub.ring[through],
+            sub.frame[through],
+        )
+        idx = idx[through]
+    return tuple(np.concatenate(a) for a in zip(*out))
+
+
 def carve(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, passes: int = 2):
     """The mesh without the triangles the rays passed through (module docstring).
 
@@ -63,11 +110,7 @@ def carve(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, passes:
     """
     removed = []
     for _ in range(passes):
-        t, prim, cos = hit_depths(load_scene(mesh), rays)
-        gap = (rays.range_m - t) * np.maximum(cos, 0.05)
-        hit = prim >= 0
-        through = hit & (gap > through_m) & (rays.range_m - t > 0.3)
-        on = hit & (np.abs(gap) <= through_m)
+        prim, through, on = hit_classes(mesh, rays, load_scene, through_m)
         n_through = np.bincount(prim[through], minlength=len(mesh.faces))
         n_on = np.bincount(prim[on], minlength=len(mesh.faces))
         drop = (n_through >= 2) & (n_through > n_on)

@@ -61,6 +61,7 @@ class ReconstructOptions:
     voxel_m: float = 0.1
     iterations: int = 150
     carve_passes: int = 2
+    transient_frames: int = 3
     prior: bool = True
     weights: str | None = None
     seed: int = 0
@@ -77,6 +78,8 @@ def check(options: ReconstructOptions) -> Drive:
 
     if not 0.02 <= options.voxel_m <= 1.0:
         raise NidarError(f"`voxel` must lie in [0.02, 1] m (got {options.voxel_m:g})")
+    if options.transient_frames < 0:
+        raise NidarError(f"`transient-frames` must be >= 0 (got {options.transient_frames})")
     if options.iterations < 1:
         raise NidarError(f"`iterations` must be >= 1 (got {options.iterations})")
     drive = open_drive(options.drive, holdout=list(options.holdout), poses_file=options.poses)
@@ -133,7 +136,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("read")
     poses = drive_poses(drive, frames, progress=options.progress)
     clock.lap("poses")
-    mesh, carved = build_surfaces(drive, frames, poses, options, stage)
+    mesh, carved, transient = build_surfaces(drive, frames, poses, options, stage)
     clock.lap("mesh")
     inv = invert(drive, frames, poses, mesh, options, stage)
     clock.lap("fit")
@@ -148,7 +151,12 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
         "poses_source": drive.poses_source,
         "columns": frames.columns,
         "coverage": float(frames.coverage.mean()),
-        "mesh": {"vertices": len(mesh.vertices), "faces": len(mesh.faces), "carved": carved},
+        "mesh": {
+            "vertices": len(mesh.vertices),
+            "faces": len(mesh.faces),
+            "carved": carved,
+            "transient": transient,
+        },
         "layout": {
             "elevation_deg": frames.layout.elevation_deg.tolist(),
             "vertical_offset_m": frames.layout.vertical_offset_m.tolist(),

@@ -35,6 +35,7 @@ def _eye(n):
         ("all held out", "--holdout holds out every frame"),
         ("bad range", "not a range"),
         ("missing poses file", "does not exist"),
+        ("negative transient frames", "`transient-frames` must be >= 0"),
     ],
 )
 def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsys):
@@ -66,6 +67,9 @@ def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsy
     elif case == "missing poses file":
         _drive(root, 3)
         extra = ["--poses", str(tmp_path / "nope.txt")]
+    elif case == "negative transient frames":
+        _drive(root, 3)
+        extra = ["--transient-frames", "-1"]
     out = tmp_path / "out"
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
     status = main([str(root), "-o", str(out), *extra])
