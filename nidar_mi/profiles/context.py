@@ -63,6 +63,7 @@ __all__ = [
     "DEFAULT_L2",
     "DEFAULT_LEARNING_RATE",
     "DEFAULT_LEAVES",
+    "DEFAULT_TARGET",
     "DEFAULT_TREES",
     "KINDS",
     "POINTS_PER_FRAME",
@@ -95,6 +96,8 @@ DEFAULT_L2 = 10.0
 POINTS_PER_FRAME = 4000
 #: What the regression is fitted on: the intensity, its per-frame rank, or both averaged.
 TARGETS = ("intensity", "rank", "blend")
+#: The trees' target unless told (chosen by nested leave one group out).
+DEFAULT_TARGET = "blend"
 #: The models a context map may hold: LightGBM's trees, or the small learned head.
 KINDS = ("gbm", "mlp")
 #: Quantiles of the training intensities a ``rank`` map keeps (its output scale).
@@ -112,7 +115,8 @@ class ContextFitOptions:
         features: the input names to read (:mod:`nidar_mi.profiles.inputs`); None: those
             of :data:`~nidar_mi.profiles.inputs.DEFAULT_INPUTS` the fitting data give.
         target: ``"intensity"``, ``"rank"`` or ``"blend"`` (module docstring; ``blend`` with
-            ``kind="gbm"`` only).
+            ``kind="gbm"`` only); None: :data:`DEFAULT_TARGET` for the trees, ``"intensity"``
+            for the head.
         kind: ``"gbm"`` (LightGBM) or ``"mlp"`` (the head of :mod:`nidar_mi.profiles.head`,
             its own fixed settings).
         trees, leaves, learning_rate, min_leaf: LightGBM's rounds, leaves per tree,
@@ -129,7 +133,7 @@ class ContextFitOptions:
     """
 
     features: tuple[str, ...] | None = None
-    target: str = "intensity"
+    target: str | None = None
     kind: str = "gbm"
     trees: int = DEFAULT_TREES
     leaves: int = DEFAULT_LEAVES
@@ -144,6 +148,10 @@ class ContextFitOptions:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.target is None:
+            object.__setattr__(
+                self, "target", DEFAULT_TARGET if self.kind == "gbm" else "intensity"
+            )
         if self.target not in TARGETS:
             raise NidarError(f"fit context: target must be one of {', '.join(TARGETS)}")
         if self.kind not in KINDS:

@@ -252,8 +252,9 @@ def test_frame_weights_give_each_group_an_equal_share():
 @pytest.mark.parametrize("kind", ["gbm", "mlp"])
 def test_a_long_recording_does_not_outweigh_a_short_one(kind):
     """Two recordings that disagree, read through one input: nine frames where I = 0.2 and one
-    where I = 0.8. Least squares predicts the weighted mean: 0.5 when each recording weighs
-    the same (``balance="group"``), 0.9·0.2 + 0.1·0.8 = 0.26 when each frame does."""
+    where I = 0.8. Least squares on the intensity predicts the weighted mean: 0.5 when each
+    recording weighs the same (``balance="group"``), 0.9·0.2 + 0.1·0.8 = 0.26 when each frame
+    does."""
     rng = np.random.default_rng(0)
     frames, per = 10, 400
     n = frames * per
@@ -271,6 +272,7 @@ def test_a_long_recording_does_not_outweigh_a_short_one(kind):
             context=ctx | {"frame": frame, "group": group},
             kind=kind,
             balance=balance,
+            target="intensity",
             trees=50,
         )
         pred = m(ctx["range_m"], ctx["range_m"], context=ctx)
