@@ -45,6 +45,7 @@ parses it (:func:`nidar_mi.profiles.gbm.load_booster`), never pickled.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -52,6 +53,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import NidarError
+from .forest import compile_forest
 from .gbm import MAX_LEAVES, MAX_TREES, lightgbm_module, load_booster, predict_threads
 from .head import fit_head, head_from_dict, head_predict, head_to_dict
 from .inputs import DEFAULT_INPUTS, GROUPS, IMAGE_GROUPS, feature_group
@@ -605,9 +607,18 @@ def _design(features: tuple[str, ...], context: Mapping[str, Any] | None, n: int
 
 
 def _booster_predict(model: str, feats: tuple[str, ...]):
-    """The prediction function of a checked LightGBM text model on ``feats``."""
+    """The prediction function of a checked LightGBM text model on ``feats``: its compiled
+    :class:`~nidar_mi.profiles.forest.Forest` (LightGBM's predictions, bit for bit), or the
+    booster's own ``predict`` without numba."""
     booster = load_booster(model, feats, missing=True)
-    return lambda x: np.asarray(booster.predict(x, num_threads=predict_threads()), np.float64)
+    forest = functools.cache(lambda: compile_forest(model, len(feats)))  # at the first call
+
+    def predict(x: np.ndarray) -> np.ndarray:
+        if forest() is not None:
+            return forest()(x, threads=predict_threads())
+        return np.asarray(booster.predict(x, num_threads=predict_threads()), np.float64)
+
+    return predict
 
 
 def _known(context: Mapping[str, Any]) -> tuple[str, ...]:

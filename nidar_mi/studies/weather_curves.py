@@ -15,6 +15,10 @@
   and of the fog points on beams that returned in clear air; :func:`stf_max_viewing_distance`
   beside :func:`max_viewing_distance`, the model's.
 * :func:`sky_fog_probability`: how often a beam that meets no surface returns the fog.
+* :func:`panel_sweep`: the calibration panels of ``scenes/target.xml`` in clear air and in
+  weather: per panel the share of its points kept and the change of their intensity, the
+  measure of the weather-tunnel studies that count points on targets
+  (``benchmarks/weather_panels.py`` puts them beside those studies' statements).
 
 The measured and published values are in ``docs/data/weather_references.csv``.
 """
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +43,9 @@ __all__ = [
     "SweepPoint",
     "street_lidar",
     "street_sweep",
+    "scene_lidar",
+    "PanelPoint",
+    "panel_sweep",
     "hahner_fog_points",
     "STF_FIT",
     "stf_max_viewing_distance",
@@ -49,6 +57,7 @@ __all__ = [
 ]
 
 STREET = Path(__file__).resolve().parents[2] / "scenes" / "street.xml"
+TARGET = STREET.with_name("target.xml")
 
 #: The published values the coefficients are checked against (docs/WEATHER.md cites them).
 REFERENCES = {
@@ -178,9 +187,16 @@ class SweepPoint:
 def street_lidar(sensor: SensorSpec, wavelength: float, cols: int):
     """The street (loaded in the active variant) and its LiDAR set to the sensor at
     ``wavelength`` (one sub-ray per beam: the footprint matters for the particles only)."""
+    return scene_lidar(STREET, sensor, wavelength, cols)
+
+
+def scene_lidar(path, sensor: SensorSpec, wavelength: float, cols: int, range_max=120.0):
+    """A scene of one LiDAR (loaded in the active variant, ``cols`` given as its ``cols``
+    parameter) and that LiDAR set to the sensor at ``wavelength``, range window up to
+    ``range_max`` m, seed 0, one sub-ray per beam."""
     from ..scene import load_scene
 
-    loaded = load_scene(str(STREET), params={"cols": str(cols)})
+    loaded = load_scene(str(path), params={"cols": str(cols)})
     lidar = loaded.lidars[0]
     from ..lidar.config import LidarConfig
 
@@ -190,7 +206,7 @@ def street_lidar(sensor: SensorSpec, wavelength: float, cols: int):
             "preset": sensor.preset,
             "horizontal_resolution": cols,
             "wavelength": wavelength,
-            "range_max": 120.0,
+            "range_max": range_max,
             "detection_threshold": sensor.threshold,
             "receiver_noise_std": sensor.noise,
             "beam_divergence": sensor.divergence,
@@ -229,6 +245,73 @@ def street_sweep(
                 range_rms=float(np.sqrt(np.mean(shift**2))) if shift.size else 0.0,
             )
         )
+    return out
+
+
+@dataclass(frozen=True)
+class PanelPoint:
+    """One calibration panel of ``scenes/target.xml`` in one condition of :func:`panel_sweep`.
+
+    Attributes:
+        panel: the panel's shape id (``panel_NN_<material>_<d>m_<tilt>deg``).
+        material: ``white_95``, ``grey_50``, ``black_05`` or ``ramp``.
+        distance: m; incidence: degrees (from the id).
+        weather: the condition.
+        npc_clear: the panel's points in clear air.
+        npc_ratio: its surface points in the condition per point in clear air.
+        intensity_ratio: mean intensity of the beams that return the panel in both scans, in
+            the condition over clear air (NaN where none does).
+    """
+
+    panel: str
+    material: str
+    distance: float
+    incidence: float
+    weather: Weather
+    npc_clear: int
+    npc_ratio: float
+    intensity_ratio: float
+
+
+_PANEL = re.compile(r"panel_\d+_(?P<material>[a-z]+(?:_\d+)?)_(?P<d>[\d.]+)m_(?P<tilt>\d+)deg$")
+
+
+def panel_sweep(
+    sensor: SensorSpec, wavelength: float, conditions: list[Weather], cols: int = 2048
+) -> list[PanelPoint]:
+    """The panels of ``scenes/target.xml`` (white 95 %, grey 50 %, black 5 % at 5, 10 and 20
+    m, normal incidence and tilted) scanned in clear air and in each condition: per panel, the
+    share of its clear points still returned from it and the change of their intensity (the
+    measure of the fog-chamber and weather-tunnel tests that count points on a target)."""
+    from ..lidar.scan import scan
+
+    loaded, lidar = scene_lidar(TARGET, sensor, wavelength, cols, range_max=40.0)
+    clear = scan(loaded.scene, lidar, weather=Weather())
+    panels = [(i, _PANEL.match(n)) for i, n in enumerate(clear.shape_names)]
+    panels = [(i, m) for i, m in panels if m]
+    out = []
+    for w in conditions:
+        r = scan(loaded.scene, lidar, weather=w)
+        kept_any = r.valid & (r.scatterer == 0)
+        for i, m in panels:
+            before = clear.valid & (clear.shape_index == i)
+            kept = before & kept_any & (r.shape_index == i)
+            n = int(before.sum())
+            both = float(clear.intensity[kept].mean()) if kept.any() else math.nan
+            out.append(
+                PanelPoint(
+                    panel=clear.shape_names[i],
+                    material=m["material"],
+                    distance=float(m["d"]),
+                    incidence=float(m["tilt"]),
+                    weather=w,
+                    npc_clear=n,
+                    npc_ratio=float(kept.sum() / max(n, 1)),
+                    intensity_ratio=float(r.intensity[kept].mean() / both)
+                    if kept.any()
+                    else math.nan,
+                )
+            )
     return out
 
 
