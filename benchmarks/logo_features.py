@@ -115,6 +115,11 @@ ROWS: dict[str, tuple[str, tuple[str, ...], str]] = {
         DEFAULT_INPUTS,
         "intensity",
     ),
+    "geometry_blend": (
+        "geometry only, the intensity's and the rank's regressions averaged",
+        (*RETURN_FEATURES, "ring", *GEOMETRY_FEATURES),
+        "blend",
+    ),
     "context_blend": (
         "same, the intensity's and the rank's regressions averaged",
         DEFAULT_INPUTS,
