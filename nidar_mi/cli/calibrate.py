@@ -3,6 +3,7 @@
     python -m nidar_mi.calibrate SCANS... -o profile.json [--name NAME] [--sensor TEXT]
                                  [--form context|gbm|range_ring|distance_quantile|physical]
                                  [--inputs GROUP,...] [--kind gbm|mlp] [--balance group|frame]
+                                 [--target intensity|rank|blend]
                                  [--branch R|I_hat]
                                  [--no-geometry | --no-incidence]
                                  [--weights DIR] [--intensity-scale S] [--splits S,...]
@@ -37,7 +38,9 @@ the small learned head (:mod:`nidar_mi.profiles.head`) in place of the trees, so
 cheaper to apply. A context profile weighs each recording alike (``--balance group``, the
 default: a recording is a scan folder, or for a KITTI frame named ``<source>__<id>`` its source,
 :func:`nidar_mi.datasets.scans.recording_of`; the frames of a recording share its weight, so
-that a long drive does not outweigh short ones) or each frame (``--balance frame``). The profile file
+that a long drive does not outweigh short ones) or each frame (``--balance frame``). The trees fit the intensity and its per-frame rank and
+average the two (``--target blend``, the default; ``intensity`` or ``rank``: one regression, half
+the cost to apply; the head fits the intensity). The profile file
 (:mod:`nidar_mi.profiles.sensor_profile`) then goes to ``assign --profile FILE`` or
 ``render --intensity nidar --profile FILE``.
 
@@ -118,6 +121,12 @@ def build_parser():
         choices=("group", "frame"),
         help="context: weigh each recording (scan folder) alike, its frames sharing its weight "
         "(group, the default), or each frame alike (frame)",
+    )
+    p.add_argument(
+        "--target",
+        choices=("intensity", "rank", "blend"),
+        help="context: fit the intensity, its per-frame rank, or both and average them "
+        "(default: blend for the trees, intensity for the head)",
     )
     p.add_argument("--branch", default="R", choices=("R", "I_hat"), help="NIDAR map to calibrate")
     p.add_argument("--weights", help="NIDAR weights folder (default: the shipped model)")
@@ -228,8 +237,9 @@ def _calibrate(args, argv) -> None:
 
 def _context_options(args) -> dict:
     """The ``context`` form's options from ``--inputs`` (``features``: the groups' inputs),
-    ``--kind`` and ``--balance``."""
+    ``--kind``, ``--balance`` and ``--target``."""
     flags = (("--inputs", args.inputs), ("--kind", args.kind), ("--balance", args.balance))
+    flags += (("--target", args.target),)
     given = [f for f, v in flags if v is not None]
     if given and args.form != "context":
         raise NidarError(f"{given[0]} needs --form context (got --form {args.form})")
@@ -238,6 +248,8 @@ def _context_options(args) -> dict:
         options["kind"] = args.kind or KITTI_PROFILE_OPTIONS.get("kind", "gbm")
     if args.balance is not None:
         options["balance"] = args.balance
+    if args.target is not None:
+        options["target"] = args.target
     if args.inputs is None:
         return options
     from ..profiles.inputs import GROUPS
@@ -252,7 +264,8 @@ def _context_options(args) -> dict:
 def _reads(profile) -> str:
     """What the summary line adds about the incidence (or the inputs of a context profile)."""
     if profile.form == "context":
-        return f" ({profile.mapping.kind}; inputs: {', '.join(profile.mapping.groups)})"
+        m = profile.mapping
+        return f" ({m.kind}, {m.target}; inputs: {', '.join(m.groups)})"
     if not profile.uses_incidence:
         return ""
     if profile.form == "physical":

@@ -102,7 +102,7 @@ KITTI_PROFILE_OPTIONS: dict = {"kind": "gbm"}
 #: leave-one-frame-out metric but the camera-map SSIM, docs/RESULTS.md).
 KITTI_PROFILE_INCIDENCE = True
 #: Version of the fitting procedure (part of the cache key).
-_FIT_VERSION = 6
+_FIT_VERSION = 7
 _KITTI_SENSOR = "Velodyne HDL-64E (KITTI), stored reflectance in [0, 1]"
 
 

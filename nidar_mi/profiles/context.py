@@ -28,7 +28,15 @@ the regularisation were chosen by nested leave one group out on the KITTI groups
 group's choice made on the other seven alone; docs/NIDAR.md, "Each drive weighs the same").
 ``target="rank"`` fits the per-frame rank of the intensity (in [0, 1]) instead and maps the
 prediction back through the quantiles of the training intensities (:data:`QUANTILES` of them,
-stored): the same ranking, on the sensor's scale.
+stored): the same ranking, on the sensor's scale. ``target="blend"`` fits both regressions on the
+same rows and averages them on the sensor's scale,
+
+    I = clip((F_I(x) + Q(F_u(x))) / 2, 0, 1),
+
+with ``F_I`` the intensity's regression, ``F_u`` the rank's and ``Q`` the weighted quantile
+function of the training intensities; the two fits err differently (the rank's does not chase the
+frames' intensity scale), and their mean ranks unseen drives better than either (chosen by nested
+leave one group out, docs/NIDAR.md, "Two regressions, averaged"), at twice the trees' cost.
 
 Missing inputs (NaN: no ring, a neighbourhood without a shape) take the branch LightGBM learnt
 for them; the model is stored as LightGBM's text model, checked line by line before LightGBM
@@ -57,6 +65,7 @@ __all__ = [
     "DEFAULT_L2",
     "DEFAULT_LEARNING_RATE",
     "DEFAULT_LEAVES",
+    "DEFAULT_TARGET",
     "DEFAULT_TREES",
     "KINDS",
     "POINTS_PER_FRAME",
@@ -68,6 +77,7 @@ __all__ = [
     "frame_weights",
     "train_context_booster",
     "training_rows",
+    "weighted_quantiles",
 ]
 
 #: Boosting rounds.
@@ -86,8 +96,10 @@ DEFAULT_BAGGING_FRACTION = 0.7
 DEFAULT_L2 = 10.0
 #: Training returns drawn per frame (all of a smaller frame).
 POINTS_PER_FRAME = 4000
-#: What the regression is fitted on: the intensity, or its per-frame rank.
-TARGETS = ("intensity", "rank")
+#: What the regression is fitted on: the intensity, its per-frame rank, or both averaged.
+TARGETS = ("intensity", "rank", "blend")
+#: The trees' target unless told (chosen by nested leave one group out).
+DEFAULT_TARGET = "blend"
 #: The models a context map may hold: LightGBM's trees, or the small learned head.
 KINDS = ("gbm", "mlp")
 #: Quantiles of the training intensities a ``rank`` map keeps (its output scale).
@@ -104,7 +116,9 @@ class ContextFitOptions:
     Attributes:
         features: the input names to read (:mod:`nidar_mi.profiles.inputs`); None: those
             of :data:`~nidar_mi.profiles.inputs.DEFAULT_INPUTS` the fitting data give.
-        target: ``"intensity"`` or ``"rank"`` (module docstring).
+        target: ``"intensity"``, ``"rank"`` or ``"blend"`` (module docstring; ``blend`` with
+            ``kind="gbm"`` only); None: :data:`DEFAULT_TARGET` for the trees, ``"intensity"``
+            for the head.
         kind: ``"gbm"`` (LightGBM) or ``"mlp"`` (the head of :mod:`nidar_mi.profiles.head`,
             its own fixed settings).
         trees, leaves, learning_rate, min_leaf: LightGBM's rounds, leaves per tree,
@@ -121,7 +135,7 @@ class ContextFitOptions:
     """
 
     features: tuple[str, ...] | None = None
-    target: str = "intensity"
+    target: str | None = None
     kind: str = "gbm"
     trees: int = DEFAULT_TREES
     leaves: int = DEFAULT_LEAVES
@@ -136,10 +150,16 @@ class ContextFitOptions:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.target is None:
+            object.__setattr__(
+                self, "target", DEFAULT_TARGET if self.kind == "gbm" else "intensity"
+            )
         if self.target not in TARGETS:
             raise NidarError(f"fit context: target must be one of {', '.join(TARGETS)}")
         if self.kind not in KINDS:
             raise NidarError(f"fit context: kind must be one of {', '.join(KINDS)}")
+        if self.target == "blend" and self.kind != "gbm":
+            raise NidarError("fit context: target 'blend' needs kind 'gbm'")
         if self.balance not in BALANCES:
             raise NidarError(f"fit context: balance must be one of {', '.join(BALANCES)}")
         if not 1 <= int(self.trees) <= MAX_TREES or not 2 <= int(self.leaves) <= MAX_LEAVES:
@@ -285,11 +305,14 @@ class ContextMap:
         features: the input names in column order.
         target: ``"intensity"`` or ``"rank"``.
         kind: ``"gbm"`` or ``"mlp"``.
-        model: LightGBM's text model (``gbm``; empty for ``mlp``).
+        model: LightGBM's text model (``gbm``; empty for ``mlp``); a ``blend`` map's
+            regression of the intensity.
+        rank_model: a ``blend`` map's LightGBM text model of the per-frame rank (empty
+            otherwise).
         head: the head's JSON numbers (``mlp``, :func:`nidar_mi.profiles.head.head_to_dict`;
             None for ``gbm``).
-        quantiles: a ``rank`` map's :data:`QUANTILES` quantiles of the training intensities
-            (the output scale); empty for an ``intensity`` map.
+        quantiles: a ``rank`` or ``blend`` map's :data:`QUANTILES` quantiles of the training
+            intensities (the rank's output scale); empty for an ``intensity`` map.
         params: the fitting parameters (for the record).
     """
 
@@ -306,6 +329,7 @@ class ContextMap:
     head: Mapping[str, Any] | None = None
     quantiles: tuple[float, ...] = ()
     params: dict[str, Any] = field(default_factory=dict)
+    rank_model: str = ""
 
     def __post_init__(self) -> None:
         feats = tuple(self.features)
@@ -317,10 +341,16 @@ class ContextMap:
         if self.target not in TARGETS:
             raise NidarError(f"context: 'target' must be one of {', '.join(TARGETS)}")
         q = np.asarray(self.quantiles, dtype=np.float64)
-        if self.target == "rank" and (
+        if self.target in ("rank", "blend") and (
             q.shape != (QUANTILES,) or not np.all(np.isfinite(q)) or np.any(np.diff(q) < 0)
         ):
-            raise NidarError(f"context: a rank map needs {QUANTILES} rising finite quantiles")
+            raise NidarError(
+                f"context: a {self.target} map needs {QUANTILES} rising finite quantiles"
+            )
+        if bool(self.rank_model) != (self.target == "blend") or (
+            self.target == "blend" and self.kind != "gbm"
+        ):
+            raise NidarError("context: a 'rank_model' belongs to (and only to) a gbm blend map")
         object.__setattr__(self, "quantiles", tuple(float(v) for v in q))
         if not isinstance(self.params, Mapping):
             raise NidarError("context: 'params' must be an object")
@@ -330,6 +360,8 @@ class ContextMap:
             if self.head is not None:
                 raise NidarError("context: a gbm map holds no 'head'")
             object.__setattr__(self, "_predict", _booster_predict(self.model, feats))
+            if self.rank_model:
+                object.__setattr__(self, "_rank", _booster_predict(self.rank_model, feats))
         else:
             if self.model:
                 raise NidarError("context: an mlp map holds no LightGBM 'model'")
@@ -383,25 +415,32 @@ class ContextMap:
             raise NidarError("context profile: values and ranges differ in length")
         x = _design(self.features, context, n)
         out = self._predict(x)
+        grid = np.linspace(0.0, 1.0, QUANTILES)
         if self.target == "rank":
-            grid = np.linspace(0.0, 1.0, QUANTILES)
             out = np.interp(np.clip(out, 0.0, 1.0), grid, np.asarray(self.quantiles))
+        elif self.target == "blend":
+            u = np.clip(self._rank(x), 0.0, 1.0)
+            out = 0.5 * (out + np.interp(u, grid, np.asarray(self.quantiles)))
         return np.clip(out, 0.0, 1.0)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe representation: the inputs and their groups, the target, the model."""
-        return {
-            "features": list(self.features),
-            "groups": list(self.groups),
-            "needs_image": self.needs_image,
-            "target": self.target,
-            "kind": self.kind,
-            "quantiles": list(self.quantiles),
-            "params": dict(self.params),
-        } | (
-            {"lightgbm": lightgbm_module().__version__, "model": self.model}
-            if self.kind == "gbm"
-            else {"head": dict(self.head)}
+        return (
+            {
+                "features": list(self.features),
+                "groups": list(self.groups),
+                "needs_image": self.needs_image,
+                "target": self.target,
+                "kind": self.kind,
+                "quantiles": list(self.quantiles),
+                "params": dict(self.params),
+            }
+            | (
+                {"lightgbm": lightgbm_module().__version__, "model": self.model}
+                if self.kind == "gbm"
+                else {"head": dict(self.head)}
+            )
+            | ({"rank_model": self.rank_model} if self.rank_model else {})
         )
 
     @classmethod
@@ -414,7 +453,7 @@ class ContextMap:
         missing = [k for k in ("features", "target") if k not in data]
         if missing or ("model" not in data and "head" not in data):
             raise NidarError(f"context: missing key(s) {', '.join(missing) or 'model'}")
-        unknown = sorted(set(data) - keys - {"params", "model", "head"})
+        unknown = sorted(set(data) - keys - {"params", "model", "head", "rank_model"})
         if unknown:
             raise NidarError(f"context: unknown key(s) {', '.join(unknown)}")
         feats = data["features"]
@@ -431,6 +470,7 @@ class ContextMap:
             head=data.get("head"),
             quantiles=tuple(q),
             params=data.get("params") or {},
+            rank_model=data.get("rank_model", ""),
         )
         if "groups" in data and list(data["groups"]) != list(out.groups):
             raise NidarError("context: 'groups' do not match the features")
@@ -480,10 +520,13 @@ class ContextMap:
         x = _design(feats, context, y.size)
         parts, groups = _frames(context, y.size)
         xt, yt, wt = training_rows([x[p] for p in parts], [y[p] for p in parts], o, groups)
-        q = np.quantile(y, np.linspace(0, 1, QUANTILES)) if o.target == "rank" else ()
         record = {"samples": int(yt.size), "points_per_frame": int(o.points_per_frame)}
         record |= {"seed": int(o.seed), "balance": o.balance, "groups": len(set(groups or [0]))}
         weight = None if np.all(wt == 1.0) else wt
+        if o.target == "blend":
+            ut = training_rows([x[p] for p in parts], [_rank_of(y, p) for p in parts], o, groups)
+            return cls._fit_blend(feats, (xt, yt, ut[1], wt), o, record)
+        q = np.quantile(y, np.linspace(0, 1, QUANTILES)) if o.target == "rank" else ()
         if o.kind == "mlp":
             head = fit_head(xt, yt, seed=o.seed, threads=o.threads, weight=weight)
             head = head_to_dict(head)
@@ -505,6 +548,41 @@ class ContextMap:
             quantiles=tuple(float(v) for v in q),
             params=record,
         )
+
+    @classmethod
+    def _fit_blend(cls, feats, rows, o: ContextFitOptions, record: dict) -> ContextMap:
+        """A ``blend`` map from training ``rows`` = (x (N, F), intensity (N,), per-frame rank
+        (N,), weight (N,)): both regressions on the same rows, the weighted quantiles of the
+        intensities as the rank's scale."""
+        x, y, u, w = rows
+        weight = None if np.all(w == 1.0) else w
+        level = train_context_booster(x, y, feats, o, weight)
+        rank = train_context_booster(x, u, feats, o, weight)
+        record |= {k: v for k, v in _params(o).items() if k not in ("verbose", "num_threads")}
+        record["trees"] = int(level.num_trees()) + int(rank.num_trees())
+        return cls(
+            features=feats,
+            target="blend",
+            model=level.model_to_string(),
+            rank_model=rank.model_to_string(),
+            quantiles=tuple(float(v) for v in weighted_quantiles(y, w, QUANTILES)),
+            params=record,
+        )
+
+
+def _rank_of(y: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(n,) the per-frame rank in [0, 1] of the intensities ``y[rows]`` (a frame's returns)."""
+    return _rank01(y[rows])
+
+
+def weighted_quantiles(y: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the quantiles at ``linspace(0, 1, n)`` of values ``y`` (N,) weighted by ``w`` (N,)
+    (the midpoint rule of the weighted empirical distribution; equal weights give
+    ``np.quantile``'s ``hazen`` estimate)."""
+    order = np.argsort(y, kind="stable")
+    ys, ws = np.asarray(y, np.float64)[order], np.asarray(w, np.float64)[order]
+    c = np.cumsum(ws)
+    return np.interp(np.linspace(0.0, 1.0, n), (c - 0.5 * ws) / c[-1], ys)
 
 
 def _design(features: tuple[str, ...], context: Mapping[str, Any] | None, n: int) -> np.ndarray:

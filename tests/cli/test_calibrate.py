@@ -344,8 +344,9 @@ def test_a_context_profile_reads_the_image_where_the_intensity_comes_from(tmp_pa
 
 def test_balance_weighs_each_folder_alike_or_each_frame(tmp_path, capsys):
     """Two recordings that disagree on the same geometry: six frames of a folder read 0.2, two
-    of another 0.8. Least squares gives their weighted mean: 0.5 with each folder weighing the
-    same (the default), (6·0.2 + 2·0.8) / 8 = 0.35 with each frame."""
+    of another 0.8. Least squares on the intensity (``--target intensity``) gives their weighted
+    mean: 0.5 with each folder weighing the same (the default), (6·0.2 + 2·0.8) / 8 = 0.35 with
+    each frame. The trees' default target is the blend of the intensity and its rank."""
     import shutil
 
     from nidar_mi.datasets.scans import load_scans
@@ -360,9 +361,11 @@ def test_balance_weighs_each_folder_alike_or_each_frame(tmp_path, capsys):
     for balance, want in ((None, 0.5), ("frame", 0.35)):
         out = tmp_path / f"{balance}.json"
         argv = [str(a), str(b), "-o", str(out), "--form", "context", "--inputs", "return", "-q"]
+        argv += ["--target", "intensity"]
         assert main(argv + (["--balance", balance] if balance else [])) == 0
         p = load_profile(out)
         assert p.mapping.params["balance"] == (balance or "group")
+        assert p.mapping.target == "intensity"
         assert p.mapping.params["groups"] == 2 and p.provenance["frames"] == 8
         ctx = return_inputs(scan.xyz, scan.ring)
         pred = p(np.zeros(len(scan.xyz)), scan.range_m, context=ctx)
@@ -371,3 +374,8 @@ def test_balance_weighs_each_folder_alike_or_each_frame(tmp_path, capsys):
         main([str(a), "-o", str(tmp_path / "g.json"), "--form", "gbm", "--balance", "frame"]) == 2
     )
     assert "--balance needs --form context" in capsys.readouterr().err
+    assert main([str(a), "-o", str(tmp_path / "g.json"), "--form", "gbm", "--target", "rank"]) == 2
+    assert "--target needs --form context" in capsys.readouterr().err
+    out = tmp_path / "default.json"
+    assert main([str(a), str(b), "-o", str(out), "--inputs", "return", "-q"]) == 0
+    assert load_profile(out).mapping.target == "blend"

@@ -10,7 +10,14 @@ import pytest
 
 from nidar_mi.errors import NidarError
 from nidar_mi.profiles import SensorProfile, fit, load_profile
-from nidar_mi.profiles.context import QUANTILES, ContextMap
+from nidar_mi.profiles.context import (
+    QUANTILES,
+    ContextFitOptions,
+    ContextMap,
+    train_context_booster,
+    training_rows,
+    weighted_quantiles,
+)
 from nidar_mi.profiles.inputs import GROUPS
 
 
@@ -99,6 +106,71 @@ def test_missing_inputs_take_their_branch_and_ranks_map_to_the_intensity_scale()
     assert "ring" in m.features and "ring" in m.groups
 
 
+def test_weighted_quantiles_are_numpys_hazen_quantiles_for_equal_weights():
+    """Equal weights give NumPy's ``hazen`` estimate; the weights' scale does not matter; weights
+    move the quantiles as repeating the values would."""
+    y = np.random.default_rng(3).gamma(2.0, 0.1, 517)
+    levels = np.linspace(0, 1, QUANTILES)
+    np.testing.assert_allclose(
+        weighted_quantiles(y, np.ones_like(y), QUANTILES),
+        np.quantile(y, levels, method="hazen"),
+        rtol=0,
+        atol=1e-12,
+    )
+    w = np.random.default_rng(4).uniform(0.1, 2.0, y.size)
+    np.testing.assert_allclose(
+        weighted_quantiles(y, w, QUANTILES),
+        weighted_quantiles(y, 7.5 * w, QUANTILES),
+        rtol=0,
+        atol=1e-12,
+    )
+    # the upper half weighing three times the lower: the median is the unweighted 2/3 quantile
+    heavy = np.where(y > np.median(y), 3.0, 1.0)
+    q = weighted_quantiles(y, heavy, 3)
+    assert abs(q[1] - np.quantile(y, 2 / 3)) < 0.01 * np.ptp(y)
+
+
+def test_a_blend_map_is_the_mean_of_its_two_regressions(tmp_path):
+    """A ``blend`` map returns (F_I + Q(F_u)) / 2 of two regressions fitted on the same rows (the
+    intensity's and the per-frame rank's, Q the weighted quantiles of the intensities), survives
+    its file, and is refused with the small head."""
+    ctx, y, frame = _data()
+    groups = np.where(frame == 0, "a", "b")
+    m = fit(
+        "context",
+        ctx["R"],
+        ctx["range_m"],
+        y,
+        context=ctx | {"frame": frame, "group": groups},
+        target="blend",
+        trees=30,
+        points_per_frame=1500,
+    )
+    o = ContextFitOptions(trees=30, points_per_frame=1500)
+    feats = m.features
+    x = np.column_stack([ctx[f] for f in feats])
+    parts = [np.flatnonzero(frame == f) for f in range(3)]
+    labels = ["a", "b", "b"]
+    xt, yt, wt = training_rows([x[p] for p in parts], [y[p] for p in parts], o, labels)
+    ranks = [(np.argsort(np.argsort(y[p])) / (p.size - 1)) for p in parts]
+    _, ut, _ = training_rows([x[p] for p in parts], ranks, o, labels)
+    level = train_context_booster(xt, yt, feats, o, wt).predict(x)
+    rank = np.clip(train_context_booster(xt, ut, feats, o, wt).predict(x), 0, 1)
+    grid = np.linspace(0, 1, QUANTILES)
+    expected = 0.5 * (level + np.interp(rank, grid, weighted_quantiles(yt, wt, QUANTILES)))
+    got = m(ctx["R"], ctx["range_m"], context=ctx)
+    np.testing.assert_allclose(got, np.clip(expected, 0, 1), rtol=0, atol=1e-12)
+    assert np.corrcoef(got, y)[0, 1] > 0.95
+    back = ContextMap.from_dict(json.loads(json.dumps(m.to_dict())))
+    np.testing.assert_array_equal(back(ctx["R"], ctx["range_m"], context=ctx), got)
+    with pytest.raises(NidarError, match="'blend' needs kind 'gbm'"):
+        ContextFitOptions(target="blend", kind="mlp")
+    data = m.to_dict()
+    data.pop("rank_model")
+    with pytest.raises(NidarError, match="'rank_model' belongs to"):
+        ContextMap.from_dict(data)
+
+
 def test_a_tampered_or_malformed_file_is_refused(tmp_path):
     p = _profile(trees=10)
     good = p.to_dict()
@@ -180,8 +252,9 @@ def test_frame_weights_give_each_group_an_equal_share():
 @pytest.mark.parametrize("kind", ["gbm", "mlp"])
 def test_a_long_recording_does_not_outweigh_a_short_one(kind):
     """Two recordings that disagree, read through one input: nine frames where I = 0.2 and one
-    where I = 0.8. Least squares predicts the weighted mean: 0.5 when each recording weighs
-    the same (``balance="group"``), 0.9·0.2 + 0.1·0.8 = 0.26 when each frame does."""
+    where I = 0.8. Least squares on the intensity predicts the weighted mean: 0.5 when each
+    recording weighs the same (``balance="group"``), 0.9·0.2 + 0.1·0.8 = 0.26 when each frame
+    does."""
     rng = np.random.default_rng(0)
     frames, per = 10, 400
     n = frames * per
@@ -199,6 +272,7 @@ def test_a_long_recording_does_not_outweigh_a_short_one(kind):
             context=ctx | {"frame": frame, "group": group},
             kind=kind,
             balance=balance,
+            target="intensity",
             trees=50,
         )
         pred = m(ctx["range_m"], ctx["range_m"], context=ctx)
