@@ -13,9 +13,12 @@ three corners, and the evidence is kept per frame: a frame that observes a verte
 reverse). A static surface is seen on by the frames that observe it, bar a stray ray; a surface
 that was there and then left is seen through by every frame after it left (one that came, by
 every frame before it came). A vertex is transient when the frames that observe it, in time
-order, end (or start) with at least ``run`` consecutive *through* votes: the views after it
-left agree that the space is empty, where a stretch of stray *through* votes between *on*
-votes (neighbouring frames see alike, so the stray ones come in runs) says nothing. A triangle
+order, end with at least ``run`` consecutive *through* votes: the views after it left agree
+that the space is empty, where a stretch of stray *through* votes between *on* votes
+(neighbouring frames see alike, so the stray ones come in runs) says nothing. A surface that
+came during the drive (its votes start *through*) is kept: it stands at the drive's end and
+past it, where the re-simulated views go; counting those runs too removed static surfaces
+(docs/RESIMULATION.md, step 4). A triangle
 is transient when its three corners are. Removing one can expose another behind it that no ray
 reached, so the test repeats until nothing is removed (at most ``passes`` rounds). What the
 removed surfaces hid, the later frames saw, and the fusion already holds it.
@@ -66,9 +69,9 @@ def frame_votes(prim, frame, through, on):
 
 
 def end_through_run(elem, vote, n: int) -> np.ndarray:
-    """(n,) the run of consecutive *through* votes that ends or starts each element's votes
-    (sorted by element, then time, as :func:`frame_votes` gives them): the frames after it
-    left, or before it came; 0 where its first and last votes are *on*."""
+    """(n,) the run of consecutive *through* votes that ends each element's votes (sorted by
+    element, then time, as :func:`frame_votes` gives them): the frames after it left; 0 where
+    its last vote is *on*."""
     run = np.zeros(n, dtype=np.int64)
     if len(elem) == 0:
         return run
@@ -77,7 +80,7 @@ def end_through_run(elem, vote, n: int) -> np.ndarray:
     first = np.flatnonzero(start)
     owner = elem[first]
     new = np.concatenate([[True], owner[1:] != owner[:-1]])
-    at_end = new | np.concatenate([new[1:], [True]])  # an element's first or last run
+    at_end = np.concatenate([new[1:], [True]])  # an element's last run
     ok = (vote[first] < 0) & at_end
     np.maximum.at(run, owner[ok], length[ok])
     return run

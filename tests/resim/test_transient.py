@@ -97,7 +97,8 @@ def test_votes_and_runs_per_frame():
     from nidar_mi.resim.transient import end_through_run, frame_votes
 
     # element 0: frames 0-2 on, 3-5 through (it left); 1: through and on alternating, from
-    # through; 2: on, through, through, on (a stray stretch in the middle); 3: unseen
+    # through, ending on (a run at the start: it came, and stays); 2: on, through, through, on
+    # (a stray stretch in the middle); 3: unseen
     prim = np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2])
     frame = np.array([0, 1, 2, 3, 4, 5, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3])
     through = np.array([0, 0, 0, 1, 1, 1, 1, 1, 0, 1, 0, 1, 0, 0, 1, 1, 0], bool)
@@ -105,4 +106,7 @@ def test_votes_and_runs_per_frame():
     np.testing.assert_array_equal(tri, [0] * 6 + [1] * 6 + [2] * 4)
     np.testing.assert_array_equal(frm, list(range(6)) * 2 + list(range(4)))
     np.testing.assert_array_equal(vote, [1, 1, 1, -1, -1, -1, -1, 1, -1, 1, -1, 1, 1, -1, -1, 1])
-    np.testing.assert_array_equal(end_through_run(tri, vote, 4), [3, 1, 0, 0])
+    np.testing.assert_array_equal(end_through_run(tri, vote, 4), [3, 0, 0, 0])
+    # the same votes in reverse time: element 1 now ends with one through vote, 0 starts with 3
+    back = np.lexsort((-frm, tri))
+    np.testing.assert_array_equal(end_through_run(tri[back], vote[back], 4), [0, 1, 0, 0])
