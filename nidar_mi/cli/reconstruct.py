@@ -61,8 +61,8 @@ def build_parser():
         type=int,
         default=d.transient_frames,
         metavar="N",
-        help="remove the surfaces that N consecutive training frames saw through (moving "
-        f"objects; {d.transient_frames}; 0: keep them)",
+        help="remove the surfaces that the last N training frames to observe them saw through "
+        f"(objects that moved away; {d.transient_frames}; 0: keep them)",
     )
     p.add_argument(
         "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"
