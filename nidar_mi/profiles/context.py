@@ -519,13 +519,15 @@ class ContextMap:
             raise NidarError(f"fit context: {y.size} returns are too few")
         x = _design(feats, context, y.size)
         parts, groups = _frames(context, y.size)
-        xt, yt, wt = training_rows([x[p] for p in parts], [y[p] for p in parts], o, groups)
+        designs = [x[p] for p in parts]
+        xt, yt, wt = training_rows(designs, [y[p] for p in parts], o, groups)
         record = {"samples": int(yt.size), "points_per_frame": int(o.points_per_frame)}
         record |= {"seed": int(o.seed), "balance": o.balance, "groups": len(set(groups or [0]))}
         weight = None if np.all(wt == 1.0) else wt
         if o.target == "blend":
-            ut = training_rows([x[p] for p in parts], [_rank_of(y, p) for p in parts], o, groups)
-            return cls._fit_blend(feats, (xt, yt, ut[1], wt), o, record)
+            # the same draw of rows (one seed), the per-frame rank as the label
+            _, ut, _ = training_rows(designs, [_rank01(y[p]) for p in parts], o, groups)
+            return cls._fit_blend(feats, (xt, yt, ut, wt), o, record)
         q = np.quantile(y, np.linspace(0, 1, QUANTILES)) if o.target == "rank" else ()
         if o.kind == "mlp":
             head = fit_head(xt, yt, seed=o.seed, threads=o.threads, weight=weight)
@@ -568,11 +570,6 @@ class ContextMap:
             quantiles=tuple(float(v) for v in weighted_quantiles(y, w, QUANTILES)),
             params=record,
         )
-
-
-def _rank_of(y: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """(n,) the per-frame rank in [0, 1] of the intensities ``y[rows]`` (a frame's returns)."""
-    return _rank01(y[rows])
 
 
 def weighted_quantiles(y: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
