@@ -11,8 +11,8 @@ from .beam_rays import Rays, concat, miss_rays
 from .build import drop_scratch, scratch_scene, training_rays
 from .drive_folder import Drive
 from .frames import Frames
-from .inversion import FitOptions, SensorFit, edges_of, fit_drive, predict_returns
-from .mesh import Mesh
+from .inversion import FitOptions, SensorFit, edges_of, fit_drive, predict_returns, sensor_samples
+from .mesh import Mesh, crease_vertices
 
 __all__ = ["Inversion", "invert", "sensor_summary", "MAX_SAMPLES"]
 
@@ -136,10 +136,12 @@ def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options,
     kw = {
         "prior": prior,
         "prior_weight": _prior_weight(samples, mesh),
+        "sensor_rows": sensor_samples(samples, crease_vertices(mesh)),
         "progress": options.progress,
     }
     rho, sensor = fit_drive(samples, scene, edges, frames.layout.rings, fo, **kw)
     residuals = _residuals(samples, sensor, predict_returns(samples, rho, sensor))
+    residuals["sensor_returns"] = int((kw["sensor_rows"] & samples.detected).sum())
     fo_flat = FitOptions(iterations=options.iterations, per_laser=False)
     rho_flat, sensor_flat = fit_drive(samples, scene, edges, frames.layout.rings, fo_flat, **kw)
     drop_scratch(stage)

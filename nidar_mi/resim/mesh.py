@@ -31,6 +31,8 @@ __all__ = [
     "compact",
     "scan_mesh",
     "fuse_meshes",
+    "crease_vertices",
+    "CREASE_DEG",
     "MAX_INCIDENCE_DEG",
     "EDGE_RATIO",
     "EDGE_PAD_M",
@@ -47,6 +49,8 @@ EDGE_RATIO = 0.15
 EDGE_PAD_M = 0.2
 #: Longest edge of any triangle, m.
 MAX_EDGE_M = 4.0
+#: A vertex is on a crease when a triangle around it turns more than this from its normal, deg.
+CREASE_DEG = 60.0
 
 
 @dataclass
@@ -168,3 +172,32 @@ def fuse_meshes(meshes: list[Mesh], voxel: float) -> Mesh:
     s = s[order]
     new = np.concatenate([[True], np.any(s[1:] != s[:-1], axis=1)])
     return compact(Mesh(centre, f[np.sort(order[new])]))
+
+
+def crease_vertices(mesh: Mesh, angle_deg: float = CREASE_DEG) -> np.ndarray:
+    """(V,) bool: the vertices where the surface folds (a wall meets the road, a box's edge) or
+    is rough: some triangle around the vertex has its normal more than ``angle_deg`` from the
+    vertex's normal. The vertex normal is the principal axis of the area-weighted normals of its
+    triangles (the eigenvector of ``Σ a·n·nᵀ`` with the largest eigenvalue), so a triangle's
+    winding does not matter. A vertex of no triangle is not on a crease.
+
+    At such a vertex one reflectance and one interpolated normal stand for two surfaces: a
+    return there reads the wall's ρ at the road's incidence, or the other way round.
+    """
+    v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    crease = np.zeros(len(v), bool)
+    if len(f) == 0:
+        return crease
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 · area
+    tensor = np.zeros((len(v), 3, 3))
+    outer = (
+        np.einsum("ti,tj->tij", n, n) / np.maximum(np.linalg.norm(n, axis=1), 1e-12)[:, None, None]
+    )
+    for k in range(3):
+        np.add.at(tensor, f[:, k], outer)
+    axis = np.linalg.eigh(tensor)[1][:, :, 2]  # eigenvalues ascending: the last is the largest
+    unit = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    worst = np.ones(len(v))
+    for k in range(3):
+        np.minimum.at(worst, f[:, k], np.abs(np.einsum("ti,ti->t", unit, axis[f[:, k]])))
+    return worst < np.cos(np.radians(angle_deg))

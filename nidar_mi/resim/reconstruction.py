@@ -59,7 +59,7 @@ class ReconstructOptions:
     holdout: tuple[str, ...] = ()
     poses: str | None = None
     voxel_m: float = 0.1
-    iterations: int = 150
+    iterations: int = 40
     carve_passes: int = 2
     transient_frames: int = 3
     prior: bool = True

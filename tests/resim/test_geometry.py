@@ -96,3 +96,29 @@ def test_fusing_a_mesh_with_itself_gives_it_back_and_carving_removes_a_blocker(v
 
     carved, removed = carve(both, rays, load)
     assert removed[0] == 1 and len(carved.faces) == len(wall.faces)
+
+
+def test_crease_vertices_are_the_box_edges_whatever_the_winding():
+    """A box made of quad grids (0.25 m cells; corners shared after fusing by position): the
+    vertices on an edge of the box (two of their coordinates on the box's bounds) are creases,
+    the others are not; reversing half of the triangles changes nothing; a plane has none."""
+    from nidar_mi.resim.mesh import Mesh, crease_vertices, fuse_meshes
+    from nidar_mi.resim.synthetic import _grid
+
+    lo, hi = np.zeros(3), np.array([2.0, 1.0, 1.5])
+    sides = [
+        _grid((0, 0, 0), (2, 0, 0), (0, 1, 0), 8, 4),
+        _grid((0, 0, 1.5), (2, 0, 0), (0, 1, 0), 8, 4),
+        _grid((0, 0, 0), (2, 0, 0), (0, 0, 1.5), 8, 6),
+        _grid((0, 1, 0), (2, 0, 0), (0, 0, 1.5), 8, 6),
+        _grid((0, 0, 0), (0, 1, 0), (0, 0, 1.5), 4, 6),
+        _grid((2, 0, 0), (0, 1, 0), (0, 0, 1.5), 4, 6),
+    ]
+    box = fuse_meshes(sides, voxel=0.01)
+    v = box.vertices
+    on_bound = (np.isclose(v, lo, atol=1e-6) | np.isclose(v, hi, atol=1e-6)).sum(axis=1)
+    np.testing.assert_array_equal(crease_vertices(box), on_bound >= 2)
+    flipped = box.faces.copy()
+    flipped[::2] = flipped[::2, ::-1]
+    np.testing.assert_array_equal(crease_vertices(Mesh(v, flipped)), on_bound >= 2)
+    assert not crease_vertices(sides[0]).any()
