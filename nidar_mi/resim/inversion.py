@@ -53,6 +53,7 @@ __all__ = [
     "alternate",
     "sensor_samples",
     "harmonic_fill",
+    "detection_start",
 ]
 
 #: Knots of the fitted range response, m; the response is 1 at REFERENCE_M.
@@ -340,10 +341,38 @@ def sensor_samples(samples: Samples, crease: np.ndarray) -> np.ndarray:
     return ~np.any(np.stack([crease[c.numpy()] for c in samples.corners]), axis=0)
 
 
+def detection_start(expected: np.ndarray, detected: np.ndarray, low: float) -> tuple[float, float]:
+    """``(T, σ_n)`` minimising the fit's ray-drop term (the mean binary cross-entropy of
+    ``P_D = Φ((E - T)/σ_n)``, clipped to [1e-4, 1 - 1e-4] as in the loss) with ``E`` fixed: the
+    best of a log-spaced grid (T and σ_n from 10⁻⁴ to 1, on at most 200 000 samples drawn with
+    a fixed seed) and of ``T = low``, ``σ_n = low/2``. The clipped term is flat where it
+    saturates, so a grid, not a gradient, finds its minimum.
+
+    Args:
+        expected: (S,) E of the samples; detected: (S,) bool; low: a low intensity (> 0).
+    """
+    from scipy.special import ndtr
+
+    e = np.asarray(expected, dtype=np.float64)
+    sign = np.where(detected, 1.0, -1.0)
+    if len(e) > 200_000:
+        keep = np.random.default_rng(0).choice(len(e), 200_000, replace=False)
+        e, sign = e[keep], sign[keep]
+
+    def loss(t, s):
+        q = np.clip(ndtr(sign * (e - t) / s), 1e-4, 1.0 - 1e-4)
+        return -float(np.mean(np.log(q)))
+
+    low = max(low, 1e-3)
+    grid = np.logspace(-4, 0, 25)
+    candidates = [(low, low / 2)] + [(t, s) for t in grid for s in grid]
+    return min(candidates, key=lambda ts: loss(*ts))
+
+
 def _start(pb: _Problem, start, rings: int, options: FitOptions):
     """The optimiser at the alternating least squares' solution (``start``: ρ, gains,
-    response), the offset at 0 and the detection threshold and noise at a low quantile of the
-    returns' intensities."""
+    response), the offset at 0 and the detection threshold and noise at their maximum
+    likelihood for that solution (:func:`detection_start`)."""
     import mitsuba as mi
 
     rho, gains, resp = start
@@ -354,8 +383,11 @@ def _start(pb: _Problem, start, rings: int, options: FitOptions):
     opt["log_r"] = mi.Float(np.log(np.maximum(resp, 1e-3)).astype(np.float32))
     opt["b"] = mi.Float(np.zeros(1, np.float32))
     low = float(np.percentile(e[e > 0], 2)) if (e > 0).any() else 0.01
-    opt["log_t"] = mi.Float(np.float32([np.log(max(low, 1e-3))]))
-    opt["log_s"] = mi.Float(np.float32([np.log(max(low, 1e-3) / 2)]))
+    fitted = SensorFit(gains, KNOTS_M, resp, 0.0, low, low / 2)
+    expected = predict_returns(pb.samples, rho, fitted)
+    t, s = detection_start(expected, pb.samples.detected, low)
+    opt["log_t"] = mi.Float(np.float32([np.log(t)]))
+    opt["log_s"] = mi.Float(np.float32([np.log(s)]))
     opt.set_learning_rate(rho=options.lr_rho, log_g=options.lr_gains, log_r=options.lr_gains)
     return opt
 

@@ -190,3 +190,21 @@ def test_the_sensor_is_fitted_to_its_rows_only(variant, tmp_path):
     flagged[5] = True
     corners = np.stack([c.numpy() for c in s.corners], axis=1)
     np.testing.assert_array_equal(sensor_samples(s, flagged), ~(corners == 5).any(axis=1))
+
+
+def test_detection_start_recovers_threshold_and_noise_on_its_grid():
+    """Hits and misses drawn from ``Φ((E - T)/σ_n)`` with T and σ_n on the start's log grid
+    (10^(-4/3) ≈ 0.0464 and 10^(-5/3) ≈ 0.0215): the start finds those two grid values; with no
+    miss at all it detects every sample above 10⁻³."""
+    from scipy.special import ndtr
+
+    from nidar_mi.resim.inversion import detection_start
+
+    rng = np.random.default_rng(3)
+    t, s = 10 ** (-4 / 3), 10 ** (-5 / 3)
+    e = rng.uniform(0.0, 0.15, 150_000)
+    hit = rng.uniform(size=e.size) < ndtr((e - t) / s)
+    got = detection_start(e, hit, 0.01)
+    np.testing.assert_allclose(got, (t, s), rtol=1e-9)
+    t0, s0 = detection_start(e, np.ones(e.size, bool), 0.01)
+    assert (ndtr((e[e > 1e-3] - t0) / s0) > 0.999).all()
