@@ -371,8 +371,8 @@ def detection_start(expected: np.ndarray, detected: np.ndarray, low: float) -> t
 
 def _start(pb: _Problem, start, rings: int, options: FitOptions):
     """The optimiser at the alternating least squares' solution (``start``: ρ, gains,
-    response), the offset at 0 and the detection threshold and noise at their maximum
-    likelihood for that solution (:func:`detection_start`)."""
+    response), the offset at 0 and the detection threshold and noise where the ray-drop term
+    is lowest for that solution (:func:`detection_start`)."""
     import mitsuba as mi
 
     rho, gains, resp = start
