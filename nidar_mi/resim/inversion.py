@@ -351,17 +351,17 @@ def detection_start(expected: np.ndarray, detected: np.ndarray, low: float) -> t
     Args:
         expected: (S,) E of the samples; detected: (S,) bool; low: a low intensity (> 0).
     """
-    from scipy.special import ndtr
+    from ..lidar.return_model import detection_probability
 
     e = np.asarray(expected, dtype=np.float64)
-    sign = np.where(detected, 1.0, -1.0)
+    hit = np.asarray(detected, bool)
     if len(e) > 200_000:
         keep = np.random.default_rng(0).choice(len(e), 200_000, replace=False)
-        e, sign = e[keep], sign[keep]
+        e, hit = e[keep], hit[keep]
 
     def loss(t, s):
-        q = np.clip(ndtr(sign * (e - t) / s), 1e-4, 1.0 - 1e-4)
-        return -float(np.mean(np.log(q)))
+        p = np.clip(detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
+        return -float(np.mean(np.log(np.where(hit, p, 1.0 - p))))
 
     low = max(low, 1e-3)
     grid = np.logspace(-4, 0, 25)

@@ -189,12 +189,12 @@ def crease_vertices(mesh: Mesh, angle_deg: float = CREASE_DEG) -> np.ndarray:
     if len(f) == 0:
         return crease
     n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 · area
-    tensor = np.zeros((len(v), 3, 3))
-    outer = (
-        np.einsum("ti,tj->tij", n, n) / np.maximum(np.linalg.norm(n, axis=1), 1e-12)[:, None, None]
-    )
-    for k in range(3):
-        np.add.at(tensor, f[:, k], outer)
+    outer = (n[:, :, None] * n[:, None, :]).reshape(-1, 9)
+    outer /= np.maximum(np.linalg.norm(n, axis=1), 1e-12)[:, None]
+    corner = f.T.ravel()  # each triangle once per corner
+    tensor = np.stack(
+        [np.bincount(corner, np.tile(outer[:, j], 3), len(v)) for j in range(9)], axis=1
+    ).reshape(-1, 3, 3)
     axis = np.linalg.eigh(tensor)[1][:, :, 2]  # eigenvalues ascending: the last is the largest
     unit = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
     worst = np.ones(len(v))
