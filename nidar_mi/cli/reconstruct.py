@@ -65,6 +65,12 @@ def build_parser():
         f"(objects that moved away; {d.transient_frames}; 0: keep them)",
     )
     p.add_argument(
+        "--no-moving",
+        action="store_true",
+        help="held-out frames see the static surfaces only (default: with the surfaces that "
+        "moved, as the training frame nearest in time saw them)",
+    )
+    p.add_argument(
         "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"
     )
     p.add_argument("--weights", default=None, help="NIDAR weights folder (default: shipped)")
@@ -117,6 +123,7 @@ def main(argv=None) -> int:
             iterations=args.iterations,
             carve_passes=args.carve_passes,
             transient_frames=args.transient_frames,
+            moving=not args.no_moving,
             prior=not args.no_prior,
             weights=args.weights,
             seed=check_seed(args.seed),

@@ -11,7 +11,10 @@ Methods, all scored on the same matched returns of a frame:
 * ``copy_all``: the intensity of the nearest training return of any frame (world frame);
 * ``copy_nearest_frame``: the same from the training frame whose pose is nearest.
 
-The re-simulated scans are the expected scans: no noise draw, detection where ``E >= T``.
+The re-simulated scans are the expected scans: no noise draw, detection where ``E >= T``. Each
+is cast into the static surfaces and, unless ``moving`` is off, the surfaces that moved as the
+training frame nearest in time saw them (:mod:`.moving`; their ρ per method: the returns
+inverted through the method's sensor, or the method's constant where it has none).
 """
 
 from __future__ import annotations
@@ -39,7 +42,9 @@ METHODS = (
 
 
 def _variants(cfg, inv) -> dict:
-    """Method -> (per-vertex ρ, sensor configuration) of the re-simulated methods."""
+    """Method -> (per-vertex ρ, sensor configuration, the :class:`.inversion.SensorFit` that
+    inverts a moving surface's returns or None: the median ρ there) of the re-simulated
+    methods."""
     quiet = {"receiver_noise_std": 0.0, "noise_intensity_std": 0.0, "noise_range_std": 0.0}
     det = replace(cfg, dropout=0.0, **quiet)
     s = inv.sensor_flat
@@ -51,13 +56,13 @@ def _variants(cfg, inv) -> dict:
         detection_threshold=s.threshold,
     )
     out = {
-        "resim": (inv.rho, det),
-        "without_laser_gains": (inv.rho_flat, flat),
-        "constant_rho": (np.full_like(inv.rho, np.median(inv.rho)), det),
+        "resim": (inv.rho, det, inv.sensor),
+        "without_laser_gains": (inv.rho_flat, flat, inv.sensor_flat),
+        "constant_rho": (np.full_like(inv.rho, np.median(inv.rho)), det, None),
     }
     if inv.prior is not None and np.isfinite(inv.prior_scale):
         r = inv.prior_scale * inv.prior
-        out["nidar_rho"] = (np.where(np.isfinite(r), r, np.median(inv.rho)), det)
+        out["nidar_rho"] = (np.where(np.isfinite(r), r, np.median(inv.rho)), det, None)
     return out
 
 
@@ -143,33 +148,89 @@ def _mean(per_frame: dict) -> dict:
     return out
 
 
-def evaluate_heldout(scene_path: str, drive: Drive, frames: Frames, poses, inv, stage: str):
+def _moving_scene(k: int, drive: Drive, frames: Frames, poses, mesh, static, stage: str):
+    """``(scene, moving, rays)`` for held-out frame ``k``: the static surfaces with the moving
+    ones of the nearest training frame (:mod:`.moving`), or the static scene alone (and None)
+    when that frame saw nothing moving."""
+    from .beam_rays import return_rays
+    from .build import scratch_scene
+    from .mesh import Mesh
+    from .moving import moving_surfaces, nearest_frame
+
+    j = nearest_frame(k, [drive.index(i) for i in drive.train])
+    rays = return_rays(frames.xyz[j], frames.grid[j], frames.layout, poses[j], j)
+    moving = moving_surfaces(frames.xyz[j], frames.grid[j], rays, static, j, wrap=not frames.cut)
+    if len(moving.mesh.faces) == 0:
+        return static, moving, rays
+    both = Mesh(
+        np.concatenate([mesh.vertices, moving.mesh.vertices]),
+        np.concatenate([mesh.faces, moving.mesh.faces + len(mesh.vertices)]),
+    )
+    return scratch_scene(stage)(both), moving, rays
+
+
+def evaluate_heldout(
+    scene_path: str,
+    drive: Drive,
+    frames: Frames,
+    poses,
+    inv,
+    stage: str,
+    mesh=None,
+    moving: bool = True,
+):
     """Re-simulate, write and score every held-out frame; ``{"frames": {id: metrics},
-    "mean": ...}``."""
+    "mean": ...}``. ``mesh``: the static surfaces of ``scene_path`` (:class:`.mesh.Mesh`),
+    needed with ``moving`` (module docstring)."""
     import mitsuba as mi
 
     from ..io.kitti import write_kitti_bin
     from ..scene import load_scene
+    from .build import drop_scratch, scratch_scene
+    from .moving import moving_rho
     from .surfaces import RHO_KEY
 
     if not drive.holdout:
         return {"frames": {}, "mean": {}}
+    if moving and mesh is None:
+        raise ValueError("evaluate_heldout: moving surfaces need the static mesh")
     loaded = load_scene(scene_path)
-    scene = loaded.scene
-    sensor = next(s for s in scene.sensors() if hasattr(s, "config"))
-    params = mi.traverse(scene)
+    static = loaded.scene
+    sensor = next(s for s in static.sensors() if hasattr(s, "config"))
     variants = _variants(sensor.config, inv)
     train = _training_world(drive, frames, poses)
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}
-    for fid in drive.holdout:
-        k = drive.index(fid)
-        scans = {}
-        for name, (rho, cfg) in variants.items():
-            params[RHO_KEY] = mi.Float(np.asarray(rho, dtype=np.float32))
-            params.update()
-            scans[name] = _sim_scan(scene, cfg, poses[k], frames)
-        sim, sim_i, _ = scans["resim"]
-        write_kitti_bin(os.path.join(stage, "heldout", f"{fid}.bin"), sim, np.clip(sim_i, 0.0, 1.0))
-        per_frame[fid] = _score_frame(k, scans, frames, poses, train)
+    scratch = scratch_scene(stage)  # the moving meshes alone, for their samples
+    try:
+        for fid in drive.holdout:
+            k = drive.index(fid)
+            scene, mv, rays = static, None, None
+            if moving:
+                scene, mv, rays = _moving_scene(k, drive, frames, poses, mesh, static, stage)
+            params = mi.traverse(scene)
+            scans = {}
+            for name, (rho, cfg, fitted) in variants.items():
+                if scene is not static:
+                    j = mv.frame
+                    extra = (
+                        moving_rho(mv, rays, frames.intensity[j], fitted, scratch)
+                        if fitted is not None
+                        else np.full(len(mv.returns), np.median(inv.rho))
+                    )
+                    rho = np.concatenate([rho, extra])
+                params[RHO_KEY] = mi.Float(np.asarray(rho, dtype=np.float32))
+                params.update()
+                scans[name] = _sim_scan(scene, cfg, poses[k], frames)
+            sim, sim_i, _ = scans["resim"]
+            path = os.path.join(stage, "heldout", f"{fid}.bin")
+            write_kitti_bin(path, sim, np.clip(sim_i, 0.0, 1.0))
+            per_frame[fid] = _score_frame(k, scans, frames, poses, train)
+            if mv is not None:
+                per_frame[fid]["moving"] = {
+                    "from": drive.ids[mv.frame],
+                    "triangles": len(mv.mesh.faces),
+                }
+    finally:
+        drop_scratch(stage)
     return {"frames": per_frame, "mean": _mean(per_frame)}

@@ -30,6 +30,7 @@ __all__ = [
     "Mesh",
     "compact",
     "scan_mesh",
+    "scan_triangles",
     "fuse_meshes",
     "crease_vertices",
     "CREASE_DEG",
@@ -91,6 +92,12 @@ def scan_mesh(xyz: np.ndarray, grid: ScanGrid, *, wrap: bool = False) -> Mesh:
         Vertices are the returns themselves (unused ones removed); triangles face the origin.
     """
     xyz = np.asarray(xyz, dtype=np.float64)
+    return compact(Mesh(xyz, scan_triangles(xyz, grid, wrap=wrap)))
+
+
+def scan_triangles(xyz: np.ndarray, grid: ScanGrid, *, wrap: bool = False) -> np.ndarray:
+    """(T, 3) int64 :func:`scan_mesh`'s triangles as indices of the returns ``xyz`` (N, 3)."""
+    xyz = np.asarray(xyz, dtype=np.float64)
     img = _grid_index(grid, len(xyz))
     if wrap:
         img = np.concatenate([img, img[:, :1]], axis=1)
@@ -105,8 +112,7 @@ def scan_mesh(xyz: np.ndarray, grid: ScanGrid, *, wrap: bool = False) -> Mesh:
             np.column_stack([a, d, b])[(a >= 0) & (b >= 0) & (d >= 0) & (c < 0)],
         ]
     )
-    tris = tris[_kept(xyz, tris)]
-    return compact(Mesh(xyz, tris))
+    return tris[_kept(xyz, tris)]
 
 
 def _kept(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:

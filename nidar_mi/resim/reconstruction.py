@@ -8,7 +8,9 @@ Output folder (published whole, with the record of :data:`OWNER`)::
     OUT/heldout/<id>.bin   the re-simulated scan of each held-out frame (KITTI .bin: x, y, z,
                            intensity on the real sensor's [0, 1] scale; LiDAR frame; the
                            drive's coverage only; the expected scan: detected where E >= T,
-                           intensity max(E - b, 0) without noise)
+                           intensity max(E - b, 0) without noise; the static surfaces and
+                           those that moved, as the training frame nearest in time saw them:
+                           :mod:`.moving`)
     OUT/report.json        inputs, timings, the recovered sensor, the fit's residuals, the
                            held-out metrics of the re-simulation and of the baselines
 
@@ -62,6 +64,7 @@ class ReconstructOptions:
     iterations: int = 40
     carve_passes: int = 2
     transient_frames: int = 3
+    moving: bool = True
     prior: bool = True
     weights: str | None = None
     seed: int = 0
@@ -142,7 +145,9 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("fit")
     scene_path = write_outputs(stage, drive, frames, poses, mesh, inv)
     clock.lap("write")
-    held = evaluate_heldout(scene_path, drive, frames, poses, inv, stage)
+    held = evaluate_heldout(
+        scene_path, drive, frames, poses, inv, stage, mesh=mesh, moving=options.moving
+    )
     clock.lap("evaluate")
     report = {
         "drive": os.path.abspath(drive.root),
