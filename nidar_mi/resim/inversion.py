@@ -13,15 +13,17 @@ per-vertex ``vertex_rho``; :func:`nidar_mi.lidar.raycast.monostatic_reflectance`
 per-laser gain (``laser_gains``) and ``r(d)`` the range response (``range_response``: piecewise
 linear through :data:`KNOTS_M`). The sensor reports ``max(E - b, 0)`` (``intensity_offset``
 b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
-returns) and detects a return with probability ``Φ((E - T) / σ_n)`` (``detection_threshold``,
-``receiver_noise_std``; :func:`~nidar_mi.lidar.return_model.detection_probability`).
+returns) and detects a return with probability ``(1 - q) · Φ((E - T) / σ_n)``
+(``detection_threshold``, ``receiver_noise_std``,
+:func:`~nidar_mi.lidar.return_model.detection_probability`; ``dropout`` q: the returns lost
+whatever their intensity, through glass, past an object's edge, as the plugin drops them).
 
 The loss, minimised with :class:`mitsuba.ad.Adam` on the gradients of ``dr.backward``:
 
 * intensity: mean over returns of ``(max(E - b, 0) - y)²``, where a return read as 0 counts
   only when ``E - b`` exceeds 0 (it says ``E <= b``, nothing more);
-* detection: ``w_det`` times the mean binary cross-entropy of ``Φ((E - T)/σ_n)`` against
-  hit/miss over the detection samples;
+* detection: ``w_det`` times the mean binary cross-entropy of ``(1 - q) Φ((E - T)/σ_n)``
+  against hit/miss over the detection samples;
 * smoothness: ``w_smooth`` times the mean of ``(ρ_a - ρ_b)²`` over the mesh's edges (the prior
   where the data are thin);
 * prior: ``w_prior`` times the mean of ``(ρ_v - s·R_v)²`` over the vertices that NIDAR's
@@ -54,6 +56,7 @@ __all__ = [
     "sensor_samples",
     "harmonic_fill",
     "detection_start",
+    "DROPOUTS",
 ]
 
 #: Knots of the fitted range response, m; the response is 1 at REFERENCE_M.
@@ -61,6 +64,9 @@ KNOTS_M = (2.0, 4.0, 7.0, 10.0, 15.0, 20.0, 30.0, 45.0, 70.0, 120.0)
 REFERENCE_M = 10.0
 #: The largest fitted reflectance.
 RHO_MAX = 4.0
+#: The dropouts the ray-drop start tries (:func:`detection_start`), and the largest fitted.
+DROPOUTS = (0.0, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3)
+DROPOUT_MAX = 0.9
 #: Rounds of the alternating least squares and the over-relaxation of its gains' step.
 ALS_ROUNDS = 100
 ALS_RELAX = 1.8
@@ -80,6 +86,7 @@ class FitOptions:
     per_laser: bool = True
     fit_response: bool = True
     fit_offset: bool = True
+    fit_dropout: bool = True
 
 
 @dataclass
@@ -91,6 +98,7 @@ class SensorFit:
         knots_m, response: the range response r(d) at the knots.
         offset: the intensity offset b.
         threshold, noise: T and σ_n of detection.
+        dropout: q, the share of returns lost whatever their intensity.
         history: per iteration the loss terms.
     """
 
@@ -100,6 +108,7 @@ class SensorFit:
     offset: float
     threshold: float
     noise: float
+    dropout: float = 0.0
     history: list[dict] = field(default_factory=list)
 
     def response_at(self, d):
@@ -184,8 +193,8 @@ class _Problem:
 
 
 def _sensor_values(opt, rings: int):
-    """The normalised gains and response, offset, threshold and noise from the optimiser's
-    variables (Dr.Jit)."""
+    """The normalised gains and response, offset, threshold, noise and dropout from the
+    optimiser's variables (Dr.Jit)."""
     import drjit as dr
     import mitsuba as mi
 
@@ -194,7 +203,7 @@ def _sensor_values(opt, rings: int):
     log_r = opt["log_r"]
     ref = dr.gather(mi.Float, log_r, KNOTS_M.index(REFERENCE_M))
     response = dr.exp(log_r - ref)
-    return gains, response, opt["b"], dr.exp(opt["log_t"]), dr.exp(opt["log_s"])
+    return gains, response, opt["b"], dr.exp(opt["log_t"]), dr.exp(opt["log_s"]), opt["q"]
 
 
 def _loss(pb: _Problem, opt, sensor, options: FitOptions, rings: int):
@@ -205,13 +214,13 @@ def _loss(pb: _Problem, opt, sensor, options: FitOptions, rings: int):
 
     from ..lidar.return_model import detection_probability
 
-    gains, response, b, t, s = _sensor_values(sensor, rings)
+    gains, response, b, t, s, q = _sensor_values(sensor, rings)
     rho = opt["rho"]
     e = _expected(pb.samples, rho, gains, response, pb.sensor_rows)
     shown = dr.maximum(e - b, 0.0)
     resid = dr.select(pb.zero, shown, shown - pb.y)
     l_int = dr.sum(dr.select(pb.det, dr.square(resid), 0.0)) / pb.n_det
-    p = dr.clip(detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
+    p = dr.clip((1.0 - q) * detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
     l_det = -dr.mean(dr.select(pb.det, dr.log(p), dr.log(1.0 - p)))
     diff = dr.gather(mi.Float, rho, pb.e0) - dr.gather(mi.Float, rho, pb.e1)
     l_smooth = dr.mean(dr.square(diff))
@@ -341,15 +350,19 @@ def sensor_samples(samples: Samples, crease: np.ndarray) -> np.ndarray:
     return ~np.any(np.stack([crease[c.numpy()] for c in samples.corners]), axis=0)
 
 
-def detection_start(expected: np.ndarray, detected: np.ndarray, low: float) -> tuple[float, float]:
-    """``(T, σ_n)`` minimising the fit's ray-drop term (the mean binary cross-entropy of
-    ``P_D = Φ((E - T)/σ_n)``, clipped to [1e-4, 1 - 1e-4] as in the loss) with ``E`` fixed: the
-    best of a log-spaced grid (T and σ_n from 10⁻⁴ to 1, on at most 200 000 samples drawn with
-    a fixed seed) and of ``T = low``, ``σ_n = low/2``. The clipped term is flat where it
-    saturates, so a grid, not a gradient, finds its minimum.
+def detection_start(
+    expected: np.ndarray, detected: np.ndarray, low: float, dropouts=DROPOUTS
+) -> tuple[float, float, float]:
+    """``(T, σ_n, q)`` minimising the fit's ray-drop term (the mean binary cross-entropy of
+    ``P_D = (1 - q) Φ((E - T)/σ_n)``, clipped to [1e-4, 1 - 1e-4] as in the loss) with ``E``
+    fixed: the best of a log-spaced grid (T and σ_n from 10⁻⁴ to 1, on at most 200 000 samples
+    drawn with a fixed seed) and of ``T = low``, ``σ_n = low/2``, each with every dropout q of
+    ``dropouts``. The clipped term is flat where it saturates, so a grid, not a gradient, finds
+    its minimum.
 
     Args:
-        expected: (S,) E of the samples; detected: (S,) bool; low: a low intensity (> 0).
+        expected: (S,) E of the samples; detected: (S,) bool; low: a low intensity (> 0);
+        dropouts: the dropouts tried, each in [0, 1) (``(0.0,)``: none).
     """
     from ..lidar.return_model import detection_probability
 
@@ -358,21 +371,45 @@ def detection_start(expected: np.ndarray, detected: np.ndarray, low: float) -> t
     if len(e) > 200_000:
         keep = np.random.default_rng(0).choice(len(e), 200_000, replace=False)
         e, hit = e[keep], hit[keep]
+    qs = np.asarray(dropouts, dtype=np.float64)
+    if qs.size == 0 or (qs < 0).any() or (qs >= 1).any():
+        raise ValueError("detection_start: dropouts must lie in [0, 1)")
 
-    def loss(t, s):
-        p = np.clip(detection_probability(e, t, s), 1e-4, 1.0 - 1e-4)
-        return -float(np.mean(np.log(np.where(hit, p, 1.0 - p))))
+    lo, hi = np.log(1e-4), np.log(1.0 - 1e-4)
+    log_keep = np.log1p(-qs)
+    floor = lo - log_keep.min()  # above it, log(1 - q) + log Φ is never clipped from below
+
+    def losses(t, s):
+        """(len(qs),) the term at (T, σ_n) for each dropout. A hit's clipped log P_D is
+        ``log(1 - q) + log Φ``, clipped: one logarithm of Φ serves every q (clipped from
+        above only at q = 0, from below only where Φ is tiny)."""
+        phi = detection_probability(e, t, s)
+        with np.errstate(divide="ignore"):
+            log_hit = np.log(phi[hit])
+        small = log_hit < floor
+        rest = log_hit[~small].sum()
+        on = (~small).sum() * log_keep + rest
+        on += np.maximum(log_keep[:, None] + log_hit[small][None, :], lo).sum(axis=1)
+        on = np.where(qs == 0.0, np.clip(log_hit, lo, hi).sum(), on)
+        p_miss = np.clip((1.0 - qs[:, None]) * phi[~hit][None, :], 1e-4, 1.0 - 1e-4)
+        off = np.log(1.0 - p_miss).sum(axis=1)
+        return -(on + off) / len(e)
 
     low = max(low, 1e-3)
     grid = np.logspace(-4, 0, 25)
-    candidates = [(low, low / 2)] + [(t, s) for t in grid for s in grid]
-    return min(candidates, key=lambda ts: loss(*ts))
+    best = (np.inf, low, low / 2, 0.0)
+    for t, s in [(low, low / 2)] + [(t, s) for t in grid for s in grid]:
+        values = losses(t, s)
+        k = int(np.argmin(values))
+        if values[k] < best[0]:
+            best = (float(values[k]), t, s, float(qs[k]))
+    return best[1], best[2], best[3]
 
 
 def _start(pb: _Problem, start, rings: int, options: FitOptions):
     """The optimiser at the alternating least squares' solution (``start``: ρ, gains,
-    response), the offset at 0 and the detection threshold and noise where the ray-drop term
-    is lowest for that solution (:func:`detection_start`)."""
+    response), the offset at 0 and the detection threshold, noise and dropout where the
+    ray-drop term is lowest for that solution (:func:`detection_start`)."""
     import mitsuba as mi
 
     rho, gains, resp = start
@@ -385,9 +422,11 @@ def _start(pb: _Problem, start, rings: int, options: FitOptions):
     low = float(np.percentile(e[e > 0], 2)) if (e > 0).any() else 0.01
     fitted = SensorFit(gains, KNOTS_M, resp, 0.0, low, low / 2)
     expected = predict_returns(pb.samples, rho, fitted)
-    t, s = detection_start(expected, pb.samples.detected, low)
+    dropouts = DROPOUTS if options.fit_dropout else (0.0,)
+    t, s, q = detection_start(expected, pb.samples.detected, low, dropouts)
     opt["log_t"] = mi.Float(np.float32([np.log(t)]))
     opt["log_s"] = mi.Float(np.float32([np.log(s)]))
+    opt["q"] = mi.Float(np.float32([q]))
     opt.set_learning_rate(rho=options.lr_rho, log_g=options.lr_gains, log_r=options.lr_gains)
     return opt
 
@@ -399,6 +438,7 @@ def _clamp(opt, options: FitOptions) -> None:
 
     opt["rho"] = dr.clip(opt["rho"], 0.0, RHO_MAX)
     opt["b"] = dr.maximum(opt["b"], 0.0) if options.fit_offset else mi.Float(0.0)
+    opt["q"] = dr.clip(opt["q"], 0.0, DROPOUT_MAX) if options.fit_dropout else mi.Float(0.0)
     if not options.per_laser:
         opt["log_g"] = dr.zeros(mi.Float, dr.width(opt["log_g"]))
     if not options.fit_response:
@@ -451,7 +491,7 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
     params[RHO_KEY] = rho
     params.update()
     with dr.suspend_grad():
-        g, r, b, t, s = _sensor_values(opt, rings)
+        g, r, b, t, s, q = _sensor_values(opt, rings)
     fitted = SensorFit(
         gains=g.numpy().astype(np.float64),
         knots_m=KNOTS_M,
@@ -459,6 +499,7 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
         offset=float(b.numpy()[0]),
         threshold=float(t.numpy()[0]),
         noise=float(s.numpy()[0]),
+        dropout=float(q.numpy()[0]),
         history=history,
     )
     return rho.numpy().astype(np.float64), fitted

@@ -67,6 +67,7 @@ def sensor_summary(s: SensorFit) -> dict:
         "intensity_offset": s.offset,
         "detection_threshold": s.threshold,
         "receiver_noise_std": s.noise,
+        "dropout": s.dropout,
         "final_loss": s.history[-1] if s.history else None,
     }
 
@@ -94,7 +95,7 @@ def _residuals(samples, rho_fit: SensorFit, predicted: np.ndarray) -> dict:
     y = samples.intensity[det]
     from scipy.special import ndtr
 
-    p = ndtr((predicted - rho_fit.threshold) / rho_fit.noise)
+    p = (1.0 - rho_fit.dropout) * ndtr((predicted - rho_fit.threshold) / rho_fit.noise)
     rings = len(rho_fit.gains)
     return {
         "laser_returns": np.bincount(samples.ring.numpy()[det], minlength=rings).tolist(),

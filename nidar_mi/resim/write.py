@@ -33,6 +33,7 @@ def sensor_params(frames: Frames, s: SensorFit, *, laser_gains: bool = True) -> 
         "intensity_offset": float(round(s.offset, 6)),
         "detection_threshold": float(round(s.threshold, 6)),
         "receiver_noise_std": float(round(s.noise, 6)),
+        "dropout": float(round(s.dropout, 6)),
     }
     if laser_gains:
         params["laser_gains"] = ", ".join(f"{g:.6g}" for g in s.gains)

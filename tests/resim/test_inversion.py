@@ -69,6 +69,7 @@ def _variables(rho, rings, k):
         "b": mi.Float(np.float32([0.01])),
         "log_t": mi.Float(np.float32([np.log(0.05)])),
         "log_s": mi.Float(np.float32([np.log(0.03)])),
+        "q": mi.Float(np.float32([0.05])),
     }
 
 
@@ -192,10 +193,11 @@ def test_the_sensor_is_fitted_to_its_rows_only(variant, tmp_path):
     np.testing.assert_array_equal(sensor_samples(s, flagged), ~(corners == 5).any(axis=1))
 
 
-def test_detection_start_recovers_threshold_and_noise_on_its_grid():
-    """Hits and misses drawn from ``Φ((E - T)/σ_n)`` with T and σ_n on the start's log grid
-    (10^(-4/3) ≈ 0.0464 and 10^(-5/3) ≈ 0.0215): the start finds those two grid values; with no
-    miss at all it detects every sample above 10⁻³."""
+def test_detection_start_recovers_threshold_noise_and_dropout_on_its_grid():
+    """Hits and misses drawn from ``(1 - q) Φ((E - T)/σ_n)`` with T and σ_n on the start's log
+    grid (10^(-4/3) ≈ 0.0464 and 10^(-5/3) ≈ 0.0215) and q among its dropouts (0 and 0.07):
+    the start finds those values; without dropouts it finds T and σ_n at q = 0; with no miss at
+    all it detects every sample above 10⁻³."""
     from scipy.special import ndtr
 
     from nidar_mi.resim.inversion import detection_start
@@ -203,8 +205,13 @@ def test_detection_start_recovers_threshold_and_noise_on_its_grid():
     rng = np.random.default_rng(3)
     t, s = 10 ** (-4 / 3), 10 ** (-5 / 3)
     e = rng.uniform(0.0, 0.15, 150_000)
-    hit = rng.uniform(size=e.size) < ndtr((e - t) / s)
-    got = detection_start(e, hit, 0.01)
-    np.testing.assert_allclose(got, (t, s), rtol=1e-9)
-    t0, s0 = detection_start(e, np.ones(e.size, bool), 0.01)
-    assert (ndtr((e[e > 1e-3] - t0) / s0) > 0.999).all()
+    u = rng.uniform(size=e.size)
+    for q in (0.0, 0.07):
+        hit = u < (1 - q) * ndtr((e - t) / s)
+        np.testing.assert_allclose(detection_start(e, hit, 0.01), (t, s, q), rtol=1e-9)
+    hit = u < ndtr((e - t) / s)
+    np.testing.assert_allclose(detection_start(e, hit, 0.01, (0.0,)), (t, s, 0.0), rtol=1e-9)
+    t0, s0, q0 = detection_start(e, np.ones(e.size, bool), 0.01)
+    assert q0 == 0.0 and (ndtr((e[e > 1e-3] - t0) / s0) > 0.999).all()
+    with pytest.raises(ValueError):
+        detection_start(e, hit, 0.01, (0.0, 1.0))

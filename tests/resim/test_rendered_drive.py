@@ -17,6 +17,7 @@ static triangles (nothing moved).
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -49,6 +50,13 @@ def test_rendered_drive_recovers_gains_rho_and_layout(variant, tmp_path):
     np.testing.assert_allclose(
         report["layout"]["vertical_offset_m"], table.vertical_offset_m, atol=0.02
     )
+    # ray drop: the fitted detection rate within a point of the observed (measured 0.9911 vs
+    # 0.9919), the fitted dropout written into the recovered sensor
+    res, sensor = report["fit"]["residuals"], report["fit"]["sensor"]
+    assert abs(res["detection_rate_fitted"] - res["detection_rate_observed"]) < 0.01
+    xml = (out / "sensor_recovered.xml").read_text()
+    written = re.search(r'<float name="dropout" value="([^"]+)"/>', xml)
+    assert written and float(written.group(1)) == pytest.approx(sensor["dropout"], abs=1e-6)
     held = report["heldout"]["frames"]["000011"]
     assert held["fscore"] >= 0.9
     # a static street: the nearest training frame's returns are all but explained by the
