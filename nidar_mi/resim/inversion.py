@@ -30,6 +30,10 @@ The loss, minimised with :class:`mitsuba.ad.Adam` on the gradients of ``dr.backw
   reflectance ``R`` sees (``s`` the median ratio of the fitted ρ to R, refreshed every step),
   weighted by how rarely the LiDAR hit the vertex.
 
+The alternating least squares that starts the fit (:func:`alternate`) carries a smoothness
+prior on the range response's knot values (``FitOptions.response_smooth``): where a drive sees
+each surface from about one range, ρ and ``r(d)`` trade off freely.
+
 Scale: ``ρ`` and the sensor's gains trade off (``G·ρ``), so the gains are normalised to a
 geometric mean of 1 and ``r`` to 1 at :data:`REFERENCE_M`; ρ is thus the intensity a surface
 gives at normal incidence at that range with the average laser (KITTI's [0, 1] scale).
@@ -87,6 +91,7 @@ class FitOptions:
     fit_response: bool = True
     fit_offset: bool = True
     fit_dropout: bool = True
+    response_smooth: float = 1.0
 
 
 @dataclass
@@ -243,6 +248,7 @@ def alternate(
     per_laser=True,
     sensor_rows: np.ndarray | None = None,
     edges: np.ndarray | None = None,
+    response_smooth: float = 0.0,
 ):
     """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d)`` (each sample assigned to
     the corner of its triangle with the largest weight): ρ per vertex, then the gains, then the
@@ -264,6 +270,11 @@ def alternate(
             for two surfaces and bias the gains of the lasers that see one side.
         edges: (E, 2) the mesh's edges: a vertex no sample is assigned to takes the harmonic
             interpolation of its neighbours (:func:`harmonic_fill`; default: the median ρ).
+        response_smooth: weight of the range response's smoothness prior: its step solves
+            ``(MᵀM + w · tr(MᵀM)/K · DᵀD) r = Mᵀy`` with D the second differences of the K
+            knot values (0: none). Where every surface is seen from about one range (a car
+            that stops), ρ and r(d) trade off freely and r(d) swings by factors of 2-18
+            between neighbouring knots; the prior takes the smoothest of the equally good.
 
     Returns:
         ``(rho (V,), gains (R,), response (K,))`` NumPy float64.
@@ -286,6 +297,7 @@ def alternate(
     ys, vs, rs, qs, hs = y[fit], v[fit], ring[fit], q[fit], hat[fit]
     gains, resp = np.ones(rings), np.ones(len(KNOTS_M))
     ref = KNOTS_M.index(REFERENCE_M)
+    d2 = np.diff(eye, n=2, axis=0)  # second differences of the knot values
 
     def solve_rho(vv, yy, a):
         num, den = np.bincount(vv, yy * a, vertices), np.bincount(vv, a * a, vertices)
@@ -300,7 +312,9 @@ def alternate(
             best = np.maximum(best, 1e-6)
             gains = best if k == 0 else gains * (best / gains) ** ALS_RELAX
         m = (gains[rs] * rho[vs] * qs)[:, None] * hs
-        resp = np.linalg.solve(m.T @ m + 1e-6 * eye, m.T @ ys)
+        mtm = m.T @ m
+        smooth = response_smooth * np.trace(mtm) / len(eye) * (d2.T @ d2)
+        resp = np.linalg.solve(mtm + 1e-6 * eye + smooth, m.T @ ys)
         resp = np.where(resp > 1e-3, resp, 1e-3)
         g0 = float(np.exp(np.mean(np.log(np.maximum(gains, 1e-6)))))
         gains, resp = gains / g0, resp / resp[ref]
@@ -475,7 +489,13 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
     pb = _Problem(samples, edges, kw.get("prior"), kw.get("prior_weight"), rows)
     vertices = dr.width(params[RHO_KEY])
     start = alternate(
-        samples, vertices, rings, per_laser=options.per_laser, sensor_rows=rows, edges=edges
+        samples,
+        vertices,
+        rings,
+        per_laser=options.per_laser,
+        sensor_rows=rows,
+        edges=edges,
+        response_smooth=options.response_smooth,
     )
     opt = _start(pb, start, rings, options)
     _clamp(opt, options)

@@ -3,8 +3,8 @@
 per-laser gains uniform in [0.7, 1.3]), reconstructed by the ``reconstruct`` command.
 
 Tolerances: the recovered per-laser gains (both normalised to a geometric mean of 1) against the
-truth: median error below 2 %, all within 5 % (the re-simulation target; measured: median 1.2 %,
-80 % within 1.8 %, the worst laser 3.7 %); the recovered per-vertex ρ ranks the true ρ at the
+truth: median error below 2 %, all within 5 % (the re-simulation target; measured: median 0.8 %,
+80 % within 1.5 %, the worst laser 2.7 %); the recovered per-vertex ρ ranks the true ρ at the
 vertices' positions at Spearman >= 0.9 (the target; measured 0.920: the vertices are cluster
 means of 0.1 m cubes that straddle lane marks and corners, a fifth of them interpolated from
 their neighbours, and the incidence comes from the reconstructed mesh's normals); the layout
