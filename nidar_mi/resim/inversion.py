@@ -396,7 +396,7 @@ def detection_start(
     def losses(t, s):
         """(len(qs),) the term at (T, σ_n) for each dropout. A hit's clipped log P_D is
         ``log(1 - q) + log Φ``, clipped: one logarithm of Φ serves every q (clipped from
-        above only at q = 0, from below only where Φ is tiny)."""
+        above only where q < 1e-4, from below only where Φ is tiny)."""
         phi = detection_probability(e, t, s)
         with np.errstate(divide="ignore"):
             log_hit = np.log(phi[hit])
@@ -404,7 +404,8 @@ def detection_start(
         rest = log_hit[~small].sum()
         on = (~small).sum() * log_keep + rest
         on += np.maximum(log_keep[:, None] + log_hit[small][None, :], lo).sum(axis=1)
-        on = np.where(qs == 0.0, np.clip(log_hit, lo, hi).sum(), on)
+        for i in np.flatnonzero(log_keep > hi):  # q < 1e-4: the upper clip can bind
+            on[i] = np.clip(log_keep[i] + log_hit, lo, hi).sum()
         p_miss = np.clip((1.0 - qs[:, None]) * phi[~hit][None, :], 1e-4, 1.0 - 1e-4)
         off = np.log(1.0 - p_miss).sum(axis=1)
         return -(on + off) / len(e)

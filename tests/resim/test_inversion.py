@@ -266,3 +266,25 @@ def test_the_range_response_prior_keeps_smooth_responses_and_smooths_the_others(
             np.testing.assert_allclose(got[1.0], truth, rtol=0.01)
         else:
             assert curvature(got[1.0]) < 0.5 * curvature(truth)
+
+
+def test_detection_start_term_equals_the_clipped_cross_entropy():
+    """The start's shortcut (one logarithm of Φ for every dropout) picks what the plain clipped
+    cross-entropy picks, dropouts below the clip's 1e-4 included."""
+    from scipy.special import ndtr
+
+    from nidar_mi.resim.inversion import detection_start
+
+    rng = np.random.default_rng(4)
+    e = rng.uniform(0.0, 0.1, 20_000)
+    hit = rng.uniform(size=e.size) < 0.95 * ndtr((e - 0.01) / 0.02)
+    qs = (0.0, 5e-5, 0.02, 0.05, 0.1)
+    grid = np.logspace(-4, 0, 25)
+
+    def plain(t, s, q):
+        p = np.clip((1 - q) * ndtr((e - t) / s), 1e-4, 1 - 1e-4)
+        return -np.mean(np.log(np.where(hit, p, 1 - p)))
+
+    cands = [(0.01, 0.005, q) for q in qs] + [(t, s, q) for t in grid for s in grid for q in qs]
+    best = min(cands, key=lambda c: plain(*c))
+    np.testing.assert_allclose(detection_start(e, hit, 0.01, qs), best, rtol=1e-12)
