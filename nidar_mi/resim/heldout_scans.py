@@ -148,16 +148,15 @@ def _mean(per_frame: dict) -> dict:
     return out
 
 
-def _moving_scene(k: int, drive: Drive, frames: Frames, poses, mesh, static, stage: str):
-    """``(scene, moving, rays)`` for held-out frame ``k``: the static surfaces with the moving
-    ones of the nearest training frame (:mod:`.moving`), or the static scene alone (and None)
-    when that frame saw nothing moving."""
+def _moving_scene(j: int, drive: Drive, frames: Frames, poses, mesh, static, stage: str):
+    """``(scene, moving, rays)`` of training frame ``j``: the static surfaces with the surfaces
+    that moved as ``j`` saw them (:mod:`.moving`), or the static scene alone when it saw
+    nothing moving; its moving surfaces and its return rays."""
     from .beam_rays import return_rays
     from .build import scratch_scene
     from .mesh import Mesh
-    from .moving import moving_surfaces, nearest_frame
+    from .moving import moving_surfaces
 
-    j = nearest_frame(k, [drive.index(i) for i in drive.train])
     rays = return_rays(frames.xyz[j], frames.grid[j], frames.layout, poses[j], j)
     moving = moving_surfaces(frames.xyz[j], frames.grid[j], rays, static, j, wrap=not frames.cut)
     if len(moving.mesh.faces) == 0:
@@ -187,7 +186,7 @@ def evaluate_heldout(
     from ..io.kitti import write_kitti_bin
     from ..scene import load_scene
     from .build import drop_scratch, scratch_scene
-    from .moving import moving_rho
+    from .moving import moving_rho, nearest_frame
     from .surfaces import RHO_KEY
 
     if not drive.holdout:
@@ -201,24 +200,29 @@ def evaluate_heldout(
     train = _training_world(drive, frames, poses)
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}
-    scratch = scratch_scene(stage)  # the moving meshes alone, for their samples
+    scratch = scratch_scene(stage)  # the moving meshes alone, for their vertex normals
+    built: dict[int, tuple] = {}  # training frame -> its scene, moving surfaces, rays, ρ
     try:
         for fid in drive.holdout:
             k = drive.index(fid)
             scene, mv, rays = static, None, None
             if moving:
-                scene, mv, rays = _moving_scene(k, drive, frames, poses, mesh, static, stage)
+                j = nearest_frame(k, [drive.index(i) for i in drive.train])
+                if j not in built:  # held-out frames with the same nearest frame share it
+                    scene, mv, rays = _moving_scene(j, drive, frames, poses, mesh, static, stage)
+                    extra = {
+                        name: moving_rho(mv, rays, frames.intensity[j], fitted, scratch)
+                        if fitted is not None and scene is not static
+                        else np.full(len(mv.returns), np.median(inv.rho))
+                        for name, (_, _, fitted) in variants.items()
+                    }
+                    built = {j: (scene, mv, rays, extra)}  # the last one only (memory)
+                scene, mv, rays, extra = built[j]
             params = mi.traverse(scene)
             scans = {}
-            for name, (rho, cfg, fitted) in variants.items():
+            for name, (rho, cfg, _) in variants.items():
                 if scene is not static:
-                    j = mv.frame
-                    extra = (
-                        moving_rho(mv, rays, frames.intensity[j], fitted, scratch)
-                        if fitted is not None
-                        else np.full(len(mv.returns), np.median(inv.rho))
-                    )
-                    rho = np.concatenate([rho, extra])
+                    rho = np.concatenate([rho, extra[name]])
                 params[RHO_KEY] = mi.Float(np.asarray(rho, dtype=np.float32))
                 params.update()
                 scans[name] = _sim_scan(scene, cfg, poses[k], frames)

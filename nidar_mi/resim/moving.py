@@ -124,7 +124,7 @@ def moving_rho(
     if len(moving.mesh.faces) == 0:
         return np.zeros(len(idx))
     params = mi.traverse(load_scene(moving.mesh))
-    normals = np.asarray(params[f"{SHAPE_ID}.vertex_normals"], np.float64).reshape(-1, 3)
+    normals = np.asarray(params[f"{SHAPE_ID}.vertex_normals"].numpy(), np.float64).reshape(-1, 3)
     cos = np.abs(np.einsum("ij,ij->i", normals, rays.direction[idx]))
     unit = sensor.gains[rays.ring[idx]] * sensor.response_at(rays.range_m[idx]) * cos
     y = np.asarray(intensity, np.float64)[idx] + sensor.offset
