@@ -113,6 +113,15 @@ class LidarSensor(mi.Sensor):
            expected intensity is multiplied by r(d), linear between the pairs and constant
            outside (a receiver's range-dependent gain, e.g. a sensor's own range compensation)
          - none (r = 1)
+       * - ``laser_range_response``
+         - string
+         - per-laser factors m_r at the knots of ``range_response``: rows separated by ``;``,
+           one per ring (ring 0 the highest), each comma-separated factors >= 0, one per knot;
+           a return of ring r at range d is multiplied by r(d)·m_r(d), m_r linear between the
+           knots and constant outside (each laser's own range compensation, as an HDL-64E's
+           per-laser focal distance and slope give it; recovered by
+           ``python -m nidar_mi.reconstruct``)
+         - none (m_r = 1)
        * - ``intensity_offset``
          - float
          - b >= 0: the reported intensity is max(output - b, 0) (an encoding that reads 0 for

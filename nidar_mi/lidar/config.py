@@ -71,6 +71,7 @@ PARAMETERS = (
     "gain",
     "laser_gains",
     "range_response",
+    "laser_range_response",
     "intensity_offset",
     "range_min",
     "range_max",
@@ -125,6 +126,7 @@ class LidarConfig:
     return_separation: float = 0.5
     laser_gains: tuple[float, ...] | None = None
     range_response: tuple[tuple[float, float], ...] | None = None
+    laser_range_response: tuple[tuple[float, ...], ...] | None = None
     intensity_offset: float = 0.0
     table: LaserTable | None = None
 
@@ -242,6 +244,16 @@ class LidarConfig:
         if v.laser_gains is not None and len(v.laser_gains) != len(elevations):
             why = f"needs one gain per laser ({len(elevations)}, got {len(v.laser_gains)})"
             raise fail("laser_gains", why)
+        shapes = v.laser_range_response
+        if shapes is not None:
+            if v.range_response is None:
+                raise fail("laser_range_response", "needs range_response (its knots)")
+            if len(shapes) != len(elevations):
+                why = f"needs one row per laser ({len(elevations)}, got {len(shapes)})"
+                raise fail("laser_range_response", why)
+            if any(len(row) != len(v.range_response) for row in shapes):
+                why = f"needs one factor per range_response knot ({len(v.range_response)}) a row"
+                raise fail("laser_range_response", why)
         return cls(
             name=name,
             preset=lasers.preset if lasers.elevation_angles is None else None,
@@ -308,6 +320,26 @@ def _gains(raw: Any) -> tuple[float, ...] | None:
     if not gains:
         raise _Problem(f"must be comma-separated numbers > 0, one per laser (got '{raw}')")
     return gains
+
+
+def _shapes(raw: Any) -> tuple[tuple[float, ...], ...] | None:
+    """Rows separated by ``;``, each comma-separated factors, finite and >= 0."""
+    if raw is None:
+        return None
+    try:
+        rows = tuple(
+            tuple(float(f) for f in row.replace(",", " ").split())
+            for row in str(raw).split(";")
+            if row.strip()
+        )
+    except ValueError:
+        rows = ()
+    if not rows or not all(row and all(math.isfinite(f) and f >= 0 for f in row) for row in rows):
+        raise _Problem(
+            f"must be ';'-separated rows of comma-separated factors >= 0, one row per laser "
+            f"(got '{str(raw)[:60]}')"
+        )
+    return rows
 
 
 def _response(raw: Any) -> tuple[tuple[float, float], ...] | None:
@@ -416,6 +448,9 @@ class SensorParameters(BaseModel):
     ] = None
     range_response: Annotated[
         tuple[tuple[float, float], ...] | None, BeforeValidator(_response)
+    ] = None
+    laser_range_response: Annotated[
+        tuple[tuple[float, ...], ...] | None, BeforeValidator(_shapes)
     ] = None
     intensity_offset: Annotated[_Number, Field(ge=0.0)] = 0.0
     range_min: Annotated[_Number, Field(ge=0.0)]

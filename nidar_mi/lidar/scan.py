@@ -299,10 +299,11 @@ def _scan_block(ctx: _Context, start: int, stop: int) -> None:
             cfg.intensity_mode,
             beams.two_way_transmittance,
         )
-        laser = _laser_gain(cfg, first, stop - start, 1 if subrays is None else cfg.subrays)
-        expected = expected * laser * _range_factor(cfg, d)
+        ring = _ring(cfg, first, stop - start, 1 if subrays is None else cfg.subrays)
+        laser = _laser_gain(cfg, ring)
+        expected = expected * laser * _range_factor(cfg, d, ring)
     draws = _draws(cfg, stop - start, inputs, first)
-    shading = _Shading(rho, cos_t, bsdf, d, expected, laser)
+    shading = _Shading(rho, cos_t, bsdf, d, expected, laser, ring)
     if subrays is None and ctx.weather is not None:
         _ideal_weather_block(ctx, beams, shading, draws, (start, stop, first))
     elif subrays is None:
@@ -321,15 +322,28 @@ class _Shading(NamedTuple):
     d: Any
     expected: Any
     laser_gain: Any = 1.0
+    ring: Any = None
 
 
-def _laser_gain(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
-    """Each ray's per-laser gain (``laser_gains`` of its ring; 1.0 when the sensor has none).
+def _ring(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
+    """Each ray's laser (``mi.UInt32``), or None when the sensor reads nothing per laser.
 
     Args:
         first_beam: opaque ``mi.UInt32`` flat index of the block's first beam.
         beams: beams in the block; per_beam: rays per beam (sub-rays).
     """
+    if cfg.laser_gains is None and cfg.laser_range_response is None:
+        return None
+    import drjit as dr
+    import mitsuba as mi
+
+    beam = dr.arange(mi.UInt32, beams * per_beam) // per_beam + first_beam
+    return beam // cfg.horizontal_resolution
+
+
+def _laser_gain(cfg: LidarConfig, ring):
+    """Each ray's per-laser gain (``laser_gains`` of its ``ring``; 1.0 when the sensor has
+    none)."""
     if cfg.laser_gains is None:
         return 1.0
     import drjit as dr
@@ -340,16 +354,29 @@ def _laser_gain(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
         ("laser_gains", cfg.laser_gains, mi.variant()),
         lambda: jit_float(np.asarray(cfg.laser_gains, dtype=np.float32)),
     )
-    beam = dr.arange(mi.UInt32, beams * per_beam) // per_beam + first_beam
-    return dr.gather(mi.Float, gains, beam // cfg.horizontal_resolution)
+    return dr.gather(mi.Float, gains, ring)
 
 
-def _range_factor(cfg: LidarConfig, d):
-    """The sensor's ``range_response`` at range ``d`` (1.0 when it has none)."""
+def _range_factor(cfg: LidarConfig, d, ring=None):
+    """The sensor's ``range_response`` at range ``d`` times, where the sensor has a
+    ``laser_range_response``, its ``ring``'s own factor there (1.0 when it has neither)."""
     if cfg.range_response is None:
         return 1.0
     knots, values = zip(*cfg.range_response)
-    return range_response(d, knots, values)
+    factor = range_response(d, knots, values)
+    if cfg.laser_range_response is None or ring is None:
+        return factor
+    import drjit as dr
+    import mitsuba as mi
+
+    k = len(knots)
+    table = _cached(
+        _jit_cache,
+        ("laser_range_response", cfg.laser_range_response, mi.variant()),
+        lambda: jit_float(np.asarray(cfg.laser_range_response, dtype=np.float32).ravel()),
+    )
+    own = [dr.gather(mi.Float, table, ring * k + i) for i in range(k)]
+    return factor * range_response(d, knots, own)
 
 
 def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: int) -> None:
@@ -668,7 +695,7 @@ def _echo_contributions(ctx: _Context, rays, beams, sh: _Shading):
             dr.select(glass.hit, glass.path_m, 1.0), 1.0, inputs.alpha, cfg.intensity_mode
         )
         * sh.laser_gain
-        * _range_factor(cfg, dr.select(glass.hit, glass.path_m, 1.0))
+        * _range_factor(cfg, dr.select(glass.hit, glass.path_m, 1.0), sh.ring)
     )
     surface = {
         "hit": beams.hit,

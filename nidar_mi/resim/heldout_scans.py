@@ -51,6 +51,7 @@ def _variants(cfg, inv) -> dict:
     flat = replace(
         det,
         laser_gains=None,
+        laser_range_response=None,
         range_response=tuple(zip(s.knots_m, (float(v) for v in s.response))),
         intensity_offset=s.offset,
         detection_threshold=s.threshold,

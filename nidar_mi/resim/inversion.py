@@ -5,13 +5,15 @@ For a training sample (:mod:`.observations`) of laser ``l`` hitting the surfaces
 ``d`` with incidence cosine ``cos θ``, the plugin's model in ``compensated`` mode without
 extinction gives
 
-    E = G_l · ρ(x) · cos θ · r(d)        (:func:`nidar_mi.lidar.return_model.expected_intensity`
-                                          times :func:`~nidar_mi.lidar.return_model.range_response`)
+    E = G_l · ρ(x) · cos θ · r(d) · m_l(d)    (:func:`nidar_mi.lidar.return_model.expected_intensity`
+                                               times :func:`~nidar_mi.lidar.return_model.range_response`)
 
 with ``ρ(x)`` read by the surfaces' BSDF (a ``mesh_attribute`` texture interpolating the
 per-vertex ``vertex_rho``; :func:`nidar_mi.lidar.raycast.monostatic_reflectance`), ``G_l`` the
-per-laser gain (``laser_gains``) and ``r(d)`` the range response (``range_response``: piecewise
-linear through :data:`KNOTS_M`). The sensor reports ``max(E - b, 0)`` (``intensity_offset``
+per-laser gain (``laser_gains``), ``r(d)`` the range response (``range_response``: piecewise
+linear through :data:`KNOTS_M`) and ``m_l(d)`` laser ``l``'s own factor through the same knots
+(``laser_range_response``: each laser of a real unit compensates range its own way, as an
+HDL-64E's per-laser focal distance and slope do). The sensor reports ``max(E - b, 0)`` (``intensity_offset``
 b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
 returns) and detects a return with probability ``(1 - q) · Φ((E - T) / σ_n)``
 (``detection_threshold``, ``receiver_noise_std``,
@@ -32,12 +34,15 @@ The loss, minimised with :class:`mitsuba.ad.Adam` on the gradients of ``dr.backw
 
 The alternating least squares that starts the fit (:func:`alternate`) carries a smoothness
 prior on the range response's knot values (``FitOptions.response_smooth``): where a drive sees
-each surface from about one range, ρ and ``r(d)`` trade off freely.
+each surface from about one range, ρ and ``r(d)`` trade off freely. It also fits the per-laser
+factors ``m_l`` (``FitOptions.laser_response``), each laser's knot values drawn to 1 and to
+their neighbours' (``FitOptions.laser_shape_prior``); the gradient fit keeps them.
 
 Scale: ``ρ`` and the sensor's gains trade off (``G·ρ``), so the gains are normalised to a
-geometric mean of 1 and ``r`` to 1 at :data:`REFERENCE_M`; ρ is thus the intensity a surface
+geometric mean of 1, ``r`` and every ``m_l`` to 1 at :data:`REFERENCE_M`, and at each knot the
+``m_l`` to a geometric mean of 1 over the lasers; ρ is thus the intensity a surface
 gives at normal incidence at that range with the average laser (KITTI's [0, 1] scale).
-Without per-laser gains (``per_laser=False``) every ``G_l`` stays 1.
+Without per-laser gains (``per_laser=False``) every ``G_l`` and ``m_l`` stays 1.
 """
 
 from __future__ import annotations
@@ -60,6 +65,7 @@ __all__ = [
     "sensor_samples",
     "harmonic_fill",
     "detection_start",
+    "laser_factor",
     "DROPOUTS",
 ]
 
@@ -71,6 +77,8 @@ RHO_MAX = 4.0
 #: The dropouts the ray-drop start tries (:func:`detection_start`), and the largest fitted.
 DROPOUTS = (0.0, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3)
 DROPOUT_MAX = 0.9
+#: The bounds of a laser's own range factor m_l at a knot, during the alternation.
+SHAPE_MIN, SHAPE_MAX = 0.25, 4.0
 #: Rounds of the alternating least squares and the over-relaxation of its gains' step.
 ALS_ROUNDS = 100
 ALS_RELAX = 1.8
@@ -92,6 +100,8 @@ class FitOptions:
     fit_offset: bool = True
     fit_dropout: bool = True
     response_smooth: float = 1.0
+    laser_response: bool = True
+    laser_shape_prior: float = 0.1
 
 
 @dataclass
@@ -105,6 +115,7 @@ class SensorFit:
         threshold, noise: T and σ_n of detection.
         dropout: q, the share of returns lost whatever their intensity.
         history: per iteration the loss terms.
+        laser_response: (R, K) each laser's factor m_l at the knots, or None (all 1).
     """
 
     gains: np.ndarray
@@ -115,12 +126,19 @@ class SensorFit:
     noise: float
     dropout: float = 0.0
     history: list[dict] = field(default_factory=list)
+    laser_response: np.ndarray | None = None
 
-    def response_at(self, d):
-        """r(d) (NumPy)."""
+    def response_at(self, d, ring=None):
+        """r(d), times ``m_l(d)`` of each return's laser ``ring`` where the fit has them
+        (NumPy; ``d`` and ``ring`` of one shape)."""
         from ..lidar.return_model import range_response
 
-        return range_response(np.asarray(d, dtype=np.float64), self.knots_m, list(self.response))
+        d = np.asarray(d, dtype=np.float64)
+        out = range_response(d, self.knots_m, list(self.response))
+        if ring is None or self.laser_response is None:
+            return out
+        rows = self.laser_response[np.asarray(ring, dtype=np.int64)]
+        return out * range_response(d, self.knots_m, list(np.moveaxis(rows, -1, 0)))
 
 
 def edges_of(faces: np.ndarray) -> np.ndarray:
@@ -139,10 +157,24 @@ def hit_reflectance(samples: Samples, rho):
     return sum(w * dr.gather(mi.Float, rho, c) for w, c in zip(samples.weights, samples.corners))
 
 
-def _expected(samples: Samples, rho, gains, response, sensor_rows=None):
+def laser_factor(samples: Samples, shape: np.ndarray | None):
+    """``m_l(d)`` of every sample (``mi.Float`` (S,)), from (R, K) per-laser knot values
+    ``shape`` (None: 1)."""
+    import mitsuba as mi
+
+    from ..lidar.return_model import range_response
+
+    if shape is None:
+        return mi.Float(1.0)
+    rows = np.asarray(shape, dtype=np.float64)[samples.ring.numpy().astype(np.int64)]
+    m = range_response(samples.range_m.astype(np.float64), KNOTS_M, list(rows.T))
+    return mi.Float(m.astype(np.float32))
+
+
+def _expected(samples: Samples, rho, gains, response, sensor_rows=None, factor=1.0):
     """E of every sample (Dr.Jit), differentiable in ρ, the gains and the response;
     ``sensor_rows`` (``mi.Bool``, optional): only these samples carry the gradient to the gains
-    and the response."""
+    and the response; ``factor``: each sample's fixed per-laser factor (:func:`laser_factor`)."""
     import drjit as dr
     import mitsuba as mi
 
@@ -150,7 +182,7 @@ def _expected(samples: Samples, rho, gains, response, sensor_rows=None):
 
     d = samples.beams.path_m
     values = [dr.gather(mi.Float, response, i) for i in range(len(KNOTS_M))]
-    sensor = dr.gather(mi.Float, gains, samples.ring) * range_response(d, KNOTS_M, values)
+    sensor = dr.gather(mi.Float, gains, samples.ring) * range_response(d, KNOTS_M, values) * factor
     if sensor_rows is not None:
         sensor = dr.select(sensor_rows, sensor, dr.detach(sensor))
     rho_hit = hit_reflectance(samples, rho)
@@ -169,6 +201,7 @@ def predict_returns(samples: Samples, rho: np.ndarray, fitted: SensorFit) -> np.
             mi.Float(np.asarray(rho, dtype=np.float32)),
             mi.Float(fitted.gains.astype(np.float32)),
             mi.Float(fitted.response.astype(np.float32)),
+            factor=laser_factor(samples, fitted.laser_response),
         )
         dr.eval(e)
     return e.numpy()
@@ -181,6 +214,7 @@ class _Problem:
         import mitsuba as mi
 
         self.samples = samples
+        self.factor = mi.Float(1.0)  # the per-laser factors, fixed in the gradient fit
         self.sensor_rows = None if sensor_rows is None else mi.Bool(np.asarray(sensor_rows))
         self.det = mi.Bool(samples.detected)
         self.y = mi.Float(samples.intensity)
@@ -221,7 +255,7 @@ def _loss(pb: _Problem, opt, sensor, options: FitOptions, rings: int):
 
     gains, response, b, t, s, q = _sensor_values(sensor, rings)
     rho = opt["rho"]
-    e = _expected(pb.samples, rho, gains, response, pb.sensor_rows)
+    e = _expected(pb.samples, rho, gains, response, pb.sensor_rows, pb.factor)
     shown = dr.maximum(e - b, 0.0)
     resid = dr.select(pb.zero, shown, shown - pb.y)
     l_int = dr.sum(dr.select(pb.det, dr.square(resid), 0.0)) / pb.n_det
@@ -249,12 +283,15 @@ def alternate(
     sensor_rows: np.ndarray | None = None,
     edges: np.ndarray | None = None,
     response_smooth: float = 0.0,
+    laser_shape: float | None = None,
 ):
-    """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d)`` (each sample assigned to
-    the corner of its triangle with the largest weight): ρ per vertex, then the gains, then the
-    range response's knot values (a linear least-squares problem in them), each the exact
-    minimiser with the others fixed, normalised after each round (gains' geometric mean 1,
-    ``r(REFERENCE_M) = 1``). Levinson and Thrun's alternation between the beams' responses and
+    """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d) · m_l(d)`` (each sample
+    assigned to the corner of its triangle with the largest weight): ρ per vertex, then the
+    gains, then the range response's knot values (a linear least-squares problem in them), then
+    (``laser_shape`` given) each laser's knot values of ``m_l``, each the exact minimiser with
+    the others fixed, normalised after each round (gains' geometric mean 1,
+    ``r(REFERENCE_M) = m_l(REFERENCE_M) = 1``, each knot's ``m_l`` a geometric mean of 1 over
+    the lasers). Levinson and Thrun's alternation between the beams' responses and
     the map's reflectance; it starts the gradient fit near the optimum.
 
     The gains' step is over-relaxed (``G ← G·(G*/G)^ALS_RELAX``, G* the exact minimiser): the
@@ -275,9 +312,16 @@ def alternate(
             knot values (0: none). Where every surface is seen from about one range (a car
             that stops), ρ and r(d) trade off freely and r(d) swings by factors of 2-18
             between neighbouring knots; the prior takes the smoothest of the equally good.
+        laser_shape: weight w of the per-laser factors' prior (None: no factors, all 1):
+            laser l's step solves ``(FᵀF + w · tr(FᵀF)/K · (DᵀD + 1)) m = Fᵀy + w · tr(FᵀF)/K``,
+            F its samples' design: toward 1 and smooth where its returns are few; the prior
+            alone fixes how the factors share a common scale with ρ, the gains and r during
+            the rounds, and each factor lies in [:data:`SHAPE_MIN`, :data:`SHAPE_MAX`]. They are
+            normalised once, after the last round (the products unchanged).
 
     Returns:
-        ``(rho (V,), gains (R,), response (K,))`` NumPy float64.
+        ``(rho (V,), gains (R,), response (K,), shape (R, K))`` NumPy float64 (``shape`` all
+        1 without ``laser_shape`` or ``per_laser``).
     """
     from ..lidar.return_model import range_response
 
@@ -296,34 +340,89 @@ def alternate(
         fit = np.ones(len(y), bool)
     ys, vs, rs, qs, hs = y[fit], v[fit], ring[fit], q[fit], hat[fit]
     gains, resp = np.ones(rings), np.ones(len(KNOTS_M))
+    shape = np.ones((rings, len(KNOTS_M)))
     ref = KNOTS_M.index(REFERENCE_M)
     d2 = np.diff(eye, n=2, axis=0)  # second differences of the knot values
+    fit_shape = per_laser and laser_shape is not None
 
     def solve_rho(vv, yy, a):
         num, den = np.bincount(vv, yy * a, vertices), np.bincount(vv, a * a, vertices)
         return num / np.maximum(den, 1e-9), den > 1e-9
 
+    # a sample's range falls between two knots: its two hat values and their knots
+    pair = _knot_pairs(hat)
+    pairs = tuple(p[fit] for p in pair)
+
+    def own(pp, rr):  # m_l(d) of each sample
+        k0, k1, w0, w1 = pp
+        return w0 * shape[rr, k0] + w1 * shape[rr, k1]
+
     for k in range(rounds):
-        rho, _ = solve_rho(vs, ys, gains[rs] * (hs @ resp) * qs)
+        ms = own(pairs, rs)
+        rho, _ = solve_rho(vs, ys, gains[rs] * (hs @ resp) * ms * qs)
         if per_laser:
-            a = rho[vs] * (hs @ resp) * qs
+            a = rho[vs] * (hs @ resp) * ms * qs
             num, den = np.bincount(rs, ys * a, rings), np.bincount(rs, a * a, rings)
             best = np.where(den > 1e-9, num / np.maximum(den, 1e-9), gains)
             best = np.maximum(best, 1e-6)
             gains = best if k == 0 else gains * (best / gains) ** ALS_RELAX
-        m = (gains[rs] * rho[vs] * qs)[:, None] * hs
+        m = (gains[rs] * rho[vs] * ms * qs)[:, None] * hs
         mtm = m.T @ m
         smooth = response_smooth * np.trace(mtm) / len(eye) * (d2.T @ d2)
         resp = np.linalg.solve(mtm + 1e-6 * eye + smooth, m.T @ ys)
         resp = np.where(resp > 1e-3, resp, 1e-3)
+        if fit_shape:
+            c = gains[rs] * rho[vs] * (hs @ resp) * qs
+            shape = _laser_shapes(c, pairs, ys, rs, rings, laser_shape, d2)
         g0 = float(np.exp(np.mean(np.log(np.maximum(gains, 1e-6)))))
         gains, resp = gains / g0, resp / resp[ref]
-    rho, seen = solve_rho(v, y, gains[ring] * (hat @ resp) * q)
+    if fit_shape:  # the same products, in the normalisation of the docstring
+        gains, shape = gains * shape[:, ref], shape / shape[:, ref : ref + 1]
+        g_k = np.exp(np.mean(np.log(shape), axis=0))
+        shape, resp = shape / g_k, resp * g_k
+        g0 = float(np.exp(np.mean(np.log(gains))))
+        gains, resp = gains / g0, resp / resp[ref]
+    rho, seen = solve_rho(v, y, gains[ring] * (hat @ resp) * own(pair, ring) * q)
     if edges is None:
         rho = np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
     else:
         rho = harmonic_fill(rho, seen, edges)
-    return np.clip(rho, 0.0, RHO_MAX), gains, resp
+    return np.clip(rho, 0.0, RHO_MAX), gains, resp, shape
+
+
+def _knot_pairs(hat: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``(k0, k1, w0, w1)``, each (S,): the two knots around each sample's range and their
+    weights in the piecewise-linear interpolation (``hat`` (S, K) those weights for every knot;
+    outside the knots ``k1 = k0`` and ``w1 = 0``)."""
+    k = hat.shape[1]
+    k0 = np.argmax(hat > 0, axis=1)
+    k1 = np.minimum(k0 + 1, k - 1)
+    rows = np.arange(len(hat))
+    w0 = hat[rows, k0]
+    w1 = np.where(k1 > k0, hat[rows, k1], 0.0)
+    return k0, k1, w0, w1
+
+
+def _laser_shapes(c, pairs, y, ring, rings: int, weight: float, d2) -> np.ndarray:
+    """(R, K) each laser's knot values minimising ``|F_l m - y_l|² + λ_l (|D m|² + |m - 1|²)``,
+    ``λ_l = weight · tr(F_lᵀF_l)/K``, F the samples' design (row: ``c`` times the hat weights
+    of :func:`_knot_pairs` ``pairs``; ``ring`` (S,) their lasers); clipped to
+    [:data:`SHAPE_MIN`, :data:`SHAPE_MAX`]."""
+    k0, k1, w0, w1 = pairs
+    k = d2.shape[1]
+    base = ring * k
+    ftf = np.zeros(rings * k * k)
+    for a, b, w in ((k0, k0, w0 * w0), (k1, k1, w1 * w1), (k0, k1, w0 * w1), (k1, k0, w0 * w1)):
+        ftf += np.bincount((base + a) * k + b, c * c * w, rings * k * k)
+    fty = np.bincount(base + k0, c * w0 * y, rings * k) + np.bincount(
+        base + k1, c * w1 * y, rings * k
+    )
+    ftf, fty = ftf.reshape(rings, k, k), fty.reshape(rings, k)
+    lam = weight * np.trace(ftf, axis1=1, axis2=2) / k
+    lam = np.maximum(lam, 1e-9)[:, None, None]
+    lhs = ftf + lam * (d2.T @ d2 + np.eye(k))
+    rhs = fty + lam[:, :, 0] * 1.0
+    return np.clip(np.linalg.solve(lhs, rhs[..., None])[..., 0], SHAPE_MIN, SHAPE_MAX)
 
 
 def harmonic_fill(values: np.ndarray, known: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -423,11 +522,11 @@ def detection_start(
 
 def _start(pb: _Problem, start, rings: int, options: FitOptions):
     """The optimiser at the alternating least squares' solution (``start``: ρ, gains,
-    response), the offset at 0 and the detection threshold, noise and dropout where the
+    response, per-laser factors or None), the offset at 0 and the detection threshold, noise and dropout where the
     ray-drop term is lowest for that solution (:func:`detection_start`)."""
     import mitsuba as mi
 
-    rho, gains, resp = start
+    rho, gains, resp, shape = start
     e = pb.samples.intensity[pb.samples.detected]
     opt = mi.ad.Adam(lr=options.lr_sensor)
     opt["rho"] = mi.Float(rho.astype(np.float32))
@@ -435,7 +534,7 @@ def _start(pb: _Problem, start, rings: int, options: FitOptions):
     opt["log_r"] = mi.Float(np.log(np.maximum(resp, 1e-3)).astype(np.float32))
     opt["b"] = mi.Float(np.zeros(1, np.float32))
     low = float(np.percentile(e[e > 0], 2)) if (e > 0).any() else 0.01
-    fitted = SensorFit(gains, KNOTS_M, resp, 0.0, low, low / 2)
+    fitted = SensorFit(gains, KNOTS_M, resp, 0.0, low, low / 2, laser_response=shape)
     expected = predict_returns(pb.samples, rho, fitted)
     dropouts = DROPOUTS if options.fit_dropout else (0.0,)
     t, s, q = detection_start(expected, pb.samples.detected, low, dropouts)
@@ -489,7 +588,8 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
     rows = kw.get("sensor_rows")
     pb = _Problem(samples, edges, kw.get("prior"), kw.get("prior_weight"), rows)
     vertices = dr.width(params[RHO_KEY])
-    start = alternate(
+    with_shape = options.per_laser and options.laser_response
+    rho0, gains0, resp0, shape = alternate(
         samples,
         vertices,
         rings,
@@ -497,8 +597,11 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
         sensor_rows=rows,
         edges=edges,
         response_smooth=options.response_smooth,
+        laser_shape=options.laser_shape_prior if with_shape else None,
     )
-    opt = _start(pb, start, rings, options)
+    shape = shape if with_shape else None
+    pb.factor = laser_factor(samples, shape)
+    opt = _start(pb, (rho0, gains0, resp0, shape), rings, options)
     _clamp(opt, options)
     history: list[dict] = []
     steps = progress_bar(range(options.iterations), show=kw.get("progress", False), desc="fit")
@@ -522,5 +625,6 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
         noise=float(s.numpy()[0]),
         dropout=float(q.numpy()[0]),
         history=history,
+        laser_response=shape,
     )
     return rho.numpy().astype(np.float64), fitted

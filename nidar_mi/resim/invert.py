@@ -64,6 +64,9 @@ def sensor_summary(s: SensorFit) -> dict:
     return {
         "laser_gains": s.gains.round(5).tolist(),
         "range_response": {"knots_m": list(s.knots_m), "values": s.response.round(5).tolist()},
+        "laser_range_response": None
+        if s.laser_response is None
+        else s.laser_response.round(5).tolist(),
         "intensity_offset": s.offset,
         "detection_threshold": s.threshold,
         "receiver_noise_std": s.noise,

@@ -126,7 +126,8 @@ def moving_rho(
     params = mi.traverse(load_scene(moving.mesh))
     normals = np.asarray(params[f"{SHAPE_ID}.vertex_normals"].numpy(), np.float64).reshape(-1, 3)
     cos = np.abs(np.einsum("ij,ij->i", normals, rays.direction[idx]))
-    unit = sensor.gains[rays.ring[idx]] * sensor.response_at(rays.range_m[idx]) * cos
+    ring = rays.ring[idx]
+    unit = sensor.gains[ring] * sensor.response_at(rays.range_m[idx], ring) * cos
     y = np.asarray(intensity, np.float64)[idx] + sensor.offset
     rho = np.where(unit > 0, y / np.where(unit > 0, unit, 1.0), RHO_MAX)
     return np.clip(rho, 0.0, RHO_MAX)

@@ -37,6 +37,10 @@ def sensor_params(frames: Frames, s: SensorFit, *, laser_gains: bool = True) -> 
     }
     if laser_gains:
         params["laser_gains"] = ", ".join(f"{g:.6g}" for g in s.gains)
+        if s.laser_response is not None:
+            params["laser_range_response"] = "; ".join(
+                ", ".join(f"{f:.6g}" for f in row) for row in s.laser_response
+            )
     return params
 
 
