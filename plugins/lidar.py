@@ -127,6 +127,12 @@ class LidarSensor(mi.Sensor):
          - b >= 0: the reported intensity is max(output - b, 0) (an encoding that reads 0 for
            weak returns it still detects, as KITTI's HDL-64E does); detection is unchanged
          - 0
+       * - ``laser_offsets``
+         - string
+         - comma-separated per-laser offsets b_r >= 0, one per ring (ring 0 the highest): a
+           return of ring r reports max(output - b - b_r, 0) (each laser's own floor, as an
+           HDL-64E's per-laser minimum intensity sets it)
+         - all 0
        * - ``range_min``
          - float
          - minimum range in m, >= 0

@@ -73,6 +73,7 @@ PARAMETERS = (
     "range_response",
     "laser_range_response",
     "intensity_offset",
+    "laser_offsets",
     "range_min",
     "range_max",
     "atmospheric_extinction",
@@ -128,6 +129,7 @@ class LidarConfig:
     range_response: tuple[tuple[float, float], ...] | None = None
     laser_range_response: tuple[tuple[float, ...], ...] | None = None
     intensity_offset: float = 0.0
+    laser_offsets: tuple[float, ...] | None = None
     table: LaserTable | None = None
 
     @property
@@ -244,6 +246,9 @@ class LidarConfig:
         if v.laser_gains is not None and len(v.laser_gains) != len(elevations):
             why = f"needs one gain per laser ({len(elevations)}, got {len(v.laser_gains)})"
             raise fail("laser_gains", why)
+        if v.laser_offsets is not None and len(v.laser_offsets) != len(elevations):
+            why = f"needs one offset per laser ({len(elevations)}, got {len(v.laser_offsets)})"
+            raise fail("laser_offsets", why)
         shapes = v.laser_range_response
         if shapes is not None:
             if v.range_response is None:
@@ -320,6 +325,19 @@ def _gains(raw: Any) -> tuple[float, ...] | None:
     if not gains:
         raise _Problem(f"must be comma-separated numbers > 0, one per laser (got '{raw}')")
     return gains
+
+
+def _offsets(raw: Any) -> tuple[float, ...] | None:
+    """Comma-separated per-laser offsets, read (the field's type bounds each one)."""
+    if raw is None:
+        return None
+    try:
+        values = tuple(float(g) for g in str(raw).replace(",", " ").split())
+    except ValueError:
+        values = ()
+    if not values or not all(math.isfinite(x) for x in values):
+        raise _Problem(f"must be comma-separated numbers >= 0, one per laser (got '{raw}')")
+    return values
 
 
 def _shapes(raw: Any) -> tuple[tuple[float, ...], ...] | None:
@@ -453,6 +471,9 @@ class SensorParameters(BaseModel):
         tuple[tuple[float, ...], ...] | None, BeforeValidator(_shapes)
     ] = None
     intensity_offset: Annotated[_Number, Field(ge=0.0)] = 0.0
+    laser_offsets: Annotated[
+        tuple[Annotated[float, Field(ge=0.0)], ...] | None, BeforeValidator(_offsets)
+    ] = None
     range_min: Annotated[_Number, Field(ge=0.0)]
     range_max: Annotated[_Number, Field(gt=0.0), AfterValidator(_below_range_max)]
     atmospheric_extinction: Annotated[_Number, Field(ge=0.0)] = 0.0

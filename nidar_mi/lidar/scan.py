@@ -332,7 +332,7 @@ def _ring(cfg: LidarConfig, first_beam, beams: int, per_beam: int):
         first_beam: opaque ``mi.UInt32`` flat index of the block's first beam.
         beams: beams in the block; per_beam: rays per beam (sub-rays).
     """
-    if cfg.laser_gains is None and cfg.laser_range_response is None:
+    if cfg.laser_gains is None and cfg.laser_range_response is None and cfg.laser_offsets is None:
         return None
     import drjit as dr
     import mitsuba as mi
@@ -355,6 +355,24 @@ def _laser_gain(cfg: LidarConfig, ring):
         lambda: jit_float(np.asarray(cfg.laser_gains, dtype=np.float32)),
     )
     return dr.gather(mi.Float, gains, ring)
+
+
+def _offset(cfg: LidarConfig, ring):
+    """The intensity offset of each ray of laser ``ring`` (``mi.UInt32`` or NumPy): the
+    sensor's ``intensity_offset`` plus, where it has ``laser_offsets``, the ring's own."""
+    if cfg.laser_offsets is None or ring is None:
+        return cfg.intensity_offset
+    if isinstance(ring, np.ndarray):
+        return cfg.intensity_offset + np.asarray(cfg.laser_offsets)[ring]
+    import drjit as dr
+    import mitsuba as mi
+
+    table = _cached(
+        _jit_cache,
+        ("laser_offsets", cfg.laser_offsets, mi.variant()),
+        lambda: jit_float(np.asarray(cfg.laser_offsets, dtype=np.float32)),
+    )
+    return cfg.intensity_offset + dr.gather(mi.Float, table, ring)
 
 
 def _range_factor(cfg: LidarConfig, d, ring=None):
@@ -401,7 +419,7 @@ def _ideal_block(ctx: _Context, beams, sh: _Shading, draws, start: int, stop: in
         )
         output = received(sh.expected, inputs.receiver_noise, draws.receiver)
         intensity = add_noise(
-            output - cfg.intensity_offset, inputs.noise_intensity, normal_intensity
+            output - _offset(cfg, sh.ring), inputs.noise_intensity, normal_intensity
         )
         range_m = add_noise(sh.d, inputs.noise_range, normal_range)
         hit = beams.hit
@@ -467,7 +485,9 @@ def _ideal_weather_block(ctx: _Context, beams, sh: _Shading, draws, span) -> Non
             "intensity": dr.select(
                 pick >= 0,
                 add_noise(
-                    picked(output + more_output, 0.0), inputs.noise_intensity, normal_intensity
+                    picked(output + more_output, 0.0) - _offset(cfg, sh.ring),
+                    inputs.noise_intensity,
+                    normal_intensity,
                 ),
                 0.0,
             ),
@@ -569,6 +589,7 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
         # attributes of beams without a return: their strongest echo, if any
         fallback = np.argmax(np.where(np.isfinite(echoes.range_m), echoes.energy, -1.0), axis=1)
         rows = np.arange(n)
+        offset = _offset(cfg, (start + rows) // cfg.horizontal_resolution)
         ctx.out.hit[start:stop] = hit.any(axis=1)
         for m in range(cfg.max_returns):
             slot = slots[:, m]
@@ -594,7 +615,7 @@ def _echo_block(ctx: _Context, rays, beams, sh: _Shading, draws, start: int, sto
                 valid=valid,
                 intensity=np.where(
                     valid,
-                    add_noise(e - cfg.intensity_offset, cfg.noise_intensity_std, normal_i),
+                    add_noise(e - offset, cfg.noise_intensity_std, normal_i),
                     0.0,
                 ),
                 range=np.where(valid, add_noise(r, cfg.noise_range_std, normal_r), 0.0),

@@ -70,6 +70,24 @@ def test_per_laser_range_response_matches_the_closed_form(variant, write_scene):
     np.testing.assert_allclose(r.intensity, np.repeat(expected[:, None], 36, 1), rtol=1e-5)
 
 
+@pytest.mark.parametrize("divergence", ["0", "1"])
+def test_per_laser_offsets_match_the_closed_form(variant, write_scene, divergence):
+    """``max(E - b - b_r, 0)`` for each ring, on one ray per beam and on diverging beams (the
+    echo path: sub-rays on the flat floor, the same return)."""
+    from nidar_mi.lidar.scan import scan
+    from nidar_mi.scene import load_scene
+
+    params = f"""<float name="intensity_offset" value="0.05"/>
+        <string name="laser_offsets" value="0.02, 0.2"/>
+        <float name="beam_divergence" value="{divergence}"/>"""
+    loaded = load_scene(write_scene(_scene(params), name=f"offsets{divergence}.xml"))
+    r = scan(loaded.scene, loaded.lidars[0])
+    s = np.sin(np.radians(-np.asarray(ELEV)))
+    expected = np.maximum(2.0 * 0.5 * s - 0.05 - np.array([0.02, 0.2]), 0.0)
+    assert r.valid.all() and expected[1] > 0
+    np.testing.assert_allclose(r.intensity, np.repeat(expected[:, None], 36, 1), rtol=2e-3)
+
+
 def test_without_them_the_scan_is_unchanged(variant, write_scene):
     from nidar_mi.lidar.scan import scan
     from nidar_mi.scene import load_scene
@@ -99,6 +117,9 @@ def _loaded(load_scene, write_scene, params):
         ("range_response", "5:1, 2:1", "strictly increasing"),
         ("range_response", "1:1, 2", "range:factor pairs"),
         ("range_response", "1:-1", "factors >= 0"),
+        ("laser_offsets", "0, 0, 0", "one offset per laser (2, got 3)"),
+        ("laser_offsets", "0, -1", ">= 0"),
+        ("laser_offsets", "0, x", "comma-separated numbers"),
         ("laser_range_response", "1, 1; 1, 1", "needs range_response"),
         ("laser_range_response", "1, x", "rows of comma-separated factors"),
         ("laser_range_response", "1, -1; 1, 1", "factors >= 0"),

@@ -284,6 +284,24 @@ def test_hard_return_follows_the_two_way_transmission(variant, write_scene, wave
     np.testing.assert_array_equal(foggy.range[wall], clear.range[wall])  # no receiver noise
 
 
+def test_offsets_apply_in_weather_as_in_clear_air(variant, write_scene):
+    """The reported intensity is max(output - b - b_r, 0) in fog as in clear air: the wall's
+    foggy returns with ``intensity_offset`` 0.01 and per-laser offsets 0 / 0.005 / 0.02 are the
+    foggy returns without them, less those offsets."""
+    offsets = np.array([0.0, 0.005, 0.02])
+    extra = '<float name="intensity_offset" value="0.01"/><string name="laser_offsets" value="0, 0.005, 0.02"/>'
+    fog = Weather(fog=2000.0)
+    gain = '<float name="gain" value="100"/>'
+    plain = _scan(_wall_scene(write_scene, gain), fog)
+    shifted = _scan(_wall_scene(write_scene, gain + extra), fog)
+    wall = plain.valid & (plain.shape_index >= 0)
+    assert wall.sum() > 50 and (plain.intensity[wall] > 0.05).all()
+    ring = np.repeat(np.arange(3)[:, None], plain.valid.shape[1], axis=1)[wall]
+    np.testing.assert_allclose(
+        shifted.intensity[wall], plain.intensity[wall] - 0.01 - offsets[ring], atol=1e-6
+    )
+
+
 def test_dense_fog_returns_from_the_fog_near_the_sensor(variant, write_scene):
     """MOR 30 m: the beams that see the sky return the fog itself, at the soft return's peak,
     with its intensity; the wall is still seen through it (strongest of the two)."""
