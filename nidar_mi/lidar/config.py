@@ -314,30 +314,22 @@ def _angles(raw: Any) -> tuple[float, ...] | None:
         raise _Problem(str(e)) from None
 
 
-def _gains(raw: Any) -> tuple[float, ...] | None:
-    """Comma-separated per-laser gains, read (the field's type bounds each one)."""
-    if raw is None:
-        return None
-    try:
-        gains = tuple(float(g) for g in str(raw).replace(",", " ").split())
-    except ValueError:
-        gains = ()
-    if not gains:
-        raise _Problem(f"must be comma-separated numbers > 0, one per laser (got '{raw}')")
-    return gains
+def _per_laser(bound: str):
+    """A reader of comma-separated per-laser numbers (the field's type bounds each one;
+    ``bound`` says how in the message)."""
 
+    def read(raw: Any) -> tuple[float, ...] | None:
+        if raw is None:
+            return None
+        try:
+            values = tuple(float(g) for g in str(raw).replace(",", " ").split())
+        except ValueError:
+            values = ()
+        if not values:
+            raise _Problem(f"must be comma-separated numbers {bound}, one per laser (got '{raw}')")
+        return values
 
-def _offsets(raw: Any) -> tuple[float, ...] | None:
-    """Comma-separated per-laser offsets, read (the field's type bounds each one)."""
-    if raw is None:
-        return None
-    try:
-        values = tuple(float(g) for g in str(raw).replace(",", " ").split())
-    except ValueError:
-        values = ()
-    if not values or not all(math.isfinite(x) for x in values):
-        raise _Problem(f"must be comma-separated numbers >= 0, one per laser (got '{raw}')")
-    return values
+    return read
 
 
 def _shapes(raw: Any) -> tuple[tuple[float, ...], ...] | None:
@@ -462,7 +454,7 @@ class SensorParameters(BaseModel):
     wavelength: Annotated[_Number, Field(ge=360.0, le=1700.0)] = 905.0
     gain: Annotated[_Number, Field(gt=0.0)] = 1.0
     laser_gains: Annotated[
-        tuple[Annotated[float, Field(gt=0.0)], ...] | None, BeforeValidator(_gains)
+        tuple[Annotated[float, Field(gt=0.0)], ...] | None, BeforeValidator(_per_laser("> 0"))
     ] = None
     range_response: Annotated[
         tuple[tuple[float, float], ...] | None, BeforeValidator(_response)
@@ -472,7 +464,7 @@ class SensorParameters(BaseModel):
     ] = None
     intensity_offset: Annotated[_Number, Field(ge=0.0)] = 0.0
     laser_offsets: Annotated[
-        tuple[Annotated[float, Field(ge=0.0)], ...] | None, BeforeValidator(_offsets)
+        tuple[Annotated[float, Field(ge=0.0)], ...] | None, BeforeValidator(_per_laser(">= 0"))
     ] = None
     range_min: Annotated[_Number, Field(ge=0.0)]
     range_max: Annotated[_Number, Field(gt=0.0), AfterValidator(_below_range_max)]

@@ -233,25 +233,34 @@ def _ranged_samples(scene, mesh, count=6000, rings=4, seed=2):
     return cast_samples(scene, mesh.faces, rays, np.full(count, 0.3), none)
 
 
+def _uniform_plane_samples(tmp_path):
+    """:func:`_ranged_samples` on a plane of uniform ρ = 0.4 (the alternation reads a hit's ρ
+    at its nearest vertex): the samples, each hit's ρ, four gains, the reference knot's index,
+    the knot indices and the number of vertices."""
+    import mitsuba as mi
+
+    from nidar_mi.resim.inversion import KNOTS_M, REFERENCE_M, hit_reflectance
+
+    mesh, rho, scene = _plane(tmp_path, n=5)
+    rho = np.full_like(rho, 0.4)
+    s = _ranged_samples(scene, mesh)
+    hit = hit_reflectance(s, mi.Float(rho.astype(np.float32))).numpy().astype(np.float64)
+    gains = np.array([0.8, 1.0, 1.1, 1.2])
+    knots = np.arange(len(KNOTS_M), dtype=np.float64)
+    return s, hit, gains, KNOTS_M.index(REFERENCE_M), knots, len(rho)
+
+
 def test_the_range_response_prior_keeps_smooth_responses_and_smooths_the_others(variant, tmp_path):
     """Noise-free samples ``G_l · ρ · cos θ · r(d)`` (ρ uniform) over every knot: a response
     linear in the knot index (no second difference) comes back within 1 % with the prior
     (weight 1) as without it; a zig-zag response comes back within 1 % without the prior, and
     with it with less than half its squared second differences (the prior acts where it
     says)."""
-    import mitsuba as mi
 
-    from nidar_mi.resim.inversion import KNOTS_M, REFERENCE_M, alternate, hit_reflectance
-
-    mesh, rho, scene = _plane(tmp_path, n=5)
-    rho = np.full_like(rho, 0.4)  # the alternation reads a hit's ρ at its nearest vertex
-    s = _ranged_samples(scene, mesh)
-    hit = hit_reflectance(s, mi.Float(rho.astype(np.float32))).numpy().astype(np.float64)
-    gains = np.array([0.8, 1.0, 1.1, 1.2])
     from nidar_mi.lidar.return_model import range_response
+    from nidar_mi.resim.inversion import KNOTS_M, alternate
 
-    ref = KNOTS_M.index(REFERENCE_M)
-    k = np.arange(len(KNOTS_M), dtype=np.float64)
+    s, hit, gains, ref, k, vertices = _uniform_plane_samples(tmp_path)
     linear = 1.0 - 0.05 * (k - ref)
     zigzag = linear * np.where(k % 2 == 0, 1.25, 0.8)
     zigzag /= zigzag[ref]
@@ -260,7 +269,7 @@ def test_the_range_response_prior_keeps_smooth_responses_and_smooths_the_others(
     for truth in (linear, zigzag):
         y = gains[s.ring.numpy()] * hit * s.cos * range_response(d, KNOTS_M, list(truth))
         s2 = s._replace(intensity=y.astype(np.float32))
-        got = {w: alternate(s2, len(rho), 4, response_smooth=w)[2] for w in (0.0, 1.0)}
+        got = {w: alternate(s2, vertices, 4, response_smooth=w)[2] for w in (0.0, 1.0)}
         np.testing.assert_allclose(got[0.0], truth, rtol=0.01)
         if truth is linear:
             np.testing.assert_allclose(got[1.0], truth, rtol=0.01)
@@ -297,18 +306,10 @@ def test_per_laser_range_responses_come_back_from_clean_samples(variant, tmp_pat
     ``G_l · r(d) · m_l(d)`` at the knots within 2 % (they are normalised as the module says:
     the same up to the common scale ρ takes), and fits every sample to 2 %; without them some
     sample is missed by more than 20 %."""
-    import mitsuba as mi
-
     from nidar_mi.lidar.return_model import range_response
-    from nidar_mi.resim.inversion import KNOTS_M, REFERENCE_M, alternate, hit_reflectance
+    from nidar_mi.resim.inversion import KNOTS_M, alternate
 
-    mesh, rho, scene = _plane(tmp_path, n=5)
-    rho = np.full_like(rho, 0.4)
-    s = _ranged_samples(scene, mesh)
-    hit = hit_reflectance(s, mi.Float(rho.astype(np.float32))).numpy().astype(np.float64)
-    gains = np.array([0.8, 1.0, 1.1, 1.2])
-    ref = KNOTS_M.index(REFERENCE_M)
-    k = np.arange(len(KNOTS_M), dtype=np.float64)
+    s, hit, gains, ref, k, vertices = _uniform_plane_samples(tmp_path)
     shared = 1.0 - 0.05 * (k - ref)
     slopes = np.array([-0.04, 0.0, 0.03, 0.06])
     own = 1.0 + slopes[:, None] * (k - ref)[None, :]
@@ -323,12 +324,12 @@ def test_per_laser_range_responses_come_back_from_clean_samples(variant, tmp_pat
         f = range_response(d, KNOTS_M, list(r)) * range_response(d, KNOTS_M, list(shape[ring].T))
         return np.median(rho_v) / 0.4 * hit * s.cos * g[ring] * f
 
-    got_rho, g, r, shape = alternate(s2, len(rho), 4, laser_shape=0.01)
+    got_rho, g, r, shape = alternate(s2, vertices, 4, laser_shape=0.01)
     got = g[:, None] * r[None, :] * shape
     np.testing.assert_allclose(got * np.median(got_rho) / 0.4, truth, rtol=0.02)
     np.testing.assert_allclose(shape[:, ref], 1.0, atol=1e-9)
     np.testing.assert_allclose(np.exp(np.log(shape).mean(axis=0)), 1.0, atol=1e-9)
     assert np.abs(fitted(got_rho, g, r, shape) / y - 1).max() < 0.02
-    flat = alternate(s2, len(rho), 4)
+    flat = alternate(s2, vertices, 4)
     np.testing.assert_array_equal(flat[3], 1.0)
     assert np.abs(fitted(*flat) / y - 1).max() > 0.2
