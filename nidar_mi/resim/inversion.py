@@ -13,8 +13,8 @@ per-vertex ``vertex_rho``; :func:`nidar_mi.lidar.raycast.monostatic_reflectance`
 per-laser gain (``laser_gains``), ``r(d)`` the range response (``range_response``: piecewise
 linear through :data:`KNOTS_M`) and ``m_l(d)`` laser ``l``'s own factor through the same knots
 (``laser_range_response``: each laser of a real unit compensates range its own way, as an
-HDL-64E's per-laser focal distance and slope do). The sensor reports ``max(E - b, 0)`` (``intensity_offset``
-b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
+HDL-64E's per-laser focal distance and slope do). The sensor reports ``max(E - b, 0)``
+(``intensity_offset`` b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
 returns) and detects a return with probability ``(1 - q) · Φ((E - T) / σ_n)``
 (``detection_threshold``, ``receiver_noise_std``,
 :func:`~nidar_mi.lidar.return_model.detection_probability`; ``dropout`` q: the returns lost
@@ -290,8 +290,8 @@ def alternate(
     gains, then the range response's knot values (a linear least-squares problem in them), then
     (``laser_shape`` given) each laser's knot values of ``m_l``, each the exact minimiser with
     the others fixed, normalised after each round (gains' geometric mean 1,
-    ``r(REFERENCE_M) = m_l(REFERENCE_M) = 1``, each knot's ``m_l`` a geometric mean of 1 over
-    the lasers). Levinson and Thrun's alternation between the beams' responses and
+    ``r(REFERENCE_M) = 1``; the factors once, after the last round: ``m_l(REFERENCE_M) = 1``
+    and each knot's ``m_l`` a geometric mean of 1 over the lasers). Levinson and Thrun's alternation between the beams' responses and
     the map's reflectance; it starts the gradient fit near the optimum.
 
     The gains' step is over-relaxed (``G ← G·(G*/G)^ALS_RELAX``, G* the exact minimiser): the
