@@ -14,8 +14,8 @@ per-laser gain (``laser_gains``), ``r(d)`` the range response (``range_response`
 linear through :data:`KNOTS_M`) and ``m_l(d)`` laser ``l``'s own factor through the same knots
 (``laser_range_response``: each laser of a real unit compensates range its own way, as an
 HDL-64E's per-laser focal distance and slope do). The sensor reports ``max(E - b, 0)``
-(``intensity_offset`` b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about a quarter of its
-returns) and detects a return with probability ``(1 - q) · Φ((E - T) / σ_n)``
+(``intensity_offset`` b: an encoding that reads 0 below it, as KITTI's HDL-64E does for about
+a quarter of its returns) and detects a return with probability ``(1 - q) · Φ((E - T) / σ_n)``
 (``detection_threshold``, ``receiver_noise_std``,
 :func:`~nidar_mi.lidar.return_model.detection_probability`; ``dropout`` q: the returns lost
 whatever their intensity, through glass, past an object's edge, as the plugin drops them).
