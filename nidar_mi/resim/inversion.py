@@ -323,6 +323,47 @@ def alternate(
         ``(rho (V,), gains (R,), response (K,), shape (R, K))`` NumPy float64 (``shape`` all
         1 without ``laser_shape`` or ``per_laser``).
     """
+    y, v, ring, q, hat, fit = _als_samples(samples, sensor_rows)
+    ys, vs, rs, qs, hs = y[fit], v[fit], ring[fit], q[fit], hat[fit]
+    gains, resp = np.ones(rings), np.ones(len(KNOTS_M))
+    shape = np.ones((rings, len(KNOTS_M)))
+    ref = KNOTS_M.index(REFERENCE_M)
+    d2 = np.diff(np.eye(len(KNOTS_M)), n=2, axis=0)  # second differences of the knot values
+    fit_shape = per_laser and laser_shape is not None
+    # a sample's range falls between two knots: its two hat values and their knots
+    pair = _knot_pairs(hat)
+    pairs = tuple(p[fit] for p in pair)
+
+    for k in range(rounds):
+        ms = _own(shape, pairs, rs)
+        rho, _ = _solve_rho(vs, ys, gains[rs] * (hs @ resp) * ms * qs, vertices)
+        if per_laser:
+            a = rho[vs] * (hs @ resp) * ms * qs
+            num, den = np.bincount(rs, ys * a, rings), np.bincount(rs, a * a, rings)
+            best = np.where(den > 1e-9, num / np.maximum(den, 1e-9), gains)
+            best = np.maximum(best, 1e-6)
+            gains = best if k == 0 else gains * (best / gains) ** ALS_RELAX
+        resp = _response_step((gains[rs] * rho[vs] * ms * qs)[:, None] * hs, ys, response_smooth)
+        if fit_shape:
+            c = gains[rs] * rho[vs] * (hs @ resp) * qs
+            shape = _laser_shapes(c, pairs, ys, rs, rings, laser_shape, d2)
+        g0 = float(np.exp(np.mean(np.log(np.maximum(gains, 1e-6)))))
+        gains, resp = gains / g0, resp / resp[ref]
+    if fit_shape:
+        gains, resp, shape = _normalised_factors(gains, resp, shape)
+    rho, seen = _solve_rho(v, y, gains[ring] * (hat @ resp) * _own(shape, pair, ring) * q, vertices)
+    if edges is None:
+        rho = np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
+    else:
+        rho = harmonic_fill(rho, seen, edges)
+    return np.clip(rho, 0.0, RHO_MAX), gains, resp, shape
+
+
+def _als_samples(samples: Samples, sensor_rows):
+    """The returns of ``samples`` as the alternation reads them, NumPy: ``(y, v, ring, cos,
+    hat, fit)``, each (N,) but ``hat`` (N, K) (the hat functions of the knots at each range);
+    ``v`` the corner of its triangle with the largest weight; ``fit`` the rows the sensor is
+    fitted to (all where ``sensor_rows`` is None or selects none)."""
     from ..lidar.return_model import range_response
 
     det = samples.detected
@@ -338,56 +379,45 @@ def alternate(
     fit = np.ones(len(y), bool) if sensor_rows is None else np.asarray(sensor_rows)[det]
     if not fit.any():
         fit = np.ones(len(y), bool)
-    ys, vs, rs, qs, hs = y[fit], v[fit], ring[fit], q[fit], hat[fit]
-    gains, resp = np.ones(rings), np.ones(len(KNOTS_M))
-    shape = np.ones((rings, len(KNOTS_M)))
+    return y, v, ring, q, hat, fit
+
+
+def _solve_rho(v, y, a, vertices: int):
+    """Per vertex the least-squares ρ of ``y = ρ_v · a`` over its samples (``v`` their
+    vertices), and whether any sample has it."""
+    num, den = np.bincount(v, y * a, vertices), np.bincount(v, a * a, vertices)
+    return num / np.maximum(den, 1e-9), den > 1e-9
+
+
+def _response_step(m: np.ndarray, y: np.ndarray, weight: float) -> np.ndarray:
+    """The range response's knot values minimising ``|M r - y|² + w · tr(MᵀM)/K · |D r|²``
+    (``m`` (S, K) the design, D the second differences), at least 1e-3."""
+    k = m.shape[1]
+    eye = np.eye(k)
+    d2 = np.diff(eye, n=2, axis=0)
+    mtm = m.T @ m
+    smooth = weight * np.trace(mtm) / k * (d2.T @ d2)
+    resp = np.linalg.solve(mtm + 1e-6 * eye + smooth, m.T @ y)
+    return np.where(resp > 1e-3, resp, 1e-3)
+
+
+def _own(shape: np.ndarray, pairs, ring) -> np.ndarray:
+    """``m_l(d)`` of each sample from (R, K) knot values ``shape`` (:func:`_knot_pairs`
+    ``pairs``; ``ring`` the samples' lasers)."""
+    k0, k1, w0, w1 = pairs
+    return w0 * shape[ring, k0] + w1 * shape[ring, k1]
+
+
+def _normalised_factors(gains, resp, shape):
+    """The same products ``G_l · r(d) · m_l(d)`` with ``m_l(REFERENCE_M) = 1``, each knot's
+    ``m_l`` a geometric mean of 1 over the lasers, the gains a geometric mean of 1 and
+    ``r(REFERENCE_M) = 1`` (up to the common factor ρ takes)."""
     ref = KNOTS_M.index(REFERENCE_M)
-    d2 = np.diff(eye, n=2, axis=0)  # second differences of the knot values
-    fit_shape = per_laser and laser_shape is not None
-
-    def solve_rho(vv, yy, a):
-        num, den = np.bincount(vv, yy * a, vertices), np.bincount(vv, a * a, vertices)
-        return num / np.maximum(den, 1e-9), den > 1e-9
-
-    # a sample's range falls between two knots: its two hat values and their knots
-    pair = _knot_pairs(hat)
-    pairs = tuple(p[fit] for p in pair)
-
-    def own(pp, rr):  # m_l(d) of each sample
-        k0, k1, w0, w1 = pp
-        return w0 * shape[rr, k0] + w1 * shape[rr, k1]
-
-    for k in range(rounds):
-        ms = own(pairs, rs)
-        rho, _ = solve_rho(vs, ys, gains[rs] * (hs @ resp) * ms * qs)
-        if per_laser:
-            a = rho[vs] * (hs @ resp) * ms * qs
-            num, den = np.bincount(rs, ys * a, rings), np.bincount(rs, a * a, rings)
-            best = np.where(den > 1e-9, num / np.maximum(den, 1e-9), gains)
-            best = np.maximum(best, 1e-6)
-            gains = best if k == 0 else gains * (best / gains) ** ALS_RELAX
-        m = (gains[rs] * rho[vs] * ms * qs)[:, None] * hs
-        mtm = m.T @ m
-        smooth = response_smooth * np.trace(mtm) / len(eye) * (d2.T @ d2)
-        resp = np.linalg.solve(mtm + 1e-6 * eye + smooth, m.T @ ys)
-        resp = np.where(resp > 1e-3, resp, 1e-3)
-        if fit_shape:
-            c = gains[rs] * rho[vs] * (hs @ resp) * qs
-            shape = _laser_shapes(c, pairs, ys, rs, rings, laser_shape, d2)
-        g0 = float(np.exp(np.mean(np.log(np.maximum(gains, 1e-6)))))
-        gains, resp = gains / g0, resp / resp[ref]
-    if fit_shape:  # the same products, in the normalisation of the docstring
-        gains, shape = gains * shape[:, ref], shape / shape[:, ref : ref + 1]
-        g_k = np.exp(np.mean(np.log(shape), axis=0))
-        shape, resp = shape / g_k, resp * g_k
-        g0 = float(np.exp(np.mean(np.log(gains))))
-        gains, resp = gains / g0, resp / resp[ref]
-    rho, seen = solve_rho(v, y, gains[ring] * (hat @ resp) * own(pair, ring) * q)
-    if edges is None:
-        rho = np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
-    else:
-        rho = harmonic_fill(rho, seen, edges)
-    return np.clip(rho, 0.0, RHO_MAX), gains, resp, shape
+    gains, shape = gains * shape[:, ref], shape / shape[:, ref : ref + 1]
+    g_k = np.exp(np.mean(np.log(shape), axis=0))
+    shape, resp = shape / g_k, resp * g_k
+    g0 = float(np.exp(np.mean(np.log(gains))))
+    return gains / g0, resp / resp[ref], shape
 
 
 def _knot_pairs(hat: np.ndarray) -> tuple[np.ndarray, ...]:
