@@ -52,6 +52,7 @@ def _variants(cfg, inv) -> dict:
         det,
         laser_gains=None,
         laser_range_response=None,
+        laser_offsets=None,
         range_response=tuple(zip(s.knots_m, (float(v) for v in s.response))),
         intensity_offset=s.offset,
         detection_threshold=s.threshold,

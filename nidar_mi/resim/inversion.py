@@ -317,7 +317,8 @@ def alternate(
             F its samples' design: toward 1 and smooth where its returns are few; the prior
             alone fixes how the factors share a common scale with ρ, the gains and r during
             the rounds, and each factor lies in [:data:`SHAPE_MIN`, :data:`SHAPE_MAX`]. They are
-            normalised once, after the last round (the products unchanged).
+            normalised once, after the last round (the products unchanged at the knots; ρ is
+            then solved with the normalised sensor).
 
     Returns:
         ``(rho (V,), gains (R,), response (K,), shape (R, K))`` NumPy float64 (``shape`` all
@@ -409,9 +410,11 @@ def _own(shape: np.ndarray, pairs, ring) -> np.ndarray:
 
 
 def _normalised_factors(gains, resp, shape):
-    """The same products ``G_l · r(d) · m_l(d)`` with ``m_l(REFERENCE_M) = 1``, each knot's
-    ``m_l`` a geometric mean of 1 over the lasers, the gains a geometric mean of 1 and
-    ``r(REFERENCE_M) = 1`` (up to the common factor ρ takes)."""
+    """The products ``G_l · r(d) · m_l(d)`` with ``m_l(REFERENCE_M) = 1``, each knot's ``m_l``
+    a geometric mean of 1 over the lasers, the gains a geometric mean of 1 and
+    ``r(REFERENCE_M) = 1``: the same at the knots (up to the common factor ρ takes); between two
+    knots whose means over the lasers differ, r and m_l, each linear there, multiply to a
+    slightly different curve."""
     ref = KNOTS_M.index(REFERENCE_M)
     gains, shape = gains * shape[:, ref], shape / shape[:, ref : ref + 1]
     g_k = np.exp(np.mean(np.log(shape), axis=0))
@@ -591,8 +594,10 @@ def _clamp(opt, options: FitOptions) -> None:
 
 def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: FitOptions, **kw):
     """Fit ρ and the sensor to the samples (module docstring): alternating least squares
-    (:func:`alternate`) for ρ, the gains and the range response, then every variable jointly by
-    Adam on the gradients of the full loss (offset, detection, smoothness, prior included).
+    (:func:`alternate`) for ρ, the gains, the range response and each laser's own factor
+    (``options.laser_response``; with ``fit_response`` only), then every variable but those
+    factors jointly by Adam on the gradients of the full loss (offset, detection, smoothness,
+    prior included).
 
     Args:
         samples: the training samples (cast into ``scene``).
@@ -618,7 +623,7 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
     rows = kw.get("sensor_rows")
     pb = _Problem(samples, edges, kw.get("prior"), kw.get("prior_weight"), rows)
     vertices = dr.width(params[RHO_KEY])
-    with_shape = options.per_laser and options.laser_response
+    with_shape = options.per_laser and options.laser_response and options.fit_response
     rho0, gains0, resp0, shape = alternate(
         samples,
         vertices,

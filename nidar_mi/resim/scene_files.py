@@ -8,8 +8,9 @@ Files (all in one folder, referenced relative to ``scene.xml``)::
                            the sensor's wavelength: Mitsuba's attribute ``vertex_rho``) and
                            ``rho1550_0`` (the same surface at 1550 nm: ``vertex_rho1550``)
     sensor_recovered.xml   the recovered sensor (``lidar``: its per-laser layout in
-                           ``layout.yaml``, ``laser_gains``, ``range_response``, threshold and
-                           receiver noise) at frame 0's pose, the world origin
+                           ``layout.yaml``, ``laser_gains``, ``range_response``,
+                           ``laser_range_response``, offset, threshold, receiver noise and
+                           dropout) at frame 0's pose, the world origin
     sensor_preset.xml      a preset sensor at the same pose: ``preset`` and ``wavelength`` from
                            the defaults ``$preset`` (``hdl64e``) and ``$wavelength`` (905)
     layout.yaml            the per-laser layout (ROS velodyne calibration YAML)
