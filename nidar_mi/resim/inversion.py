@@ -32,7 +32,9 @@ The loss, minimised with :class:`mitsuba.ad.Adam` on the gradients of ``dr.backw
   reflectance ``R`` sees (``s`` the median ratio of the fitted ρ to R, refreshed every step),
   weighted by how rarely the LiDAR hit the vertex.
 
-The alternating least squares that starts the fit (:func:`alternate`) carries a smoothness
+The alternating least squares that starts the fit (:func:`alternate`) solves its last ρ through
+the surfaces' interpolation, as the renderer reads it, with the mesh's edges as a prior where
+the samples are few (``FitOptions.rho_smooth``, :mod:`.vertex_rho`). It carries a smoothness
 prior on the range response's knot values (``FitOptions.response_smooth``): where a drive sees
 each surface from about one range, ρ and ``r(d)`` trade off freely. It also fits the per-laser
 factors ``m_l`` (``FitOptions.laser_response``), each laser's knot values drawn to 1 and to
@@ -52,6 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .observations import Samples
+from .vertex_rho import harmonic_fill, interpolated_rho
 
 __all__ = [
     "FitOptions",
@@ -89,7 +92,7 @@ class FitOptions:
     """Settings of the inversion (defaults used on the real drives)."""
 
     iterations: int = 40
-    lr_rho: float = 0.003
+    lr_rho: float = 0.001
     lr_sensor: float = 0.01
     lr_gains: float = 0.0002
     w_det: float = 0.02
@@ -102,6 +105,7 @@ class FitOptions:
     response_smooth: float = 1.0
     laser_response: bool = True
     laser_shape_prior: float = 0.1
+    rho_smooth: float | None = 0.1
 
 
 @dataclass
@@ -284,6 +288,7 @@ def alternate(
     edges: np.ndarray | None = None,
     response_smooth: float = 0.0,
     laser_shape: float | None = None,
+    rho_smooth: float | None = None,
 ):
     """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d) · m_l(d)`` (each sample
     assigned to the corner of its triangle with the largest weight): ρ per vertex, then the
@@ -307,6 +312,10 @@ def alternate(
             for two surfaces and bias the gains of the lasers that see one side.
         edges: (E, 2) the mesh's edges: a vertex no sample is assigned to takes the harmonic
             interpolation of its neighbours (:func:`harmonic_fill`; default: the median ρ).
+        rho_smooth: with ``edges``, the last ρ (after the rounds) is solved through the
+            surfaces' interpolation, every sample read at its barycentric weights as the
+            renderer reads it, with this weight λ on the edges' prior
+            (:func:`.vertex_rho.interpolated_rho`); None: each sample at its nearest corner.
         response_smooth: weight of the range response's smoothness prior: its step solves
             ``(MᵀM + w · tr(MᵀM)/K · DᵀD) r = Mᵀy`` with D the second differences of the K
             knot values (0: none). Where every surface is seen from about one range (a car
@@ -352,12 +361,28 @@ def alternate(
         gains, resp = gains / g0, resp / resp[ref]
     if fit_shape:
         gains, resp, shape = _normalised_factors(gains, resp, shape)
-    rho, seen = _solve_rho(v, y, gains[ring] * (hat @ resp) * _own(shape, pair, ring) * q, vertices)
-    if edges is None:
-        rho = np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
-    else:
-        rho = harmonic_fill(rho, seen, edges)
+    a = gains[ring] * (hat @ resp) * _own(shape, pair, ring) * q
+    rho = _last_rho(samples, (y, v, a), vertices, edges, rho_smooth)
     return np.clip(rho, 0.0, RHO_MAX), gains, resp, shape
+
+
+def _last_rho(samples: Samples, data, vertices: int, edges, smooth: float | None) -> np.ndarray:
+    """(V,) ρ from every return with the sensor fixed (``data``: the alternation's ``(y, v,
+    a)``, each (N,)): at each sample's nearest corner, the vertices without one filled from
+    their neighbours (:func:`harmonic_fill`) or with the median; then, with ``edges`` and
+    ``smooth``, through the interpolation (:func:`.vertex_rho.interpolated_rho`, started
+    there)."""
+    y, v, a = data
+    rho, seen = _solve_rho(v, y, a, vertices)
+    if edges is None:
+        return np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
+    rho = harmonic_fill(rho, seen, edges)
+    if smooth is None:
+        return rho
+    det = samples.detected
+    corners = np.stack([c.numpy() for c in samples.corners], axis=1)[det]
+    weights = np.stack([w.numpy() for w in samples.weights], axis=1)[det]
+    return interpolated_rho(corners, weights, y, a, edges, vertices, smooth, start=rho)
 
 
 def _als_samples(samples: Samples, sensor_rows):
@@ -456,38 +481,6 @@ def _laser_shapes(c, pairs, y, ring, rings: int, weight: float, d2) -> np.ndarra
     lhs = ftf + lam * (d2.T @ d2 + np.eye(k))
     rhs = fty + lam[:, :, 0] * 1.0
     return np.clip(np.linalg.solve(lhs, rhs[..., None])[..., 0], SHAPE_MIN, SHAPE_MAX)
-
-
-def harmonic_fill(values: np.ndarray, known: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """(V,) ``values`` at the ``known`` vertices, and at the others the harmonic interpolation
-    over the mesh's edges (each unknown vertex the mean of its neighbours: the minimiser of
-    Σ over edges of (x_a - x_b)² with the known values fixed; SciPy's sparse direct solver). A
-    part of the mesh with no known vertex takes the known values' median.
-
-    Args:
-        values: (V,) float; known: (V,) bool; edges: (E, 2) vertex indices.
-    """
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import spsolve
-
-    x = np.asarray(values, dtype=np.float64).copy()
-    known = np.asarray(known, bool)
-    unknown = np.flatnonzero(~known)
-    if len(unknown) == 0:
-        return x
-    fallback = float(np.median(x[known])) if known.any() else 0.3
-    if not known.any():
-        return np.full(len(x), fallback)
-    n = len(x)
-    a, b = edges[:, 0], edges[:, 1]
-    adj = sp.coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), (n, n)).tocsr()
-    adj.data[:] = 1.0  # an edge listed twice counts once
-    degree = np.asarray(adj.sum(axis=1)).ravel()
-    eps = 1e-9  # ties a part with no known vertex to the median; negligible elsewhere
-    lhs = sp.diags(degree[unknown] + eps) - adj[unknown][:, unknown]
-    rhs = adj[unknown][:, np.flatnonzero(known)] @ x[known] + eps * fallback
-    x[unknown] = spsolve(lhs.tocsc(), rhs)
-    return x
 
 
 def sensor_samples(samples: Samples, crease: np.ndarray) -> np.ndarray:
@@ -633,6 +626,7 @@ def fit_drive(samples: Samples, scene, edges: np.ndarray, rings: int, options: F
         edges=edges,
         response_smooth=options.response_smooth,
         laser_shape=options.laser_shape_prior if with_shape else None,
+        rho_smooth=options.rho_smooth,
     )
     shape = shape if with_shape else None
     pb.factor = laser_factor(samples, shape)
