@@ -133,6 +133,14 @@ class LidarSensor(mi.Sensor):
            return of ring r reports max(output - b - b_r, 0) (each laser's own floor, as an
            HDL-64E's per-laser minimum intensity sets it)
          - all 0
+       * - ``laser_shadow``
+         - string
+         - beams the mounting blocks (the vehicle's roof, a mirror), comma-separated
+           ``r:from:to`` triples: laser r (ring 0 the highest) returns nothing where its beam's
+           sensor-frame azimuth atan2(y, x) lies in [from, to) degrees (-180 <= from < to <=
+           180; an interval across ±180° is two triples); on every path, in any weather
+           (recovered by ``python -m nidar_mi.reconstruct``)
+         - none
        * - ``range_min``
          - float
          - minimum range in m, >= 0

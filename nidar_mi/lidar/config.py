@@ -74,6 +74,7 @@ PARAMETERS = (
     "laser_range_response",
     "intensity_offset",
     "laser_offsets",
+    "laser_shadow",
     "range_min",
     "range_max",
     "atmospheric_extinction",
@@ -130,6 +131,7 @@ class LidarConfig:
     laser_range_response: tuple[tuple[float, ...], ...] | None = None
     intensity_offset: float = 0.0
     laser_offsets: tuple[float, ...] | None = None
+    laser_shadow: tuple[tuple[int, float, float], ...] | None = None
     table: LaserTable | None = None
 
     @property
@@ -249,6 +251,9 @@ class LidarConfig:
         if v.laser_offsets is not None and len(v.laser_offsets) != len(elevations):
             why = f"needs one offset per laser ({len(elevations)}, got {len(v.laser_offsets)})"
             raise fail("laser_offsets", why)
+        if v.laser_shadow is not None and max(r for r, _, _ in v.laser_shadow) >= len(elevations):
+            why = f"names a laser past the last ({len(elevations) - 1})"
+            raise fail("laser_shadow", why)
         shapes = v.laser_range_response
         if shapes is not None:
             if v.range_response is None:
@@ -350,6 +355,29 @@ def _shapes(raw: Any) -> tuple[tuple[float, ...], ...] | None:
             f"(got '{str(raw)[:60]}')"
         )
     return rows
+
+
+def _shadow(raw: Any) -> tuple[tuple[int, float, float], ...] | None:
+    """``r:a0:a1`` triples, comma-separated: laser index r >= 0, azimuths -180 <= a0 < a1 <= 180
+    (degrees)."""
+    if raw is None:
+        return None
+    out = []
+    for item in str(raw).replace(",", " ").split():
+        parts = item.split(":")
+        try:
+            r, a0, a1 = int(parts[0]), float(parts[1]), float(parts[2])
+        except (ValueError, IndexError):
+            r, a0, a1 = -1, 0.0, 0.0
+        if len(parts) != 3 or r < 0 or not -180.0 <= a0 < a1 <= 180.0:
+            raise _Problem(
+                "must be comma-separated 'laser:from:to' triples (laser index >= 0, azimuths "
+                f"in degrees, -180 <= from < to <= 180; got '{item[:40]}')"
+            )
+        out.append((r, a0, a1))
+    if not out:
+        raise _Problem("must name at least one 'laser:from:to' interval")
+    return tuple(out)
 
 
 def _response(raw: Any) -> tuple[tuple[float, float], ...] | None:
@@ -465,6 +493,9 @@ class SensorParameters(BaseModel):
     intensity_offset: Annotated[_Number, Field(ge=0.0)] = 0.0
     laser_offsets: Annotated[
         tuple[Annotated[float, Field(ge=0.0)], ...] | None, BeforeValidator(_per_laser(">= 0"))
+    ] = None
+    laser_shadow: Annotated[
+        tuple[tuple[int, float, float], ...] | None, BeforeValidator(_shadow)
     ] = None
     range_min: Annotated[_Number, Field(ge=0.0)]
     range_max: Annotated[_Number, Field(gt=0.0), AfterValidator(_below_range_max)]

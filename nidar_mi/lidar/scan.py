@@ -184,11 +184,14 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
         )
         for layer in out.layers
     ]
+    directions, origins = _pattern_arrays(cfg, 0, cfg.rings * cfg.horizontal_resolution)
+    shadow = shadowed_beams(cfg, directions.reshape(*shape, 3))
     for layer in layers:
         _drop_materials(layer, bad)
+        if shadow is not None:
+            _drop(layer, shadow & layer.valid)
     _warn_rgb_materials(tables, cfg, np.unique(np.concatenate(out.materials_hit)))
     first = layers[0]
-    directions, origins = _pattern_arrays(cfg, 0, cfg.rings * cfg.horizontal_resolution)
     return ScanResult(
         config=cfg,
         valid=first.valid,
@@ -212,6 +215,19 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
         scatterer=first.scatterer,
         weather=None if ctx.weather is None else ctx.weather[0].weather,
     )
+
+
+def shadowed_beams(cfg: LidarConfig, directions: np.ndarray) -> np.ndarray | None:
+    """(R, C) bool: the beams in the sensor's ``laser_shadow`` (laser r, azimuth of its
+    sensor-frame direction ``atan2(y, x)`` in degrees within [from, to)), which return
+    nothing; None without a shadow. ``directions``: (R, C, 3) the pattern's."""
+    if cfg.laser_shadow is None:
+        return None
+    az = np.degrees(np.arctan2(directions[..., 1], directions[..., 0]))  # (R, C)
+    out = np.zeros(az.shape, bool)
+    for ring, a0, a1 in cfg.laser_shadow:
+        out[ring] |= (az[ring] >= a0) & (az[ring] < a1)
+    return out
 
 
 # ---------------------------------------------------------------- one block of beams
@@ -1000,9 +1016,12 @@ def _drop_materials(layer: ReturnLayer, bad: np.ndarray) -> None:
     data at the laser wavelength gives no trustworthy return anywhere, even where its
     evaluation happens to be finite (Mitsuba's conductor presets read η = k = 0 past their
     table, a perfect mirror at exactly normal incidence and NaN elsewhere)."""
-    if not len(bad):
-        return
-    drop = np.isin(layer.material, bad) & layer.valid
+    if len(bad):
+        _drop(layer, np.isin(layer.material, bad) & layer.valid)
+
+
+def _drop(layer: ReturnLayer, drop: np.ndarray) -> None:
+    """Report no return at the (R, C) beams ``drop`` (not valid, range and intensity 0)."""
     if drop.any():
         layer.valid = layer.valid & ~drop
         layer.range = np.where(drop, 0.0, layer.range).astype(np.float32)
