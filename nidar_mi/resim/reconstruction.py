@@ -7,12 +7,14 @@ Output folder (published whole, with the record of :data:`OWNER`)::
     OUT/poses.txt          every frame's LiDAR pose in frame 0's LiDAR frame (KITTI format)
     OUT/heldout/<id>.bin   the re-simulated scan of each held-out frame (KITTI .bin: x, y, z,
                            intensity on the real sensor's [0, 1] scale; LiDAR frame; the
-                           drive's coverage only; the expected scan: detected where E >= T,
+                           drive's coverage only, the beams of the mounting's shadow
+                           dropped: :mod:`.shadow`; the expected scan: detected where E >= T,
                            intensity max(E - b, 0) without noise; the static surfaces and
                            those that moved, as the training frame nearest in time saw them:
                            :mod:`.moving`)
-    OUT/report.json        inputs, timings, the recovered sensor, the fit's residuals, the
-                           held-out metrics of the re-simulation and of the baselines
+    OUT/report.json        inputs, timings, the recovered sensor and its shadow, the fit's
+                           residuals, the held-out metrics of the re-simulation and of the
+                           baselines
 
 Held-out frames enter only the odometry (for their poses) and the evaluation: the layout, the
 mesh, the prior and the fit see the training frames alone.
@@ -132,7 +134,8 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     from .frames import load_frames
     from .heldout_scans import evaluate_heldout
     from .invert import invert
-    from .write import write_outputs
+    from .shadow import mounting_shadow
+    from .write import write_outputs, write_sensors
 
     clock = _Clock()
     frames = load_frames(drive, progress=options.progress)
@@ -145,6 +148,10 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("fit")
     scene_path = write_outputs(stage, drive, frames, poses, mesh, inv)
     clock.lap("write")
+    shadow = mounting_shadow(scene_path, drive, frames, poses)
+    if shadow.intervals:
+        write_sensors(stage, frames, inv.sensor, shadow.intervals)
+    clock.lap("shadow")
     held = evaluate_heldout(
         scene_path, drive, frames, poses, inv, stage, mesh=mesh, moving=options.moving
     )
@@ -167,6 +174,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
             "vertical_offset_m": frames.layout.vertical_offset_m.tolist(),
         },
         "fit": inv.summary(),
+        "shadow": shadow.summary(),
         "heldout": held,
         "timings_s": clock.times,
     }

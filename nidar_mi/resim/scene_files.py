@@ -9,8 +9,9 @@ Files (all in one folder, referenced relative to ``scene.xml``)::
                            ``rho1550_0`` (the same surface at 1550 nm: ``vertex_rho1550``)
     sensor_recovered.xml   the recovered sensor (``lidar``: its per-laser layout in
                            ``layout.yaml``, ``laser_gains``, ``range_response``,
-                           ``laser_range_response``, offset, threshold, receiver noise and
-                           dropout) at frame 0's pose, the world origin
+                           ``laser_range_response``, offset, threshold, receiver noise,
+                           dropout and the mounting's ``laser_shadow``: :mod:`.shadow`) at
+                           frame 0's pose, the world origin
     sensor_preset.xml      a preset sensor at the same pose: ``preset`` and ``wavelength`` from
                            the defaults ``$preset`` (``hdl64e``) and ``$wavelength`` (905)
     layout.yaml            the per-laser layout (ROS velodyne calibration YAML)

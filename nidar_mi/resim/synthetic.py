@@ -2,7 +2,8 @@
 
 :func:`street_scene` writes a street (road, two facades, three boxes for parked cars) as one
 PLY mesh whose per-vertex reflectance is a known function of position, seen by an HDL-64E
-(``hdl64e`` preset, its published per-laser layout) with known per-laser gains;
+(``hdl64e`` preset, its published per-laser layout) with known per-laser gains and a known
+shadow of its mounting (:data:`TRUE_SHADOW`);
 :func:`render_drive` renders it along a straight trajectory with the project's own sequence
 renderer (:func:`nidar_mi.sequence.render_sequence`) and returns the KITTI-layout drive it wrote
 (``kitti/velodyne/*.bin``, ``kitti/poses.txt``). The scans are the renderer's: motion
@@ -21,7 +22,12 @@ import numpy as np
 
 from .mesh import Mesh
 
-__all__ = ["true_rho", "street_mesh", "street_scene", "true_gains", "render_drive"]
+__all__ = ["true_rho", "street_mesh", "street_scene", "true_gains", "render_drive", "TRUE_SHADOW"]
+
+#: The rendered sensor's ``laser_shadow`` (laser, from, to degrees): its eight lowest lasers
+#: blocked behind it (a roof's rear edge) and its four lowest to its right (a mirror).
+TRUE_SHADOW = tuple((r, a, b) for r in range(56, 64) for a, b in ((150.0, 180.0), (-180.0, -150.0)))
+TRUE_SHADOW += tuple((r, -100.0, -80.0) for r in range(60, 64))
 
 _BOXES = (((14.0, -4.0), 0.25), ((22.0, 3.5), 0.55), ((31.0, -4.5), 0.8))
 
@@ -106,6 +112,7 @@ def street_scene(folder: str, *, columns: int = 1024, seed: int = 0) -> str:
             # in time, each sweep all but free of motion distortion
             "rotation_rate": 100.0,
             "laser_gains": ", ".join(f"{g:.6f}" for g in true_gains(seed=seed)),
+            "laser_shadow": ", ".join(f"{r}:{a:g}:{b:g}" for r, a, b in TRUE_SHADOW),
         },
         np.eye(4),
     )
