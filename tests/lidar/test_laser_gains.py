@@ -12,25 +12,11 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
-
-ELEV = (-10.0, -30.0)
+from tests.helpers.floor_scene import ELEV, floor_scene
 
 
 def _scene(params: str) -> str:
-    return f"""
-    <sensor type="lidar" id="lidar">
-        <string name="elevation_angles" value="{",".join(map(str, ELEV))}"/>
-        <integer name="horizontal_resolution" value="36"/>
-        <float name="gain" value="2"/>
-        <string name="intensity_mode" value="compensated"/>
-        <float name="range_min" value="0.1"/>
-        {params}
-        <transform name="to_world"><translate z="1"/></transform>
-    </sensor>
-    <bsdf type="diffuse" id="grey"><spectrum name="reflectance" value="360:0.5, 1700:0.5"/></bsdf>
-    <shape type="rectangle"><transform name="to_world"><scale value="50"/></transform>
-        <ref id="grey"/></shape>
-    """
+    return floor_scene(params, gain=2.0)
 
 
 def test_gains_response_and_offset_match_the_closed_form(variant, write_scene):

@@ -10,24 +10,9 @@ import numpy as np
 import pytest
 
 from nidar_mi.errors import NidarError
+from tests.helpers.floor_scene import floor_scene as _scene
 
 SHADOW = "0:-90:-30, 1:100:180, 1:-180:-170"
-
-
-def _scene(params: str) -> str:
-    return f"""
-    <sensor type="lidar" id="lidar">
-        <string name="elevation_angles" value="-10, -30"/>
-        <integer name="horizontal_resolution" value="36"/>
-        <string name="intensity_mode" value="compensated"/>
-        <float name="range_min" value="0.1"/>
-        {params}
-        <transform name="to_world"><translate z="1"/></transform>
-    </sensor>
-    <bsdf type="diffuse" id="grey"><spectrum name="reflectance" value="360:0.5, 1700:0.5"/></bsdf>
-    <shape type="rectangle"><transform name="to_world"><scale value="50"/></transform>
-        <ref id="grey"/></shape>
-    """
 
 
 def _shadowed(directions: np.ndarray) -> np.ndarray:
