@@ -219,11 +219,12 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
 
 def shadowed_beams(cfg: LidarConfig, directions: np.ndarray) -> np.ndarray | None:
     """(R, C) bool: the beams in the sensor's ``laser_shadow`` (laser r, azimuth of its
-    sensor-frame direction ``atan2(y, x)`` in degrees within [from, to)), which return
-    nothing; None without a shadow. ``directions``: (R, C, 3) the pattern's."""
+    sensor-frame direction ``atan2(y, x)`` in degrees, read in [-180, 180), within [from, to)),
+    which return nothing; None without a shadow. ``directions``: (R, C, 3) the pattern's."""
     if cfg.laser_shadow is None:
         return None
-    az = np.degrees(np.arctan2(directions[..., 1], directions[..., 0]))  # (R, C)
+    az = np.degrees(np.arctan2(directions[..., 1], directions[..., 0]))  # (R, C), (-180, 180]
+    az = np.where(az >= 180.0, az - 360.0, az)  # [-180, 180): straight back starts the circle
     out = np.zeros(az.shape, bool)
     for ring, a0, a1 in cfg.laser_shadow:
         out[ring] |= (az[ring] >= a0) & (az[ring] < a1)

@@ -290,8 +290,9 @@ def alternate(
     laser_shape: float | None = None,
     rho_smooth: float | None = None,
 ):
-    """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d) · m_l(d)`` (each sample
-    assigned to the corner of its triangle with the largest weight): ρ per vertex, then the
+    """Alternating least squares for ``E = G_l · ρ_v · cos θ · r(d) · m_l(d)`` (in the rounds
+    each sample assigned to the corner of its triangle with the largest weight; the last ρ
+    through the interpolation with ``rho_smooth``): ρ per vertex, then the
     gains, then the range response's knot values (a linear least-squares problem in them), then
     (``laser_shape`` given) each laser's knot values of ``m_l``, each the exact minimiser with
     the others fixed, normalised after each round (gains' geometric mean 1,
@@ -377,7 +378,7 @@ def _last_rho(samples: Samples, data, vertices: int, edges, smooth: float | None
     if edges is None:
         return np.where(seen, rho, np.median(rho[seen]) if seen.any() else 0.3)
     rho = harmonic_fill(rho, seen, edges)
-    if smooth is None:
+    if smooth is None or len(y) == 0:
         return rho
     det = samples.detected
     corners = np.stack([c.numpy() for c in samples.corners], axis=1)[det]

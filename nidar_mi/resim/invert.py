@@ -1,5 +1,6 @@
-"""The inversion run on a drive: the training samples cast into the surfaces, NIDAR's prior,
-the fit with per-laser gains and the fit without them (a baseline), and the fit's residuals."""
+"""The inversion run on a drive: the training samples cast into the surfaces, the mounting's
+shadow found in them (its misses then left out, :mod:`.shadow`), NIDAR's prior, the fit with
+per-laser gains and the fit without them (a baseline), and the fit's residuals."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from .drive_folder import Drive
 from .frames import Frames
 from .inversion import FitOptions, SensorFit, edges_of, fit_drive, predict_returns, sensor_samples
 from .mesh import Mesh, crease_vertices
+from .shadow import Shadow, find_shadow, ray_columns
 
 __all__ = ["Inversion", "invert", "sensor_summary", "MAX_SAMPLES"]
 
@@ -29,6 +31,7 @@ class Inversion:
         rho_flat, sensor_flat: the fit without per-laser gains.
         prior: (V,) NIDAR's R per vertex (NaN unseen), or None; prior_scale: ρ ≈ scale·R.
         residuals: the fit's residuals on the training samples.
+        shadow: the mounting's shadow found in the training samples (:mod:`.shadow`).
     """
 
     rho: np.ndarray
@@ -38,6 +41,7 @@ class Inversion:
     prior: np.ndarray | None
     prior_scale: float
     residuals: dict
+    shadow: Shadow
 
     def summary(self) -> dict:
         """JSON-safe: the recovered sensor, the residuals, the prior's coverage."""
@@ -132,6 +136,12 @@ def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options,
     misses = _misses(drive, frames, poses)
     misses, _ = _subsample(misses, np.zeros(len(misses.ring)), MAX_SAMPLES // 2, rng)
     samples = cast_samples(scene, mesh.faces, rays, intensity, misses)
+    train = [drive.index(i) for i in drive.train]
+    shadow = find_shadow(samples, poses, train, (frames.layout.rings, frames.columns))
+    if shadow.mask.any():  # the shadow's misses are not the receiver's: out of the fit
+        open_ = ~shadow.mask[misses.ring, ray_columns(misses, poses, frames.columns)]
+        misses = Rays(*(getattr(misses, f)[open_] for f in Rays._fields))
+        samples = cast_samples(scene, mesh.faces, rays, intensity, misses)
     prior = (
         nidar_prior(drive, mesh.vertices, poses, weights=options.weights) if options.prior else None
     )
@@ -153,4 +163,4 @@ def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options,
     if prior is not None and np.isfinite(prior).any():
         seen = np.isfinite(prior) & (prior > 1e-3)
         scale = float(np.median(rho[seen] / prior[seen])) if seen.any() else np.nan
-    return Inversion(rho, sensor, rho_flat, sensor_flat, prior, scale, residuals)
+    return Inversion(rho, sensor, rho_flat, sensor_flat, prior, scale, residuals, shadow)

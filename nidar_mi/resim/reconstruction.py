@@ -134,8 +134,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     from .frames import load_frames
     from .heldout_scans import evaluate_heldout
     from .invert import invert
-    from .shadow import mounting_shadow
-    from .write import write_outputs, write_sensors
+    from .write import write_outputs
 
     clock = _Clock()
     frames = load_frames(drive, progress=options.progress)
@@ -148,10 +147,6 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("fit")
     scene_path = write_outputs(stage, drive, frames, poses, mesh, inv)
     clock.lap("write")
-    shadow = mounting_shadow(scene_path, drive, frames, poses)
-    if shadow.intervals:
-        write_sensors(stage, frames, inv.sensor, shadow.intervals)
-    clock.lap("shadow")
     held = evaluate_heldout(
         scene_path, drive, frames, poses, inv, stage, mesh=mesh, moving=options.moving
     )
@@ -174,7 +169,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
             "vertical_offset_m": frames.layout.vertical_offset_m.tolist(),
         },
         "fit": inv.summary(),
-        "shadow": shadow.summary(),
+        "shadow": inv.shadow.summary(),
         "heldout": held,
         "timings_s": clock.times,
     }

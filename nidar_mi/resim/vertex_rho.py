@@ -14,13 +14,17 @@ one of its samples"; ε = 1e-6 ties a part of the mesh that no sample reaches to
 samples' median ρ). The normal equations ``(BᵀB + λ m L + ε m I) ρ = Bᵀy + ε m ρ̃`` (B the
 (S, V) design, L the graph Laplacian of the edges) are sparse, symmetric and positive definite;
 SciPy's conjugate gradients with a Jacobi preconditioner solve them from a start near the
-answer. Vertices no sample reaches take the harmonic interpolation of their neighbours.
+answer (a warning if they stop before :data:`CG_RTOL`; the start kept if they go non-finite).
+With λ > 0 the vertices no sample reaches take the harmonic interpolation of their neighbours;
+with λ = 0, ρ̃.
 
 Solving at the vertices with each sample given to one corner (its nearest) is the alternation's
 fast step; it reads each sample as if it fell on a vertex, which the interpolation then blurs.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -121,5 +125,14 @@ def interpolated_rho(
     rhs = b.T @ y + TIE * m * tie_value
     x0 = np.full(vertices, tie_value) if start is None else np.asarray(start, np.float64)
     jacobi = sp.diags(1.0 / np.maximum(lhs.diagonal(), 1e-300))
-    x, _ = cg(lhs, rhs, x0=x0, M=jacobi, rtol=CG_RTOL, maxiter=CG_MAXITER)
+    x, info = cg(lhs, rhs, x0=x0, M=jacobi, rtol=CG_RTOL, maxiter=CG_MAXITER)
+    if not np.isfinite(x).all():
+        warnings.warn("reflectance solve: not finite; its start is kept", stacklevel=2)
+        return x0
+    if info != 0:
+        warnings.warn(
+            f"reflectance solve: not converged to {CG_RTOL:g} in {CG_MAXITER} iterations; "
+            "its last iterate is kept",
+            stacklevel=2,
+        )
     return x

@@ -61,7 +61,7 @@ def write_outputs(stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, i
     table = preset_table(LASER_PRESET)
     ids = table.laser_id if frames.layout.rings == table.rings else range(frames.layout.rings)
     write_velodyne_yaml(os.path.join(stage, LAYOUT), frames.layout, list(ids))
-    write_sensors(stage, frames, inv.sensor)
+    write_sensors(stage, frames, inv.sensor, inv.shadow.intervals)
     write_kitti_poses(os.path.join(stage, "poses.txt"), poses)
     return os.path.join(stage, SCENE)
 
