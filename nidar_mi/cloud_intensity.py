@@ -102,7 +102,8 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
         The :class:`CloudInputs` (``xyz`` and ``intensity`` as float32).
 
     Raises:
-        NidarError: the count of images or an image's size does not match the cameras.
+        NidarError: the count of images or an image's size does not match the cameras, or the
+            cloud is empty.
     """
     from .io.calib import is_render_calib, load_calib
     from .io.images import read_rgb8
@@ -111,6 +112,10 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
     cameras = load_calib(calib, lidar=lidar)
     if len(cameras) != len(images):
         raise NidarError(f"{calib} has {len(cameras)} cameras but {len(images)} `images` given")
+    # the cloud before the images: an empty one is refused before an image's warning is shown
+    cloud = read_point_cloud(points)
+    if len(cloud["xyz"]) == 0:
+        raise NidarError(f"{points}: the point cloud holds no points")
     rgb = [read_rgb8(im) for im in images]
     for cam, im, path in zip(cameras, rgb, images):
         if im.shape[:2] != (cam.height, cam.width):
@@ -118,7 +123,6 @@ def read_inputs(points: str, calib: str, images: list[str], lidar: str | None = 
                 f"{path}: image {im.shape[1]}x{im.shape[0]} does not match camera "
                 f"'{cam.name}' {cam.width}x{cam.height}"
             )
-    cloud = read_point_cloud(points)
     cloud["xyz"] = np.asarray(cloud["xyz"], dtype=np.float32)
     if "intensity" in cloud:
         cloud["intensity"] = np.asarray(cloud["intensity"], dtype=np.float32)
