@@ -38,6 +38,7 @@ The work is :mod:`nidar_mi.cloud_intensity`'s; this module parses the command li
 from __future__ import annotations
 
 import os
+import warnings
 
 from ..errors import NidarError
 from ..extras import require
@@ -162,17 +163,22 @@ def _assign(args) -> None:
     publish = dict(owner=ASSIGN_OWNER, overwrite=args.overwrite, inputs=read)
     if args.out:  # before the inputs are read; the default OUT is named after them
         check_output_folder(args.out, **publish)
-    inputs = _inputs(args)
-    out = args.out or os.path.join("out", "assign", inputs.name)
-    check_output_folder(out, **publish)
-    profile, unknown = _profile(args, inputs)
-    points = assign_cloud(
-        inputs,
-        weights=args.weights,
-        occlusion=not args.no_occlusion,
-        branch=args.branch,
-        profile=profile,
-    )
+    # the inputs' warnings are shown once the cloud has its intensity: bad input is one line
+    with warnings.catch_warnings(record=True) as held:
+        warnings.simplefilter("always")
+        inputs = _inputs(args)
+        out = args.out or os.path.join("out", "assign", inputs.name)
+        check_output_folder(out, **publish)
+        profile, unknown = _profile(args, inputs)
+        points = assign_cloud(
+            inputs,
+            weights=args.weights,
+            occlusion=not args.no_occlusion,
+            branch=args.branch,
+            profile=profile,
+        )
+    for text in dict.fromkeys(str(w.message) for w in held):
+        warnings.warn(text, RuntimeWarning, stacklevel=1)
     written = write_points(out, points, formats, args.overwrite)
     if not args.quiet:
         print(profile_line(profile, branch=args.branch))
