@@ -29,7 +29,7 @@ from .drive_folder import Drive
 from .frames import MIN_RANGE_M, Frames
 from .scan_scores import copy_intensity, drop_metrics, geometry_metrics, intensity_metrics, matches
 
-__all__ = ["evaluate_heldout", "expected_scan", "METHODS"]
+__all__ = ["evaluate_heldout", "METHODS"]
 
 METHODS = (
     "resim",
@@ -68,7 +68,7 @@ def _variants(cfg, inv) -> dict:
     return out
 
 
-def expected_scan(scene, cfg, pose, frames: Frames):
+def _sim_scan(scene, cfg, pose, frames: Frames):
     """(M, 3) LiDAR-frame points, (M,) intensity, (R, C) occupancy of a re-simulated scan,
     inside the drive's coverage and past MIN_RANGE_M."""
     from ..datasets.kitti_rings import azimuth_deg
@@ -227,7 +227,7 @@ def evaluate_heldout(
                     rho = np.concatenate([rho, extra[name]])
                 params[RHO_KEY] = mi.Float(np.asarray(rho, dtype=np.float32))
                 params.update()
-                scans[name] = expected_scan(scene, cfg, poses[k], frames)
+                scans[name] = _sim_scan(scene, cfg, poses[k], frames)
             sim, sim_i, _ = scans["resim"]
             path = os.path.join(stage, "heldout", f"{fid}.bin")
             write_kitti_bin(path, sim, np.clip(sim_i, 0.0, 1.0))

@@ -12,7 +12,7 @@ from .frames import MIN_RANGE_M, Frames
 from .inversion import SensorFit
 from .mesh import Mesh
 
-__all__ = ["sensor_params", "write_outputs", "write_sensors", "LASER_PRESET"]
+__all__ = ["sensor_params", "write_outputs", "LASER_PRESET"]
 
 #: The preset whose firing timing the recovered layout keeps (a 64-laser drive).
 LASER_PRESET = "hdl64e"
@@ -53,7 +53,7 @@ def write_outputs(stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, i
     from ..io.kitti import write_kitti_poses
     from ..lidar.layouts import preset_table
     from .laser_layout import write_velodyne_yaml
-    from .scene_files import LAYOUT, SCENE, SURFACES, write_surfaces_ply
+    from .scene_files import LAYOUT, SCENE, SURFACES, SensorXml, write_scene, write_surfaces_ply
     from .spectral import band_map
 
     rho1550 = band_map(905.0, 1550.0)(inv.rho)
@@ -61,20 +61,13 @@ def write_outputs(stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, i
     table = preset_table(LASER_PRESET)
     ids = table.laser_id if frames.layout.rings == table.rings else range(frames.layout.rings)
     write_velodyne_yaml(os.path.join(stage, LAYOUT), frames.layout, list(ids))
-    write_sensors(stage, frames, inv.sensor, inv.shadow.intervals)
-    write_kitti_poses(os.path.join(stage, "poses.txt"), poses)
-    return os.path.join(stage, SCENE)
-
-
-def write_sensors(stage: str, frames: Frames, sensor: SensorFit, shadow=()) -> None:
-    """Write ``scene.xml`` and its two sensors (the recovered one with its ``shadow``
-    intervals, :mod:`.shadow`; the preset one) into ``stage``."""
-    from .scene_files import SensorXml, write_scene
-
-    recovered = SensorXml("lidar", sensor_params(frames, sensor, shadow=shadow), np.eye(4))
+    shadow = inv.shadow.intervals
+    recovered = SensorXml("lidar", sensor_params(frames, inv.sensor, shadow=shadow), np.eye(4))
     preset = SensorXml(
         "lidar",
         {"preset": "$preset", "wavelength": "$wavelength", "intensity_mode": "compensated"},
         np.eye(4),
     )
     write_scene(stage, recovered, preset)
+    write_kitti_poses(os.path.join(stage, "poses.txt"), poses)
+    return os.path.join(stage, SCENE)
