@@ -71,6 +71,12 @@ def build_parser():
         "moved, as the training frame nearest in time saw them)",
     )
     p.add_argument(
+        "--no-splats",
+        action="store_true",
+        help="no splats for the returns that the scans' meshes leave out (foliage, edges, "
+        "far surfaces; default: a square per return, its cell's size, facing its sensor)",
+    )
+    p.add_argument(
         "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"
     )
     p.add_argument("--weights", default=None, help="NIDAR weights folder (default: shipped)")
@@ -124,6 +130,7 @@ def main(argv=None) -> int:
             carve_passes=args.carve_passes,
             transient_frames=args.transient_frames,
             moving=not args.no_moving,
+            splats=not args.no_splats,
             prior=not args.no_prior,
             weights=args.weights,
             seed=check_seed(args.seed),

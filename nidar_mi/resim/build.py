@@ -13,7 +13,14 @@ from .drive_folder import Drive
 from .frames import Frames
 from .mesh import Mesh, fuse_meshes, scan_mesh
 
-__all__ = ["drive_poses", "build_surfaces", "training_rays", "scratch_scene", "drop_scratch"]
+__all__ = [
+    "drive_poses",
+    "build_surfaces",
+    "drive_splats",
+    "training_rays",
+    "scratch_scene",
+    "drop_scratch",
+]
 
 
 def drive_poses(drive: Drive, frames: Frames, *, progress: bool = False) -> np.ndarray:
@@ -62,14 +69,59 @@ def drop_scratch(stage: str) -> None:
         os.remove(path)
 
 
+def drive_splats(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh):
+    """The splats of every training frame's returns that its range-image mesh left out and
+    that lie off the fused ``mesh`` (:mod:`.splats`), world coordinates."""
+    from scipy.spatial import cKDTree
+
+    from .mesh import scan_triangles
+    from .splats import (
+        OFF_MESH_M,
+        Splats,
+        local_normals,
+        ring_spacing_rad,
+        scan_splats,
+        unmeshed_returns,
+    )
+
+    spacing = ring_spacing_rad(frames.layout.elevation_deg)
+    tree = cKDTree(mesh.vertices)
+    parts = []
+    for fid in drive.train:
+        k = drive.index(fid)
+        xyz, grid, pose = frames.xyz[k], frames.grid[k], poses[k]
+        alone = unmeshed_returns(len(xyz), scan_triangles(xyz, grid, wrap=not frames.cut))
+        world = xyz @ pose[:3, :3].T + pose[:3, 3]
+        alone &= tree.query(world, distance_upper_bound=OFF_MESH_M)[0] > OFF_MESH_M
+        normals = local_normals(xyz, np.flatnonzero(alone))
+        p = xyz[alone]
+        d = np.linalg.norm(p, axis=1)
+        cos = np.abs(np.einsum("ij,ij->i", p / d[:, None], np.nan_to_num(normals, nan=0.0)))
+        cos = np.where(np.isfinite(normals[:, 0]), cos, 1.0)
+        splat = scan_splats(p, grid.ring[alone], grid.columns, spacing, normals)
+        four = {  # four corners per splat, each standing for its return
+            "ring": grid.ring[alone],
+            "range_m": d,
+            "intensity": frames.intensity[k][alone],
+            "cos": cos,
+        }
+        parts.append(
+            Splats(splat.transformed(pose), **{f: np.repeat(v, 4) for f, v in four.items()})
+        )
+    return Splats.join(parts)
+
+
 def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, stage: str):
-    """The carved mesh of the training frames (world = frame 0's LiDAR frame).
+    """The carved mesh of the training frames (world = frame 0's LiDAR frame) and the carved
+    splats of the returns it left out.
 
     Returns:
-        ``(mesh, carved, transient)``: the mesh, the triangles each carving pass removed and
-        the transient triangles removed (:mod:`.transient`).
+        ``(mesh, splats, carved, transient)``: the mesh, the splats (:class:`.splats.Splats`,
+        none unless ``options.splats``), the triangles each carving pass removed (``mesh``
+        and ``splats``) and the transient triangles removed (:mod:`.transient`).
     """
     from ..errors import NidarError
+    from .splats import Splats
 
     meshes = []
     for fid in drive.train:
@@ -80,13 +132,19 @@ def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, sta
     if len(mesh.faces) == 0:
         raise NidarError(f"{drive.root}: the training scans gave no surface to mesh")
     rays = None
+    carved = {"mesh": [], "splats": []}
+    splats = drive_splats(drive, frames, poses, mesh) if options.splats else Splats.join([])
     if options.carve_passes > 0:
-        from .carve import carve
+        from .carve import carve, carved_faces
 
         rays, _ = training_rays(drive, frames, poses)
-        mesh, carved = carve(mesh, rays, scratch_scene(stage), passes=options.carve_passes)
-    else:
-        carved = []
+        load = scratch_scene(stage)
+        mesh, carved["mesh"] = carve(mesh, rays, load, passes=options.carve_passes)
+        if len(splats.mesh.faces):
+            keep, carved["splats"] = carved_faces(
+                splats.mesh, rays, load, passes=options.carve_passes
+            )
+            splats = splats.kept(keep)
     transient = []
     if options.transient_frames > 0:
         from .transient import remove_transient
@@ -96,4 +154,4 @@ def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, sta
             mesh, rays, scratch_scene(stage), run=options.transient_frames
         )
     drop_scratch(stage)
-    return mesh, carved, transient
+    return mesh, splats, carved, transient

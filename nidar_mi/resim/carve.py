@@ -17,7 +17,7 @@ import numpy as np
 from .beam_rays import Rays, jit_rays
 from .mesh import Mesh, compact
 
-__all__ = ["carve", "hit_classes", "hit_depths", "layered_hits"]
+__all__ = ["carve", "carved_faces", "hit_classes", "hit_depths", "layered_hits"]
 
 #: Rays cast per Dr.Jit launch.
 BLOCK = 1 << 20
@@ -108,14 +108,24 @@ def carve(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, passes:
     Returns:
         ``(mesh, removed)``: the carved mesh and how many triangles each pass removed.
     """
+    keep, removed = carved_faces(mesh, rays, load_scene, through_m=through_m, passes=passes)
+    return compact(Mesh(mesh.vertices, mesh.faces[keep])), removed
+
+
+def carved_faces(mesh: Mesh, rays: Rays, load_scene, *, through_m: float = 0.1, passes: int = 2):
+    """:func:`carve` as ``(keep, removed)``: (T,) bool, the triangles of ``mesh`` it keeps."""
+    keep = np.ones(len(mesh.faces), bool)
     removed = []
     for _ in range(passes):
-        prim, through, on = hit_classes(mesh, rays, load_scene, through_m)
-        n_through = np.bincount(prim[through], minlength=len(mesh.faces))
-        n_on = np.bincount(prim[on], minlength=len(mesh.faces))
+        idx = np.flatnonzero(keep)
+        prim, through, on = hit_classes(
+            Mesh(mesh.vertices, mesh.faces[idx]), rays, load_scene, through_m
+        )
+        n_through = np.bincount(prim[through], minlength=len(idx))
+        n_on = np.bincount(prim[on], minlength=len(idx))
         drop = (n_through >= 2) & (n_through > n_on)
         removed.append(int(drop.sum()))
         if not drop.any():
             break
-        mesh = Mesh(mesh.vertices, mesh.faces[~drop])
-    return compact(mesh), removed
+        keep[idx[drop]] = False
+    return keep, removed

@@ -156,18 +156,14 @@ def _moving_scene(j: int, drive: Drive, frames: Frames, poses, mesh, static, sta
     nothing moving; its moving surfaces and its return rays."""
     from .beam_rays import return_rays
     from .build import scratch_scene
-    from .mesh import Mesh
+    from .mesh import merge_meshes
     from .moving import moving_surfaces
 
     rays = return_rays(frames.xyz[j], frames.grid[j], frames.layout, poses[j], j)
     moving = moving_surfaces(frames.xyz[j], frames.grid[j], rays, static, j, wrap=not frames.cut)
     if len(moving.mesh.faces) == 0:
         return static, moving, rays
-    both = Mesh(
-        np.concatenate([mesh.vertices, moving.mesh.vertices]),
-        np.concatenate([mesh.faces, moving.mesh.faces + len(mesh.vertices)]),
-    )
-    return scratch_scene(stage)(both), moving, rays
+    return scratch_scene(stage)(merge_meshes([mesh, moving.mesh])), moving, rays
 
 
 def evaluate_heldout(

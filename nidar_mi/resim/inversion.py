@@ -144,6 +144,22 @@ class SensorFit:
         rows = self.laser_response[np.asarray(ring, dtype=np.int64)]
         return out * range_response(d, self.knots_m, list(np.moveaxis(rows, -1, 0)))
 
+    def reflectance_of(self, y, ring, d, cos) -> np.ndarray:
+        """ρ that one detected return's intensity ``y`` says its surface has, in [0, RHO_MAX].
+
+        The sensor reports ``max(E − b, 0)`` with ``E = G_l · ρ · cos θ · r(d)``, so ``E = y +
+        b``; but a return read as 0 says only ``E <= b``, and a return was detected, so ``E``
+        is taken no lower than ``T + 2 σ_n`` (detected again with probability Φ(2) ≈ 0.98):
+        ``ρ = max(y + b, T + 2 σ_n) / (G_l · r(d) · cos θ)`` (RHO_MAX where the denominator
+        is 0). All (N,): ``y`` on the sensor's scale, ``ring`` its laser, ``d`` range (m),
+        ``cos`` = ``|cos θ|``."""
+        ring = np.asarray(ring, dtype=np.int64)
+        unit = self.gains[ring] * self.response_at(d, ring) * np.asarray(cos, np.float64)
+        floor = self.threshold + 2.0 * self.noise
+        num = np.maximum(np.asarray(y, np.float64) + self.offset, floor)
+        rho = np.where(unit > 0, num / np.where(unit > 0, unit, 1.0), RHO_MAX)
+        return np.clip(rho, 0.0, RHO_MAX)
+
 
 def edges_of(faces: np.ndarray) -> np.ndarray:
     """(E, 2) the unique undirected edges of (T, 3) triangles."""

@@ -27,7 +27,8 @@ class Inversion:
     """The fitted reflectance and sensor, with and without per-laser gains.
 
     Attributes:
-        rho, sensor: the fit (per-vertex ρ (V,), the recovered sensor).
+        rho, sensor: the fit (ρ (V,) per vertex of the mesh, then of the splats; the
+            recovered sensor).
         rho_flat, sensor_flat: the fit without per-laser gains.
         prior: (V,) NIDAR's R per vertex (NaN unseen), or None; prior_scale: ρ ≈ scale·R.
         residuals: the fit's residuals on the training samples.
@@ -124,8 +125,13 @@ def _prior_weight(samples, mesh: Mesh) -> np.ndarray:
     return 1.0 / (1.0 + hits)
 
 
-def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options, stage: str):
-    """Cast the training samples, run NIDAR for the prior, fit twice (module docstring)."""
+def invert(
+    drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options, stage: str, splats=None
+):
+    """Cast the training samples, run NIDAR for the prior, fit twice (module docstring).
+
+    ``splats`` (:class:`.splats.Splats`) take no part in the fit: their vertices' ρ come from
+    their own returns through each fitted sensor, after the mesh's in every per-vertex array."""
     from .observations import cast_samples
     from .prior import nidar_prior
 
@@ -142,9 +148,14 @@ def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options,
         open_ = ~shadow.mask[misses.ring, ray_columns(misses, poses, frames.columns)]
         misses = Rays(*(getattr(misses, f)[open_] for f in Rays._fields))
         samples = cast_samples(scene, mesh.faces, rays, intensity, misses)
-    prior = (
-        nidar_prior(drive, mesh.vertices, poses, weights=options.weights) if options.prior else None
+    n = len(mesh.vertices)
+    vertices = (
+        mesh.vertices if splats is None else np.concatenate([mesh.vertices, splats.mesh.vertices])
     )
+    prior_all = (
+        nidar_prior(drive, vertices, poses, weights=options.weights) if options.prior else None
+    )
+    prior = None if prior_all is None else prior_all[:n]
     edges = edges_of(mesh.faces)
     fo = FitOptions(iterations=options.iterations)
     kw = {
@@ -163,4 +174,7 @@ def invert(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, options,
     if prior is not None and np.isfinite(prior).any():
         seen = np.isfinite(prior) & (prior > 1e-3)
         scale = float(np.median(rho[seen] / prior[seen])) if seen.any() else np.nan
-    return Inversion(rho, sensor, rho_flat, sensor_flat, prior, scale, residuals, shadow)
+    if splats is not None:
+        rho = np.concatenate([rho, splats.reflectance(sensor)])
+        rho_flat = np.concatenate([rho_flat, splats.reflectance(sensor_flat)])
+    return Inversion(rho, sensor, rho_flat, sensor_flat, prior_all, scale, residuals, shadow)

@@ -29,9 +29,11 @@ from .range_image import ScanGrid
 __all__ = [
     "Mesh",
     "compact",
+    "compact_index",
     "scan_mesh",
     "scan_triangles",
     "fuse_meshes",
+    "merge_meshes",
     "crease_vertices",
     "CREASE_DEG",
     "MAX_INCIDENCE_DEG",
@@ -146,10 +148,24 @@ def _kept(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 def compact(mesh: Mesh) -> Mesh:
     """The mesh without unreferenced vertices."""
+    return compact_index(mesh)[0]
+
+
+def compact_index(mesh: Mesh) -> tuple[Mesh, np.ndarray]:
+    """:func:`compact` and the (V',) indices of the vertices it kept, in their order."""
     used = np.unique(mesh.faces)
     remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
-    return Mesh(mesh.vertices[used], remap[mesh.faces])
+    return Mesh(mesh.vertices[used], remap[mesh.faces]), used
+
+
+def merge_meshes(meshes: list[Mesh]) -> Mesh:
+    """The meshes side by side in one (no vertex shared, every triangle kept)."""
+    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+    return Mesh(
+        np.concatenate([m.vertices for m in meshes]),
+        np.concatenate([m.faces + o for m, o in zip(meshes, offsets)]),
+    )
 
 
 def fuse_meshes(meshes: list[Mesh], voxel: float) -> Mesh:
@@ -159,9 +175,8 @@ def fuse_meshes(meshes: list[Mesh], voxel: float) -> Mesh:
         Vertices at the mean of their cluster; no degenerate or repeated triangle (a triangle
         and its reverse count as one; the first one's orientation is kept).
     """
-    verts = np.concatenate([m.vertices for m in meshes])
-    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
-    faces = np.concatenate([m.faces + o for m, o in zip(meshes, offsets)])
+    merged = merge_meshes(meshes)
+    verts, faces = merged.vertices, merged.faces
     keys = np.floor((verts - verts.min(axis=0)) / voxel).astype(np.int64)
     if keys.max(initial=0) >= 1 << 21:
         raise ValueError(f"the drive spans more than {(1 << 21) * voxel:g} m at voxel {voxel} m")

@@ -14,7 +14,8 @@ the unexplained returns (a triangle whose three corners are unexplained), in wor
 
 Its reflectance is each vertex's own return inverted through the recovered sensor
 (:func:`moving_rho`): the sensor reports ``max(G_l · ρ · cos θ · r(d) - b, 0)``
-(:mod:`.inversion`), so ``ρ = (y + b) / (G_l · r(d) · cos θ)``, with ``cos θ`` taken on the
+(:mod:`.inversion`), so ``ρ = (y + b) / (G_l · r(d) · cos θ)`` (no lower than the sensor
+detects: :meth:`.inversion.SensorFit.reflectance_of`), with ``cos θ`` taken on the
 vertex normal Mitsuba computes for the mesh (the normal the renderer shades the vertex with:
 re-scanned from where it was measured, the vertex gives back its return's intensity).
 Casting each return into the mesh, as the inversion's samples are cast, would lose about a
@@ -117,7 +118,6 @@ def moving_rho(
     """
     import mitsuba as mi
 
-    from .inversion import RHO_MAX
     from .surfaces import SHAPE_ID
 
     idx = moving.returns
@@ -126,8 +126,5 @@ def moving_rho(
     params = mi.traverse(load_scene(moving.mesh))
     normals = np.asarray(params[f"{SHAPE_ID}.vertex_normals"].numpy(), np.float64).reshape(-1, 3)
     cos = np.abs(np.einsum("ij,ij->i", normals, rays.direction[idx]))
-    ring = rays.ring[idx]
-    unit = sensor.gains[ring] * sensor.response_at(rays.range_m[idx], ring) * cos
-    y = np.asarray(intensity, np.float64)[idx] + sensor.offset
-    rho = np.where(unit > 0, y / np.where(unit > 0, unit, 1.0), RHO_MAX)
-    return np.clip(rho, 0.0, RHO_MAX)
+    y = np.asarray(intensity, np.float64)[idx]
+    return sensor.reflectance_of(y, rays.ring[idx], rays.range_m[idx], cos)

@@ -67,6 +67,7 @@ class ReconstructOptions:
     carve_passes: int = 2
     transient_frames: int = 3
     moving: bool = True
+    splats: bool = True
     prior: bool = True
     weights: str | None = None
     seed: int = 0
@@ -134,6 +135,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     from .frames import load_frames
     from .heldout_scans import evaluate_heldout
     from .invert import invert
+    from .mesh import merge_meshes
     from .write import write_outputs
 
     clock = _Clock()
@@ -141,14 +143,15 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("read")
     poses = drive_poses(drive, frames, progress=options.progress)
     clock.lap("poses")
-    mesh, carved, transient = build_surfaces(drive, frames, poses, options, stage)
+    mesh, splats, carved, transient = build_surfaces(drive, frames, poses, options, stage)
     clock.lap("mesh")
-    inv = invert(drive, frames, poses, mesh, options, stage)
+    inv = invert(drive, frames, poses, mesh, options, stage, splats=splats)
     clock.lap("fit")
-    scene_path = write_outputs(stage, drive, frames, poses, mesh, inv)
+    surfaces = merge_meshes([mesh, splats.mesh])  # inv's ρ: the mesh's vertices, then the splats'
+    scene_path = write_outputs(stage, drive, frames, poses, surfaces, inv)
     clock.lap("write")
     held = evaluate_heldout(
-        scene_path, drive, frames, poses, inv, stage, mesh=mesh, moving=options.moving
+        scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving
     )
     clock.lap("evaluate")
     report = {
@@ -161,8 +164,13 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
         "mesh": {
             "vertices": len(mesh.vertices),
             "faces": len(mesh.faces),
-            "carved": carved,
+            "carved": carved["mesh"],
             "transient": transient,
+        },
+        "splats": {
+            "vertices": len(splats.mesh.vertices),
+            "faces": len(splats.mesh.faces),
+            "carved": carved["splats"],
         },
         "layout": {
             "elevation_deg": frames.layout.elevation_deg.tolist(),
