@@ -68,13 +68,15 @@ def build_parser():
         "--no-moving",
         action="store_true",
         help="held-out frames see the static surfaces only (default: with the surfaces that "
-        "moved, as the training frame nearest in time saw them)",
+        "moved, as the training frame nearest in time saw them, moved on at the velocity "
+        "another training frame gives them)",
     )
     p.add_argument(
         "--no-splats",
         action="store_true",
         help="no splats for the returns that the scans' meshes leave out (foliage, edges, "
-        "far surfaces; default: a square per return, its cell's size, facing its sensor)",
+        "far surfaces; default: one quad per such return off the mesh, its range-image cell "
+        "on its local plane)",
     )
     p.add_argument(
         "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"

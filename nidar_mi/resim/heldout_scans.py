@@ -13,8 +13,9 @@ Methods, all scored on the same matched returns of a frame:
 
 The re-simulated scans are the expected scans: no noise draw, detection where ``E >= T``. Each
 is cast into the static surfaces and, unless ``moving`` is off, the surfaces that moved as the
-training frame nearest in time saw them (:mod:`.moving`; their ρ per method: the returns
-inverted through the method's sensor, or the method's constant where it has none).
+training frame nearest in time saw them, each object moved on at the velocity a second
+training frame gives it (:mod:`.moving`; their ρ per method: the returns inverted through the
+method's sensor, or the method's constant where it has none).
 """
 
 from __future__ import annotations
@@ -150,20 +151,68 @@ def _mean(per_frame: dict) -> dict:
     return out
 
 
-def _moving_scene(j: int, drive: Drive, frames: Frames, poses, mesh, static, stage: str):
-    """``(scene, moving, rays)`` of training frame ``j``: the static surfaces with the surfaces
-    that moved as ``j`` saw them (:mod:`.moving`), or the static scene alone when it saw
-    nothing moving; its moving surfaces and its return rays."""
+def _frame_moving(j: int, frames: Frames, poses, static):
+    """``(moving, rays)`` of training frame ``j``: the surfaces that moved as it saw them
+    (:mod:`.moving`) and its return rays."""
     from .beam_rays import return_rays
-    from .build import scratch_scene
-    from .mesh import merge_meshes
     from .moving import moving_surfaces
 
     rays = return_rays(frames.xyz[j], frames.grid[j], frames.layout, poses[j], j)
     moving = moving_surfaces(frames.xyz[j], frames.grid[j], rays, static, j, wrap=not frames.cut)
-    if len(moving.mesh.faces) == 0:
-        return static, moving, rays
-    return scratch_scene(stage)(merge_meshes([mesh, moving.mesh])), moving, rays
+    return moving, rays
+
+
+class _Moving:
+    """The surfaces that moved, at each held-out frame's time (module docstring), the
+    training frames' moving surfaces and their ρ computed once."""
+
+    def __init__(self, drive: Drive, frames: Frames, poses, mesh, static, stage, variants):
+        from .build import scratch_scene
+
+        self.drive, self.frames, self.poses, self.mesh = drive, frames, poses, mesh
+        self.static, self.stage, self.variants = static, stage, variants
+        self.load = scratch_scene(stage)
+        self.train = [drive.index(i) for i in drive.train]
+        self.seen: dict[int, tuple] = {}
+
+    def _frame(self, j: int, inv):
+        """Training frame ``j``'s moving surfaces, rays and their ρ per method."""
+        from .moving import moving_rho
+
+        if j not in self.seen:
+            mv, rays = _frame_moving(j, self.frames, self.poses, self.static)
+            extra = {
+                name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load)
+                if fitted is not None and len(mv.mesh.faces)
+                else np.full(len(mv.returns), np.median(inv.rho))
+                for name, (_, _, fitted) in self.variants.items()
+            }
+            if len(self.seen) >= 3:  # memory: the last few frames only
+                self.seen.pop(next(iter(self.seen)))
+            self.seen[j] = (mv, rays, extra)
+        return self.seen[j]
+
+    def at(self, k: int, inv):
+        """``(scene, moving, extra, record)`` at held-out frame ``k``."""
+        from .mesh import Mesh, merge_meshes
+        from .moving import MAX_STEP_M, nearest_frame, partner_frame, track_shifts
+
+        j = nearest_frame(k, self.train)
+        mv, _, extra = self._frame(j, inv)
+        record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
+        if len(mv.mesh.faces) == 0:
+            return self.static, mv, extra, record
+        j2 = partner_frame(k, j, self.train)
+        vertices = mv.mesh.vertices
+        if j2 is not None:
+            target = self._frame(j2, inv)[0].mesh
+            shift = track_shifts(mv.mesh, target, MAX_STEP_M * abs(j2 - j))
+            vertices = vertices + shift * (k - j) / (j2 - j)
+            moved = np.linalg.norm(shift, axis=1) > 0
+            record.update(partner=self.drive.ids[j2], tracked=float(moved.mean()))
+        moved_mesh = Mesh(vertices, mv.mesh.faces)
+        scene = self.load(merge_meshes([self.mesh, moved_mesh]))
+        return scene, mv, extra, record
 
 
 def evaluate_heldout(
@@ -183,8 +232,7 @@ def evaluate_heldout(
 
     from ..io.kitti import write_kitti_bin
     from ..scene import load_scene
-    from .build import drop_scratch, scratch_scene
-    from .moving import moving_rho, nearest_frame
+    from .build import drop_scratch
     from .surfaces import RHO_KEY
 
     if not drive.holdout:
@@ -198,24 +246,13 @@ def evaluate_heldout(
     train = _training_world(drive, frames, poses)
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}
-    scratch = scratch_scene(stage)  # the moving meshes alone, for their vertex normals
-    built: dict[int, tuple] = {}  # training frame -> its scene, moving surfaces, rays, ρ
+    motion = _Moving(drive, frames, poses, mesh, static, stage, variants) if moving else None
     try:
         for fid in drive.holdout:
             k = drive.index(fid)
-            scene, mv, rays = static, None, None
-            if moving:
-                j = nearest_frame(k, [drive.index(i) for i in drive.train])
-                if j not in built:  # held-out frames with the same nearest frame share it
-                    scene, mv, rays = _moving_scene(j, drive, frames, poses, mesh, static, stage)
-                    extra = {
-                        name: moving_rho(mv, rays, frames.intensity[j], fitted, scratch)
-                        if fitted is not None and scene is not static
-                        else np.full(len(mv.returns), np.median(inv.rho))
-                        for name, (_, _, fitted) in variants.items()
-                    }
-                    built = {j: (scene, mv, rays, extra)}  # the last one only (memory)
-                scene, mv, rays, extra = built[j]
+            scene, record = static, None
+            if motion is not None:
+                scene, _, extra, record = motion.at(k, inv)
             params = mi.traverse(scene)
             scans = {}
             for name, (rho, cfg, _) in variants.items():
@@ -228,11 +265,8 @@ def evaluate_heldout(
             path = os.path.join(stage, "heldout", f"{fid}.bin")
             write_kitti_bin(path, sim, np.clip(sim_i, 0.0, 1.0))
             per_frame[fid] = _score_frame(k, scans, frames, poses, train)
-            if mv is not None:
-                per_frame[fid]["moving"] = {
-                    "from": drive.ids[mv.frame],
-                    "triangles": len(mv.mesh.faces),
-                }
+            if record is not None:
+                per_frame[fid]["moving"] = record
     finally:
         drop_scratch(stage)
     return {"frames": per_frame, "mean": _mean(per_frame)}

@@ -1,5 +1,5 @@
-"""Surfaces that moved, at a held-out frame's time: what the training frame nearest in time saw
-and the static surfaces lack.
+"""Surfaces that moved, at a held-out frame's time: what the training frame nearest in time
+saw and the static surfaces lack, moved on as far as it went by then.
 
 The reconstructed surfaces are static (:mod:`.build`): a vehicle that moved during the drive is
 left out (:mod:`.transient`) or kept where it stood at the drive's end. A held-out frame inside
@@ -12,6 +12,13 @@ gap across the surface ``|t - d| · max(|cos θ|, 0.05)`` at most
 inversion. The moving mesh is that frame's range-image mesh (:func:`.mesh.scan_triangles`) on
 the unexplained returns (a triangle whose three corners are unexplained), in world coordinates.
 
+Each of its objects (:func:`object_labels`) then moves at constant velocity: its translation to
+where a second training frame saw the surfaces that moved (:func:`partner_frame`: the nearest
+one on the held-out frame's other side, or, past the drive's ends, the one before the nearest)
+is found by ICP (:func:`track_shifts`) and scaled to the held-out frame's time (frame indices
+as time: a constant scan rate). An object not found again stays where it was seen (the
+zero-order model).
+
 Its reflectance is each vertex's own return inverted through the recovered sensor
 (:func:`moving_rho`): the sensor reports ``max(G_l · ρ · cos θ · r(d) - b, 0)``
 (:mod:`.inversion`), so ``ρ = (y + b) / (G_l · r(d) · cos θ)`` (no lower than the sensor
@@ -21,9 +28,7 @@ re-scanned from where it was measured, the vertex gives back its return's intens
 Casting each return into the mesh, as the inversion's samples are cast, would lose about a
 quarter of them: a ray through a mesh's vertex may pass between its triangles.
 
-This is the zero-order model of motion (a surface is where it was last or next seen); it adds
-nothing where nothing moved, and nothing past the drive's end, where the static surfaces
-already hold what the last frames saw.
+Nothing is added where nothing moved.
 """
 
 from __future__ import annotations
@@ -36,9 +41,26 @@ from .beam_rays import Rays
 from .mesh import Mesh, scan_triangles
 from .observations import ON_SURFACE_M
 
+#: Tracking an object between two frames (:func:`track_shifts`): its fewest vertices, the
+#: share of them that must land within TRACK_INLIER_M (m) of the other frame's, and the
+#: fastest motion tracked per frame step, m (3 m at 10 Hz: 108 km/h).
+TRACK_MIN_VERTICES = 20
+#: Surfaces that moved closer than this belong to one object (:func:`object_labels`), m; each
+#: object's translation starts from no motion and the TRACK_STARTS nearest objects of the
+#: other frame.
+OBJECT_GAP_M = 0.5
+TRACK_STARTS = 8
+TRACK_MIN_SHARE = 0.5
+TRACK_INLIER_M = 0.2
+MAX_STEP_M = 3.0
+
 __all__ = [
     "MovingSurfaces",
     "nearest_frame",
+    "partner_frame",
+    "object_labels",
+    "OBJECT_GAP_M",
+    "track_shifts",
     "unexplained_returns",
     "moving_surfaces",
     "moving_rho",
@@ -128,3 +150,87 @@ def moving_rho(
     cos = np.abs(np.einsum("ij,ij->i", normals, rays.direction[idx]))
     y = np.asarray(intensity, np.float64)[idx]
     return sensor.reflectance_of(y, rays.ring[idx], rays.range_m[idx], cos)
+
+
+def partner_frame(k: int, j: int, train) -> int | None:
+    """The second training frame that times the motion seen in frame ``j`` (the nearest to
+    held-out frame ``k``): the nearest one on ``k``'s other side when ``k`` lies between
+    training frames, else the nearest one on ``j``'s side away from ``k`` (the two before
+    ``k`` past the drive's end); None when there is none."""
+    train = [t for t in train if t != j]
+    side = [t for t in train if (t - k) * (j - k) < 0] if j != k else []
+    if not side:
+        side = [t for t in train if (t - j) * (k - j) < 0]
+    return min(side, key=lambda t: (abs(t - j), t)) if side else None
+
+
+def object_labels(mesh: Mesh, gap_m: float = OBJECT_GAP_M) -> np.ndarray:
+    """(V,) int: each vertex's object: the connected components of the mesh's triangles joined
+    wherever two vertices lie within ``gap_m`` (a vehicle's surfaces come in many pieces)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = len(mesh.vertices)
+    f = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    near = cKDTree(mesh.vertices).query_pairs(gap_m, output_type="ndarray") if n else []
+    near = np.asarray(near, dtype=np.int64).reshape(-1, 2)
+    a = np.concatenate([f[:, 0], f[:, 1], f[:, 2], near[:, 0]])
+    b = np.concatenate([f[:, 1], f[:, 2], f[:, 0], near[:, 1]])
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def track_shifts(moving: Mesh, target: Mesh, max_shift_m: float) -> np.ndarray:
+    """(V,) 3-vectors: how far each object of ``moving`` went to be seen as ``target`` (the
+    surfaces that moved, as the partner frame saw them), 0 where it is not found.
+
+    Per object (:func:`object_labels`, at least :data:`TRACK_MIN_VERTICES` vertices), a
+    translation, started at no motion and at the :data:`TRACK_STARTS` objects of ``target``
+    nearest to it within ``max_shift_m`` (centroid to centroid), refined by point-to-point ICP (the median
+    offset to the nearest target vertex within a shrinking radius, Besl and McKay, 1992,
+    translation only); kept when at least :data:`TRACK_MIN_SHARE` of its vertices end within
+    :data:`TRACK_INLIER_M` of a target vertex (the best start), and no farther than
+    ``max_shift_m``.
+    """
+    from scipy.spatial import cKDTree
+
+    shifts = np.zeros((len(moving.vertices), 3))
+    if len(target.vertices) == 0 or len(moving.vertices) == 0:
+        return shifts
+    tree = cKDTree(target.vertices)
+    t_lab = object_labels(target)
+    t_centre = np.stack([np.bincount(t_lab, target.vertices[:, i]) for i in range(3)], 1)
+    t_centre /= np.bincount(t_lab)[:, None]
+    labels = object_labels(moving)
+    for obj in np.flatnonzero(np.bincount(labels) >= TRACK_MIN_VERTICES):
+        idx = np.flatnonzero(labels == obj)
+        p = moving.vertices[idx]
+        starts = t_centre - p.mean(axis=0)
+        far = np.linalg.norm(starts, axis=1)
+        near = np.argsort(far)[:TRACK_STARTS]
+        starts = [np.zeros(3), *starts[near[far[near] <= max_shift_m]]]
+        best, share = None, TRACK_MIN_SHARE
+        for start in starts:
+            s = _icp_translation(p, target.vertices, tree, start)
+            inside = np.mean(
+                tree.query(p + s, distance_upper_bound=TRACK_INLIER_M)[0] <= TRACK_INLIER_M
+            )
+            if inside >= share and np.linalg.norm(s) <= max_shift_m:
+                best, share = s, inside
+        if best is not None:
+            shifts[idx] = best
+    return shifts
+
+
+def _icp_translation(p: np.ndarray, q: np.ndarray, tree, start: np.ndarray) -> np.ndarray:
+    """The translation moving points ``p`` onto points ``q`` (``tree`` over them), from
+    ``start``: the median offset to the nearest point, within radii shrinking to 0.2 m."""
+    s = np.asarray(start, dtype=np.float64).copy()
+    for radius in (1.0, 0.6, 0.4, 0.3, 0.2, 0.2, 0.2):
+        d, i = tree.query(p + s, distance_upper_bound=radius)
+        ok = np.isfinite(d)
+        if ok.sum() < 3:
+            break
+        s += np.median(q[i[ok]] - (p[ok] + s), axis=0)
+    return s

@@ -9,9 +9,9 @@ Output folder (published whole, with the record of :data:`OWNER`)::
                            intensity on the real sensor's [0, 1] scale; LiDAR frame; the
                            drive's coverage only, the beams of the mounting's shadow
                            dropped: :mod:`.shadow`; the expected scan: detected where E >= T,
-                           intensity max(E - b, 0) without noise; the static surfaces and
-                           those that moved, as the training frame nearest in time saw them:
-                           :mod:`.moving`)
+                           intensity max(E - b, 0) without noise; the static surfaces, the
+                           splats (:mod:`.splats`) and those that moved, as the training
+                           frame nearest in time saw them, moved on: :mod:`.moving`)
     OUT/report.json        inputs, timings, the recovered sensor and its shadow, the fit's
                            residuals, the held-out metrics of the re-simulation and of the
                            baselines

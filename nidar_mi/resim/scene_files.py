@@ -4,7 +4,8 @@ the recovered sensor, and another sensor to put in its place.
 Files (all in one folder, referenced relative to ``scene.xml``)::
 
     scene.xml              the surfaces and ``<include filename="sensor_$sensor.xml"/>``
-    surfaces.ply           the mesh; vertex properties ``rho_0`` (the recovered reflectance at
+    surfaces.ply           the mesh and the splats (:mod:`.splats`, their vertices last); vertex
+                           properties ``rho_0`` (the recovered reflectance at
                            the sensor's wavelength: Mitsuba's attribute ``vertex_rho``) and
                            ``rho1550_0`` (the same surface at 1550 nm: ``vertex_rho1550``)
     sensor_recovered.xml   the recovered sensor (``lidar``: its per-laser layout in

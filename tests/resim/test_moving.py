@@ -166,3 +166,58 @@ def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
     np.testing.assert_allclose(got, 0.03 / unit, rtol=1e-5)
     empty = MovingSurfaces(4, Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), np.zeros(0, int))
     assert moving_rho(empty, rays, y, sensor, load).shape == (0,)
+
+
+def test_the_partner_frame_times_the_motion_from_the_other_side_or_before():
+    from nidar_mi.resim.moving import partner_frame
+
+    train = [0, 1, 2, 3, 4, 6, 7, 10]
+    # between training frames: the nearest on the held-out frame's other side
+    assert partner_frame(5, 4, train) == 6 and partner_frame(8, 7, train) == 10
+    assert partner_frame(9, 10, train) == 7
+    # past either end: the nearest on the nearest frame's side away from it
+    assert partner_frame(12, 10, train) == 7 and partner_frame(-2, 0, train) == 1
+    assert partner_frame(5, 3, [3]) is None
+
+
+def _blob(centre, n=12, seed=0):
+    """A curved patch of (n x n) vertices around ``centre``, its grid's triangles."""
+    from nidar_mi.resim.mesh import Mesh
+
+    u, v = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-0.6, 0.6, n), indexing="ij")
+    xyz = np.stack([u, 0.3 * u**2 + 0.1 * v, v], -1).reshape(-1, 3) + centre
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = (
+        idx[:-1, :-1].ravel(),
+        idx[1:, :-1].ravel(),
+        idx[:-1, 1:].ravel(),
+        idx[1:, 1:].ravel(),
+    )
+    return Mesh(xyz, np.concatenate([np.column_stack([a, b, c]), np.column_stack([b, d, c])]))
+
+
+def test_objects_are_found_where_they_went():
+    """Two objects seen again 1.4 m and 0.5 m on (part of the first seen, a third object
+    beside them): each one's translation within 1 cm; an object not seen again, and one that
+    went farther than the fastest motion allowed, stay put."""
+    from nidar_mi.resim.mesh import Mesh, compact, merge_meshes
+    from nidar_mi.resim.moving import object_labels, track_shifts
+
+    car, van, gone = _blob([5.0, 0, 0]), _blob([0.0, 6, 0]), _blob([-8.0, -8, 0])
+    moving = merge_meshes([car, van, gone])
+    assert len(np.unique(object_labels(moving))) == 3
+    go_car, go_van = np.array([1.4, 0.2, 0.0]), np.array([0.0, -0.5, 0.05])
+    half = Mesh(car.vertices + go_car, car.faces[: len(car.faces) // 2])  # its front alone
+    target = merge_meshes(
+        [compact(half), Mesh(van.vertices + go_van, van.faces), _blob([9.0, 9, 0])]
+    )
+    got = track_shifts(moving, target, max_shift_m=3.0)
+    n = len(car.vertices)
+    np.testing.assert_allclose(got[:n], np.tile(go_car, (n, 1)), atol=0.01)
+    np.testing.assert_allclose(got[n : 2 * n], np.tile(go_van, (n, 1)), atol=0.01)
+    np.testing.assert_array_equal(got[2 * n :], 0.0)
+    slow = track_shifts(moving, target, max_shift_m=1.0)
+    np.testing.assert_array_equal(slow[:n], 0.0)  # 1.4 m: too far
+    np.testing.assert_allclose(slow[n : 2 * n], np.tile(go_van, (n, 1)), atol=0.01)
+    empty = Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    np.testing.assert_array_equal(track_shifts(moving, empty, 3.0), 0.0)
