@@ -157,13 +157,13 @@ def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
 
     # ρ = (y + b) / (G_l r(d) cos θ), cos θ on the plane's normal: float32 rounding
     np.testing.assert_allclose(moving_rho(moving, rays, y, sensor, load), rho, rtol=1e-5)
-    # a return read as 0 says E <= b, and it was detected: E is taken as T + 2 σ_n where that
-    # is higher (here 0.03 against b = 0.02), over its unit
+    # a return read as 0 says E <= b, and it was detected (E >= T): E = max(b, 1.01 T), here
+    # b = 0.02, over its unit
     y0 = y.copy()
     y0[used[0]] = 0.0
     unit = sensor.gains[rays.ring[used[0]]] * sensor.response_at(d[0]) * cos[0]
     got = moving_rho(moving, rays, y0, sensor, load)[0]
-    np.testing.assert_allclose(got, 0.03 / unit, rtol=1e-5)
+    np.testing.assert_allclose(got, 0.02 / unit, rtol=1e-5)
     empty = MovingSurfaces(4, Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), np.zeros(0, int))
     assert moving_rho(empty, rays, y, sensor, load).shape == (0,)
 
