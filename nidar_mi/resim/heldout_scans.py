@@ -174,9 +174,10 @@ class _Moving:
         self.load = scratch_scene(stage)
         self.train = [drive.index(i) for i in drive.train]
         self.seen: dict[int, tuple] = {}
+        self.shifts: dict[tuple[int, int], np.ndarray] = {}
 
     def _frame(self, j: int, inv):
-        """Training frame ``j``'s moving surfaces, rays and their ρ per method."""
+        """Training frame ``j``'s moving surfaces and their ρ per method."""
         from .moving import moving_rho
 
         if j not in self.seen:
@@ -189,30 +190,33 @@ class _Moving:
             }
             if len(self.seen) >= 3:  # memory: the last few frames only
                 self.seen.pop(next(iter(self.seen)))
-            self.seen[j] = (mv, rays, extra)
+            self.seen[j] = (mv, extra)
         return self.seen[j]
 
     def at(self, k: int, inv):
-        """``(scene, moving, extra, record)`` at held-out frame ``k``."""
+        """``(scene, extra, record)`` at held-out frame ``k``: the static surfaces with those
+        that moved, their ρ per method, and what ``report.json`` records of them."""
         from .mesh import Mesh, merge_meshes
         from .moving import MAX_STEP_M, nearest_frame, partner_frame, track_shifts
 
         j = nearest_frame(k, self.train)
-        mv, _, extra = self._frame(j, inv)
+        mv, extra = self._frame(j, inv)
         record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
         if len(mv.mesh.faces) == 0:
-            return self.static, mv, extra, record
+            return self.static, extra, record
         j2 = partner_frame(k, j, self.train)
         vertices = mv.mesh.vertices
         if j2 is not None:
-            target = self._frame(j2, inv)[0].mesh
-            shift = track_shifts(mv.mesh, target, MAX_STEP_M * abs(j2 - j))
+            if (j, j2) not in self.shifts:  # held-out frames between the same two share it
+                target = self._frame(j2, inv)[0].mesh
+                self.shifts = {(j, j2): track_shifts(mv.mesh, target, MAX_STEP_M * abs(j2 - j))}
+            shift = self.shifts[(j, j2)]
             vertices = vertices + shift * (k - j) / (j2 - j)
             moved = np.linalg.norm(shift, axis=1) > 0
             record.update(partner=self.drive.ids[j2], tracked=float(moved.mean()))
         moved_mesh = Mesh(vertices, mv.mesh.faces)
         scene = self.load(merge_meshes([self.mesh, moved_mesh]))
-        return scene, mv, extra, record
+        return scene, extra, record
 
 
 def evaluate_heldout(
@@ -252,7 +256,7 @@ def evaluate_heldout(
             k = drive.index(fid)
             scene, record = static, None
             if motion is not None:
-                scene, _, extra, record = motion.at(k, inv)
+                scene, extra, record = motion.at(k, inv)
             params = mi.traverse(scene)
             scans = {}
             for name, (rho, cfg, _) in variants.items():
