@@ -149,13 +149,15 @@ class SensorFit:
 
         The sensor reports ``max(E − b, 0)`` with ``E = G_l · ρ · cos θ · r(d)``, so ``E = y +
         b``; but a return read as 0 says only ``E <= b``, and a return was detected, so ``E``
-        is taken no lower than the threshold ``T`` (1 % above it, against rounding): the
-        expected scan detects it again and reads it as about 0. ``ρ = max(y + b, 1.01 T) /
-        (G_l · r(d) · cos θ)`` (RHO_MAX where the denominator is 0). All (N,): ``y`` on the
-        sensor's scale, ``ring`` its laser, ``d`` range (m), ``cos`` = ``|cos θ|``."""
+        is taken no lower than twice the threshold ``T``: the expected scan detects it again
+        from poses where ``cos θ · r(d)`` is down to half, and reads it as about 0 (``T`` is
+        where the fit puts it, near 0, when ``b <= T``; above ``T`` the offset already holds
+        ``E = b``). ``ρ = max(y + b, 2 T) / (G_l · r(d) · cos θ)`` (RHO_MAX where the
+        denominator is 0). All (N,): ``y`` on the sensor's scale, ``ring`` its laser, ``d``
+        range (m), ``cos`` = ``|cos θ|``."""
         ring = np.asarray(ring, dtype=np.int64)
         unit = self.gains[ring] * self.response_at(d, ring) * np.asarray(cos, np.float64)
-        floor = 1.01 * self.threshold
+        floor = 2.0 * self.threshold
         num = np.maximum(np.asarray(y, np.float64) + self.offset, floor)
         rho = np.where(unit > 0, num / np.where(unit > 0, unit, 1.0), RHO_MAX)
         return np.clip(rho, 0.0, RHO_MAX)

@@ -157,7 +157,7 @@ def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
 
     # ρ = (y + b) / (G_l r(d) cos θ), cos θ on the plane's normal: float32 rounding
     np.testing.assert_allclose(moving_rho(moving, rays, y, sensor, load), rho, rtol=1e-5)
-    # a return read as 0 says E <= b, and it was detected (E >= T): E = max(b, 1.01 T), here
+    # a return read as 0 says E <= b, and it was detected (E >= T): E = max(b, 2 T), here
     # b = 0.02, over its unit
     y0 = y.copy()
     y0[used[0]] = 0.0
