@@ -11,7 +11,7 @@ import numpy as np
 from .beam_rays import concat, return_rays
 from .drive_folder import Drive
 from .frames import Frames
-from .mesh import Mesh, fuse_meshes, scan_mesh
+from .mesh import Mesh, compact, fuse_meshes, scan_triangles
 
 __all__ = [
     "drive_poses",
@@ -69,28 +69,26 @@ def drop_scratch(stage: str) -> None:
         os.remove(path)
 
 
-def drive_splats(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh):
-    """The splats of every training frame's returns that its range-image mesh left out and
-    that lie off the fused ``mesh`` (:mod:`.splats`), world coordinates."""
+def drive_splats(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, unmeshed: list):
+    """The splats of every training frame's returns that its range-image mesh left out
+    (``unmeshed``: per training frame, in ``drive.train``'s order, (N,) bool) and that lie off
+    the fused ``mesh`` (:mod:`.splats`), world coordinates."""
     from scipy.spatial import cKDTree
 
-    from .mesh import scan_triangles
     from .splats import (
         OFF_MESH_M,
         Splats,
         local_normals,
         ring_spacing_rad,
         scan_splats,
-        unmeshed_returns,
     )
 
     spacing = ring_spacing_rad(frames.layout.elevation_deg)
     tree = cKDTree(mesh.vertices)
     parts = []
-    for fid in drive.train:
+    for fid, alone in zip(drive.train, unmeshed):
         k = drive.index(fid)
         xyz, grid, pose = frames.xyz[k], frames.grid[k], poses[k]
-        alone = unmeshed_returns(len(xyz), scan_triangles(xyz, grid, wrap=not frames.cut))
         world = xyz @ pose[:3, :3].T + pose[:3, 3]
         alone &= tree.query(world, distance_upper_bound=OFF_MESH_M)[0] > OFF_MESH_M
         normals = local_normals(xyz, np.flatnonzero(alone))
@@ -121,19 +119,23 @@ def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, sta
         and ``splats``) and the transient triangles removed (:mod:`.transient`).
     """
     from ..errors import NidarError
-    from .splats import Splats
+    from .splats import Splats, unmeshed_returns
 
-    meshes = []
+    meshes, unmeshed = [], []
     for fid in drive.train:
         k = drive.index(fid)
-        m = scan_mesh(frames.xyz[k], frames.grid[k], wrap=not frames.cut)
-        meshes.append(m.transformed(poses[k]))
+        xyz = np.asarray(frames.xyz[k], dtype=np.float64)
+        tris = scan_triangles(xyz, frames.grid[k], wrap=not frames.cut)
+        meshes.append(compact(Mesh(xyz, tris)).transformed(poses[k]))  # scan_mesh's mesh
+        unmeshed.append(unmeshed_returns(len(xyz), tris))
     mesh = fuse_meshes(meshes, options.voxel_m)
     if len(mesh.faces) == 0:
         raise NidarError(f"{drive.root}: the training scans gave no surface to mesh")
     rays = None
     carved = {"mesh": [], "splats": []}
-    splats = drive_splats(drive, frames, poses, mesh) if options.splats else Splats.join([])
+    splats = Splats.join([])
+    if options.splats:
+        splats = drive_splats(drive, frames, poses, mesh, unmeshed)
     if options.carve_passes > 0:
         from .carve import carve, carved_faces
 

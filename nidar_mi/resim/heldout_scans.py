@@ -175,23 +175,33 @@ class _Moving:
         self.train = [drive.index(i) for i in drive.train]
         self.seen: dict[int, tuple] = {}
         self.shifts: dict[tuple[int, int], np.ndarray] = {}
+        self.rho: tuple[int, dict] = (-1, {})
 
-    def _frame(self, j: int, inv):
-        """Training frame ``j``'s moving surfaces and their ρ per method."""
-        from .moving import moving_rho
-
+    def _frame(self, j: int):
+        """Training frame ``j``'s moving surfaces and return rays."""
         if j not in self.seen:
-            mv, rays = _frame_moving(j, self.frames, self.poses, self.static)
-            extra = {
-                name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load)
-                if fitted is not None and len(mv.mesh.faces)
-                else np.full(len(mv.returns), np.median(inv.rho))
-                for name, (_, _, fitted) in self.variants.items()
-            }
             if len(self.seen) >= 3:  # memory: the last few frames only
                 self.seen.pop(next(iter(self.seen)))
-            self.seen[j] = (mv, extra)
+            self.seen[j] = _frame_moving(j, self.frames, self.poses, self.static)
         return self.seen[j]
+
+    def _rho(self, j: int, inv) -> dict:
+        """Frame ``j``'s moving surfaces' ρ per method (only the frame they come from needs
+        them, not the frame that times their motion)."""
+        from .moving import moving_rho
+
+        if self.rho[0] != j:
+            mv, rays = self._frame(j)
+            self.rho = (
+                j,
+                {
+                    name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load)
+                    if fitted is not None and len(mv.mesh.faces)
+                    else np.full(len(mv.returns), np.median(inv.rho))
+                    for name, (_, _, fitted) in self.variants.items()
+                },
+            )
+        return self.rho[1]
 
     def at(self, k: int, inv):
         """``(scene, extra, record)`` at held-out frame ``k``: the static surfaces with those
@@ -200,7 +210,7 @@ class _Moving:
         from .moving import MAX_STEP_M, nearest_frame, partner_frame, track_shifts
 
         j = nearest_frame(k, self.train)
-        mv, extra = self._frame(j, inv)
+        mv, extra = self._frame(j)[0], self._rho(j, inv)
         record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
         if len(mv.mesh.faces) == 0:
             return self.static, extra, record
@@ -208,7 +218,7 @@ class _Moving:
         vertices = mv.mesh.vertices
         if j2 is not None:
             if (j, j2) not in self.shifts:  # held-out frames between the same two share it
-                target = self._frame(j2, inv)[0].mesh
+                target = self._frame(j2)[0].mesh
                 self.shifts = {(j, j2): track_shifts(mv.mesh, target, MAX_STEP_M * abs(j2 - j))}
             shift = self.shifts[(j, j2)]
             vertices = vertices + shift * (k - j) / (j2 - j)
