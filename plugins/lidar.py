@@ -141,6 +141,14 @@ class LidarSensor(mi.Sensor):
            180; an interval across ±180° is two triples); on every path, in any weather
            (recovered by ``python -m nidar_mi.reconstruct``)
          - none
+       * - ``laser_range_offsets``
+         - string
+         - comma-separated per-laser range offsets o_r in m, |o_r| <= 1, one per ring (ring 0
+           the highest): a return of ring r reports its range as d + o_r (no lower than 0;
+           each laser's own timing bias, what a Velodyne's per-laser distance correction
+           leaves; recovered by ``python -m nidar_mi.reconstruct``); detection, intensity and
+           the range gates read d
+         - all 0
        * - ``range_min``
          - float
          - minimum range in m, >= 0

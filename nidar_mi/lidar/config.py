@@ -54,6 +54,8 @@ LAYOUTS = ("uniform", "per_laser")
 SPINS = ("cw", "ccw")
 #: Largest ``beam_sample_quality`` (1 + 3·q·(q-1) sub-rays per beam: 397 at 12).
 MAX_SAMPLE_QUALITY = 12
+#: Largest per-laser range offset (``laser_range_offsets``), m.
+MAX_RANGE_OFFSET_M = 1.0
 
 #: XML parameter names a ``lidar`` sensor reads (``to_world`` is read by Mitsuba itself).
 PARAMETERS = (
@@ -75,6 +77,7 @@ PARAMETERS = (
     "intensity_offset",
     "laser_offsets",
     "laser_shadow",
+    "laser_range_offsets",
     "range_min",
     "range_max",
     "atmospheric_extinction",
@@ -132,6 +135,7 @@ class LidarConfig:
     intensity_offset: float = 0.0
     laser_offsets: tuple[float, ...] | None = None
     laser_shadow: tuple[tuple[int, float, float], ...] | None = None
+    laser_range_offsets: tuple[float, ...] | None = None
     table: LaserTable | None = None
 
     @property
@@ -254,6 +258,10 @@ class LidarConfig:
         if v.laser_shadow is not None and max(r for r, _, _ in v.laser_shadow) >= len(elevations):
             why = f"names a laser past the last ({len(elevations) - 1})"
             raise fail("laser_shadow", why)
+        offsets = v.laser_range_offsets
+        if offsets is not None and len(offsets) != len(elevations):
+            why = f"needs one offset per laser ({len(elevations)}, got {len(offsets)})"
+            raise fail("laser_range_offsets", why)
         shapes = v.laser_range_response
         if shapes is not None:
             if v.range_response is None:
@@ -496,6 +504,10 @@ class SensorParameters(BaseModel):
     ] = None
     laser_shadow: Annotated[
         tuple[tuple[int, float, float], ...] | None, BeforeValidator(_shadow)
+    ] = None
+    laser_range_offsets: Annotated[
+        tuple[Annotated[float, Field(ge=-MAX_RANGE_OFFSET_M, le=MAX_RANGE_OFFSET_M)], ...] | None,
+        BeforeValidator(_per_laser(f"in [-{MAX_RANGE_OFFSET_M:g}, {MAX_RANGE_OFFSET_M:g}] m")),
     ] = None
     range_min: Annotated[_Number, Field(ge=0.0)]
     range_max: Annotated[_Number, Field(gt=0.0), AfterValidator(_below_range_max)]

@@ -190,6 +190,7 @@ def _result(ctx, pose, poses_per_column, labels) -> ScanResult:
         _drop_materials(layer, bad)
         if shadow is not None:
             _drop(layer, shadow & layer.valid)
+        _offset_ranges(layer, cfg)
     _warn_rgb_materials(tables, cfg, np.unique(np.concatenate(out.materials_hit)))
     first = layers[0]
     return ScanResult(
@@ -1027,6 +1028,16 @@ def _drop(layer: ReturnLayer, drop: np.ndarray) -> None:
         layer.valid = layer.valid & ~drop
         layer.range = np.where(drop, 0.0, layer.range).astype(np.float32)
         layer.intensity = np.where(drop, 0.0, layer.intensity).astype(np.float32)
+
+
+def _offset_ranges(layer: ReturnLayer, cfg: LidarConfig) -> None:
+    """Add each laser's ``laser_range_offsets`` (m) to the range its returns report, no lower
+    than 0 (the detection, the intensity and the range gates read the true distance)."""
+    if cfg.laser_range_offsets is None:
+        return
+    off = np.asarray(cfg.laser_range_offsets, dtype=np.float64)[:, None]  # (R, 1)
+    moved = np.maximum(layer.range + off, 0.0)
+    layer.range = np.where(layer.valid, moved, layer.range).astype(np.float32)
 
 
 def _warn_nonfinite(cfg: LidarConfig, names: list[str], materials: np.ndarray) -> np.ndarray:
