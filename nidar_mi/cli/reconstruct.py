@@ -79,6 +79,12 @@ def build_parser():
         "on its local plane)",
     )
     p.add_argument(
+        "--no-range-offsets",
+        action="store_true",
+        help="no per-laser range offsets (default: each laser's offset recovered from the "
+        "training scans, taken out of their returns and written into the recovered sensor)",
+    )
+    p.add_argument(
         "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"
     )
     p.add_argument("--weights", default=None, help="NIDAR weights folder (default: shipped)")
@@ -133,6 +139,7 @@ def main(argv=None) -> int:
             transient_frames=args.transient_frames,
             moving=not args.no_moving,
             splats=not args.no_splats,
+            range_offsets=not args.no_range_offsets,
             prior=not args.no_prior,
             weights=args.weights,
             seed=check_seed(args.seed),

@@ -68,6 +68,7 @@ class ReconstructOptions:
     transient_frames: int = 3
     moving: bool = True
     splats: bool = True
+    range_offsets: bool = True
     prior: bool = True
     weights: str | None = None
     seed: int = 0
@@ -131,11 +132,12 @@ class _Clock:
 
 def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     from ..io.atomic import atomic_write_json
-    from .build import build_surfaces, drive_poses
+    from .build import build_surfaces, drive_poses, drop_scratch, scratch_scene
     from .frames import load_frames
     from .heldout_scans import evaluate_heldout
     from .invert import invert
     from .mesh import merge_meshes
+    from .range_offsets import corrected_frames, fit_range_offsets
     from .write import write_outputs
 
     clock = _Clock()
@@ -143,12 +145,19 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("read")
     poses = drive_poses(drive, frames, progress=options.progress)
     clock.lap("poses")
+    offsets = None
+    if options.range_offsets:  # the held-out frames' returns stay as measured
+        train = [drive.index(i) for i in drive.train]
+        offsets = fit_range_offsets(frames, poses, train, scratch_scene(stage), options.voxel_m)
+        drop_scratch(stage)
+        frames = corrected_frames(frames, train, offsets.offsets_m)
+        clock.lap("range_offsets")
     mesh, splats, carved, transient = build_surfaces(drive, frames, poses, options, stage)
     clock.lap("mesh")
     inv = invert(drive, frames, poses, mesh, options, stage, splats=splats)
     clock.lap("fit")
     surfaces = merge_meshes([mesh, splats.mesh])  # inv's ρ: the mesh's vertices, then the splats'
-    scene_path = write_outputs(stage, drive, frames, poses, surfaces, inv)
+    scene_path = write_outputs(stage, drive, frames, poses, surfaces, inv, range_offsets=offsets)
     clock.lap("write")
     held = evaluate_heldout(
         scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving
@@ -176,6 +185,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
             "elevation_deg": frames.layout.elevation_deg.tolist(),
             "vertical_offset_m": frames.layout.vertical_offset_m.tolist(),
         },
+        "range_offsets": None if offsets is None else offsets.summary(),
         "fit": inv.summary(),
         "shadow": inv.shadow.summary(),
         "heldout": held,

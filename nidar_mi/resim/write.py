@@ -18,9 +18,12 @@ __all__ = ["sensor_params", "write_outputs", "LASER_PRESET"]
 LASER_PRESET = "hdl64e"
 
 
-def sensor_params(frames: Frames, s: SensorFit, *, laser_gains: bool = True, shadow=()) -> dict:
+def sensor_params(
+    frames: Frames, s: SensorFit, *, laser_gains: bool = True, shadow=(), range_offsets=None
+) -> dict:
     """The ``lidar`` plugin's parameters of the recovered sensor (``shadow``: its
-    ``laser_shadow`` intervals, :mod:`.shadow`)."""
+    ``laser_shadow`` intervals, :mod:`.shadow`; ``range_offsets``: (R,) its
+    ``laser_range_offsets``, m, :mod:`.range_offsets`)."""
     from .scene_files import LAYOUT
     from .shadow import shadow_value
 
@@ -45,11 +48,16 @@ def sensor_params(frames: Frames, s: SensorFit, *, laser_gains: bool = True, sha
             )
     if shadow:
         params["laser_shadow"] = shadow_value(shadow)
+    if range_offsets is not None:
+        params["laser_range_offsets"] = ", ".join(f"{o:.5f}" for o in range_offsets)
     return params
 
 
-def write_outputs(stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, inv) -> str:
-    """Write the scene and ``poses.txt`` into ``stage``; returns the scene file's path."""
+def write_outputs(
+    stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, inv, range_offsets=None
+) -> str:
+    """Write the scene and ``poses.txt`` into ``stage``; returns the scene file's path
+    (``range_offsets``: the recovered :class:`.range_offsets.RangeOffsets` or None)."""
     from ..io.kitti import write_kitti_poses
     from ..lidar.layouts import preset_table
     from .laser_layout import write_velodyne_yaml
@@ -62,7 +70,9 @@ def write_outputs(stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, i
     ids = table.laser_id if frames.layout.rings == table.rings else range(frames.layout.rings)
     write_velodyne_yaml(os.path.join(stage, LAYOUT), frames.layout, list(ids))
     shadow = inv.shadow.intervals
-    recovered = SensorXml("lidar", sensor_params(frames, inv.sensor, shadow=shadow), np.eye(4))
+    offsets = None if range_offsets is None else range_offsets.offsets_m
+    params = sensor_params(frames, inv.sensor, shadow=shadow, range_offsets=offsets)
+    recovered = SensorXml("lidar", params, np.eye(4))
     preset = SensorXml(
         "lidar",
         {"preset": "$preset", "wavelength": "$wavelength", "intensity_mode": "compensated"},
