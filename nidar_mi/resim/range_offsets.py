@@ -20,13 +20,14 @@ grazing incidence the ridges that the offsets themselves leave in the fused mesh
 along the ray: on the rendered drive of :mod:`.synthetic` a laser that sees the road at
 ``cos θ = 0.22`` and little else came back 62 mm off with 0.3 as the bound, 8 mm with 0.7
 (the bound chosen there and on the room of ``tests/resim/test_range_offsets.py``, before any
-real drive was run with it; with no offsets in the renderer the same two lasers come back 5
+real drive was run with it; with no offsets in the renderer two lasers beside it come back 5
 and 9 mm off, the others within 0.5 mm). Leaving out the hits on the mesh's creases, as the
 inversion's sensor samples do, takes those two to 0 there, but a real drive's fused mesh is
-rough: it left 37 of `r0064`'s 64 lasers with too few returns, and was not kept. The fused mesh holds each return itself (its vertices are means
-over 0.1 m cubes), so one round finds part of the offset; the returns are corrected
-(:func:`corrected_returns`: ``d - o_r`` along each return's ray) and the fit repeated,
-:data:`ROUNDS` rounds. At most :data:`MAX_FRAMES` training frames, evenly spread, take part.
+rough: it left 37 of ``r0064``'s 64 lasers with too few returns, and was not kept. The fused
+mesh holds each return itself (its vertices are means over 0.1 m cubes), so one round finds
+part of the offset; the returns are corrected (:func:`corrected_returns`: ``d - o_r`` along
+each return's ray) and the fit repeated, :data:`ROUNDS` rounds. At most :data:`MAX_FRAMES`
+training frames, evenly spread, take part.
 """
 
 from __future__ import annotations
