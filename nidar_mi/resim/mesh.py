@@ -177,6 +177,8 @@ def fuse_meshes(meshes: list[Mesh], voxel: float) -> Mesh:
     """
     merged = merge_meshes(meshes)
     verts, faces = merged.vertices, merged.faces
+    if len(verts) == 0:
+        return merged
     keys = np.floor((verts - verts.min(axis=0)) / voxel).astype(np.int64)
     if keys.max(initial=0) >= 1 << 21:
         raise ValueError(f"the drive spans more than {(1 << 21) * voxel:g} m at voxel {voxel} m")

@@ -149,7 +149,10 @@ def _round_residuals(frames: Frames, poses, idx, offsets, load, voxel_m: float):
     for k in idx:
         tris = scan_triangles(xyz[k], frames.grid[k], wrap=not frames.cut)
         meshes.append(compact(Mesh(xyz[k], tris)).transformed(poses[k]))
-    scene = load(fuse_meshes(meshes, voxel_m))
+    fused = fuse_meshes(meshes, voxel_m)
+    if len(fused.faces) == 0:  # nothing to cast into: no laser speaks (the surfaces step says why)
+        return np.zeros(0), np.zeros(0, np.int64)
+    scene = load(fused)
     res, ring = [], []
     for k in idx:
         rays = return_rays(xyz[k], frames.grid[k], frames.layout, poses[k], k)

@@ -122,3 +122,12 @@ def test_crease_vertices_are_the_box_edges_whatever_the_winding():
     flipped[::2] = flipped[::2, ::-1]
     np.testing.assert_array_equal(crease_vertices(Mesh(v, flipped)), on_bound >= 2)
     assert not crease_vertices(sides[0]).any()
+
+
+def test_fusing_meshes_without_a_vertex_gives_an_empty_mesh():
+    """Scans that make no triangle fuse into nothing, for the caller to refuse in one line."""
+    from nidar_mi.resim.mesh import Mesh, fuse_meshes
+
+    empty = Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    fused = fuse_meshes([empty, empty], 0.1)
+    assert fused.vertices.shape == (0, 3) and fused.faces.shape == (0, 3)

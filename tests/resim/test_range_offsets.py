@@ -113,3 +113,22 @@ def test_the_offsets_of_a_room_are_recovered(variant, tmp_path):
     clean, _ = _room_frames(np.full(64, -shift), centres, yaws)
     for k in range(6):
         np.testing.assert_allclose(fixed.xyz[k], clean.xyz[k], atol=0.006)
+
+
+def test_scans_without_a_surface_give_no_offsets():
+    """Two returns per scan make no triangle: every offset stays 0, no laser has a return (the
+    surfaces step refuses such a drive in one line)."""
+    from nidar_mi.resim.range_offsets import fit_range_offsets
+
+    frames, poses = _room_frames(np.zeros(64), np.zeros((2, 3)), np.zeros(2))
+    frames.xyz = [x[:2] for x in frames.xyz]
+    frames.grid = [
+        type(g)(g.ring[:2], g.column[:2], g.rings, g.columns, g.ordered) for g in frames.grid
+    ]
+
+    def load(mesh):  # never reached: there is no surface
+        raise AssertionError("no mesh to load")
+
+    fit = fit_range_offsets(frames, poses, range(2), load, 0.1)
+    np.testing.assert_array_equal(fit.offsets_m, np.zeros(64))
+    assert fit.returns.sum() == 0 and len(fit.steps_sd_m) == 3
