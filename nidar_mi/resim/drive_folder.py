@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["Drive", "open_drive", "parse_ids"]
+__all__ = ["Drive", "open_drive", "parse_ids", "evenly_spread"]
 
 
 @dataclass(frozen=True)
@@ -71,6 +71,15 @@ class Drive:
             if os.path.isfile(p):
                 return p
         return None
+
+
+def evenly_spread(items: list, limit: int) -> list:
+    """At most ``limit`` of ``items`` (``limit >= 2``), evenly spread, the first and the last
+    kept; all of them when there are no more."""
+    if len(items) <= limit:
+        return list(items)
+    pick = np.linspace(0, len(items) - 1, limit).round().astype(int)
+    return [items[k] for k in pick]
 
 
 def parse_ids(text: str | None) -> list[str]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .drive_folder import Drive
+from .drive_folder import Drive, evenly_spread
 
 __all__ = ["MAX_FRAMES", "nidar_prior"]
 
@@ -22,10 +22,7 @@ MAX_FRAMES = 4
 
 def _frames_with_images(drive: Drive) -> list[str]:
     usable = [i for i in drive.train if drive.image_path(i) and drive.calib_path(i)]
-    if len(usable) <= MAX_FRAMES:
-        return usable
-    pick = np.linspace(0, len(usable) - 1, MAX_FRAMES).round().astype(int)
-    return [usable[k] for k in pick]
+    return evenly_spread(usable, MAX_FRAMES)
 
 
 def nidar_prior(drive: Drive, vertices: np.ndarray, poses: np.ndarray, *, weights=None):

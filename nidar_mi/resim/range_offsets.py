@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .beam_rays import return_rays
+from .drive_folder import evenly_spread
 from .frames import Frames
 
 __all__ = [
@@ -130,14 +131,6 @@ def corrected_frames(frames: Frames, train, offsets: np.ndarray | None) -> Frame
     return replace(frames, xyz=xyz)
 
 
-def _spread(train: list[int], limit: int) -> list[int]:
-    """At most ``limit`` of ``train``, evenly spread, the first and the last kept."""
-    if len(train) <= limit:
-        return list(train)
-    pick = np.unique(np.round(np.linspace(0, len(train) - 1, limit)).astype(int))
-    return [train[i] for i in pick]
-
-
 def _round_residuals(frames: Frames, poses, idx, offsets, load, voxel_m: float):
     """``(residual, ring)`` of one round: the corrected returns of frames ``idx`` cast into
     their fused mesh (module docstring)."""
@@ -175,7 +168,7 @@ def fit_range_offsets(
         load: ``load(mesh) -> mi.Scene`` of a mesh alone (:func:`.build.scratch_scene`).
         voxel_m: the fusion's cube, m (the surfaces' own).
     """
-    idx = _spread(list(train), MAX_FRAMES)
+    idx = evenly_spread(list(train), MAX_FRAMES)
     rings = frames.layout.rings
     offsets = np.zeros(rings)
     steps, counts = [], np.zeros(rings, np.int64)

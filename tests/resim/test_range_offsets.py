@@ -132,3 +132,15 @@ def test_scans_without_a_surface_give_no_offsets():
     fit = fit_range_offsets(frames, poses, range(2), load, 0.1)
     np.testing.assert_array_equal(fit.offsets_m, np.zeros(64))
     assert fit.returns.sum() == 0 and len(fit.steps_sd_m) == 3
+
+
+def test_the_frames_read_are_evenly_spread():
+    from nidar_mi.resim.drive_folder import evenly_spread
+
+    assert evenly_spread(list(range(10)), 4) == [0, 3, 6, 9]
+    assert evenly_spread(list(range(78)), 16)[:3] == [0, 5, 10]
+    assert (
+        evenly_spread(list(range(78)), 16)[-1] == 77
+        and len(evenly_spread(list(range(78)), 16)) == 16
+    )
+    assert evenly_spread([4, 7], 16) == [4, 7]
