@@ -152,14 +152,17 @@ def _mean(per_frame: dict) -> dict:
 
 
 def _frame_moving(j: int, frames: Frames, poses, static):
-    """``(moving, rays)`` of training frame ``j``: the surfaces that moved as it saw them
-    (:mod:`.moving`) and its return rays."""
+    """``(moving, hit, rays)`` of training frame ``j``: the surfaces that moved as it saw them
+    (:mod:`.moving`), the static triangle each return ends on (-1: none that explains it) and
+    its return rays."""
     from .beam_rays import return_rays
     from .moving import moving_surfaces
 
     rays = return_rays(frames.xyz[j], frames.grid[j], frames.layout, poses[j], j)
-    moving = moving_surfaces(frames.xyz[j], frames.grid[j], rays, static, j, wrap=not frames.cut)
-    return moving, rays
+    moving, hit = moving_surfaces(
+        frames.xyz[j], frames.grid[j], rays, static, j, wrap=not frames.cut
+    )
+    return moving, hit, rays
 
 
 class _Moving:
@@ -185,48 +188,82 @@ class _Moving:
             self.seen[j] = _frame_moving(j, self.frames, self.poses, self.static)
         return self.seen[j]
 
+    def _rho_of(self, mv, rays, j: int, inv) -> dict:
+        """The ρ per method of moving surfaces ``mv`` of frame ``j`` (``rays``: its returns')."""
+        from .moving import moving_rho
+
+        return {
+            name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load)
+            if fitted is not None and len(mv.mesh.faces)
+            else np.full(len(mv.returns), np.median(inv.rho))
+            for name, (_, _, fitted) in self.variants.items()
+        }
+
     def _rho(self, j: int, inv) -> dict:
         """Frame ``j``'s moving surfaces' ρ per method (only the frame they come from needs
         them, not the frame that times their motion)."""
-        from .moving import moving_rho
-
         if self.rho[0] != j:
-            mv, rays = self._frame(j)
-            self.rho = (
-                j,
-                {
-                    name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load)
-                    if fitted is not None and len(mv.mesh.faces)
-                    else np.full(len(mv.returns), np.median(inv.rho))
-                    for name, (_, _, fitted) in self.variants.items()
-                },
-            )
+            mv, _, rays = self._frame(j)
+            self.rho = (j, self._rho_of(mv, rays, j, inv))
         return self.rho[1]
 
+    def _velocity(self, j: int, j2: int) -> np.ndarray:
+        """(V, 3) frame ``j``'s moving vertices' motion per frame step, timed by frame ``j2``."""
+        from .moving import MAX_STEP_M, track_shifts
+
+        if (j, j2) not in self.shifts:  # held-out frames between the same two share it
+            mv, target = self._frame(j)[0].mesh, self._frame(j2)[0].mesh
+            self.shifts = {(j, j2): track_shifts(mv, target, MAX_STEP_M * abs(j2 - j))}
+        return self.shifts[(j, j2)] / (j2 - j)
+
+    def _whole(self, j: int, k: int, velocity, inv):
+        """``(mv, velocity, trail, rho)``: frame ``j``'s tracked objects whole at held-out frame
+        ``k`` (:mod:`.moving`: the returns its own trail explained join them, moving alike) and
+        the static triangles of their trail."""
+        from .moving import carried_velocity, surfaces_of, trail_faces
+
+        mv, hit, rays = self._frame(j)
+        steps = [i - j for i in self.train]
+        trail = trail_faces(self.mesh, mv.mesh, velocity, steps, k - j)
+        if not trail.any():
+            return mv, velocity, trail, self._rho(j, inv)
+        free = (hit < 0) | trail[np.maximum(hit, 0)]
+        grown = surfaces_of(
+            self.frames.xyz[j], self.frames.grid[j], rays, free, j, wrap=not self.frames.cut
+        )
+        velocity = carried_velocity(grown, mv, velocity)
+        trail |= trail_faces(self.mesh, grown.mesh, velocity, steps, k - j)
+        return grown, velocity, trail, self._rho_of(grown, rays, j, inv)
+
     def at(self, k: int, inv):
-        """``(scene, extra, record)`` at held-out frame ``k``: the static surfaces with those
-        that moved, their ρ per method, and what ``report.json`` records of them."""
-        from .mesh import Mesh, merge_meshes
-        from .moving import MAX_STEP_M, nearest_frame, partner_frame, track_shifts
+        """``(scene, extra, keep, record)`` at held-out frame ``k``: the static surfaces without
+        the tracked objects' trails and with the surfaces that moved, their ρ per method, the
+        static vertices the scene keeps (in its order; the moving ones follow; None: all) and
+        what ``report.json`` records of them."""
+        from .mesh import Mesh, compact_index, merge_meshes
+        from .moving import nearest_frame, partner_frame
 
         j = nearest_frame(k, self.train)
-        mv, extra = self._frame(j)[0], self._rho(j, inv)
+        mv = self._frame(j)[0]
         record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
         if len(mv.mesh.faces) == 0:
-            return self.static, extra, record
+            return self.static, self._rho(j, inv), None, record
         j2 = partner_frame(k, j, self.train)
-        vertices = mv.mesh.vertices
-        if j2 is not None:
-            if (j, j2) not in self.shifts:  # held-out frames between the same two share it
-                target = self._frame(j2)[0].mesh
-                self.shifts = {(j, j2): track_shifts(mv.mesh, target, MAX_STEP_M * abs(j2 - j))}
-            shift = self.shifts[(j, j2)]
-            vertices = vertices + shift * (k - j) / (j2 - j)
-            moved = np.linalg.norm(shift, axis=1) > 0
-            record.update(partner=self.drive.ids[j2], tracked=float(moved.mean()))
-        moved_mesh = Mesh(vertices, mv.mesh.faces)
-        scene = self.load(merge_meshes([self.mesh, moved_mesh]))
-        return scene, extra, record
+        if j2 is None:
+            moved = Mesh(mv.mesh.vertices, mv.mesh.faces)
+            return self.load(merge_meshes([self.mesh, moved])), self._rho(j, inv), None, record
+        velocity = self._velocity(j, j2)
+        tracked = float((np.linalg.norm(velocity, axis=1) > 0).mean())
+        mv, velocity, trail, extra = self._whole(j, k, velocity, inv)
+        static, keep = self.mesh, None
+        if trail.any():
+            static, keep = compact_index(Mesh(self.mesh.vertices, self.mesh.faces[~trail]))
+        record.update(
+            partner=self.drive.ids[j2], tracked=tracked, trail=int(trail.sum()),
+            triangles=len(mv.mesh.faces),
+        )  # fmt: skip
+        moved = Mesh(mv.mesh.vertices + velocity * (k - j), mv.mesh.faces)
+        return self.load(merge_meshes([static, moved])), extra, keep, record
 
 
 def evaluate_heldout(
@@ -264,14 +301,14 @@ def evaluate_heldout(
     try:
         for fid in drive.holdout:
             k = drive.index(fid)
-            scene, record = static, None
+            scene, record, keep = static, None, None
             if motion is not None:
-                scene, extra, record = motion.at(k, inv)
+                scene, extra, keep, record = motion.at(k, inv)
             params = mi.traverse(scene)
             scans = {}
             for name, (rho, cfg, _) in variants.items():
                 if scene is not static:
-                    rho = np.concatenate([rho, extra[name]])
+                    rho = np.concatenate([rho if keep is None else rho[keep], extra[name]])
                 params[RHO_KEY] = mi.Float(np.asarray(rho, dtype=np.float32))
                 params.update()
                 scans[name] = _sim_scan(scene, cfg, poses[k], frames)

@@ -29,6 +29,13 @@ Casting each return into the mesh, as the inversion's samples are cast, would lo
 quarter of them: a ray through a mesh's vertex may pass between its triangles.
 
 Nothing is added where nothing moved.
+
+Where an object went, the static surfaces keep the layers the training frames saw of it as it
+passed, wherever no later training ray passed through them: an oncoming car seen from beside
+leaves a trail of its flanks, each hidden from the later training views behind the car itself,
+and seen again from the held-out pose once the car has moved on. The same object, moved back
+along its track to another training frame's time, lies on those layers; they are hidden for that
+held-out frame (:func:`trail_faces`).
 """
 
 from __future__ import annotations
@@ -53,6 +60,15 @@ TRACK_STARTS = 8
 TRACK_MIN_SHARE = 0.5
 TRACK_INLIER_M = 0.2
 MAX_STEP_M = 3.0
+#: A tracked object's trail (:func:`trail_faces`): a static surface within TRAIL_M (m) of where
+#: the object stood at another training frame's time, facing the same way (|cos| of the normals
+#: at least TRAIL_COS), is the object left there; only frames within TRAIL_FRAMES of the frame it
+#: comes from are followed (constant velocity holds over a short time).
+TRAIL_M = 0.15
+TRAIL_COS = 0.7
+TRAIL_FRAMES = 5
+#: Trail points looked at per static vertex (the nearest).
+TRAIL_NEIGHBOURS = 8
 
 __all__ = [
     "MovingSurfaces",
@@ -64,6 +80,10 @@ __all__ = [
     "unexplained_returns",
     "moving_surfaces",
     "moving_rho",
+    "trail_faces",
+    "surfaces_of",
+    "carried_velocity",
+    "vertex_normals",
 ]
 
 
@@ -102,7 +122,8 @@ def unexplained_returns(t: np.ndarray, cos: np.ndarray, range_m: np.ndarray) -> 
 
 
 def moving_surfaces(xyz: np.ndarray, grid, rays: Rays, static_scene, frame: int, *, wrap: bool):
-    """The :class:`MovingSurfaces` of one training frame.
+    """``(moving, hit)``: the :class:`MovingSurfaces` of one training frame and (N,) the static
+    triangle each of its returns ends on (-1: none, or it does not explain the return).
 
     Args:
         xyz: (N, 3) the frame's returns, LiDAR frame, m; grid: their cells
@@ -114,8 +135,15 @@ def moving_surfaces(xyz: np.ndarray, grid, rays: Rays, static_scene, frame: int,
     """
     from .carve import hit_depths
 
-    t, _, cos = hit_depths(static_scene, rays)
+    t, prim, cos = hit_depths(static_scene, rays)
     free = unexplained_returns(t, cos, rays.range_m)
+    hit = np.where(free, -1, prim)
+    return surfaces_of(xyz, grid, rays, free, frame, wrap=wrap), hit
+
+
+def surfaces_of(xyz: np.ndarray, grid, rays: Rays, free: np.ndarray, frame: int, *, wrap: bool):
+    """The :class:`MovingSurfaces` of the returns ``free`` ((N,) bool) of one training frame:
+    its range-image triangles whose three corners are free (arguments: :func:`moving_surfaces`)."""
     tris = scan_triangles(xyz, grid, wrap=wrap)
     tris = tris[free[tris].all(axis=1)] if len(tris) else tris.reshape(0, 3)
     used = np.unique(tris)
@@ -234,3 +262,73 @@ def _icp_translation(p: np.ndarray, q: np.ndarray, tree, start: np.ndarray) -> n
             break
         s += np.median(q[i[ok]] - (p[ok] + s), axis=0)
     return s
+
+
+def vertex_normals(mesh: Mesh) -> np.ndarray:
+    """(V, 3) unit vertex normals, the area-weighted mean of the adjacent triangles' (zero where
+    no triangle uses the vertex)."""
+    v, f = mesh.vertices, np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    face = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    out = np.zeros_like(v, dtype=np.float64)
+    for c in range(3):
+        np.add.at(out, f[:, c], face)
+    norm = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
+
+
+def trail_faces(static: Mesh, moving: Mesh, velocity: np.ndarray, steps, at: float) -> np.ndarray:
+    """(F,) bool: the static triangles that are a tracked object's trail (module docstring).
+
+    Args:
+        static: the static surfaces (world, m); moving: the moving surfaces as their frame saw
+            them (world, m); velocity: (V, 3) each moving vertex's motion per frame step, m
+            (0: not tracked); steps: the training frames' times, in frame steps from the moving
+            surfaces' frame (0: that frame's own); at: the held-out frame's, likewise.
+
+    A static vertex is on the trail when, at one of ``steps``, a tracked moving vertex stands
+    within :data:`TRAIL_M` of it with a normal within :data:`TRAIL_COS` of its own, and no
+    tracked vertex stands within :data:`TRAIL_M` of it at ``at`` (where the object is then); a
+    triangle is on it when its three corners are.
+    """
+    from scipy.spatial import cKDTree
+
+    faces = np.asarray(static.faces, dtype=np.int64).reshape(-1, 3)
+    tracked = np.linalg.norm(velocity, axis=1) > 0
+    steps = [s for s in steps if abs(s) <= TRAIL_FRAMES]
+    if not tracked.any() or not steps or len(faces) == 0:
+        return np.zeros(len(faces), dtype=bool)
+    p, u = moving.vertices[tracked], velocity[tracked]
+    trail = np.concatenate([p + s * u for s in steps])
+    n_trail = np.tile(vertex_normals(moving)[tracked], (len(steps), 1))
+    d, idx = cKDTree(trail).query(static.vertices, k=TRAIL_NEIGHBOURS, distance_upper_bound=TRAIL_M)
+    near = np.isfinite(d)
+    cos = np.zeros(d.shape)
+    rows = np.nonzero(near)
+    cos[rows] = np.abs(np.einsum("ij,ij->i", vertex_normals(static)[rows[0]], n_trail[idx[rows]]))
+    on = (near & (cos >= TRAIL_COS)).any(axis=1)
+    now = cKDTree(p + at * u).query(static.vertices, distance_upper_bound=TRAIL_M)[0]
+    on &= ~np.isfinite(now)
+    return on[faces].all(axis=1)
+
+
+def carried_velocity(grown: MovingSurfaces, moving: MovingSurfaces, velocity: np.ndarray):
+    """(V', 3) the velocity of each vertex of ``grown`` (the surfaces of a frame grown from
+    ``moving``'s, the same frame): a vertex's own where ``moving`` has its return, else that of
+    the nearest tracked vertex of ``moving`` within :data:`OBJECT_GAP_M` (its object's), else 0."""
+    from scipy.spatial import cKDTree
+
+    out = np.zeros((len(grown.returns), 3))
+    tracked = np.linalg.norm(velocity, axis=1) > 0
+    if not tracked.any() or len(grown.returns) == 0:
+        return out
+    d, i = cKDTree(moving.mesh.vertices[tracked]).query(
+        grown.mesh.vertices, distance_upper_bound=OBJECT_GAP_M
+    )
+    near = np.isfinite(d)
+    out[near] = velocity[tracked][i[near]]
+    pos = np.searchsorted(moving.returns, grown.returns)
+    own = (pos < len(moving.returns)) & (
+        moving.returns[np.minimum(pos, len(moving.returns) - 1)] == grown.returns
+    )
+    out[own] = velocity[pos[own]]
+    return out

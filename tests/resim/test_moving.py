@@ -95,7 +95,7 @@ def test_a_panel_that_left_comes_back_at_its_time(variant, tmp_path):
 
     wall, static = _wall(tmp_path)
     xyz, grid, rays, panel = _rays(4)  # the training frame nearest to held-out frame 5
-    moving = moving_surfaces(xyz, grid, rays, static, 4, wrap=False)
+    moving = moving_surfaces(xyz, grid, rays, static, 4, wrap=False)[0]
     v = moving.mesh.vertices
     assert len(moving.mesh.faces) > 100
     np.testing.assert_allclose(v[:, 1], PANEL_Y, atol=1e-9)  # the panel and nothing of the wall
@@ -121,7 +121,7 @@ def test_a_panel_that_left_comes_back_at_its_time(variant, tmp_path):
 
     # a frame after the panel left sees nothing the wall does not explain
     xyz, grid, rays, _ = _rays(12)
-    assert len(moving_surfaces(xyz, grid, rays, static, 12, wrap=False).mesh.faces) == 0
+    assert len(moving_surfaces(xyz, grid, rays, static, 12, wrap=False)[0].mesh.faces) == 0
 
 
 def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
