@@ -165,6 +165,12 @@ ROWS: dict[str, tuple[str, tuple[str, ...], str]] = {
         "intensity",
         "mlp",
     ),
+    "context_rank_mlp": (
+        "every input, the small head on the per-frame rank",
+        (*RETURN_FEATURES, "ring", *GEOMETRY_FEATURES, *IMAGE_FEATURES, *NIDAR_MAPS),
+        "rank",
+        "mlp",
+    ),
 }
 #: The baseline rows and their labels.
 BASELINES = {

@@ -5,8 +5,9 @@ or this head in its place: ``F(x) = W3 · relu(W2 · relu(W1 · z + b1) + b2) + 
 the inputs standardised by the training rows' mean and standard deviation (a missing input,
 NaN, at its mean: 0; each ``z`` clipped to ±:data:`CLIP`), :data:`HIDDEN` units per layer.
 Evaluating it is two small matrix products per return in NumPy (float32), some thirty times
-cheaper than 400 trees of 63 leaves, which is what lets the whole NIDAR frame with a context
-profile fit its time budget (docs/BENCHMARKS.md).
+cheaper than 400 trees of 63 leaves (docs/BENCHMARKS.md); on drives it was not fitted on it
+ranks the intensities far below the trees, about as the range, elevation and incidence alone
+do (docs/NIDAR.md, "What the fast paths cost").
 
 Fitting (:func:`fit_head`, settings fixed beforehand, not tuned on held-out data): least
 squares, Adam (learning rate :data:`LEARNING_RATE`, weight decay :data:`WEIGHT_DECAY`),
