@@ -33,9 +33,11 @@ Nothing is added where nothing moved.
 Where an object went, the static surfaces keep the layers the training frames saw of it as it
 passed, wherever no later training ray passed through them: an oncoming car seen from beside
 leaves a trail of its flanks, each hidden from the later training views behind the car itself,
-and seen again from the held-out pose once the car has moved on. The same object, moved back
-along its track to another training frame's time, lies on those layers; they are hidden for that
-held-out frame (:func:`trail_faces`).
+and seen again from the held-out pose once the car has moved on. The same object, moved along
+its track to a training frame's time (its own frame's included: that copy too is left behind once
+it moves on), lies on those layers; they are hidden for that held-out frame
+(:func:`trail_faces`), and the returns of its frame that they explained join its moving surfaces
+(:func:`surfaces_of`, :func:`carried_velocity`).
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ TRACK_MIN_SHARE = 0.5
 TRACK_INLIER_M = 0.2
 MAX_STEP_M = 3.0
 #: A tracked object's trail (:func:`trail_faces`): a static surface within TRAIL_M (m) of where
-#: the object stood at another training frame's time, facing the same way (|cos| of the normals
+#: the object stood at a training frame's time, facing the same way (|cos| of the normals
 #: at least TRAIL_COS), is the object left there; only frames within TRAIL_FRAMES of the frame it
 #: comes from are followed (constant velocity holds over a short time).
 TRAIL_M = 0.15
