@@ -179,6 +179,7 @@ class _Moving:
         self.seen: dict[int, tuple] = {}
         self.shifts: dict[tuple[int, int], np.ndarray] = {}
         self.rho: tuple[int, dict] = (-1, {})
+        self.normals: np.ndarray | None = None  # the static surfaces' vertex normals, once
 
     def _frame(self, j: int):
         """Training frame ``j``'s moving surfaces and return rays."""
@@ -220,11 +221,13 @@ class _Moving:
         """``(mv, velocity, trail, rho)``: frame ``j``'s tracked objects whole at held-out frame
         ``k`` (:mod:`.moving`: the returns its own trail explained join them, moving alike) and
         the static triangles of their trail."""
-        from .moving import carried_velocity, surfaces_of, trail_faces
+        from .moving import carried_velocity, surfaces_of, trail_faces, vertex_normals
 
         mv, hit, rays = self._frame(j)
         steps = [i - j for i in self.train]
-        trail = trail_faces(self.mesh, mv.mesh, velocity, steps, k - j)
+        if self.normals is None:
+            self.normals = vertex_normals(self.mesh)
+        trail = trail_faces(self.mesh, mv.mesh, velocity, steps, k - j, self.normals)
         if not trail.any():
             return mv, velocity, trail, self._rho(j, inv)
         free = (hit < 0) | trail[np.maximum(hit, 0)]
@@ -232,7 +235,7 @@ class _Moving:
             self.frames.xyz[j], self.frames.grid[j], rays, free, j, wrap=not self.frames.cut
         )
         velocity = carried_velocity(grown, mv, velocity)
-        trail |= trail_faces(self.mesh, grown.mesh, velocity, steps, k - j)
+        trail |= trail_faces(self.mesh, grown.mesh, velocity, steps, k - j, self.normals)
         return grown, velocity, trail, self._rho_of(grown, rays, j, inv)
 
     def at(self, k: int, inv):

@@ -278,14 +278,18 @@ def vertex_normals(mesh: Mesh) -> np.ndarray:
     return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
 
-def trail_faces(static: Mesh, moving: Mesh, velocity: np.ndarray, steps, at: float) -> np.ndarray:
+def trail_faces(
+    static: Mesh, moving: Mesh, velocity: np.ndarray, steps, at: float, static_normals=None
+) -> np.ndarray:
     """(F,) bool: the static triangles that are a tracked object's trail (module docstring).
 
     Args:
         static: the static surfaces (world, m); moving: the moving surfaces as their frame saw
             them (world, m); velocity: (V, 3) each moving vertex's motion per frame step, m
             (0: not tracked); steps: the training frames' times, in frame steps from the moving
-            surfaces' frame (0: that frame's own); at: the held-out frame's, likewise.
+            surfaces' frame (0: that frame's own); at: the held-out frame's, likewise;
+            static_normals: (V, 3) :func:`vertex_normals` of ``static`` when the caller keeps
+            them (a drive's surfaces are scored against several held-out frames).
 
     A static vertex is on the trail when, at one of ``steps``, a tracked moving vertex stands
     within :data:`TRAIL_M` of it with a normal within :data:`TRAIL_COS` of its own, and no
@@ -306,7 +310,9 @@ def trail_faces(static: Mesh, moving: Mesh, velocity: np.ndarray, steps, at: flo
     near = np.isfinite(d)
     cos = np.zeros(d.shape)
     rows = np.nonzero(near)
-    cos[rows] = np.abs(np.einsum("ij,ij->i", vertex_normals(static)[rows[0]], n_trail[idx[rows]]))
+    if static_normals is None:
+        static_normals = vertex_normals(static)
+    cos[rows] = np.abs(np.einsum("ij,ij->i", static_normals[rows[0]], n_trail[idx[rows]]))
     on = (near & (cos >= TRAIL_COS)).any(axis=1)
     now = cKDTree(p + at * u).query(static.vertices, distance_upper_bound=TRAIL_M)[0]
     on &= ~np.isfinite(now)
