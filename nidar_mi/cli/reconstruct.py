@@ -16,6 +16,39 @@ from ._common import parser, run, show_progress
 __all__ = ["main", "build_parser"]
 
 
+#: The steps a flag switches off, and what each does by default (``--help``).
+STEP_SWITCHES = (
+    (
+        "--no-moving",
+        "held-out frames see the static surfaces only (default: with the surfaces that moved, "
+        "as the training frame nearest in time saw them, moved on at the velocity another "
+        "training frame gives them)",
+    ),
+    (
+        "--no-holes",
+        "keep the held-out frames' returns where the training scans next to them returned "
+        "nothing (default: dropped, the surfaces too dark for the sensor)",
+    ),
+    (
+        "--no-splats",
+        "no splats for the returns that the scans' meshes leave out (foliage, edges, far "
+        "surfaces; default: one quad per such return off the mesh, its range-image cell on its "
+        "local plane)",
+    ),
+    (
+        "--no-range-offsets",
+        "no per-laser range offsets (default: each laser's offset recovered from the training "
+        "scans, taken out of their returns and written into the recovered sensor)",
+    ),
+    ("--no-prior", "no NIDAR prior and no NIDAR baseline (no images)"),
+)
+
+
+def _add_step_switches(p) -> None:
+    for flag, text in STEP_SWITCHES:
+        p.add_argument(flag, action="store_true", help=text)
+
+
 def build_parser():
     from ..resim.reconstruction import MAX_FRAMES, ReconstructOptions
 
@@ -64,29 +97,7 @@ def build_parser():
         help="remove the surfaces that the last N training frames to observe them saw through "
         f"(objects that moved away; {d.transient_frames}; 0: keep them)",
     )
-    p.add_argument(
-        "--no-moving",
-        action="store_true",
-        help="held-out frames see the static surfaces only (default: with the surfaces that "
-        "moved, as the training frame nearest in time saw them, moved on at the velocity "
-        "another training frame gives them)",
-    )
-    p.add_argument(
-        "--no-splats",
-        action="store_true",
-        help="no splats for the returns that the scans' meshes leave out (foliage, edges, "
-        "far surfaces; default: one quad per such return off the mesh, its range-image cell "
-        "on its local plane)",
-    )
-    p.add_argument(
-        "--no-range-offsets",
-        action="store_true",
-        help="no per-laser range offsets (default: each laser's offset recovered from the "
-        "training scans, taken out of their returns and written into the recovered sensor)",
-    )
-    p.add_argument(
-        "--no-prior", action="store_true", help="no NIDAR prior and no NIDAR baseline (no images)"
-    )
+    _add_step_switches(p)
     p.add_argument("--weights", default=None, help="NIDAR weights folder (default: shipped)")
     p.add_argument("--seed", type=int, default=d.seed, help="sampling seed (0)")
     p.add_argument(
@@ -138,6 +149,7 @@ def main(argv=None) -> int:
             carve_passes=args.carve_passes,
             transient_frames=args.transient_frames,
             moving=not args.no_moving,
+            holes=not args.no_holes,
             splats=not args.no_splats,
             range_offsets=not args.no_range_offsets,
             prior=not args.no_prior,

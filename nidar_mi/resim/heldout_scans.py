@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import replace
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -69,9 +70,10 @@ def _variants(cfg, inv) -> dict:
     return out
 
 
-def _sim_scan(scene, cfg, pose, frames: Frames):
+def _sim_scan(scene, cfg, pose, frames: Frames, drop=None):
     """(M, 3) LiDAR-frame points, (M,) intensity, (R, C) occupancy of a re-simulated scan,
-    inside the drive's coverage and past MIN_RANGE_M."""
+    inside the drive's coverage and past MIN_RANGE_M; ``drop``: a function of (M, 3) points
+    giving the (M,) returns to leave out as well (:mod:`.holes`), or None."""
     from ..datasets.kitti_rings import azimuth_deg
     from ..lidar.scan import scan
 
@@ -82,6 +84,9 @@ def _sim_scan(scene, cfg, pose, frames: Frames):
     col = np.floor((azimuth_deg(xyz.reshape(-1, 3)) + 180.0) * frames.columns / 360.0)
     col = col.astype(np.int64).reshape(r.valid.shape) % frames.columns
     keep = r.valid & frames.coverage[col] & (r.range >= MIN_RANGE_M)
+    if drop is not None and keep.any():
+        kept = np.flatnonzero(keep)
+        keep.flat[kept[drop(xyz[keep])]] = False
     occ = np.zeros((cfg.rings, frames.columns), bool)
     ring = np.broadcast_to(np.arange(cfg.rings)[:, None], keep.shape)
     occ[ring[keep], col[keep]] = True
@@ -239,10 +244,11 @@ class _Moving:
         return grown, velocity, trail, self._rho_of(grown, rays, j, inv)
 
     def at(self, k: int, inv):
-        """``(scene, extra, keep, record)`` at held-out frame ``k``: the static surfaces without
-        the tracked objects' trails and with the surfaces that moved, their ρ per method, the
-        static vertices the scene keeps (in its order; the moving ones follow; None: all) and
-        what ``report.json`` records of them."""
+        """``(scene, extra, keep, record, moved)`` at held-out frame ``k``: the static surfaces
+        without the tracked objects' trails and with the surfaces that moved, their ρ per
+        method, the static vertices the scene keeps (in its order; the moving ones follow;
+        None: all), what ``report.json`` records of them and the (V, 3) world vertices of the
+        surfaces that moved, where they stand at ``k`` (None: none)."""
         from .mesh import Mesh, compact_index, merge_meshes
         from .moving import nearest_frame, partner_frame
 
@@ -250,11 +256,12 @@ class _Moving:
         mv = self._frame(j)[0]
         record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
         if len(mv.mesh.faces) == 0:
-            return self.static, self._rho(j, inv), None, record
+            return self.static, self._rho(j, inv), None, record, None
         j2 = partner_frame(k, j, self.train)
         if j2 is None:
             moved = Mesh(mv.mesh.vertices, mv.mesh.faces)
-            return self.load(merge_meshes([self.mesh, moved])), self._rho(j, inv), None, record
+            scene = self.load(merge_meshes([self.mesh, moved]))
+            return scene, self._rho(j, inv), None, record, moved.vertices
         velocity = self._velocity(j, j2)
         tracked = float((np.linalg.norm(velocity, axis=1) > 0).mean())
         mv, velocity, trail, extra = self._whole(j, k, velocity, inv)
@@ -266,7 +273,7 @@ class _Moving:
             triangles=len(mv.mesh.faces),
         )  # fmt: skip
         moved = Mesh(mv.mesh.vertices + velocity * (k - j), mv.mesh.faces)
-        return self.load(merge_meshes([static, moved])), extra, keep, record
+        return self.load(merge_meshes([static, moved])), extra, keep, record, moved.vertices
 
 
 def evaluate_heldout(
@@ -278,15 +285,18 @@ def evaluate_heldout(
     stage: str,
     mesh=None,
     moving: bool = True,
+    holes: bool = True,
 ):
     """Re-simulate, write and score every held-out frame; ``{"frames": {id: metrics},
     "mean": ...}``. ``mesh``: the static surfaces of ``scene_path`` (:class:`.mesh.Mesh`),
-    needed with ``moving`` (module docstring)."""
+    needed with ``moving``; ``holes``: drop the returns in the holes of the training scans next
+    to each frame (module docstring)."""
     import mitsuba as mi
 
     from ..io.kitti import write_kitti_bin
     from ..scene import load_scene
     from .build import drop_scratch
+    from .holes import Holes, hole_frames
     from .surfaces import RHO_KEY
 
     if not drive.holdout:
@@ -301,12 +311,14 @@ def evaluate_heldout(
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}
     motion = _Moving(drive, frames, poses, mesh, static, stage, variants) if moving else None
+    hole_test = Holes(frames, poses, [drive.index(i) for i in drive.train]) if holes else None
     try:
         for fid in drive.holdout:
             k = drive.index(fid)
-            scene, record, keep = static, None, None
+            scene, record, keep, moved = static, None, None, None
             if motion is not None:
-                scene, extra, keep, record = motion.at(k, inv)
+                scene, extra, keep, record, moved = motion.at(k, inv)
+            drop = None if hole_test is None else partial(hole_test.mask, k, moving=moved)
             params = mi.traverse(scene)
             scans = {}
             for name, (rho, cfg, _) in variants.items():
@@ -314,13 +326,18 @@ def evaluate_heldout(
                     rho = np.concatenate([rho if keep is None else rho[keep], extra[name]])
                 params[RHO_KEY] = mi.Float(np.asarray(rho, dtype=np.float32))
                 params.update()
-                scans[name] = _sim_scan(scene, cfg, poses[k], frames)
+                scans[name] = _sim_scan(scene, cfg, poses[k], frames, drop)
             sim, sim_i, _ = scans["resim"]
             path = os.path.join(stage, "heldout", f"{fid}.bin")
             write_kitti_bin(path, sim, np.clip(sim_i, 0.0, 1.0))
             per_frame[fid] = _score_frame(k, scans, frames, poses, train)
             if record is not None:
                 per_frame[fid]["moving"] = record
+            if hole_test is not None:
+                per_frame[fid]["holes"] = {
+                    "from": [drive.ids[j] for j in hole_frames(k, hole_test.train)],
+                    "dropped": hole_test.dropped.get(k, 0),
+                }
     finally:
         drop_scratch(stage)
     return {"frames": per_frame, "mean": _mean(per_frame)}

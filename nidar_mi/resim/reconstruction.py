@@ -11,7 +11,9 @@ Output folder (published whole, with the record of :data:`OWNER`)::
                            dropped: :mod:`.shadow`; the expected scan: detected where E >= T,
                            intensity max(E - b, 0) without noise; the static surfaces, the
                            splats (:mod:`.splats`) and those that moved, as the training
-                           frame nearest in time saw them, moved on: :mod:`.moving`)
+                           frame nearest in time saw them, moved on: :mod:`.moving`; the
+                           returns in the holes of the training scans next to the frame
+                           dropped: :mod:`.holes`)
     OUT/report.json        inputs, timings, the recovered sensor and its shadow, the fit's
                            residuals, the held-out metrics of the re-simulation and of the
                            baselines
@@ -67,6 +69,7 @@ class ReconstructOptions:
     carve_passes: int = 2
     transient_frames: int = 3
     moving: bool = True
+    holes: bool = True
     splats: bool = True
     range_offsets: bool = True
     prior: bool = True
@@ -160,8 +163,9 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     scene_path = write_outputs(stage, drive, frames, poses, surfaces, inv, range_offsets=offsets)
     clock.lap("write")
     held = evaluate_heldout(
-        scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving
-    )
+        scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving,
+        holes=options.holes,
+    )  # fmt: skip
     clock.lap("evaluate")
     report = {
         "drive": os.path.abspath(drive.root),

@@ -1,0 +1,67 @@
+"""The radius of :mod:`nidar_mi.resim.holes`, chosen on training frames alone: the share of a
+training scan's own real returns that the hole rule would drop, its training neighbours as the
+evidence, at each radius (docs/RESIMULATION.md, step 11).
+
+``python benchmarks/resim_holes.py --work DIR [--runs NAME,...] [--radii 0.3,0.4,0.5,0.7]``
+
+``DIR`` is a ``benchmarks/resim_drives.py --work`` folder: each run's drive in
+``DIR/drives/<run>`` and its re-simulation in ``DIR/out/<run>`` (its poses and held-out frames
+are read from there; the held-out frames are neither scored nor used as evidence). Every third
+training frame with training frames on both sides is scored. A real return the rule drops is a
+return the rule would have taken from a real sensor: the radius is the smallest under 0.1 % on
+every drive. Prints a markdown table. KITTI is research-only data: only numbers are printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def false_drops(run_dir: Path, out_dir: Path, radii: list[float]) -> dict:
+    """radius -> (returns dropped, returns scored) over a run's scored training frames."""
+    from nidar_mi.io.kitti import read_kitti_poses
+    from nidar_mi.resim.drive_folder import open_drive
+    from nidar_mi.resim.frames import load_frames
+    from nidar_mi.resim.holes import Holes
+
+    report = json.loads((out_dir / "report.json").read_text())
+    drive = open_drive(str(run_dir), holdout=report["holdout"], poses_file=None)
+    frames = load_frames(drive)
+    poses = read_kitti_poses(str(out_dir / "poses.txt"))
+    train = [drive.index(i) for i in drive.train]
+    scored = [k for k in train[1:-1]][::3]
+    out = {}
+    for radius in radii:
+        holes = Holes(frames, poses, train, radius_deg=radius)
+        dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
+        out[radius] = (dropped, sum(len(frames.xyz[k]) for k in scored))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--work", required=True, type=Path, help="a resim_drives.py --work folder")
+    ap.add_argument("--runs", default=None, help="runs to score (default: every one there)")
+    ap.add_argument("--radii", default="0.3,0.4,0.5,0.7", help="radii, degrees")
+    args = ap.parse_args(argv)
+    radii = [float(r) for r in args.radii.split(",")]
+    runs = (
+        args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
+    )
+    print("| run | " + " | ".join(f"{r}°" for r in radii) + " |")
+    print("| --- |" + " ---: |" * len(radii))
+    for run in runs:
+        res = false_drops(args.work / "drives" / run, args.work / "out" / run, radii)
+        cells = " | ".join(f"{100 * d / max(n, 1):.3f} % ({d} of {n})" for d, n in res.values())
+        print(f"| `{run}` | {cells} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(REPO))
+    sys.exit(main())

@@ -1,0 +1,186 @@
+"""The holes of the training scans next to a held-out frame (:mod:`nidar_mi.resim.holes`).
+
+A sensor on a line (x = 0, 0.5, 1 m; the middle frame held out) scans a wall 10 m ahead
+through a dark box 5 m ahead that returns nothing; a fourth training frame 3 m to the side sees
+the whole wall on the beams the box hides from the others. The held-out frame's re-simulation,
+which does not hold the box, returns on the wall everywhere. Checked against ray-box
+intersection: no dropped return is one the box leaves in view (a return deeper than the radius
+inside the box's shadow from both neighbours is, by convexity, hidden from the frame between
+them), and at least half of those the box hides are dropped (measured: 74 % of 1 452); the beams no
+training scan returned on, the columns past the drive's coverage and the surfaces that moved
+are never dropped. Beams with offsets: a point placed on each ring's beam 3 m away comes back
+on that ring, where the nearest elevation from the sensor's centre is off by several rings.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from nidar_mi.resim.holes import (
+    HOLE_RADIUS_DEG,
+    SIDE_DEG,
+    Holes,
+    beam_rings,
+    hole_frames,
+    in_hole,
+    returned_beams,
+)
+from nidar_mi.resim.laser_layout import RingLayout
+from nidar_mi.resim.range_image import ScanGrid
+
+ELEVATIONS = np.arange(2.0, -8.01, -0.4)  # ring 0 highest, degrees
+COLUMNS = 1800  # 0.2 degrees
+BOX = (np.array([4.8, -0.5, -0.5]), np.array([5.2, 0.5, 0.5]))  # the dark box, m
+WALL_X = 10.0
+
+
+@pytest.mark.parametrize(
+    ("k", "train", "want"),
+    [
+        (5, [0, 1, 4, 7, 9], [4, 7]),  # inside the drive: the nearest before and after
+        (12, [0, 1, 4, 7, 9], [7, 9]),  # past its end: the last two
+        (0, [3, 5, 8], [3, 5]),  # before its start: the first two
+        (4, [2], [2]),  # a single training frame
+    ],
+)
+def test_hole_frames(k, train, want):
+    assert hole_frames(k, train) == want
+
+
+def _beam_points(t: float, az_deg: float, elev, offsets) -> np.ndarray:
+    """(R, 3) the points ``t`` m along each ring's beam at azimuth ``az_deg``."""
+    th, ph = np.radians(elev), np.radians(az_deg)
+    d = np.column_stack([np.cos(th) * np.cos(ph), np.cos(th) * np.sin(ph), np.sin(th)])
+    o = offsets[:, None] * np.column_stack(
+        [-np.sin(th) * np.cos(ph), -np.sin(th) * np.sin(ph), np.cos(th)]
+    )
+    return o + t * d
+
+
+def test_beam_rings_follow_the_offsets():
+    offsets = np.linspace(0.2, -0.15, len(ELEVATIONS))
+    pts = _beam_points(3.0, 30.0, ELEVATIONS, offsets)
+    ring, off = beam_rings(pts, ELEVATIONS, offsets)
+    assert np.array_equal(ring, np.arange(len(ELEVATIONS))) and off.max() < 1e-9
+    centre = np.degrees(np.arcsin(pts[:, 2] / np.linalg.norm(pts, axis=1)))
+    nearest = np.argmin(np.abs(centre[:, None] - ELEVATIONS[None, :]), axis=1)
+    assert np.abs(nearest - np.arange(len(ELEVATIONS))).max() >= 3  # the offsets matter here
+
+
+def _directions():
+    """(rings, columns, 3) unit beam directions of the forward half (|azimuth| < 60°)."""
+    az = np.radians(-180.0 + (np.arange(COLUMNS) + 0.5) * 360.0 / COLUMNS)
+    th = np.radians(ELEVATIONS)[:, None]
+    d = np.stack(
+        np.broadcast_arrays(np.cos(th) * np.cos(az), np.cos(th) * np.sin(az), np.sin(th)), -1
+    )
+    return d
+
+
+def _hits_box(o: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(N,) bool: the segments from ``o`` to the points ``p`` cross the box (slab test)."""
+    d = p - o
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (BOX[0] - o) / d, (BOX[1] - o) / d
+    lo = np.nanmax(np.minimum(t1, t2), axis=1)
+    hi = np.nanmin(np.maximum(t1, t2), axis=1)
+    return (hi >= np.maximum(lo, 0.0)) & (lo <= 1.0)
+
+
+def _scan(origin: np.ndarray, box: bool):
+    """(N, 3) LiDAR-frame returns on the wall from ``origin`` (no rotation) and their grid."""
+    d = _directions()
+    ring, col = np.meshgrid(np.arange(len(ELEVATIONS)), np.arange(COLUMNS), indexing="ij")
+    ahead = d[..., 0] > 0.5
+    t = (WALL_X - origin[0]) / d[..., 0][ahead]
+    p = d[ahead] * t[:, None]
+    keep = np.ones(len(p), bool)
+    if box:
+        keep = ~_hits_box(origin, p + origin)
+    return p[keep], ScanGrid(ring[ahead][keep], col[ahead][keep], len(ELEVATIONS), COLUMNS, True)
+
+
+@pytest.fixture(scope="module")
+def drive():
+    origins = [np.array(o, float) for o in ([0, 0, 0], [0.5, 0, 0], [1, 0, 0], [0, 3, 0])]
+    scans = [_scan(o, box=True) for o in origins]
+    poses = []
+    for o in origins:
+        T = np.eye(4)
+        T[:3, 3] = o
+        poses.append(T)
+    az = -180.0 + (np.arange(COLUMNS) + 0.5) * 360.0 / COLUMNS
+    frames = SimpleNamespace(
+        xyz=[s[0] for s in scans],
+        grid=[s[1] for s in scans],
+        coverage=np.abs(az) < 50.0,
+        layout=RingLayout(ELEVATIONS, np.zeros(len(ELEVATIONS)), np.ones(len(ELEVATIONS))),
+    )
+    sim, _ = _scan(origins[1], box=False)  # the re-simulation does not hold the box
+    in_view = np.abs(np.degrees(np.arctan2(sim[:, 1], sim[:, 0]))) < 45.0
+    return frames, poses, sim[in_view], origins
+
+
+def test_holes_drop_what_the_dark_box_hides(drive):
+    frames, poses, sim, origins = drive
+    holes = Holes(frames, poses, [0, 2, 3])
+    drop = holes.mask(1, sim)
+    hidden = _hits_box(origins[1], sim + origins[1])
+    assert hidden.sum() > 200
+    assert not (drop & ~hidden).any()  # nothing the box leaves in view
+    assert drop[hidden].mean() >= 0.5  # most of what it hides (measured 0.74)
+    assert holes.dropped[1] == drop.sum()
+
+
+def test_holes_keep_the_moving_surfaces(drive):
+    frames, poses, sim, origins = drive
+    holes = Holes(frames, poses, [0, 2, 3])
+    drop = holes.mask(1, sim)
+    moved = sim[drop][:20] + origins[1]  # world points of a surface that moved there
+    kept = holes.mask(1, sim, moving=moved)
+    near = np.min(np.linalg.norm(sim[:, None] + origins[1] - moved[None], axis=2), axis=1) < 0.3
+    assert drop[near].sum() >= 20 and not kept[near].any()
+    assert np.array_equal(kept[~near], drop[~near])
+
+
+def test_in_hole_needs_a_returned_beam_and_the_coverage(drive):
+    frames, poses, sim, origins = drive
+    local = sim + origins[1] - origins[0]  # the sim's points in frame 0's LiDAR frame
+    beams = returned_beams([frames.grid[t] for t in (0, 2, 3)])
+    full = in_hole(local, frames.xyz[0], beams, frames.coverage, frames.layout)
+    assert full.sum() > 100
+    # a ring no training scan returned on: its points are never in a hole
+    none = beams.copy()
+    ring, _ = beam_rings(local, ELEVATIONS, np.zeros(len(ELEVATIONS)))
+    r = int(np.bincount(ring[full]).argmax())
+    none[r] = False
+    got = in_hole(local, frames.xyz[0], none, frames.coverage, frames.layout)
+    assert not got[ring == r].any() and np.array_equal(got[ring != r], full[ring != r])
+    # the coverage must reach past the hole on both sides
+    cover = frames.coverage.copy()
+    cover[(np.abs(-180.0 + (np.arange(COLUMNS) + 0.5) * 0.2) > 2.0)] = False
+    narrow = in_hole(local, frames.xyz[0], beams, cover, frames.layout)
+    az = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
+    assert narrow.any() and not narrow[np.abs(az) > 2.0 - HOLE_RADIUS_DEG - SIDE_DEG + 0.2].any()
+
+
+def test_in_hole_is_the_angle_to_the_nearest_return():
+    # returns every 0.2 degrees of azimuth on one ring, none between 9.8 and 12.2 degrees
+    az = np.round(np.arange(-30.0, 30.0, 0.2), 6)
+    az = az[(az <= 9.8) | (az >= 12.2)]
+    real = np.column_stack([np.cos(np.radians(az)), np.sin(np.radians(az)), np.zeros_like(az)])
+    layout = RingLayout(np.array([0.0]), np.zeros(1), np.ones(1))
+    beams = np.ones((1, COLUMNS), bool)
+    cover = np.ones(COLUMNS, bool)
+    probe = np.array([10.2, 11.0, 11.6, 9.0, 12.0])  # 0.4, 1.2, 0.6, 0, 0.2 deg from a return
+    pts = 5.0 * np.column_stack([np.cos(np.radians(probe)), np.sin(np.radians(probe)), [0] * 5])
+    got = in_hole(pts, 10.0 * real, beams, cover, layout, radius_deg=0.55)
+    assert got.tolist() == [False, True, True, False, False]
+    # in the gap but 2 degrees above the sensor's only beam: outside its field of view
+    up = 5.0 * np.array([[np.cos(np.radians(2.0)) * np.cos(np.radians(11.0)),
+                          np.cos(np.radians(2.0)) * np.sin(np.radians(11.0)),
+                          np.sin(np.radians(2.0))]])  # fmt: skip
+    assert not in_hole(up, 10.0 * real, beams, cover, layout, radius_deg=0.55)[0]
