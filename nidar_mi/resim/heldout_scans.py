@@ -15,7 +15,9 @@ The re-simulated scans are the expected scans: no noise draw, detection where ``
 is cast into the static surfaces and, unless ``moving`` is off, the surfaces that moved as the
 training frame nearest in time saw them, each object moved on at the velocity a second
 training frame gives it (:mod:`.moving`; their ρ per method: the returns inverted through the
-method's sensor, or the method's constant where it has none).
+method's sensor, or the method's constant where it has none). Unless ``holes`` is off, the
+returns that fall in the holes of the training scans beside the frame are dropped from every
+method's scan (:mod:`.holes`: surfaces too dark to return).
 """
 
 from __future__ import annotations
