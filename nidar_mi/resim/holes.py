@@ -20,6 +20,7 @@ lowest no scan ever returns), on a beam (ring, column) that some training scan r
 beams of the mounting's shadow never do: :mod:`.shadow`) and with the drive's coverage on both
 sides of it (the edges of a cut scan are no hole). A return on a surface that moved
 (:mod:`.moving`) is kept: where it stands at ``k`` the frames next to it may have seen nothing.
+An evidence scan without a single return (a lost sweep) drops nothing.
 
 **The radius, chosen on the training frames alone** (``benchmarks/resim_holes.py``): applied
 to a training frame's own real returns, with its training neighbours as the evidence, the rule
@@ -172,7 +173,9 @@ class Holes:
 
         xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
         evidence = hole_frames(k, self.train)
-        if not evidence or len(xyz) == 0:
+        # a scan without a return (a lost sweep) is no evidence of a dark surface anywhere
+        if not evidence or len(xyz) == 0 or any(len(self.frames.xyz[j]) == 0 for j in evidence):
+            self.dropped.setdefault(k, 0)
             return np.zeros(len(xyz), dtype=bool)
         Tk = self.poses[k]
         world = xyz @ Tk[:3, :3].T + Tk[:3, 3]

@@ -146,6 +146,13 @@ def test_holes_keep_the_moving_surfaces(drive):
     assert np.array_equal(kept[~near], drop[~near])
 
 
+def test_an_empty_scan_is_no_evidence(drive):
+    frames, poses, sim, _ = drive
+    lost = SimpleNamespace(**{**vars(frames), "xyz": [frames.xyz[0][:0], *frames.xyz[1:]]})
+    holes = Holes(lost, poses, [0, 2, 3])
+    assert not holes.mask(1, sim).any() and holes.dropped[1] == 0
+
+
 def test_in_hole_needs_a_returned_beam_and_the_coverage(drive):
     frames, poses, sim, origins = drive
     local = sim + origins[1] - origins[0]  # the sim's points in frame 0's LiDAR frame
