@@ -42,6 +42,7 @@ __all__ = [
     "hole_frames",
     "returned_beams",
     "beam_rings",
+    "direction_tree",
     "in_hole",
     "Holes",
 ]
@@ -98,6 +99,13 @@ def _unit(xyz: np.ndarray) -> np.ndarray:
     return xyz / np.maximum(n, 1e-12)
 
 
+def direction_tree(real: np.ndarray):
+    """A k-d tree (scipy's ``cKDTree``) of the unit directions of (N, 3) returns."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(_unit(np.asarray(real, dtype=np.float64).reshape(-1, 3)))
+
+
 def in_hole(
     points: np.ndarray,
     real: np.ndarray,
@@ -105,6 +113,7 @@ def in_hole(
     coverage: np.ndarray,
     layout,
     radius_deg: float = HOLE_RADIUS_DEG,
+    tree=None,
 ) -> np.ndarray:
     """(M,) bool: the points that lie in a hole of one real scan (module docstring).
 
@@ -116,9 +125,9 @@ def in_hole(
         coverage: (columns,) bool, the columns the drive's scans cover.
         layout: the drive's :class:`.laser_layout.RingLayout` (each ring's elevation and offset).
         radius_deg: the hole's radius around a point's direction, degrees.
+        tree: :func:`direction_tree` of ``real`` when the caller keeps it (one evidence scan
+            serves every re-simulated scan of a held-out frame).
     """
-    from scipy.spatial import cKDTree
-
     from ..datasets.kitti_rings import azimuth_deg
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -127,9 +136,8 @@ def in_hole(
         return out
     chord = 2.0 * np.sin(np.radians(radius_deg) / 2.0)
     if len(real):
-        d, _ = cKDTree(_unit(np.asarray(real, dtype=np.float64))).query(
-            _unit(points), k=1, distance_upper_bound=chord
-        )
+        tree = direction_tree(real) if tree is None else tree
+        d, _ = tree.query(_unit(points), k=1, distance_upper_bound=chord)
         out = ~np.isfinite(d)
     else:
         out[:] = True
@@ -159,6 +167,14 @@ class Holes:
         self.beams = returned_beams([frames.grid[t] for t in self.train])
         #: held-out frame -> returns dropped from its first scan (the ``resim`` method's)
         self.dropped: dict[int, int] = {}
+        self._trees: dict[int, object] = {}  # the evidence scans' direction trees, a few
+
+    def _tree(self, j: int):
+        if j not in self._trees:
+            if len(self._trees) >= 4:
+                self._trees.pop(next(iter(self._trees)))
+            self._trees[j] = direction_tree(self.frames.xyz[j])
+        return self._trees[j]
 
     def mask(self, k: int, xyz: np.ndarray, moving: np.ndarray | None = None) -> np.ndarray:
         """(M,) bool: the returns of a re-simulated scan at frame ``k`` to drop.
@@ -190,6 +206,7 @@ class Holes:
                 self.frames.coverage,
                 self.frames.layout,
                 self.radius_deg,
+                tree=self._tree(j),
             )
         if moving is not None and len(moving) and drop.any():
             near, _ = cKDTree(moving).query(world[drop], k=1, distance_upper_bound=MOVING_KEEP_M)
