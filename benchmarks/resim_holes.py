@@ -2,13 +2,19 @@
 training frames alone, and what it changes on the held-out frames.
 
 ``python benchmarks/resim_holes.py --work DIR [--runs NAME,...] [--radii 0.3,0.4,0.5,0.7]``
+``python benchmarks/resim_holes.py --work DIR --reaches none,0.25,0.5,1,2 [--runs NAME,...]``
+``python benchmarks/resim_holes.py --work DIR --shares 0.3,0.5,0.7,0.9,1 [--runs NAME,...]``
 ``python benchmarks/resim_holes.py --work DIR --ab [--runs NAME,...] [--json FILE]``
 
 Radius (the default): the share of a training scan's own real returns that the hole rule would
-drop, its training neighbours as the evidence, at each radius.
+drop, its training neighbours as the evidence, at each radius (the reach test's margin
+``REACH_M``). ``--reaches``: the same at each margin of the reach test (``none``: every return in
+the radius counts), radius ``HOLE_RADIUS_DEG``; ``--shares``: at each largest share of returned
+beams around a point that the reach test takes for a sparse scan (``SPARSE_SHARE``; 1: any).
 ``--ab``: each run reconstructed once more (``nidar_mi.resim.reconstruction.reconstruct`` into a
-temporary folder, removed afterwards) and its held-out frames evaluated twice on that one fit,
-without and with the holes: the step's own effect, free of the run-to-run spread of the fit's
+temporary folder, removed afterwards) and its held-out frames evaluated three times on that one
+fit: without the holes, with holes that count every return in the radius (no reach test) and
+with the rule as it is: the step's own effect, free of the run-to-run spread of the fit's
 threaded sums (a few mm of Chamfer on ``kitti_raw_0926``).
 
 ``DIR`` is a ``benchmarks/resim_drives.py --work`` folder: each run's drive in
@@ -16,7 +22,7 @@ threaded sums (a few mm of Chamfer on ``kitti_raw_0926``).
 are read from there; the held-out frames are neither scored nor used as evidence). Every third
 training frame with training frames on both sides is scored. A real return the rule drops is a
 return the rule would have taken from a real sensor: the radius is the smallest under 0.1 % on
-every drive. Prints a markdown table. KITTI is research-only data: only numbers are printed.
+every drive, the margin the smallest under 0.2 %. Prints a markdown table. KITTI is research-only data: only numbers are printed.
 """
 
 from __future__ import annotations
@@ -29,8 +35,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def false_drops(run_dir: Path, out_dir: Path, radii: list[float]) -> dict:
-    """radius -> (returns dropped, returns scored) over a run's scored training frames."""
+def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
+    """(radius, reach, share) -> (returns dropped, returns scored) over a run's scored training
+    frames."""
+    import nidar_mi.resim.holes as rule
     from nidar_mi.io.kitti import read_kitti_poses
     from nidar_mi.resim.drive_folder import open_drive
     from nidar_mi.resim.frames import load_frames
@@ -43,19 +51,26 @@ def false_drops(run_dir: Path, out_dir: Path, radii: list[float]) -> dict:
     train = [drive.index(i) for i in drive.train]
     scored = [k for k in train[1:-1]][::3]
     out = {}
-    for radius in radii:
-        holes = Holes(frames, poses, train, radius_deg=radius)
-        dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
-        out[radius] = (dropped, sum(len(frames.xyz[k]) for k in scored))
+    shipped = rule.SPARSE_SHARE
+    for radius, reach, share in settings:
+        rule.SPARSE_SHARE = share  # in_hole reads it when it runs
+        try:
+            holes = Holes(frames, poses, train, radius_deg=radius, reach_m=reach)
+            dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
+        finally:
+            rule.SPARSE_SHARE = shipped
+        out[(radius, reach, share)] = (dropped, sum(len(frames.xyz[k]) for k in scored))
     return out
 
 
 def ab(run_dir: Path, out_dir: Path) -> dict:
-    """``{"without": mean, "with": mean}`` of one fresh reconstruction's held-out frames."""
+    """``{"without": mean, "no_reach": mean, "with": mean}`` of one fresh reconstruction's
+    held-out frames."""
     import shutil
     import tempfile
 
     import nidar_mi.resim.heldout_scans as heldout
+    import nidar_mi.resim.holes as holes
     from nidar_mi.backend import set_variant
     from nidar_mi.resim.reconstruction import ReconstructOptions, reconstruct
 
@@ -64,6 +79,12 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
 
     def both(*args, **kwargs):
         means["without"] = evaluate(*args, **{**kwargs, "holes": False})["mean"]
+        rule = holes.Holes
+        holes.Holes = lambda *a, **k: rule(*a, **{**k, "reach_m": None})
+        try:  # evaluate_heldout imports Holes when it runs
+            means["no_reach"] = evaluate(*args, **{**kwargs, "holes": True})["mean"]
+        finally:
+            holes.Holes = rule
         result = evaluate(*args, **{**kwargs, "holes": True})
         means["with"] = result["mean"]
         return result
@@ -80,16 +101,19 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
 
 
 def _ab_table(args, runs) -> dict:
-    print("| run | Chamfer (m) | F@0.1 m | drop agr. | Spearman | RMSE |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print(
+        "| run (no holes → no reach test → the rule) | Chamfer (m) | F@0.1 m | drop agr. |", end=""
+    )
+    print(" Spearman | RMSE |\n| --- | --- | --- | --- | --- | --- |")
     out = {}
     for run in runs:
         out[run] = m = ab(args.work / "drives" / run, args.work / "out" / run)
+        steps = ("without", "no_reach", "with")
         cells = [
-            f"{m['without'][q]:.4f} → {m['with'][q]:.4f}"
+            " → ".join(f"{m[s][q]:.4f}" for s in steps)
             for q in ("chamfer_m", "fscore", "drop_agreement")
         ] + [
-            f"{m['without']['intensity']['resim'][q]:.4f} → {m['with']['intensity']['resim'][q]:.4f}"
+            " → ".join(f"{m[s]['intensity']['resim'][q]:.4f}" for s in steps)
             for q in ("spearman", "rmse")
         ]
         print(f"| `{run}` | " + " | ".join(cells) + " |", flush=True)
@@ -101,10 +125,23 @@ def main(argv=None) -> int:
     ap.add_argument("--work", required=True, type=Path, help="a resim_drives.py --work folder")
     ap.add_argument("--runs", default=None, help="runs to score (default: every one there)")
     ap.add_argument("--radii", default="0.3,0.4,0.5,0.7", help="radii, degrees")
+    ap.add_argument("--reaches", default=None, help="reach margins, m ('none': no reach test)")
+    ap.add_argument("--shares", default=None, help="sparse shares of the reach test")
     ap.add_argument("--ab", action="store_true", help="held-out scores without and with holes")
     ap.add_argument("--json", type=Path, default=None, help="--ab: write the means here")
     args = ap.parse_args(argv)
-    radii = [float(r) for r in args.radii.split(",")]
+    from nidar_mi.resim.holes import HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE
+
+    if args.reaches:
+        reach = [None if r == "none" else float(r) for r in args.reaches.split(",")]
+        settings = [(HOLE_RADIUS_DEG, r, SPARSE_SHARE) for r in reach]
+        heads = [f"{r} m" if r is not None else "no reach test" for r in reach]
+    elif args.shares:
+        settings = [(HOLE_RADIUS_DEG, REACH_M, float(f)) for f in args.shares.split(",")]
+        heads = [f"share ≤ {f}" for _, _, f in settings]
+    else:
+        settings = [(float(r), REACH_M, SPARSE_SHARE) for r in args.radii.split(",")]
+        heads = [f"{r}°" for r, _, _ in settings]
     runs = (
         args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
     )
@@ -113,10 +150,10 @@ def main(argv=None) -> int:
         if args.json:
             args.json.write_text(json.dumps(out, indent=1))
         return 0
-    print("| run | " + " | ".join(f"{r}°" for r in radii) + " |")
-    print("| --- |" + " ---: |" * len(radii))
+    print("| run | " + " | ".join(heads) + " |")
+    print("| --- |" + " ---: |" * len(settings))
     for run in runs:
-        res = false_drops(args.work / "drives" / run, args.work / "out" / run, radii)
+        res = false_drops(args.work / "drives" / run, args.work / "out" / run, settings)
         cells = " | ".join(f"{100 * d / max(n, 1):.3f} % ({d} of {n})" for d, n in res.values())
         print(f"| `{run}` | {cells} |", flush=True)
     return 0

@@ -6,7 +6,8 @@ the whole wall on the beams the box hides from the others. The held-out frame's 
 which does not hold the box, returns on the wall everywhere. Checked against ray-box
 intersection: no dropped return is one the box leaves in view (a return deeper than the radius
 inside the box's shadow from both neighbours is, by convexity, hidden from the frame between
-them), and at least half of those the box hides are dropped (measured: 74 % of 1 452); the beams no
+them), and at least half of those the box hides are dropped (measured: 74 % of 1 452), also when
+the box returns on every third beam it hides, returns that stop 5 m short of the wall; the beams no
 training scan returned on, the columns past the drive's coverage and the surfaces that moved
 are never dropped. Beams with offsets: a point placed on each ring's beam 3 m away comes back
 on that ring, where the nearest elevation from the sensor's centre is off by several rings.
@@ -27,6 +28,7 @@ from nidar_mi.resim.holes import (
     hole_frames,
     in_hole,
     returned_beams,
+    returned_share,
 )
 from nidar_mi.resim.laser_layout import RingLayout
 from nidar_mi.resim.range_image import ScanGrid
@@ -90,8 +92,16 @@ def _hits_box(o: np.ndarray, p: np.ndarray) -> np.ndarray:
     return (hi >= np.maximum(lo, 0.0)) & (lo <= 1.0)
 
 
-def _scan(origin: np.ndarray, box: bool):
-    """(N, 3) LiDAR-frame returns on the wall from ``origin`` (no rotation) and their grid."""
+def _box_entry(o: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(N,) the distance along unit rays ``d`` from ``o`` to where they enter the box."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (BOX[0] - o) / d, (BOX[1] - o) / d
+    return np.nanmax(np.minimum(t1, t2), axis=1)
+
+
+def _scan(origin: np.ndarray, box: bool, scatter: int = 0):
+    """(N, 3) LiDAR-frame returns on the wall from ``origin`` (no rotation) and their grid;
+    ``scatter``: the box returns on every ``scatter``-th ring and column it hides (0: none)."""
     d = _directions()
     ring, col = np.meshgrid(np.arange(len(ELEVATIONS)), np.arange(COLUMNS), indexing="ij")
     ahead = d[..., 0] > 0.5
@@ -100,13 +110,16 @@ def _scan(origin: np.ndarray, box: bool):
     keep = np.ones(len(p), bool)
     if box:
         keep = ~_hits_box(origin, p + origin)
+        if scatter:
+            on = ~keep & (ring[ahead] % scatter == 0) & (col[ahead] % scatter == 0)
+            p[on] = d[ahead][on] * _box_entry(origin, d[ahead][on])[:, None]
+            keep |= on
     return p[keep], ScanGrid(ring[ahead][keep], col[ahead][keep], len(ELEVATIONS), COLUMNS, True)
 
 
-@pytest.fixture(scope="module")
-def drive():
+def _drive(scatter: int = 0):
     origins = [np.array(o, float) for o in ([0, 0, 0], [0.5, 0, 0], [1, 0, 0], [0, 3, 0])]
-    scans = [_scan(o, box=True) for o in origins]
+    scans = [_scan(o, box=True, scatter=scatter) for o in origins]
     poses = []
     for o in origins:
         T = np.eye(4)
@@ -124,6 +137,11 @@ def drive():
     return frames, poses, sim[in_view], origins
 
 
+@pytest.fixture(scope="module")
+def drive():
+    return _drive()
+
+
 def test_holes_drop_what_the_dark_box_hides(drive):
     frames, poses, sim, origins = drive
     holes = Holes(frames, poses, [0, 2, 3])
@@ -133,6 +151,74 @@ def test_holes_drop_what_the_dark_box_hides(drive):
     assert not (drop & ~hidden).any()  # nothing the box leaves in view
     assert drop[hidden].mean() >= 0.5  # most of what it hides (measured 0.74)
     assert holes.dropped[1] == drop.sum()
+
+
+def test_scattered_returns_stop_short_of_the_wall():
+    # the dark box returns on every third ring and column it hides: those returns lie in the
+    # radius of nearly every hidden wall point, 5 m short of it; counting them (no reach test)
+    # keeps most of the wall behind the box, counting only returns that reach the point drops it
+    frames, poses, sim, origins = _drive(scatter=3)
+    hidden = _hits_box(origins[1], sim + origins[1])
+    drop = Holes(frames, poses, [0, 2, 3]).mask(1, sim)
+    assert not (drop & ~hidden).any()  # nothing the box leaves in view
+    assert drop[hidden].mean() >= 0.5  # measured 0.74, as with a box that returns nothing
+    naive = Holes(frames, poses, [0, 2, 3], reach_m=None).mask(1, sim)
+    assert naive[hidden].mean() <= 0.1  # measured 0.0
+
+
+def _one_ring(az_deg, range_m):
+    """(N, 3) returns at ``range_m`` on a single horizontal ring, and its (1, COLUMNS) beams."""
+    a = np.radians(np.asarray(az_deg, float))
+    col = np.floor((np.asarray(az_deg) + 180.0) * COLUMNS / 360.0).astype(int)
+    returned = np.zeros((1, COLUMNS), bool)
+    returned[0, col] = True
+    return np.column_stack([np.cos(a), np.sin(a), 0 * a]) * np.asarray(range_m)[..., None], returned
+
+
+def test_a_return_reaches_within_the_margin():
+    # one probe 5 m away at azimuth 0.1 degrees (a column's centre); the scan's returns at
+    # -0.3 and +0.5 degrees: 2 of the 7 beams within 0.7 degrees (columns of 0.2 degrees)
+    layout = RingLayout(np.array([0.0]), np.zeros(1), np.ones(1))
+    beams, cover = np.ones((1, COLUMNS), bool), np.ones(COLUMNS, bool)
+    probe = 5.0 * np.array([[np.cos(np.radians(0.1)), np.sin(np.radians(0.1)), 0.0]])
+
+    def got(az, rng, reach_m=1.0):
+        real, returned = _one_ring(az, rng)
+        return bool(
+            in_hole(probe, real, beams, cover, layout, reach_m=reach_m, returned=returned)[0]
+        )
+
+    sparse = [-0.3, 0.5]
+    assert got(sparse, [3.9, 3.9])  # 1.1 m short: stopped before the probe
+    assert not got(sparse, [4.1, 4.1])  # 0.9 m short: within the margin
+    assert not got(sparse, [7.0, 7.0])  # beyond it
+    assert not got(sparse, [3.0, 6.0])  # one of them reaches
+    assert not got(sparse, [3.0, 3.0], reach_m=None)  # no reach test: a return is in the radius
+    real, _ = _one_ring(sparse, [3.0, 3.0])
+    assert not in_hole(probe, real, beams, cover, layout)[0]  # nor without the scan's beams
+    # the same short returns on every beam around it (a bright surface in front: parallax,
+    # not a dark surface): 7 of 7 returned, the probe is no hole
+    dense = np.arange(-0.5, 0.71, 0.2)
+    assert not got(dense, np.full(len(dense), 3.0))
+    # 3 of 7 returned (0.43, sparse) against 4 of 7 (0.57, not)
+    assert got(dense[::3], [3.0] * 3) and not got(dense[[0, 1, 3, 6]], [3.0] * 4)
+
+
+def test_returned_share_counts_the_beams_in_the_radius():
+    # 5 rings 0.4 degrees apart, 0.7 degrees: the ring itself and one on either side (the
+    # next are 0.8 degrees away), 3 columns on either side: 3 x 7 beams around (2, 100)
+    layout = RingLayout(np.arange(0.8, -0.81, -0.4), np.zeros(5), np.ones(5))
+    beams = np.ones((5, COLUMNS), bool)
+    returned = np.zeros((5, COLUMNS), bool)
+    returned[1:4, 97:104] = True  # all 21
+    returned[0, :] = returned[4, :] = True  # outside the radius: not counted
+    ring, col = np.array([2, 2, 0]), np.array([100, 104, 1799])
+    share = returned_share(ring, col, returned, beams, layout, 0.7)
+    # (2, 104): columns 101-107, 3 of 7 on rings 1-3; (0, 1799): rings 0 and 1, columns
+    # 1796-1799 and 0-2 (wrapping): ring 0 all 7, ring 1 none
+    np.testing.assert_allclose(share, [1.0, 9 / 21, 7 / 14])
+    beams[1, :] = False  # beams no training scan returned on are not counted
+    np.testing.assert_allclose(returned_share(ring, col, returned, beams, layout, 0.7)[:1], [1.0])
 
 
 def test_holes_keep_the_moving_surfaces(drive):
