@@ -1,9 +1,11 @@
-"""Step 11 of docs/RESIMULATION.md (:mod:`nidar_mi.resim.holes`) measured: its radius, chosen on
-training frames alone, and what it changes on the held-out frames.
+"""Step 11 of docs/RESIMULATION.md (:mod:`nidar_mi.resim.holes`, :mod:`nidar_mi.resim.seen_through`)
+measured: its radius and margins on training frames alone, and what it changes on the held-out
+frames.
 
 ``python benchmarks/resim_holes.py --work DIR [--runs NAME,...] [--radii 0.3,0.4,0.5,0.7]``
 ``python benchmarks/resim_holes.py --work DIR --reaches none,0.25,0.5,1,2 [--runs NAME,...]``
 ``python benchmarks/resim_holes.py --work DIR --shares 0.3,0.5,0.7,0.9,1 [--runs NAME,...]``
+``python benchmarks/resim_holes.py --work DIR --throughs 0.5,0.75,1,2 [--runs NAME,...]``
 ``python benchmarks/resim_holes.py --work DIR --ab [--runs NAME,...] [--json FILE]``
 
 Radius (the default): the share of a training scan's own real returns that the hole rule would
@@ -11,18 +13,20 @@ drop, its training neighbours as the evidence, at each radius (the reach test's 
 ``REACH_M``). ``--reaches``: the same at each margin of the reach test (``none``: every return in
 the radius counts), radius ``HOLE_RADIUS_DEG``; ``--shares``: at each largest share of returned
 beams around a point that the reach test takes for a sparse scan (``SPARSE_SHARE``; 1: any).
+These three measure the holes alone. ``--throughs``: the see-through test alone at each margin.
 ``--ab``: each run reconstructed once more (``nidar_mi.resim.reconstruction.reconstruct`` into a
-temporary folder, removed afterwards) and its held-out frames evaluated three times on that one
-fit: without the holes, with holes that count every return in the radius (no reach test) and
-with the rule as it is: the step's own effect, free of the run-to-run spread of the fit's
-threaded sums (a few mm of Chamfer on ``kitti_raw_0926``).
+temporary folder, removed afterwards) and its held-out frames evaluated four times on that one
+fit (:data:`AB_STEPS`): without the step, with holes that count every return in the radius (no
+reach test), with the holes as they are, and with the see-through test too: each part's own
+effect, free of the run-to-run spread of the fit's threaded sums (a few mm of Chamfer on
+``kitti_raw_0926``).
 
 ``DIR`` is a ``benchmarks/resim_drives.py --work`` folder: each run's drive in
 ``DIR/drives/<run>`` and its re-simulation in ``DIR/out/<run>`` (its poses and held-out frames
 are read from there; the held-out frames are neither scored nor used as evidence). Every third
 training frame with training frames on both sides is scored. A real return the rule drops is a
 return the rule would have taken from a real sensor: the radius is the smallest under 0.1 % on
-every drive, the margin the smallest under 0.2 %. Prints a markdown table. KITTI is research-only data: only numbers are printed.
+every drive, the see-through margin too. Prints a markdown table. KITTI is research-only data: only numbers are printed.
 """
 
 from __future__ import annotations
@@ -36,8 +40,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
-    """(radius, reach, share) -> (returns dropped, returns scored) over a run's scored training
-    frames."""
+    """(radius, reach, share, through) -> (returns dropped, returns scored) over a run's scored
+    training frames (through None: the holes alone; else the see-through test alone)."""
     import nidar_mi.resim.holes as rule
     from nidar_mi.io.kitti import read_kitti_poses
     from nidar_mi.resim.drive_folder import open_drive
@@ -52,20 +56,32 @@ def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
     scored = [k for k in train[1:-1]][::3]
     out = {}
     shipped = rule.SPARSE_SHARE
-    for radius, reach, share in settings:
+    for radius, reach, share, through in settings:
         rule.SPARSE_SHARE = share  # in_hole reads it when it runs
         try:
-            holes = Holes(frames, poses, train, radius_deg=radius, reach_m=reach)
+            holes = Holes(
+                frames, poses, train, radius_deg=radius, reach_m=reach,
+                holes=through is None, through_m=through,
+            )  # fmt: skip
             dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
         finally:
             rule.SPARSE_SHARE = shipped
-        out[(radius, reach, share)] = (dropped, sum(len(frames.xyz[k]) for k in scored))
+        out[(radius, reach, share, through)] = (dropped, sum(len(frames.xyz[k]) for k in scored))
     return out
 
 
+#: ``--ab``'s evaluations, in order: name -> (evaluate_heldout's switches, the hole test's).
+AB_STEPS = {
+    "without": ({"holes": False, "through": False}, {}),
+    "no_reach": ({"holes": True, "through": False}, {"reach_m": None}),
+    "no_through": ({"holes": True, "through": False}, {}),
+    "with": ({"holes": True, "through": True}, {}),
+}
+
+
 def ab(run_dir: Path, out_dir: Path) -> dict:
-    """``{"without": mean, "no_reach": mean, "with": mean}`` of one fresh reconstruction's
-    held-out frames."""
+    """``{step: mean}`` of one fresh reconstruction's held-out frames evaluated with each of
+    :data:`AB_STEPS`."""
     import shutil
     import tempfile
 
@@ -77,21 +93,20 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
     holdout = tuple(json.loads((out_dir / "report.json").read_text())["holdout"])
     evaluate, means = heldout.evaluate_heldout, {}
 
-    def both(*args, **kwargs):
-        means["without"] = evaluate(*args, **{**kwargs, "holes": False})["mean"]
+    def each(*args, **kwargs):
         rule = holes.Holes
-        holes.Holes = lambda *a, **k: rule(*a, **{**k, "reach_m": None})
-        try:  # evaluate_heldout imports Holes when it runs
-            means["no_reach"] = evaluate(*args, **{**kwargs, "holes": True})["mean"]
-        finally:
-            holes.Holes = rule
-        result = evaluate(*args, **{**kwargs, "holes": True})
-        means["with"] = result["mean"]
+        for name, (switches, test) in AB_STEPS.items():
+            holes.Holes = lambda *a, _t=test, **k: rule(*a, **{**k, **_t})
+            try:  # evaluate_heldout imports Holes when it runs
+                result = evaluate(*args, **{**kwargs, **switches})
+            finally:
+                holes.Holes = rule
+            means[name] = result["mean"]
         return result
 
     set_variant()
     tmp = Path(tempfile.mkdtemp(prefix="resim_holes_"))
-    heldout.evaluate_heldout = both  # reconstruct imports it when it runs
+    heldout.evaluate_heldout = each  # reconstruct imports it when it runs
     try:
         reconstruct(ReconstructOptions(drive=str(run_dir), out=str(tmp / "out"), holdout=holdout))
     finally:
@@ -101,14 +116,12 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
 
 
 def _ab_table(args, runs) -> dict:
-    print(
-        "| run (no holes → no reach test → the rule) | Chamfer (m) | F@0.1 m | drop agr. |", end=""
-    )
+    print("| run (" + " → ".join(AB_STEPS) + ") | Chamfer (m) | F@0.1 m | drop agr. |", end="")
     print(" Spearman | RMSE |\n| --- | --- | --- | --- | --- | --- |")
     out = {}
     for run in runs:
         out[run] = m = ab(args.work / "drives" / run, args.work / "out" / run)
-        steps = ("without", "no_reach", "with")
+        steps = tuple(AB_STEPS)
         cells = [
             " → ".join(f"{m[s][q]:.4f}" for s in steps)
             for q in ("chamfer_m", "fscore", "drop_agreement")
@@ -127,6 +140,7 @@ def main(argv=None) -> int:
     ap.add_argument("--radii", default="0.3,0.4,0.5,0.7", help="radii, degrees")
     ap.add_argument("--reaches", default=None, help="reach margins, m ('none': no reach test)")
     ap.add_argument("--shares", default=None, help="sparse shares of the reach test")
+    ap.add_argument("--throughs", default=None, help="margins of the see-through test, m")
     ap.add_argument("--ab", action="store_true", help="held-out scores without and with holes")
     ap.add_argument("--json", type=Path, default=None, help="--ab: write the means here")
     args = ap.parse_args(argv)
@@ -134,14 +148,18 @@ def main(argv=None) -> int:
 
     if args.reaches:
         reach = [None if r == "none" else float(r) for r in args.reaches.split(",")]
-        settings = [(HOLE_RADIUS_DEG, r, SPARSE_SHARE) for r in reach]
+        settings = [(HOLE_RADIUS_DEG, r, SPARSE_SHARE, None) for r in reach]
         heads = [f"{r} m" if r is not None else "no reach test" for r in reach]
     elif args.shares:
-        settings = [(HOLE_RADIUS_DEG, REACH_M, float(f)) for f in args.shares.split(",")]
-        heads = [f"share ≤ {f}" for _, _, f in settings]
+        settings = [(HOLE_RADIUS_DEG, REACH_M, float(f), None) for f in args.shares.split(",")]
+        heads = [f"share ≤ {f}" for _, _, f, _ in settings]
+    elif args.throughs:
+        margins = [float(m) for m in args.throughs.split(",")]
+        settings = [(HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, m) for m in margins]
+        heads = [f"seen through by {m} m" for m in margins]
     else:
-        settings = [(float(r), REACH_M, SPARSE_SHARE) for r in args.radii.split(",")]
-        heads = [f"{r}°" for r, _, _ in settings]
+        settings = [(float(r), REACH_M, SPARSE_SHARE, None) for r in args.radii.split(",")]
+        heads = [f"{r}°" for r, _, _, _ in settings]
     runs = (
         args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
     )

@@ -30,6 +30,11 @@ STEP_SWITCHES = (
         "nothing (default: dropped, the surfaces too dark for the sensor)",
     ),
     (
+        "--no-see-through",
+        "keep the held-out frames' returns where the training scans next to them saw through "
+        "the surface (default: dropped, layers no longer there)",
+    ),
+    (
         "--no-splats",
         "no splats for the returns that the scans' meshes leave out (foliage, edges, far "
         "surfaces; default: one quad per such return off the mesh, its range-image cell on its "
@@ -150,6 +155,7 @@ def main(argv=None) -> int:
             transient_frames=args.transient_frames,
             moving=not args.no_moving,
             holes=not args.no_holes,
+            through=not args.no_see_through,
             splats=not args.no_splats,
             range_offsets=not args.no_range_offsets,
             prior=not args.no_prior,

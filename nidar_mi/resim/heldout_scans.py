@@ -17,7 +17,8 @@ training frame nearest in time saw them, each object moved on at the velocity a 
 training frame gives it (:mod:`.moving`; their ρ per method: the returns inverted through the
 method's sensor, or the method's constant where it has none). Unless ``holes`` is off, the
 returns that fall in the holes of the training scans beside the frame are dropped from every
-method's scan (:mod:`.holes`: surfaces too dark to return).
+method's scan (:mod:`.holes`: surfaces too dark to return), and unless ``through`` is off,
+those the same scans saw through (:mod:`.seen_through`: layers that are not there).
 """
 
 from __future__ import annotations
@@ -288,17 +289,19 @@ def evaluate_heldout(
     mesh=None,
     moving: bool = True,
     holes: bool = True,
+    through: bool = True,
 ):
     """Re-simulate, write and score every held-out frame; ``{"frames": {id: metrics},
     "mean": ...}``. ``mesh``: the static surfaces of ``scene_path`` (:class:`.mesh.Mesh`),
     needed with ``moving``; ``holes``: drop the returns in the holes of the training scans next
-    to each frame (module docstring)."""
+    to each frame, ``through``: those they saw through (module docstring)."""
     import mitsuba as mi
 
     from ..io.kitti import write_kitti_bin
     from ..scene import load_scene
     from .build import drop_scratch
     from .holes import Holes, hole_frames
+    from .seen_through import THROUGH_M
     from .surfaces import RHO_KEY
 
     if not drive.holdout:
@@ -313,7 +316,12 @@ def evaluate_heldout(
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}
     motion = _Moving(drive, frames, poses, mesh, static, stage, variants) if moving else None
-    hole_test = Holes(frames, poses, [drive.index(i) for i in drive.train]) if holes else None
+    hole_test = None
+    if holes or through:
+        train_ids = [drive.index(i) for i in drive.train]
+        hole_test = Holes(
+            frames, poses, train_ids, holes=holes, through_m=THROUGH_M if through else None
+        )
     try:
         for fid in drive.holdout:
             k = drive.index(fid)
@@ -339,6 +347,7 @@ def evaluate_heldout(
                 per_frame[fid]["holes"] = {
                     "from": [drive.ids[j] for j in hole_frames(k, hole_test.train)],
                     "dropped": hole_test.dropped.get(k, 0),
+                    "seen_through": hole_test.seen.get(k, 0),
                 }
     finally:
         drop_scratch(stage)

@@ -13,7 +13,8 @@ Output folder (published whole, with the record of :data:`OWNER`)::
                            splats (:mod:`.splats`) and those that moved, as the training
                            frame nearest in time saw them, moved on: :mod:`.moving`; the
                            returns in the holes of the training scans next to the frame
-                           dropped: :mod:`.holes`)
+                           dropped: :mod:`.holes`, and those they saw through:
+                           :mod:`.seen_through`)
     OUT/report.json        inputs, timings, the recovered sensor and its shadow, the fit's
                            residuals, the held-out metrics of the re-simulation and of the
                            baselines
@@ -70,6 +71,7 @@ class ReconstructOptions:
     transient_frames: int = 3
     moving: bool = True
     holes: bool = True
+    through: bool = True
     splats: bool = True
     range_offsets: bool = True
     prior: bool = True
@@ -164,7 +166,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("write")
     held = evaluate_heldout(
         scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving,
-        holes=options.holes,
+        holes=options.holes, through=options.through,
     )  # fmt: skip
     clock.lap("evaluate")
     report = {
