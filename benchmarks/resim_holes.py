@@ -137,11 +137,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--work", required=True, type=Path, help="a resim_drives.py --work folder")
     ap.add_argument("--runs", default=None, help="runs to score (default: every one there)")
-    ap.add_argument("--radii", default="0.3,0.4,0.5,0.7", help="radii, degrees")
-    ap.add_argument("--reaches", default=None, help="reach margins, m ('none': no reach test)")
-    ap.add_argument("--shares", default=None, help="sparse shares of the reach test")
-    ap.add_argument("--throughs", default=None, help="margins of the see-through test, m")
-    ap.add_argument("--ab", action="store_true", help="held-out scores without and with holes")
+    one = ap.add_mutually_exclusive_group()  # what to measure: one of these
+    one.add_argument("--radii", default="0.3,0.4,0.5,0.7", help="radii, degrees")
+    one.add_argument("--reaches", default=None, help="reach margins, m ('none': no reach test)")
+    one.add_argument("--shares", default=None, help="sparse shares of the reach test")
+    one.add_argument("--throughs", default=None, help="margins of the see-through test, m")
+    one.add_argument(
+        "--ab", action="store_true", help="held-out scores at each step: " + ", ".join(AB_STEPS)
+    )
     ap.add_argument("--json", type=Path, default=None, help="--ab: write the means here")
     args = ap.parse_args(argv)
     from nidar_mi.resim.holes import HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE

@@ -27,7 +27,8 @@ STEP_SWITCHES = (
     (
         "--no-holes",
         "keep the held-out frames' returns where the training scans next to them returned "
-        "nothing (default: dropped, the surfaces too dark for the sensor)",
+        "nothing, or a few scattered returns short of them (default: dropped, the surfaces "
+        "too dark for the sensor)",
     ),
     (
         "--no-see-through",

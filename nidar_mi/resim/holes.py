@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .directions import around, chord, direction_tree, unit_directions
 from .seen_through import THROUGH_M, seen_through
 
 __all__ = [
@@ -63,8 +64,6 @@ __all__ = [
     "hole_frames",
     "returned_beams",
     "beam_rings",
-    "direction_tree",
-    "unit_directions",
     "in_hole",
     "Holes",
 ]
@@ -77,9 +76,6 @@ SIDE_DEG = 0.5
 MOVING_KEEP_M = 0.3
 #: A real return in the radius reaches a point when it is at most this much nearer the sensor, m.
 REACH_M = 1.0
-#: Returns looked at in the radius (HDL-64E: about 20 on a surface that returns everywhere);
-#: a point with this many is taken as reached.
-REACH_NEIGHBOURS = 64
 #: The returns in the radius that stop short make a hole only where the scan is sparse: at most
 #: this share of the beams around the point returned (a dark surface's scattered returns).
 SPARSE_SHARE = 0.5
@@ -124,27 +120,14 @@ def beam_rings(points: np.ndarray, elevations_deg, offsets_m) -> tuple[np.ndarra
     return ring, off
 
 
-def unit_directions(xyz: np.ndarray) -> np.ndarray:
-    """(N, 3) the unit directions of (N, 3) points from the sensor (the origin)."""
-    n = np.linalg.norm(xyz, axis=1, keepdims=True)
-    return xyz / np.maximum(n, 1e-12)
-
-
-def direction_tree(real: np.ndarray):
-    """A k-d tree (scipy's ``cKDTree``) of the unit directions of (N, 3) returns."""
-    from scipy.spatial import cKDTree
-
-    return cKDTree(unit_directions(np.asarray(real, dtype=np.float64).reshape(-1, 3)))
-
-
-def _short(points: np.ndarray, real: np.ndarray, tree, chord: float, reach_m):
-    """``(none, short)``: (M,) bool each, no return of ``real`` within ``chord`` of a point's
+def _short(points: np.ndarray, real: np.ndarray, tree, chord_len: float, reach_m):
+    """``(none, short)``: (M,) bool each, no return of ``real`` within ``chord_len`` of a point's
     direction, and returns there that all stop more than ``reach_m`` short of it (None: never).
     The nearest direction first: where it reaches (nearly every point), the point is reached;
     only the others look at every return in the radius (a point with
-    :data:`REACH_NEIGHBOURS` of them is taken as reached)."""
+    :data:`~.directions.RADIUS_NEIGHBOURS` of them is taken as reached)."""
     unit = unit_directions(points)
-    d, i = tree.query(unit, k=1, distance_upper_bound=chord)
+    d, i = tree.query(unit, k=1, distance_upper_bound=chord_len)
     none = ~np.isfinite(d)
     short = np.zeros(len(points), dtype=bool)
     if reach_m is None:
@@ -154,12 +137,8 @@ def _short(points: np.ndarray, real: np.ndarray, tree, chord: float, reach_m):
     idx = np.flatnonzero(~none)
     idx = idx[rng[i[idx]] < dist[idx] - reach_m]
     if len(idx):
-        k = min(REACH_NEIGHBOURS, len(real))
-        d, i = tree.query(unit[idx], k=k, distance_upper_bound=chord)
-        d, i = d.reshape(len(idx), k), i.reshape(len(idx), k)
-        hit = np.isfinite(d)
-        far = np.where(hit, rng[np.minimum(i, len(real) - 1)], -np.inf).max(axis=1)
-        full = hit[:, -1] & (k == REACH_NEIGHBOURS)
+        hit, i, full = around(tree, unit[idx], chord_len, len(real))
+        far = np.where(hit, rng[i], -np.inf).max(axis=1)
         short[idx] = (far < dist[idx] - reach_m) & ~full
     return none, short
 
@@ -230,10 +209,10 @@ def in_hole(
     if len(points) == 0:
         return np.zeros(0, dtype=bool)
     reach_m = None if returned is None else reach_m
-    chord = 2.0 * np.sin(np.radians(radius_deg) / 2.0)
     if len(real):
         tree = direction_tree(real) if tree is None else tree
-        out, short = _short(points, np.asarray(real, dtype=np.float64), tree, chord, reach_m)
+        real = np.asarray(real, dtype=np.float64)
+        out, short = _short(points, real, tree, chord(radius_deg), reach_m)
     else:
         out, short = np.ones(len(points), dtype=bool), np.zeros(len(points), dtype=bool)
     rings, columns = beams.shape
@@ -283,7 +262,7 @@ class Holes:
         self.dropped: dict[int, int] = {}
         #: held-out frame -> of those, the returns seen through (and in no hole)
         self.seen: dict[int, int] = {}
-        self._trees: dict[int, object] = {}  # the evidence scans' direction trees, a few
+        self._trees: dict[int, tuple] = {}  # the evidence scans' trees and beams, a few
 
     def _tree(self, j: int):
         """``(tree, returned)`` of evidence scan ``j``: its direction tree and its beams."""

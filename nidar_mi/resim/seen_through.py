@@ -5,10 +5,10 @@ The reconstruction keeps a surface wherever too few training rays passed through
 (:mod:`.transient`: a vertex needs several frames that see through it). A vehicle that crept up
 to its stopping place leaves layers of its rear along the way that later rays rarely cross: the
 beams that would cross them reach its dark underside or its shadow on the road and return
-nothing, so they carve nothing. (On ``kitti_raw_0926`` the stopped vehicle ahead of the sensor
-kept such a layer 1.5 m in front of it, 0.4 m above the road: the re-simulated held-out scans
-returned there, 0.9 m from any real return, while the real beams of the frames on either side
-reached the vehicle behind it.)
+nothing, so they carve nothing. (On ``kitti_raw_0926`` the vehicle ahead of the sensor crept
+2.7 m to its stop and left such a layer 1.3 to 2.4 m in front of it, 0.3 to 0.6 m above the
+road: the re-simulated held-out scans returned there, 0.9 m from any real return, while the
+real beams of the frames on either side reached the vehicle behind it.)
 
 The evidence is the same as the holes' (:mod:`.holes`: the training frames next to the
 held-out frame, each of them agreeing): a re-simulated return of held-out frame ``k`` is
@@ -32,9 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .directions import around, chord, unit_directions
+
 __all__ = ["THROUGH_M", "seen_through"]
 
-#: A scan saw through a point when all its returns around the point's direction lie at least
+#: A scan saw through a point when all its returns around the point's direction lie more than
 #: this much farther from the sensor, m.
 THROUGH_M = 1.0
 
@@ -51,36 +53,29 @@ def seen_through(
     Args:
         points: (M, 3) points in that scan's LiDAR frame, m.
         real: (N, 3) the scan's returns, same frame, m.
-        tree: :func:`.holes.direction_tree` of ``real``.
+        tree: :func:`.directions.direction_tree` of ``real``.
         radius_deg: the radius around a point's direction, degrees (the holes':
             :data:`~.holes.HOLE_RADIUS_DEG`).
         margin_m: how much farther than the point every return there must lie, m.
 
     The nearest direction first: where it does not lie beyond the point (nearly every point),
     the point was not seen through; only the others look at every return in the radius (a
-    point with :data:`~.holes.REACH_NEIGHBOURS` of them is taken as not seen through).
+    point with :data:`~.directions.RADIUS_NEIGHBOURS` of them is taken as not seen through).
     """
-    from .holes import REACH_NEIGHBOURS, unit_directions
-
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     real = np.asarray(real, dtype=np.float64).reshape(-1, 3)
     out = np.zeros(len(points), dtype=bool)
     if len(points) == 0 or len(real) == 0:
         return out
-    chord = 2.0 * np.sin(np.radians(radius_deg) / 2.0)
     unit = unit_directions(points)
     dist = np.linalg.norm(points, axis=1)
     rng = np.linalg.norm(real, axis=1)
-    d, i = tree.query(unit, k=1, distance_upper_bound=chord)
+    d, i = tree.query(unit, k=1, distance_upper_bound=chord(radius_deg))
     idx = np.flatnonzero(np.isfinite(d))
     idx = idx[rng[i[idx]] > dist[idx] + margin_m]
     if len(idx) == 0:
         return out
-    k = min(REACH_NEIGHBOURS, len(real))
-    d, i = tree.query(unit[idx], k=k, distance_upper_bound=chord)
-    d, i = d.reshape(len(idx), k), i.reshape(len(idx), k)
-    hit = np.isfinite(d)
-    near = np.where(hit, rng[np.minimum(i, len(real) - 1)], np.inf).min(axis=1)
-    full = hit[:, -1] & (k == REACH_NEIGHBOURS)
+    hit, i, full = around(tree, unit[idx], chord(radius_deg), len(real))
+    near = np.where(hit, rng[i], np.inf).min(axis=1)
     out[idx] = (near > dist[idx] + margin_m) & ~full
     return out

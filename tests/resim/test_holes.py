@@ -193,6 +193,9 @@ def test_a_return_reaches_within_the_margin():
     assert not got(sparse, [4.1, 4.1])  # 0.9 m short: within the margin
     assert not got(sparse, [7.0, 7.0])  # beyond it
     assert not got(sparse, [3.0, 6.0])  # one of them reaches
+    # the return nearest in direction (at 0 degrees, 0.1 from the probe) short and the other
+    # reaching, and the other way round: neither is a hole
+    assert not got([0.0, 0.5], [3.0, 6.0]) and not got([0.0, 0.5], [6.0, 3.0])
     assert not got(sparse, [3.0, 3.0], reach_m=None)  # no reach test: a return is in the radius
     real, _ = _one_ring(sparse, [3.0, 3.0])
     assert not in_hole(probe, real, beams, cover, layout)[0]  # nor without the scan's beams
@@ -211,12 +214,13 @@ def test_returned_share_counts_the_beams_in_the_radius():
     beams = np.ones((5, COLUMNS), bool)
     returned = np.zeros((5, COLUMNS), bool)
     returned[1:4, 97:104] = True  # all 21
-    returned[0, :] = returned[4, :] = True  # outside the radius: not counted
+    returned[4, :] = True  # outside the radius: not counted
+    returned[0, 0:3] = True  # past the seam of ring 0
     ring, col = np.array([2, 2, 0]), np.array([100, 104, 1799])
     share = returned_share(ring, col, returned, beams, layout, 0.7)
     # (2, 104): columns 101-107, 3 of 7 on rings 1-3; (0, 1799): rings 0 and 1, columns
-    # 1796-1799 and 0-2 (wrapping): ring 0 all 7, ring 1 none
-    np.testing.assert_allclose(share, [1.0, 9 / 21, 7 / 14])
+    # 1796-1799 and 0-2 (wrapping): 3 of 7 on ring 0, none on ring 1
+    np.testing.assert_allclose(share, [1.0, 9 / 21, 3 / 14])
     beams[1, :] = False  # beams no training scan returned on are not counted
     np.testing.assert_allclose(returned_share(ring, col, returned, beams, layout, 0.7)[:1], [1.0])
 

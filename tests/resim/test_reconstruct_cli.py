@@ -86,3 +86,27 @@ def test_holdout_ranges_expand_with_their_width():
 
     assert parse_ids("000008:000011, r5") == ["000008", "000009", "000010", "000011", "r5"]
     assert parse_ids("") == []
+
+
+def test_each_step_switch_turns_its_step_off(monkeypatch):
+    # every --no-* flag of STEP_SWITCHES reaches ReconstructOptions as its step off, the others on
+    import nidar_mi.resim.reconstruction as rec
+    from nidar_mi.cli.reconstruct import STEP_SWITCHES, main
+
+    field = {
+        "--no-moving": "moving",
+        "--no-holes": "holes",
+        "--no-see-through": "through",
+        "--no-splats": "splats",
+        "--no-range-offsets": "range_offsets",
+        "--no-prior": "prior",
+    }
+    assert sorted(field) == sorted(flag for flag, _ in STEP_SWITCHES)
+    seen = []
+    monkeypatch.setattr(rec, "check", lambda options: seen.append(options))
+    monkeypatch.setattr(rec, "reconstruct", lambda options: {})
+    monkeypatch.setattr("nidar_mi.backend.set_variant", lambda *a, **k: None)
+    for flag, name in field.items():
+        assert main(["drive", "-o", "out", "-q", flag]) == 0
+        assert getattr(seen[-1], name) is False
+        assert all(getattr(seen[-1], other) is True for other in field.values() if other != name)

@@ -2,8 +2,8 @@
 
 A sensor on a line (x = 0, 0.5, 1 m; the middle frame held out) scans a wall 10 m ahead. The
 held-out frame's re-simulation also holds a box 5 m ahead that the real scans never saw (a layer
-that is not there any more): its returns on the box, and only those, are dropped, checked
-against ray-box intersection; when the real scans see the box too, nothing is. Hand-placed
+that is not there any more): its returns on the box's faces, and only those, are dropped;
+when the real scans see the box too, nothing is. Hand-placed
 returns around one probe check the margin.
 """
 
@@ -13,7 +13,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from nidar_mi.resim.holes import Holes, direction_tree
+from nidar_mi.resim.directions import direction_tree
+from nidar_mi.resim.holes import Holes
 from nidar_mi.resim.laser_layout import RingLayout
 from nidar_mi.resim.range_image import ScanGrid
 from nidar_mi.resim.seen_through import THROUGH_M, seen_through
@@ -107,6 +108,11 @@ def test_the_margin_on_hand_placed_returns():
     assert not through([5.9, 8.0])  # one within the margin
     assert not through([4.0, 8.0])  # one in front of it
     assert through([5.9, 8.0], margin=0.5)
+    # the return nearest in direction beyond, another within the margin or in front: not
+    b = np.radians([0.1, 0.5])
+    for second in (5.9, 4.0):
+        real = np.column_stack([np.cos(b), np.sin(b), 0 * b]) * np.array([[8.0], [second]])
+        assert not seen_through(probe, real, direction_tree(real), 0.7)[0]
     # no return within the radius: a hole, not seen through
     far = 7.0 * np.array([[np.cos(np.radians(2.0)), np.sin(np.radians(2.0)), 0.0]])
     assert not seen_through(probe, far, direction_tree(far), 0.7)[0]
