@@ -17,7 +17,7 @@ These three measure the holes alone. ``--throughs``: the see-through test alone 
 ``--ab``: each run reconstructed once more (``nidar_mi.resim.reconstruction.reconstruct`` into a
 temporary folder, removed afterwards) and its held-out frames evaluated four times on that one
 fit (:data:`AB_STEPS`): without the step, with holes that count every return in the radius (no
-reach test), with the holes as they are, and with the see-through test too: each part's own
+reach test), with the holes as they are, and with the see-through test's hiding too: each part's own
 effect, free of the run-to-run spread of the fit's threaded sums (a few mm of Chamfer on
 ``kitti_raw_0926``).
 
@@ -26,7 +26,7 @@ effect, free of the run-to-run spread of the fit's threaded sums (a few mm of Ch
 are read from there; the held-out frames are neither scored nor used as evidence). Every third
 training frame with training frames on both sides is scored. A real return the rule drops is a
 return the rule would have taken from a real sensor: the radius is the smallest under 0.1 % on
-every drive, the see-through margin too. Prints a markdown table. KITTI is research-only data: only numbers are printed.
+every drive, and the margins are under it too. Prints a markdown table. KITTI is research-only data: only numbers are printed.
 """
 
 from __future__ import annotations
@@ -39,14 +39,21 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
+def _world(xyz, pose):
+    """(N, 3) LiDAR-frame points ``xyz`` in the world of the (4, 4) ``pose``."""
+    return xyz @ pose[:3, :3].T + pose[:3, 3]
+
+
 def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
     """(radius, reach, share, through) -> (returns dropped, returns scored) over a run's scored
-    training frames (through None: the holes alone; else the see-through test alone)."""
+    training frames (through None: the holes alone; else the see-through test alone, each
+    return taken as a point of the static surfaces)."""
     import nidar_mi.resim.holes as rule
     from nidar_mi.io.kitti import read_kitti_poses
     from nidar_mi.resim.drive_folder import open_drive
     from nidar_mi.resim.frames import load_frames
     from nidar_mi.resim.holes import Holes
+    from nidar_mi.resim.seen_through import SeenThrough
 
     report = json.loads((out_dir / "report.json").read_text())
     drive = open_drive(str(run_dir), holdout=report["holdout"], poses_file=None)
@@ -59,11 +66,14 @@ def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
     for radius, reach, share, through in settings:
         rule.SPARSE_SHARE = share  # in_hole reads it when it runs
         try:
-            holes = Holes(
-                frames, poses, train, radius_deg=radius, reach_m=reach,
-                holes=through is None, through_m=through,
-            )  # fmt: skip
-            dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
+            if through is None:
+                holes = Holes(frames, poses, train, radius_deg=radius, reach_m=reach)
+                dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
+            else:
+                seen = SeenThrough(frames, poses, train, margin_m=through, radius_deg=radius)
+                dropped = sum(
+                    int(seen.points(k, _world(frames.xyz[k], poses[k])).sum()) for k in scored
+                )
         finally:
             rule.SPARSE_SHARE = shipped
         out[(radius, reach, share, through)] = (dropped, sum(len(frames.xyz[k]) for k in scored))
@@ -147,6 +157,11 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--json", type=Path, default=None, help="--ab: write the means here")
     args = ap.parse_args(argv)
+    import signal
+
+    from nidar_mi.cli._common import _on_sigterm
+
+    signal.signal(signal.SIGTERM, _on_sigterm)  # --ab's temporary folder removed on SIGTERM too
     from nidar_mi.resim.holes import HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE
 
     if args.reaches:

@@ -32,8 +32,8 @@ STEP_SWITCHES = (
     ),
     (
         "--no-see-through",
-        "keep the held-out frames' returns where the training scans next to them saw through "
-        "the surface (default: dropped, layers no longer there)",
+        "keep the static surfaces that the training scans next to a held-out frame saw through "
+        "(default: hidden at that frame, layers no longer there)",
     ),
     (
         "--no-splats",

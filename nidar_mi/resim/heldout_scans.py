@@ -18,7 +18,8 @@ training frame gives it (:mod:`.moving`; their ρ per method: the returns invert
 method's sensor, or the method's constant where it has none). Unless ``holes`` is off, the
 returns that fall in the holes of the training scans beside the frame are dropped from every
 method's scan (:mod:`.holes`: surfaces too dark to return), and unless ``through`` is off,
-those the same scans saw through (:mod:`.seen_through`: layers that are not there).
+the static triangles the same scans saw through are hidden from its cast (:mod:`.seen_through`:
+layers that are not there).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 
 from .drive_folder import Drive
 from .frames import MIN_RANGE_M, Frames
+from .mesh import Mesh
 from .scan_scores import copy_intensity, drop_metrics, geometry_metrics, intensity_metrics, matches
 
 __all__ = ["evaluate_heldout", "METHODS"]
@@ -246,37 +248,51 @@ class _Moving:
         trail |= trail_faces(self.mesh, grown.mesh, velocity, steps, k - j, self.normals)
         return grown, velocity, trail, self._rho_of(grown, rays, j, inv)
 
-    def at(self, k: int, inv):
+    def at(self, k: int, inv, hidden=None):
         """``(scene, extra, keep, record, moved)`` at held-out frame ``k``: the static surfaces
-        without the tracked objects' trails and with the surfaces that moved, their ρ per
-        method, the static vertices the scene keeps (in its order; the moving ones follow;
+        without the tracked objects' trails and the triangles ``hidden`` ((F,) bool over the
+        static faces, or None; :mod:`.seen_through`) and with the surfaces that moved, their ρ
+        per method, the static vertices the scene keeps (in its order; the moving ones follow;
         None: all), what ``report.json`` records of them and the (V, 3) world vertices of the
         surfaces that moved, where they stand at ``k`` (None: none)."""
-        from .mesh import Mesh, compact_index, merge_meshes
         from .moving import nearest_frame, partner_frame
 
         j = nearest_frame(k, self.train)
         mv = self._frame(j)[0]
         record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
-        if len(mv.mesh.faces) == 0:
-            return self.static, self._rho(j, inv), None, record, None
-        j2 = partner_frame(k, j, self.train)
-        if j2 is None:
-            moved = Mesh(mv.mesh.vertices, mv.mesh.faces)
-            scene = self.load(merge_meshes([self.mesh, moved]))
-            return scene, self._rho(j, inv), None, record, moved.vertices
-        velocity = self._velocity(j, j2)
-        tracked = float((np.linalg.norm(velocity, axis=1) > 0).mean())
-        mv, velocity, trail, extra = self._whole(j, k, velocity, inv)
-        static, keep = self.mesh, None
-        if trail.any():
-            static, keep = compact_index(Mesh(self.mesh.vertices, self.mesh.faces[~trail]))
-        record.update(
-            partner=self.drive.ids[j2], tracked=tracked, trail=int(trail.sum()),
-            triangles=len(mv.mesh.faces),
-        )  # fmt: skip
+        gone = np.zeros(len(self.mesh.faces), bool) if hidden is None else hidden.copy()
+        extra, velocity = self._rho(j, inv), np.zeros((len(mv.mesh.vertices), 3))
+        j2 = partner_frame(k, j, self.train) if len(mv.mesh.faces) else None
+        if j2 is not None:
+            velocity = self._velocity(j, j2)
+            tracked = float((np.linalg.norm(velocity, axis=1) > 0).mean())
+            mv, velocity, trail, extra = self._whole(j, k, velocity, inv)
+            gone |= trail
+            record.update(
+                partner=self.drive.ids[j2], tracked=tracked, trail=int(trail.sum()),
+                triangles=len(mv.mesh.faces),
+            )  # fmt: skip
         moved = Mesh(mv.mesh.vertices + velocity * (k - j), mv.mesh.faces)
-        return self.load(merge_meshes([static, moved])), extra, keep, record, moved.vertices
+        scene, keep = without_faces(self.load, self.mesh, gone, moved)
+        if scene is None:
+            return self.static, extra, None, record, None
+        return scene, extra, keep, record, moved.vertices if len(moved.faces) else None
+
+
+def without_faces(load, mesh, gone: np.ndarray, moved=None):
+    """``(scene, keep)``: the static ``mesh`` without the faces ``gone`` ((F,) bool) and with
+    the ``moved`` mesh after it, loaded with ``load`` (:func:`.build.scratch_scene`), and the
+    static vertices kept, in their order (None: all); ``(None, None)`` when nothing is to
+    change."""
+    from .mesh import compact_index, merge_meshes
+
+    static, keep = mesh, None
+    if gone.any():
+        static, keep = compact_index(Mesh(mesh.vertices, mesh.faces[~gone]))
+    parts = [static] + ([moved] if moved is not None and len(moved.faces) else [])
+    if keep is None and len(parts) == 1:
+        return None, None
+    return load(merge_meshes(parts)), keep
 
 
 def evaluate_heldout(
@@ -293,21 +309,22 @@ def evaluate_heldout(
 ):
     """Re-simulate, write and score every held-out frame; ``{"frames": {id: metrics},
     "mean": ...}``. ``mesh``: the static surfaces of ``scene_path`` (:class:`.mesh.Mesh`),
-    needed with ``moving``; ``holes``: drop the returns in the holes of the training scans next
-    to each frame, ``through``: those they saw through (module docstring)."""
+    needed with ``moving`` and ``through``; ``holes``: drop the returns in the holes of the
+    training scans next to each frame; ``through``: hide the static triangles they saw through
+    (module docstring)."""
     import mitsuba as mi
 
     from ..io.kitti import write_kitti_bin
     from ..scene import load_scene
-    from .build import drop_scratch
+    from .build import drop_scratch, scratch_scene
     from .holes import Holes, hole_frames
-    from .seen_through import THROUGH_M
+    from .seen_through import SeenThrough
     from .surfaces import RHO_KEY
 
     if not drive.holdout:
         return {"frames": {}, "mean": {}}
-    if moving and mesh is None:
-        raise ValueError("evaluate_heldout: moving surfaces need the static mesh")
+    if (moving or through) and mesh is None:
+        raise ValueError("evaluate_heldout: moving surfaces and the see-through test need the mesh")
     loaded = load_scene(scene_path)
     static = loaded.scene
     sensor = next(s for s in static.sensors() if hasattr(s, "config"))
@@ -316,18 +333,19 @@ def evaluate_heldout(
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}
     motion = _Moving(drive, frames, poses, mesh, static, stage, variants) if moving else None
-    hole_test = None
-    if holes or through:
-        train_ids = [drive.index(i) for i in drive.train]
-        hole_test = Holes(
-            frames, poses, train_ids, holes=holes, through_m=THROUGH_M if through else None
-        )
+    train_ids = [drive.index(i) for i in drive.train]
+    hole_test = Holes(frames, poses, train_ids) if holes else None
+    seen = SeenThrough(frames, poses, train_ids) if through else None
     try:
         for fid in drive.holdout:
             k = drive.index(fid)
             scene, record, keep, moved = static, None, None, None
+            hidden = None if seen is None else seen.faces(k, mesh.vertices, mesh.faces)
             if motion is not None:
-                scene, extra, keep, record, moved = motion.at(k, inv)
+                scene, extra, keep, record, moved = motion.at(k, inv, hidden)
+            elif hidden is not None and hidden.any():
+                scene, keep = without_faces(scratch_scene(stage), mesh, hidden)
+                extra = {name: np.zeros(0) for name in variants}
             drop = None if hole_test is None else partial(hole_test.mask, k, moving=moved)
             params = mi.traverse(scene)
             scans = {}
@@ -343,11 +361,11 @@ def evaluate_heldout(
             per_frame[fid] = _score_frame(k, scans, frames, poses, train)
             if record is not None:
                 per_frame[fid]["moving"] = record
-            if hole_test is not None:
+            if hole_test is not None or seen is not None:
                 per_frame[fid]["holes"] = {
-                    "from": [drive.ids[j] for j in hole_frames(k, hole_test.train)],
-                    "dropped": hole_test.dropped.get(k, 0),
-                    "seen_through": hole_test.seen.get(k, 0),
+                    "from": [drive.ids[j] for j in hole_frames(k, train_ids)],
+                    "dropped": 0 if hole_test is None else hole_test.dropped.get(k, 0),
+                    "seen_through": 0 if seen is None else seen.hidden.get(k, 0),
                 }
     finally:
         drop_scratch(stage)

@@ -52,7 +52,6 @@ from __future__ import annotations
 import numpy as np
 
 from .directions import around, chord, direction_tree, unit_directions
-from .seen_through import THROUGH_M, seen_through
 
 __all__ = [
     "HOLE_RADIUS_DEG",
@@ -238,9 +237,6 @@ class Holes:
         train: the training frames' indices.
         radius_deg: the holes' radius (:data:`HOLE_RADIUS_DEG`).
         reach_m: the reach test's margin (:data:`REACH_M`; None: every return counts).
-        holes: drop the returns in the holes (this module).
-        through_m: drop the returns the same scans saw through, with this margin
-            (:mod:`.seen_through`; None: not).
     """
 
     def __init__(
@@ -250,18 +246,13 @@ class Holes:
         train,
         radius_deg: float = HOLE_RADIUS_DEG,
         reach_m=REACH_M,
-        holes: bool = True,
-        through_m: float | None = THROUGH_M,
     ):
         self.frames, self.poses, self.radius_deg = frames, poses, radius_deg
-        self.reach_m, self.holes = reach_m, holes
-        self.through = through_m
+        self.reach_m = reach_m
         self.train = sorted(int(t) for t in train)
         self.beams = returned_beams([frames.grid[t] for t in self.train])
         #: held-out frame -> returns dropped from its first scan (the ``resim`` method's)
         self.dropped: dict[int, int] = {}
-        #: held-out frame -> of those, the returns seen through (and in no hole)
-        self.seen: dict[int, int] = {}
         self._trees: dict[int, tuple] = {}  # the evidence scans' trees and beams, a few
 
     def _tree(self, j: int):
@@ -288,36 +279,27 @@ class Holes:
         # a scan without a return (a lost sweep) is no evidence of a dark surface anywhere
         if not evidence or len(xyz) == 0 or any(len(self.frames.xyz[j]) == 0 for j in evidence):
             self.dropped.setdefault(k, 0)
-            self.seen.setdefault(k, 0)
             return np.zeros(len(xyz), dtype=bool)
         Tk = self.poses[k]
         world = xyz @ Tk[:3, :3].T + Tk[:3, 3]
-        hole = np.full(len(xyz), self.holes)
-        through = np.full(len(xyz), self.through is not None)
+        drop = np.ones(len(xyz), dtype=bool)
         for j in evidence:
             Tj = self.poses[j]
             local = (world - Tj[:3, 3]) @ Tj[:3, :3]
             tree, returned = self._tree(j)
-            if hole.any():
-                hole &= in_hole(
-                    local,
-                    self.frames.xyz[j],
-                    self.beams,
-                    self.frames.coverage,
-                    self.frames.layout,
-                    self.radius_deg,
-                    tree=tree,
-                    reach_m=self.reach_m,
-                    returned=returned,
-                )
-            if through.any():
-                through &= seen_through(
-                    local, self.frames.xyz[j], tree, self.radius_deg, self.through
-                )
-        drop = hole | through
+            drop &= in_hole(
+                local,
+                self.frames.xyz[j],
+                self.beams,
+                self.frames.coverage,
+                self.frames.layout,
+                self.radius_deg,
+                tree=tree,
+                reach_m=self.reach_m,
+                returned=returned,
+            )
         if moving is not None and len(moving) and drop.any():
             near, _ = cKDTree(moving).query(world[drop], k=1, distance_upper_bound=MOVING_KEEP_M)
             drop[np.flatnonzero(drop)[np.isfinite(near)]] = False
         self.dropped.setdefault(k, int(drop.sum()))
-        self.seen.setdefault(k, int((drop & through & ~hole).sum()))
         return drop

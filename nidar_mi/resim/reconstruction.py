@@ -13,8 +13,8 @@ Output folder (published whole, with the record of :data:`OWNER`)::
                            splats (:mod:`.splats`) and those that moved, as the training
                            frame nearest in time saw them, moved on: :mod:`.moving`; the
                            returns in the holes of the training scans next to the frame
-                           dropped: :mod:`.holes`, and those they saw through:
-                           :mod:`.seen_through`)
+                           dropped: :mod:`.holes`; the static triangles they saw
+                           through hidden: :mod:`.seen_through`)
     OUT/report.json        inputs, timings, the recovered sensor and its shadow, the fit's
                            residuals, the held-out metrics of the re-simulation and of the
                            baselines

@@ -105,6 +105,7 @@ def test_rendered_drive_recovers_gains_rho_and_layout(variant, tmp_path):
     # (measured: 0 of 60 819)
     assert held["holes"]["from"] == ["000009", "000010"]
     assert held["holes"]["dropped"] <= 1e-3 * held["returns_resim"]
+    assert held["holes"]["seen_through"] <= 1e-3 * report["mesh"]["faces"]
     assert (out / "heldout" / "000011.bin").stat().st_size > 0
     shadow = re.search(r'<string name="laser_shadow" value="([^"]+)"/>', xml)
     assert shadow and report["shadow"]["frames"] == 11

@@ -2,8 +2,9 @@
 
 A sensor on a line (x = 0, 0.5, 1 m; the middle frame held out) scans a wall 10 m ahead. The
 held-out frame's re-simulation also holds a box 5 m ahead that the real scans never saw (a layer
-that is not there any more): its returns on the box's faces, and only those, are dropped;
-when the real scans see the box too, nothing is. Hand-placed
+that is not there any more): its points on the box's faces, and only those, are seen through
+by the frames on either side, and the box's triangles hidden, the wall's kept; when the real
+scans see the box too, nothing is. Hand-placed
 returns around one probe check the margin.
 """
 
@@ -14,10 +15,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from nidar_mi.resim.directions import direction_tree
-from nidar_mi.resim.holes import Holes
 from nidar_mi.resim.laser_layout import RingLayout
 from nidar_mi.resim.range_image import ScanGrid
-from nidar_mi.resim.seen_through import THROUGH_M, seen_through
+from nidar_mi.resim.seen_through import THROUGH_M, SeenThrough, seen_through
 
 ELEVATIONS = np.arange(2.0, -8.01, -0.4)  # ring 0 highest, degrees
 COLUMNS = 1800  # 0.2 degrees
@@ -72,27 +72,34 @@ def _drive(real_box: bool):
     return frames, poses, sim[in_view], origins
 
 
-def test_a_layer_the_scans_saw_through_is_dropped():
+def test_a_layer_the_scans_saw_through_is_hidden():
     frames, poses, sim, origins = _drive(real_box=False)
-    box = _on_box(sim + origins[1])
+    world = sim + origins[1]
+    box = _on_box(world)
     assert box.sum() > 200
-    holes = Holes(frames, poses, [0, 2])
-    drop = holes.mask(1, sim)
+    test = SeenThrough(frames, poses, [0, 2])
     # every beam of frames 0 and 2 around a point on the box reached the wall 5 m behind it;
     # the wall's own returns are never seen through
-    assert np.array_equal(drop, box)
-    assert holes.dropped[1] == holes.seen[1] == box.sum()
-    # off: nothing; a surface that moved there: kept
-    assert not Holes(frames, poses, [0, 2], through_m=None).mask(1, sim).any()
-    moved = sim[box][:10] + origins[1]
-    kept = Holes(frames, poses, [0, 2]).mask(1, sim, moving=moved)
-    near = np.min(np.linalg.norm(sim[:, None] + origins[1] - moved[None], axis=2), axis=1) < 0.3
-    assert not kept[near].any() and np.array_equal(kept[~near], drop[~near])
+    assert np.array_equal(test.points(1, world), box)
+    # as a mesh: a patch of the box's front face (x = 4.8 m) and of the wall behind it, two
+    # triangles each; the face's are hidden, the wall's kept
+    y, z = (-0.4, 0.4), (-0.4, 0.1)  # inside the beams from frames 0 and 2
+    quad = lambda x: np.array([[x, y[0], z[0]], [x, y[1], z[0]], [x, y[1], z[1]], [x, y[0], z[1]]])  # noqa: E731
+    vertices = np.vstack([quad(BOX[0][0]), quad(WALL_X)])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    assert test.faces(1, vertices, faces).tolist() == [True, True, False, False]
+    assert test.hidden[1] == 2
 
 
 def test_a_surface_the_scans_saw_is_kept():
-    frames, poses, sim, _ = _drive(real_box=True)
-    assert not Holes(frames, poses, [0, 2]).mask(1, sim).any()
+    frames, poses, sim, origins = _drive(real_box=True)
+    assert not SeenThrough(frames, poses, [0, 2]).points(1, sim + origins[1]).any()
+
+
+def test_a_scan_without_returns_sees_through_nothing():
+    frames, poses, sim, origins = _drive(real_box=False)
+    lost = SimpleNamespace(**{**vars(frames), "xyz": [frames.xyz[0][:0], *frames.xyz[1:]]})
+    assert not SeenThrough(lost, poses, [0, 2]).points(1, sim + origins[1]).any()
 
 
 def test_the_margin_on_hand_placed_returns():
