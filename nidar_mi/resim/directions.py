@@ -7,7 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RADIUS_NEIGHBOURS", "unit_directions", "direction_tree", "chord", "around"]
+__all__ = [
+    "RADIUS_NEIGHBOURS",
+    "unit_directions",
+    "direction_tree",
+    "chord",
+    "around",
+    "TreeCache",
+]
 
 #: Returns looked at within the radius of a direction (an HDL-64E has about 20 within 0.7° on a
 #: surface that returns everywhere); a direction with this many is taken as full.
@@ -44,3 +51,19 @@ def around(tree, unit: np.ndarray, chord_len: float, n_real: int):
     hit = np.isfinite(d)
     full = hit[:, -1] & (k == RADIUS_NEIGHBOURS)
     return hit, np.minimum(i, n_real - 1), full
+
+
+class TreeCache:
+    """``cache(j)``: :func:`direction_tree` of scan ``scans[j]``, built once, the last ``keep``
+    kept (a held-out frame's evidence scans serve every re-simulated scan of it)."""
+
+    def __init__(self, scans, keep: int = 4):
+        self.scans, self.keep = scans, keep
+        self._trees: dict[int, object] = {}
+
+    def __call__(self, j: int):
+        if j not in self._trees:
+            if len(self._trees) >= self.keep:
+                self._trees.pop(next(iter(self._trees)))
+            self._trees[j] = direction_tree(self.scans[j])
+        return self._trees[j]

@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .directions import around, chord, direction_tree, unit_directions
+from .directions import TreeCache, around, chord, direction_tree, unit_directions
 
 __all__ = [
     "HOLE_RADIUS_DEG",
@@ -253,15 +253,7 @@ class Holes:
         self.beams = returned_beams([frames.grid[t] for t in self.train])
         #: held-out frame -> returns dropped from its first scan (the ``resim`` method's)
         self.dropped: dict[int, int] = {}
-        self._trees: dict[int, tuple] = {}  # the evidence scans' trees and beams, a few
-
-    def _tree(self, j: int):
-        """``(tree, returned)`` of evidence scan ``j``: its direction tree and its beams."""
-        if j not in self._trees:
-            if len(self._trees) >= 4:
-                self._trees.pop(next(iter(self._trees)))
-            self._trees[j] = (direction_tree(self.frames.xyz[j]), self.frames.grid[j].occupancy())
-        return self._trees[j]
+        self._tree = TreeCache(frames.xyz)  # the evidence scans' direction trees
 
     def mask(self, k: int, xyz: np.ndarray, moving: np.ndarray | None = None) -> np.ndarray:
         """(M,) bool: the returns of a re-simulated scan at frame ``k`` to drop.
@@ -286,7 +278,6 @@ class Holes:
         for j in evidence:
             Tj = self.poses[j]
             local = (world - Tj[:3, 3]) @ Tj[:3, :3]
-            tree, returned = self._tree(j)
             drop &= in_hole(
                 local,
                 self.frames.xyz[j],
@@ -294,9 +285,9 @@ class Holes:
                 self.frames.coverage,
                 self.frames.layout,
                 self.radius_deg,
-                tree=tree,
+                tree=self._tree(j),
                 reach_m=self.reach_m,
-                returned=returned,
+                returned=self.frames.grid[j].occupancy(),
             )
         if moving is not None and len(moving) and drop.any():
             near, _ = cKDTree(moving).query(world[drop], k=1, distance_upper_bound=MOVING_KEEP_M)

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .directions import around, chord, unit_directions
+from .directions import TreeCache, around, chord, unit_directions
 
 __all__ = ["THROUGH_M", "seen_through", "SeenThrough"]
 
@@ -104,16 +104,7 @@ class SeenThrough:
         self.train = sorted(int(t) for t in train)
         #: held-out frame -> static triangles hidden there
         self.hidden: dict[int, int] = {}
-        self._trees: dict[int, object] = {}  # the evidence scans' direction trees, a few
-
-    def _tree(self, j: int):
-        from .directions import direction_tree
-
-        if j not in self._trees:
-            if len(self._trees) >= 4:
-                self._trees.pop(next(iter(self._trees)))
-            self._trees[j] = direction_tree(self.frames.xyz[j])
-        return self._trees[j]
+        self._tree = TreeCache(frames.xyz)  # the evidence scans' direction trees
 
     def points(self, k: int, world: np.ndarray) -> np.ndarray:
         """(M,) bool: the (M, 3) world points that every training scan next to frame ``k``

@@ -32,6 +32,7 @@ from nidar_mi.resim.holes import (
 )
 from nidar_mi.resim.laser_layout import RingLayout
 from nidar_mi.resim.range_image import ScanGrid
+from tests.helpers.wall_scans import drive_of
 
 ELEVATIONS = np.arange(2.0, -8.01, -0.4)  # ring 0 highest, degrees
 COLUMNS = 1800  # 0.2 degrees
@@ -120,18 +121,7 @@ def _scan(origin: np.ndarray, box: bool, scatter: int = 0):
 def _drive(scatter: int = 0):
     origins = [np.array(o, float) for o in ([0, 0, 0], [0.5, 0, 0], [1, 0, 0], [0, 3, 0])]
     scans = [_scan(o, box=True, scatter=scatter) for o in origins]
-    poses = []
-    for o in origins:
-        T = np.eye(4)
-        T[:3, 3] = o
-        poses.append(T)
-    az = -180.0 + (np.arange(COLUMNS) + 0.5) * 360.0 / COLUMNS
-    frames = SimpleNamespace(
-        xyz=[s[0] for s in scans],
-        grid=[s[1] for s in scans],
-        coverage=np.abs(az) < 50.0,
-        layout=RingLayout(ELEVATIONS, np.zeros(len(ELEVATIONS)), np.ones(len(ELEVATIONS))),
-    )
+    frames, poses = drive_of(scans, origins, ELEVATIONS, COLUMNS)
     sim, _ = _scan(origins[1], box=False)  # the re-simulation does not hold the box
     in_view = np.abs(np.degrees(np.arctan2(sim[:, 1], sim[:, 0]))) < 45.0
     return frames, poses, sim[in_view], origins

@@ -15,9 +15,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from nidar_mi.resim.directions import direction_tree
-from nidar_mi.resim.laser_layout import RingLayout
 from nidar_mi.resim.range_image import ScanGrid
 from nidar_mi.resim.seen_through import THROUGH_M, SeenThrough, seen_through
+from tests.helpers.wall_scans import drive_of
 
 ELEVATIONS = np.arange(2.0, -8.01, -0.4)  # ring 0 highest, degrees
 COLUMNS = 1800  # 0.2 degrees
@@ -55,18 +55,7 @@ def _on_box(p: np.ndarray) -> np.ndarray:
 def _drive(real_box: bool):
     origins = [np.array(o, float) for o in ([0, 0, 0], [0.5, 0, 0], [1, 0, 0])]
     scans = [_scan(o, box=real_box) for o in origins]
-    poses = []
-    for o in origins:
-        T = np.eye(4)
-        T[:3, 3] = o
-        poses.append(T)
-    az = -180.0 + (np.arange(COLUMNS) + 0.5) * 360.0 / COLUMNS
-    frames = SimpleNamespace(
-        xyz=[s[0] for s in scans],
-        grid=[s[1] for s in scans],
-        coverage=np.abs(az) < 50.0,
-        layout=RingLayout(ELEVATIONS, np.zeros(len(ELEVATIONS)), np.ones(len(ELEVATIONS))),
-    )
+    frames, poses = drive_of(scans, origins, ELEVATIONS, COLUMNS)
     sim, _ = _scan(origins[1], box=True)  # the re-simulation holds the box
     in_view = np.abs(np.degrees(np.arctan2(sim[:, 1], sim[:, 0]))) < 45.0
     return frames, poses, sim[in_view], origins
