@@ -104,6 +104,7 @@ class SeenThrough:
         self.train = sorted(int(t) for t in train)
         #: held-out frame -> static triangles hidden there
         self.hidden: dict[int, int] = {}
+        self._last = None  # (evidence frames, vertices, faces, hidden) of the last call
         self._tree = TreeCache(frames.xyz)  # the evidence scans' direction trees
 
     def points(self, k: int, world: np.ndarray) -> np.ndarray:
@@ -127,8 +128,15 @@ class SeenThrough:
 
     def faces(self, k: int, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(F,) bool: the triangles of a static mesh ((V, 3) world ``vertices``, (F, 3)
-        ``faces``) whose three corners are seen through at frame ``k``."""
-        seen = self.points(k, vertices)
-        hidden = seen[faces].all(axis=1) if len(faces) else np.zeros(0, dtype=bool)
-        self.hidden.setdefault(k, int(hidden.sum()))
-        return hidden
+        ``faces``) whose three corners are seen through at frame ``k``. Held-out frames with
+        the same evidence frames (those past a drive's end) share one answer, computed once."""
+        from .holes import hole_frames
+
+        key = tuple(hole_frames(k, self.train))
+        last = self._last
+        if last is None or last[0] != key or last[1] is not vertices or last[2] is not faces:
+            seen = self.points(k, vertices)
+            hidden = seen[faces].all(axis=1) if len(faces) else np.zeros(0, dtype=bool)
+            self._last = last = (key, vertices, faces, hidden)
+        self.hidden.setdefault(k, int(last[3].sum()))
+        return last[3].copy()

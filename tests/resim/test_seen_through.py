@@ -78,6 +78,11 @@ def test_a_layer_the_scans_saw_through_is_hidden():
     faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
     assert test.faces(1, vertices, faces).tolist() == [True, True, False, False]
     assert test.hidden[1] == 2
+    # again with the same evidence frames: the same answer; with other evidence, computed anew
+    assert test.faces(1, vertices, faces).tolist() == [True, True, False, False]
+    # frame 0's evidence is frame 2 alone (x = 1 m): the box 3.8 m ahead of it, the wall 9 m
+    assert test.faces(0, vertices, faces).tolist() == [True, True, False, False]
+    assert test._last[0] == (2,) and test.hidden[0] == 2
 
 
 def test_a_surface_the_scans_saw_is_kept():
