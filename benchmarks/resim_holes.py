@@ -6,18 +6,24 @@ frames.
 ``python benchmarks/resim_holes.py --work DIR --reaches none,0.25,0.5,1,2 [--runs NAME,...]``
 ``python benchmarks/resim_holes.py --work DIR --shares 0.3,0.5,0.7,0.9,1 [--runs NAME,...]``
 ``python benchmarks/resim_holes.py --work DIR --throughs 0.5,0.75,1,2 [--runs NAME,...]``
+``python benchmarks/resim_holes.py --work DIR --abstain [--runs NAME,...]``
 ``python benchmarks/resim_holes.py --work DIR --ab [--runs NAME,...] [--json FILE]``
 
 Radius (the default): the share of a training scan's own real returns that the hole rule would
 drop, its training neighbours as the evidence, at each radius (the reach test's margin
 ``REACH_M``). ``--reaches``: the same at each margin of the reach test (``none``: every return in
 the radius counts), radius ``HOLE_RADIUS_DEG``; ``--shares``: at each largest share of returned
-beams around a point that the reach test takes for a sparse scan (``SPARSE_SHARE``; 1: any).
-These three measure the holes alone. ``--throughs``: the see-through test alone at each margin.
-``--ab``: each run reconstructed once more (``nidar_mi.resim.reconstruction.reconstruct`` into a
-temporary folder, removed afterwards) and its held-out frames evaluated four times on that one
-fit (:data:`AB_STEPS`): without the step, with holes that count every return in the radius (no
-reach test), with the holes as they are, and with the see-through test's hiding too: each part's own
+beams around a point that the reach test takes for a sparse scan (``SPARSE_SHARE``; 1: any);
+``--abstain``: the holes, then the see-through test, with an evidence scan that cannot see a
+point keeping it, and leaving it to the other (``Holes(abstain=...)``,
+``SeenThrough(abstain=...)``). The first three measure the holes alone. ``--throughs``: the
+see-through test alone at each margin. ``--ab``: each run reconstructed once more
+(``nidar_mi.resim.reconstruction.reconstruct`` into a temporary folder, removed afterwards) and
+its held-out frames evaluated six times on that one fit (:data:`AB_STEPS`): without the step,
+with holes that count every return in the radius (no reach test) and where every evidence scan
+decides, with the reach test, with the scans that cannot see a point abstaining (the holes as
+they are), with the see-through test's hiding too where every evidence scan decides, and with
+it as it is: each part's own
 effect, free of the run-to-run spread of the fit's threaded sums (a few mm of Chamfer on
 ``kitti_raw_0926``).
 
@@ -45,9 +51,9 @@ def _world(xyz, pose):
 
 
 def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
-    """(radius, reach, share, through) -> (returns dropped, returns scored) over a run's scored
-    training frames (through None: the holes alone; else the see-through test alone, each
-    return taken as a point of the static surfaces)."""
+    """(radius, reach, share, through, abstain) -> (returns dropped, returns scored) over a
+    run's scored training frames (through None: the holes alone; else the see-through test
+    alone, each return taken as a point of the static surfaces)."""
     import nidar_mi.resim.holes as rule
     from nidar_mi.io.kitti import read_kitti_poses
     from nidar_mi.resim.drive_folder import open_drive
@@ -63,30 +69,40 @@ def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
     scored = [k for k in train[1:-1]][::3]
     out = {}
     shipped = rule.SPARSE_SHARE
-    for radius, reach, share, through in settings:
+    for radius, reach, share, through, abstain in settings:
         rule.SPARSE_SHARE = share  # in_hole reads it when it runs
         try:
             if through is None:
-                holes = Holes(frames, poses, train, radius_deg=radius, reach_m=reach)
+                holes = Holes(
+                    frames, poses, train, radius_deg=radius, reach_m=reach, abstain=abstain
+                )
                 dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
             else:
-                seen = SeenThrough(frames, poses, train, margin_m=through, radius_deg=radius)
+                seen = SeenThrough(
+                    frames, poses, train, margin_m=through, radius_deg=radius, abstain=abstain
+                )
                 dropped = sum(
                     int(seen.points(k, _world(frames.xyz[k], poses[k])).sum()) for k in scored
                 )
         finally:
             rule.SPARSE_SHARE = shipped
-        out[(radius, reach, share, through)] = (dropped, sum(len(frames.xyz[k]) for k in scored))
+        out[(radius, reach, share, through, abstain)] = (
+            dropped,
+            sum(len(frames.xyz[k]) for k in scored),
+        )
     return out
 
 
-#: ``--ab``'s evaluations, in order: name -> (evaluate_heldout's switches, the hole test's).
+#: ``--ab``'s evaluations, in order.
 AB_STEPS = {
-    "without": ({"holes": False, "through": False}, {}),
-    "no_reach": ({"holes": True, "through": False}, {"reach_m": None}),
-    "no_through": ({"holes": True, "through": False}, {}),
-    "with": ({"holes": True, "through": True}, {}),
+    "without": ({"holes": False, "through": False}, {}, {}),
+    "no_reach": ({"holes": True, "through": False}, {"reach_m": None, "abstain": False}, {}),
+    "no_abstain": ({"holes": True, "through": False}, {"abstain": False}, {}),
+    "no_through": ({"holes": True, "through": False}, {}, {}),
+    "through_no_abstain": ({"holes": True, "through": True}, {}, {"abstain": False}),
+    "with": ({"holes": True, "through": True}, {}, {}),
 }
+"""name -> (evaluate_heldout's switches, the hole test's arguments, the see-through test's)."""
 
 
 def ab(run_dir: Path, out_dir: Path) -> dict:
@@ -97,6 +113,7 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
 
     import nidar_mi.resim.heldout_scans as heldout
     import nidar_mi.resim.holes as holes
+    import nidar_mi.resim.seen_through as through
     from nidar_mi.backend import set_variant
     from nidar_mi.resim.reconstruction import ReconstructOptions, reconstruct
 
@@ -104,13 +121,14 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
     evaluate, means = heldout.evaluate_heldout, {}
 
     def each(*args, **kwargs):
-        rule = holes.Holes
-        for name, (switches, test) in AB_STEPS.items():
+        rule, seen = holes.Holes, through.SeenThrough
+        for name, (switches, test, test2) in AB_STEPS.items():
             holes.Holes = lambda *a, _t=test, **k: rule(*a, **{**k, **_t})
-            try:  # evaluate_heldout imports Holes when it runs
+            through.SeenThrough = lambda *a, _t=test2, **k: seen(*a, **{**k, **_t})
+            try:  # evaluate_heldout imports both when it runs
                 result = evaluate(*args, **{**kwargs, **switches})
             finally:
-                holes.Holes = rule
+                holes.Holes, through.SeenThrough = rule, seen
             means[name] = result["mean"]
         return result
 
@@ -153,6 +171,9 @@ def main(argv=None) -> int:
     one.add_argument("--shares", default=None, help="sparse shares of the reach test")
     one.add_argument("--throughs", default=None, help="margins of the see-through test, m")
     one.add_argument(
+        "--abstain", action="store_true", help="the holes without and with abstaining scans"
+    )
+    one.add_argument(
         "--ab", action="store_true", help="held-out scores at each step: " + ", ".join(AB_STEPS)
     )
     ap.add_argument("--json", type=Path, default=None, help="--ab: write the means here")
@@ -163,21 +184,35 @@ def main(argv=None) -> int:
 
     signal.signal(signal.SIGTERM, _on_sigterm)  # --ab's temporary folder removed on SIGTERM too
     from nidar_mi.resim.holes import HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE
+    from nidar_mi.resim.seen_through import THROUGH_M
 
     if args.reaches:
         reach = [None if r == "none" else float(r) for r in args.reaches.split(",")]
-        settings = [(HOLE_RADIUS_DEG, r, SPARSE_SHARE, None) for r in reach]
+        settings = [(HOLE_RADIUS_DEG, r, SPARSE_SHARE, None, True) for r in reach]
         heads = [f"{r} m" if r is not None else "no reach test" for r in reach]
     elif args.shares:
-        settings = [(HOLE_RADIUS_DEG, REACH_M, float(f), None) for f in args.shares.split(",")]
-        heads = [f"share ≤ {f}" for _, _, f, _ in settings]
+        settings = [
+            (HOLE_RADIUS_DEG, REACH_M, float(f), None, True) for f in args.shares.split(",")
+        ]
+        heads = [f"share ≤ {f}" for _, _, f, _, _ in settings]
     elif args.throughs:
         margins = [float(m) for m in args.throughs.split(",")]
-        settings = [(HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, m) for m in margins]
+        settings = [(HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, m, True) for m in margins]
         heads = [f"seen through by {m} m" for m in margins]
+    elif args.abstain:
+        settings = [
+            (HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, through, a)
+            for through in (None, THROUGH_M)
+            for a in (False, True)
+        ]
+        heads = [
+            f"{test}: {who}"
+            for test in ("holes", "seen through")
+            for who in ("every evidence scan decides", "scans that cannot see a point abstain")
+        ]
     else:
-        settings = [(float(r), REACH_M, SPARSE_SHARE, None) for r in args.radii.split(",")]
-        heads = [f"{r}°" for r, _, _, _ in settings]
+        settings = [(float(r), REACH_M, SPARSE_SHARE, None, True) for r in args.radii.split(",")]
+        heads = [f"{r}°" for r, _, _, _, _ in settings]
     runs = (
         args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
     )

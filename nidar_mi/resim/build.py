@@ -69,28 +69,49 @@ def drop_scratch(stage: str) -> None:
         os.remove(path)
 
 
-def drive_splats(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, unmeshed: list):
+def _subgrid(grid, idx: np.ndarray):
+    """The :class:`.range_image.ScanGrid` of the returns ``idx`` of ``grid``'s scan."""
+    from .range_image import ScanGrid
+
+    return ScanGrid(grid.ring[idx], grid.column[idx], grid.rings, grid.columns, grid.ordered)
+
+
+def _off_mesh(xyz, grid, layout, pose, tree, scene) -> np.ndarray:
+    """(N,) bool: returns of a scan (LiDAR frame, m; ``grid``: their cells) that the fused mesh
+    does not hold: farther than :data:`.splats.OFF_MESH_M` from its vertices (``tree``), or
+    nearer but passed by their own rays (:func:`.splats.passed_by`, cast into ``scene``, the
+    mesh's)."""
+    from .carve import hit_depths
+    from .splats import OFF_MESH_M, passed_by
+
+    world = xyz @ pose[:3, :3].T + pose[:3, 3]
+    off = tree.query(world, distance_upper_bound=OFF_MESH_M)[0] > OFF_MESH_M
+    near = np.flatnonzero(~off)
+    if len(near):
+        rays = return_rays(xyz[near], _subgrid(grid, near), layout, pose, 0)
+        t, _, cos = hit_depths(scene, rays)
+        off[near] = passed_by(rays.range_m, t, cos)
+    return off
+
+
+def drive_splats(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, unmeshed: list, load):
     """The splats of every training frame's returns that its range-image mesh left out
-    (``unmeshed``: per training frame, in ``drive.train``'s order, (N,) bool) and that lie off
-    the fused ``mesh`` (:mod:`.splats`), world coordinates."""
+    (``unmeshed``: per training frame, in ``drive.train``'s order, (N,) bool) and that the
+    fused ``mesh`` does not hold (:mod:`.splats`), world coordinates; ``load``:
+    :func:`scratch_scene`."""
     from scipy.spatial import cKDTree
 
-    from .splats import (
-        OFF_MESH_M,
-        Splats,
-        local_normals,
-        ring_spacing_rad,
-        scan_splats,
-    )
+    from .splats import Splats, local_normals, ring_spacing_rad, scan_splats
 
     spacing = ring_spacing_rad(frames.layout.elevation_deg)
     tree = cKDTree(mesh.vertices)
+    scene = load(mesh)
     parts = []
     for fid, alone in zip(drive.train, unmeshed):
         k = drive.index(fid)
         xyz, grid, pose = frames.xyz[k], frames.grid[k], poses[k]
-        world = xyz @ pose[:3, :3].T + pose[:3, 3]
-        alone &= tree.query(world, distance_upper_bound=OFF_MESH_M)[0] > OFF_MESH_M
+        idx = np.flatnonzero(alone)
+        alone[idx] = _off_mesh(xyz[idx], _subgrid(grid, idx), frames.layout, pose, tree, scene)
         normals = local_normals(xyz, np.flatnonzero(alone))
         p = xyz[alone]
         d = np.linalg.norm(p, axis=1)
@@ -135,7 +156,7 @@ def build_surfaces(drive: Drive, frames: Frames, poses: np.ndarray, options, sta
     carved = {"mesh": [], "splats": []}
     splats = Splats.join([])
     if options.splats:
-        splats = drive_splats(drive, frames, poses, mesh, unmeshed)
+        splats = drive_splats(drive, frames, poses, mesh, unmeshed, scratch_scene(stage))
     if options.carve_passes > 0:
         from .carve import carve, carved_faces
 

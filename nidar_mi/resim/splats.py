@@ -6,7 +6,11 @@ foliage, the edges of objects, far and sparse surfaces (on KITTI drives a tenth 
 returns within 30 m, a quarter to a half past 40 m). Left out, a held-out scan finds nothing
 where the real sensor returned. Each such return that lies off the fused mesh (farther than
 :data:`OFF_MESH_M` from its vertices: nearer, the mesh holds its surface, and a splat there
-would only hide the fitted surface behind one return's reflectance) becomes one quad of two
+would only hide the fitted surface behind one return's reflectance), or near its vertices but
+in a hole of it (:func:`passed_by`: its own ray meets no triangle until it has passed the return
+by more than :data:`PASS_M` across the surface; a dark car's scattered returns leave too few
+neighbours for the range-image mesh, and the few triangles around them cover little of it),
+becomes one quad of two
 triangles, its cell of the range image (``d·2π/columns`` across, ``d·Δθ`` high, ``Δθ`` the
 spacing of its ring's neighbours): facing its ray where its neighbours do not lie on one
 plane, else that square's footprint on the plane (:func:`local_normals`), so that a far road
@@ -24,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mesh import Mesh, compact_index, merge_meshes
+from .observations import ON_SURFACE_M
 
 #: A splat is its cell's footprint on its surface up to this incidence; past it, the footprint
 #: is no longer along the ray's trace than at this incidence, deg.
@@ -34,9 +39,14 @@ NEIGHBOURS = 8
 PLANAR_SHARE = 0.02
 #: A return this close to a vertex of the fused mesh gets no splat (the mesh holds it), m.
 OFF_MESH_M = 0.3
+#: ... unless its ray passes the mesh by more than this, across the surface, m: farther than
+#: step 5 takes a return to lie on a surface.
+PASS_M = ON_SURFACE_M
 
 __all__ = [
     "OFF_MESH_M",
+    "PASS_M",
+    "passed_by",
     "Splats",
     "local_normals",
     "ring_spacing_rad",
@@ -82,6 +92,15 @@ class Splats:
         """(V,) each vertex's ρ from its own return through the recovered ``sensor``
         (:meth:`.inversion.SensorFit.reflectance_of`)."""
         return sensor.reflectance_of(self.intensity, self.ring, self.range_m, self.cos)
+
+
+def passed_by(range_m: np.ndarray, t: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """(N,) bool: returns at ``range_m`` (N,) whose rays first meet a triangle at ``t`` (inf:
+    none) with ``|cos θ|`` ``cos`` more than :data:`PASS_M` beyond them, across the surface
+    (``(t - range_m) · max(|cos θ|, 0.05)``, as carving measures a gap: a grazing road a
+    centimetre lower is no hole), or meet none."""
+    with np.errstate(invalid="ignore"):
+        return ~np.isfinite(t) | ((t - range_m) * np.maximum(cos, 0.05) > PASS_M)
 
 
 def ring_spacing_rad(elevation_deg: np.ndarray) -> np.ndarray:

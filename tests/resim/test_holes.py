@@ -9,7 +9,9 @@ inside the box's shadow from both neighbours is, by convexity, hidden from the f
 them), and at least half of those the box hides are dropped (measured: 74 % of 1 452), also when
 the box returns on every third beam it hides, returns that stop 5 m short of the wall; the beams no
 training scan returned on, the columns past the drive's coverage and the surfaces that moved
-are never dropped. Beams with offsets: a point placed on each ring's beam 3 m away comes back
+are never dropped. An evidence frame turned to look back cannot see the points and abstains:
+the other decides alone (exactly its own holes), where no frame can see them none is dropped,
+and without abstaining nothing is. Beams with offsets: a point placed on each ring's beam 3 m away comes back
 on that ring, where the nearest elevation from the sensor's centre is off by several rings.
 """
 
@@ -27,6 +29,7 @@ from nidar_mi.resim.holes import (
     beam_rings,
     hole_frames,
     in_hole,
+    out_of_view,
     returned_beams,
     returned_share,
 )
@@ -271,3 +274,48 @@ def test_in_hole_is_the_angle_to_the_nearest_return():
                           np.cos(np.radians(2.0)) * np.sin(np.radians(11.0)),
                           np.sin(np.radians(2.0))]])  # fmt: skip
     assert not in_hole(up, 10.0 * real, beams, cover, layout, radius_deg=0.55)[0]
+
+
+def _turned(frames, poses, j):
+    """The drive with training frame ``j`` turned to look back (yaw 180°, its scan unchanged
+    in its own frame): every point ahead of the others lies behind it, out of its view."""
+    turned = [p.copy() for p in poses]
+    turned[j][:3, :3] = np.diag([-1.0, -1.0, 1.0])
+    return frames, turned
+
+
+def test_out_of_view_is_outside_the_coverage_and_its_margin():
+    cover = np.abs(-180.0 + (np.arange(COLUMNS) + 0.5) * 360.0 / COLUMNS) < 50.0
+    az = np.radians([0.0, 49.0, 50.0 + HOLE_RADIUS_DEG + SIDE_DEG - 0.3, 52.0, 180.0, -120.0])
+    pts = 5.0 * np.column_stack([np.cos(az), np.sin(az), np.zeros_like(az)])
+    assert out_of_view(pts, cover).tolist() == [False, False, False, True, True, True]
+
+
+def test_a_scan_that_cannot_see_the_points_abstains():
+    # the box returns on every third beam it hides; frame 2, after the held-out frame, is turned
+    # to look back: frame 0 decides alone, and only where its returns stop short of the point
+    frames, poses, sim, origins = _drive(scatter=3)
+    both = Holes(frames, poses, [0, 2, 3]).mask(1, sim)
+    frames, turned = _turned(frames, poses, 2)
+    hidden = _hits_box(origins[1], sim + origins[1])
+    drop = Holes(frames, turned, [0, 2, 3]).mask(1, sim)
+    beams = returned_beams([frames.grid[t] for t in (0, 2, 3)])
+    local = sim + origins[1] - origins[0]  # in frame 0's LiDAR frame
+    returned = frames.grid[0].occupancy()
+    alone = in_hole(local, frames.xyz[0], beams, frames.coverage, frames.layout, returned=returned)
+    empty = in_hole(local, frames.xyz[0], beams, frames.coverage, frames.layout)
+    assert np.array_equal(drop, alone & ~empty) and drop.sum() > 500
+    assert not (drop & ~hidden).any()  # nothing the box leaves in view
+    assert drop[hidden].mean() >= 0.4 and not (drop & ~both).any()
+    # without abstaining, the scan that sees none of the points keeps every one of them
+    assert not Holes(frames, turned, [0, 2, 3], abstain=False).mask(1, sim).any()
+    # a point no evidence scan can see is kept
+    frames, none = _turned(frames, turned, 0)
+    assert not Holes(frames, none, [0, 2, 3]).mask(1, sim).any()
+
+
+def test_alone_a_scan_without_returns_in_the_radius_drops_nothing(drive):
+    frames, poses, sim, _ = drive  # the box returns nothing: no return stops short
+    frames, turned = _turned(frames, poses, 2)
+    assert Holes(frames, poses, [0, 2, 3]).mask(1, sim).sum() > 500
+    assert not Holes(frames, turned, [0, 2, 3]).mask(1, sim).any()
