@@ -14,16 +14,14 @@ drop, its training neighbours as the evidence, at each radius (the reach test's 
 ``REACH_M``). ``--reaches``: the same at each margin of the reach test (``none``: every return in
 the radius counts), radius ``HOLE_RADIUS_DEG``; ``--shares``: at each largest share of returned
 beams around a point that the reach test takes for a sparse scan (``SPARSE_SHARE``; 1: any);
-``--abstain``: the holes, then the see-through test, with an evidence scan that cannot see a
-point keeping it, and leaving it to the other (``Holes(abstain=...)``,
-``SeenThrough(abstain=...)``). The first three measure the holes alone. ``--throughs``: the
+``--abstain``: with an evidence scan that cannot see a point keeping it, and leaving it to the
+other (``Holes(abstain=...)``). These four measure the holes alone. ``--throughs``: the
 see-through test alone at each margin. ``--ab``: each run reconstructed once more
 (``nidar_mi.resim.reconstruction.reconstruct`` into a temporary folder, removed afterwards) and
-its held-out frames evaluated six times on that one fit (:data:`AB_STEPS`): without the step,
+its held-out frames evaluated five times on that one fit (:data:`AB_STEPS`): without the step,
 with holes that count every return in the radius (no reach test) and where every evidence scan
 decides, with the reach test, with the scans that cannot see a point abstaining (the holes as
-they are), with the see-through test's hiding too where every evidence scan decides, and with
-it as it is: each part's own
+they are), and with the see-through test's hiding too: each part's own
 effect, free of the run-to-run spread of the fit's threaded sums (a few mm of Chamfer on
 ``kitti_raw_0926``).
 
@@ -78,9 +76,7 @@ def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
                 )
                 dropped = sum(int(holes.mask(k, frames.xyz[k]).sum()) for k in scored)
             else:
-                seen = SeenThrough(
-                    frames, poses, train, margin_m=through, radius_deg=radius, abstain=abstain
-                )
+                seen = SeenThrough(frames, poses, train, margin_m=through, radius_deg=radius)
                 dropped = sum(
                     int(seen.points(k, _world(frames.xyz[k], poses[k])).sum()) for k in scored
                 )
@@ -95,14 +91,13 @@ def false_drops(run_dir: Path, out_dir: Path, settings: list[tuple]) -> dict:
 
 #: ``--ab``'s evaluations, in order.
 AB_STEPS = {
-    "without": ({"holes": False, "through": False}, {}, {}),
-    "no_reach": ({"holes": True, "through": False}, {"reach_m": None, "abstain": False}, {}),
-    "no_abstain": ({"holes": True, "through": False}, {"abstain": False}, {}),
-    "no_through": ({"holes": True, "through": False}, {}, {}),
-    "through_no_abstain": ({"holes": True, "through": True}, {}, {"abstain": False}),
-    "with": ({"holes": True, "through": True}, {}, {}),
+    "without": ({"holes": False, "through": False}, {}),
+    "no_reach": ({"holes": True, "through": False}, {"reach_m": None, "abstain": False}),
+    "no_abstain": ({"holes": True, "through": False}, {"abstain": False}),
+    "no_through": ({"holes": True, "through": False}, {}),
+    "with": ({"holes": True, "through": True}, {}),
 }
-"""name -> (evaluate_heldout's switches, the hole test's arguments, the see-through test's)."""
+"""name -> (evaluate_heldout's switches, the hole test's arguments)."""
 
 
 def ab(run_dir: Path, out_dir: Path) -> dict:
@@ -113,7 +108,6 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
 
     import nidar_mi.resim.heldout_scans as heldout
     import nidar_mi.resim.holes as holes
-    import nidar_mi.resim.seen_through as through
     from nidar_mi.backend import set_variant
     from nidar_mi.resim.reconstruction import ReconstructOptions, reconstruct
 
@@ -121,14 +115,13 @@ def ab(run_dir: Path, out_dir: Path) -> dict:
     evaluate, means = heldout.evaluate_heldout, {}
 
     def each(*args, **kwargs):
-        rule, seen = holes.Holes, through.SeenThrough
-        for name, (switches, test, test2) in AB_STEPS.items():
+        rule = holes.Holes
+        for name, (switches, test) in AB_STEPS.items():
             holes.Holes = lambda *a, _t=test, **k: rule(*a, **{**k, **_t})
-            through.SeenThrough = lambda *a, _t=test2, **k: seen(*a, **{**k, **_t})
-            try:  # evaluate_heldout imports both when it runs
+            try:  # evaluate_heldout imports Holes when it runs
                 result = evaluate(*args, **{**kwargs, **switches})
             finally:
-                holes.Holes, through.SeenThrough = rule, seen
+                holes.Holes = rule
             means[name] = result["mean"]
         return result
 
@@ -184,7 +177,6 @@ def main(argv=None) -> int:
 
     signal.signal(signal.SIGTERM, _on_sigterm)  # --ab's temporary folder removed on SIGTERM too
     from nidar_mi.resim.holes import HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE
-    from nidar_mi.resim.seen_through import THROUGH_M
 
     if args.reaches:
         reach = [None if r == "none" else float(r) for r in args.reaches.split(",")]
@@ -200,16 +192,8 @@ def main(argv=None) -> int:
         settings = [(HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, m, True) for m in margins]
         heads = [f"seen through by {m} m" for m in margins]
     elif args.abstain:
-        settings = [
-            (HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, through, a)
-            for through in (None, THROUGH_M)
-            for a in (False, True)
-        ]
-        heads = [
-            f"{test}: {who}"
-            for test in ("holes", "seen through")
-            for who in ("every evidence scan decides", "scans that cannot see a point abstain")
-        ]
+        settings = [(HOLE_RADIUS_DEG, REACH_M, SPARSE_SHARE, None, a) for a in (False, True)]
+        heads = ["every evidence scan decides", "scans that cannot see a point abstain"]
     else:
         settings = [(float(r), REACH_M, SPARSE_SHARE, None, True) for r in args.radii.split(",")]
         heads = [f"{r}°" for r, _, _, _, _ in settings]

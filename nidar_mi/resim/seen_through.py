@@ -94,17 +94,12 @@ class SeenThrough:
         train: the training frames' indices.
         margin_m: :data:`THROUGH_M`.
         radius_deg: the radius around a point's direction (:data:`~.holes.HOLE_RADIUS_DEG`).
-        abstain: an evidence scan that cannot see a point (:func:`.holes.out_of_view`) leaves
-            the decision to the others (False: the point is not seen through).
     """
 
-    def __init__(
-        self, frames, poses, train, margin_m: float = THROUGH_M, radius_deg=None, abstain=True
-    ):
+    def __init__(self, frames, poses, train, margin_m: float = THROUGH_M, radius_deg=None):
         from .holes import HOLE_RADIUS_DEG
 
         self.frames, self.poses, self.margin_m = frames, poses, margin_m
-        self.abstain = abstain
         self.radius_deg = HOLE_RADIUS_DEG if radius_deg is None else radius_deg
         self.train = sorted(int(t) for t in train)
         #: held-out frame -> static triangles hidden there
@@ -114,28 +109,22 @@ class SeenThrough:
 
     def points(self, k: int, world: np.ndarray) -> np.ndarray:
         """(M,) bool: the (M, 3) world points that every training scan next to frame ``k``
-        (:func:`.holes.hole_frames`) that can see them saw through (at least one can); none
-        where one of them has no return."""
-        from .holes import hole_frames, out_of_view
+        (:func:`.holes.hole_frames`) saw through; none where one of them has no return."""
+        from .holes import hole_frames
 
         world = np.asarray(world, dtype=np.float64).reshape(-1, 3)
         evidence = hole_frames(k, self.train)
         out = np.full(len(world), bool(evidence))
-        seen = np.zeros(len(world), dtype=bool)
         for j in evidence:
             if not out.any():
                 break
             Tj = self.poses[j]
             local = (world[out] - Tj[:3, 3]) @ Tj[:3, :3]
-            away = np.zeros(len(local), dtype=bool)
-            if self.abstain:
-                away = out_of_view(local, self.frames.coverage, self.radius_deg)
-            seen[np.flatnonzero(out)[~away]] = True
-            got = away | seen_through(
+            got = seen_through(
                 local, self.frames.xyz[j], self._tree(j), self.radius_deg, self.margin_m
             )
             out[np.flatnonzero(out)[~got]] = False
-        return out & seen
+        return out
 
     def faces(self, k: int, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(F,) bool: the triangles of a static mesh ((V, 3) world ``vertices``, (F, 3)
