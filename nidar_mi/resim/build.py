@@ -88,7 +88,7 @@ def _off_mesh(xyz, grid, layout, pose, tree, scene) -> np.ndarray:
     off = tree.query(world, distance_upper_bound=OFF_MESH_M)[0] > OFF_MESH_M
     near = np.flatnonzero(~off)
     if len(near):
-        rays = return_rays(xyz[near], _subgrid(grid, near), layout, pose, 0)
+        rays = return_rays(xyz[near], _subgrid(grid, near), layout, pose, -1)  # frame unused
         t, _, cos = hit_depths(scene, rays)
         off[near] = passed_by(rays.range_m, t, cos)
     return off
@@ -96,9 +96,9 @@ def _off_mesh(xyz, grid, layout, pose, tree, scene) -> np.ndarray:
 
 def drive_splats(drive: Drive, frames: Frames, poses: np.ndarray, mesh: Mesh, unmeshed: list, load):
     """The splats of every training frame's returns that its range-image mesh left out
-    (``unmeshed``: per training frame, in ``drive.train``'s order, (N,) bool) and that the
-    fused ``mesh`` does not hold (:mod:`.splats`), world coordinates; ``load``:
-    :func:`scratch_scene`."""
+    (``unmeshed``: per training frame, in ``drive.train``'s order, (N,) bool; narrowed in place
+    to the returns splatted) and that the fused ``mesh`` does not hold (:mod:`.splats`), world
+    coordinates; ``load``: :func:`scratch_scene`."""
     from scipy.spatial import cKDTree
 
     from .splats import Splats, local_normals, ring_spacing_rad, scan_splats

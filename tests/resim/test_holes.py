@@ -10,7 +10,8 @@ them), and at least half of those the box hides are dropped (measured: 74 % of 1
 the box returns on every third beam it hides, returns that stop 5 m short of the wall; the beams no
 training scan returned on, the columns past the drive's coverage and the surfaces that moved
 are never dropped. An evidence frame turned to look back cannot see the points and abstains:
-the other decides alone (exactly its own holes), where no frame can see them none is dropped,
+the other decides alone (exactly its own holes of the reach test's kind; a box that returns
+nothing drops nothing alone), where no frame can see them none is dropped,
 and without abstaining nothing is. Beams with offsets: a point placed on each ring's beam 3 m away comes back
 on that ring, where the nearest elevation from the sensor's centre is off by several rings.
 """

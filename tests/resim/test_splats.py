@@ -198,7 +198,9 @@ def test_a_dark_walls_scattered_returns_are_splatted_where_the_mesh_has_holes(va
     The fused mesh holds 1 cm triangles, one per 10 cm, over the wall, so that every return lies
     within 0.3 m of a vertex, and a quad over its left half: the returns on the left half get
     no splat, those on the right half whose rays pass the tiny triangles by get one each (measured:
-    99.7 % of them)."""
+    all of them here; every other return is held by its scan's triangles and gets none),
+    centred on them in the world of a turned and moved sensor whose beams start off its
+    centre."""
     from types import SimpleNamespace
 
     from scipy.spatial import cKDTree
@@ -231,17 +233,27 @@ def test_a_dark_walls_scattered_returns_are_splatted_where_the_mesh_has_holes(va
         ),
     )  # fmt: skip
     assert cKDTree(mesh.vertices).query(xyz)[0].max() < 0.3  # all near a vertex
+    # the sensor turned 30° and moved; its rings' beams start off its centre; every other
+    # return unmeshed (the rest held by their scan's triangles: never splatted)
+    c, s_ = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    pose = np.eye(4)
+    pose[:3, :3] = [[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]]
+    pose[:3, 3] = [3.0, -2.0, 0.4]
+    mesh = mesh.transformed(pose)
     drive = SimpleNamespace(train=["a"], index=lambda fid: 0)
+    offsets = np.linspace(0.1, -0.1, len(elev))
     frames = SimpleNamespace(
         xyz=[xyz],
         grid=[grid],
         intensity=[np.full(len(xyz), 0.02)],
-        layout=RingLayout(elev, np.zeros(len(elev)), np.ones(len(elev))),
+        layout=RingLayout(elev, offsets, np.ones(len(elev))),
     )
-    unmeshed = [np.ones(len(xyz), dtype=bool)]
-    splats = drive_splats(drive, frames, [np.eye(4)], mesh, unmeshed, scratch_scene(str(tmp_path)))
+    unmeshed = [np.arange(len(xyz)) % 2 == 0]
+    given = unmeshed[0].copy()
+    splats = drive_splats(drive, frames, [pose], mesh, unmeshed, scratch_scene(str(tmp_path)))
     centres = splats.mesh.vertices.reshape(-1, 4, 3).mean(axis=1)
     right = xyz[:, 1] > 0.0
-    assert not (unmeshed[0] & ~right).any()  # the covered half: none
-    assert unmeshed[0][right].mean() > 0.9 and len(centres) == unmeshed[0].sum()
-    np.testing.assert_allclose(centres, xyz[unmeshed[0]], atol=1e-9)
+    assert not (unmeshed[0] & ~(right & given)).any()  # the covered half, the meshed: none
+    assert unmeshed[0][right & given].mean() > 0.9 and len(centres) == unmeshed[0].sum()
+    world = xyz @ pose[:3, :3].T + pose[:3, 3]
+    np.testing.assert_allclose(centres, world[unmeshed[0]], atol=1e-9)
