@@ -17,7 +17,7 @@ import numpy as np
 from .beam_rays import Rays, jit_rays
 from .mesh import Mesh, compact
 
-__all__ = ["carve", "carved_faces", "hit_classes", "hit_depths", "layered_hits"]
+__all__ = ["across_gap", "carve", "carved_faces", "hit_classes", "hit_depths", "layered_hits"]
 
 #: Rays cast per Dr.Jit launch.
 BLOCK = 1 << 20
@@ -48,9 +48,17 @@ def hit_depths(scene, rays: Rays):
     return np.concatenate(t), np.concatenate(prim), np.concatenate(cos)
 
 
+def across_gap(range_m, t, cos):
+    """(N,) how far a return at ``range_m`` lies beyond its ray's hit at ``t`` (negative: in
+    front of it), measured across the hit surface: ``(range_m − t) · max(|cos θ|, 0.05)``, so
+    that a grazing hit on the road, where a centimetre of height is a metre of range, is no
+    gap; m."""
+    return (np.asarray(range_m, np.float64) - t) * np.maximum(cos, 0.05)
+
+
 def _classes(range_m, t, prim, cos, through_m: float):
     """(N,) bools: the hit passed *through* its triangle; the ray ended *on* it."""
-    gap = (range_m - t) * np.maximum(cos, 0.05)
+    gap = across_gap(range_m, t, cos)
     hit = prim >= 0
     through = hit & (gap > through_m) & (range_m - t > 0.3)
     return through, hit & (np.abs(gap) <= through_m)

@@ -333,8 +333,9 @@ class Holes:
             drop &= a | self._in_hole(j, p, self.reach_m)
         # a scan deciding alone (hole_frames gives at most two): only returns short of the point
         if len(evidence) > 1 and drop.any():
+            some_away = np.logical_or.reduce(away)
             for j, p, a in zip(evidence, local, away):
-                alone = np.flatnonzero(drop & ~a & np.logical_or.reduce(away))
+                alone = np.flatnonzero(drop & ~a & some_away)
                 if len(alone):
                     drop[alone[self._in_hole(j, p[alone], None)]] = False
         if moving is not None and len(moving) and drop.any():

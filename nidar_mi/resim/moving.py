@@ -119,8 +119,9 @@ def unexplained_returns(t: np.ndarray, cos: np.ndarray, range_m: np.ndarray) -> 
         t: (N,) each return's ray's first hit on the static surfaces, m (inf: none);
         cos: (N,) ``|cos θ|`` there; range_m: (N,) the measured range along the ray, m.
     """
-    gap = np.abs(np.asarray(range_m, np.float64) - t) * np.maximum(cos, 0.05)
-    return ~(np.isfinite(t) & (gap <= ON_SURFACE_M))
+    from .carve import across_gap
+
+    return ~(np.isfinite(t) & (np.abs(across_gap(range_m, t, cos)) <= ON_SURFACE_M))
 
 
 def moving_surfaces(xyz: np.ndarray, grid, rays: Rays, static_scene, frame: int, *, wrap: bool):

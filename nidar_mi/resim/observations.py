@@ -78,10 +78,10 @@ def cast_samples(scene, faces, returns: Rays, intensity: np.ndarray, misses: Ray
 
     from ..lidar.raycast import cast, monostatic_reflectance
     from .beam_rays import jit_rays
-    from .carve import hit_depths
+    from .carve import across_gap, hit_depths
 
     t, _, cos = hit_depths(scene, returns)
-    on = np.isfinite(t) & (np.abs(t - returns.range_m) * np.maximum(cos, 0.05) <= ON_SURFACE_M)
+    on = np.isfinite(t) & (np.abs(across_gap(returns.range_m, t, cos)) <= ON_SURFACE_M)
     tm, _, _ = hit_depths(scene, misses)
     seen = np.isfinite(tm) & (tm <= MISS_RANGE_M)
     rays = concat([_select(returns, on), _select(misses, seen)])

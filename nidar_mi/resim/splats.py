@@ -97,10 +97,11 @@ class Splats:
 def passed_by(range_m: np.ndarray, t: np.ndarray, cos: np.ndarray) -> np.ndarray:
     """(N,) bool: returns at ``range_m`` (N,) whose rays first meet a triangle at ``t`` (inf:
     none) with ``|cos θ|`` ``cos`` more than :data:`PASS_M` beyond them, across the surface
-    (``(t - range_m) · max(|cos θ|, 0.05)``, as carving measures a gap: a grazing road a
-    centimetre lower is no hole), or meet none."""
+    (:func:`.carve.across_gap`: a grazing road a centimetre lower is no hole), or meet none."""
+    from .carve import across_gap
+
     with np.errstate(invalid="ignore"):
-        return ~np.isfinite(t) | ((t - range_m) * np.maximum(cos, 0.05) > PASS_M)
+        return ~np.isfinite(t) | (-across_gap(range_m, t, cos) > PASS_M)
 
 
 def ring_spacing_rad(elevation_deg: np.ndarray) -> np.ndarray:
