@@ -199,20 +199,26 @@ class _Moving:
             self.seen[j] = _frame_moving(j, self.frames, self.poses, self.static)
         return self.seen[j]
 
-    def _rho_of(self, mv, rays, j: int, inv) -> dict:
-        """The ρ per method of moving surfaces ``mv`` of frame ``j`` (``rays``: its returns')."""
+    def _rho_of(self, mv, rays, j: int, inv, partner=None) -> dict:
+        """The ρ per method of moving surfaces ``mv`` of frame ``j`` (``rays``: its returns';
+        ``partner``: ``(j2, shift)``, the frame that times their motion and (V, 3) each
+        vertex's motion to it, or None: :func:`.moving.moving_rho`)."""
         from .moving import moving_rho
 
+        seen = None
+        if partner is not None:
+            j2, shift = partner
+            seen = (self._frame(j2)[2], self.frames.intensity[j2], shift)
         return {
-            name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load)
+            name: moving_rho(mv, rays, self.frames.intensity[j], fitted, self.load, seen)
             if fitted is not None and len(mv.mesh.faces)
             else np.full(len(mv.returns), np.median(inv.rho))
             for name, (_, _, fitted) in self.variants.items()
         }
 
     def _rho(self, j: int, inv) -> dict:
-        """Frame ``j``'s moving surfaces' ρ per method (only the frame they come from needs
-        them, not the frame that times their motion)."""
+        """Frame ``j``'s moving surfaces' ρ per method, from its returns alone (the frame they
+        come from when no other frame times their motion)."""
         if self.rho[0] != j:
             mv, _, rays = self._frame(j)
             self.rho = (j, self._rho_of(mv, rays, j, inv))
@@ -227,10 +233,11 @@ class _Moving:
             self.shifts = {(j, j2): track_shifts(mv, target, MAX_STEP_M * abs(j2 - j))}
         return self.shifts[(j, j2)] / (j2 - j)
 
-    def _whole(self, j: int, k: int, velocity, inv):
+    def _whole(self, j: int, j2: int, k: int, velocity, inv):
         """``(mv, velocity, trail, rho)``: frame ``j``'s tracked objects whole at held-out frame
-        ``k`` (:mod:`.moving`: the returns its own trail explained join them, moving alike) and
-        the static triangles of their trail."""
+        ``k`` (:mod:`.moving`: the returns its own trail explained join them, moving alike),
+        the static triangles of their trail and their ρ, each vertex's return averaged with
+        frame ``j2``'s where that frame saw it (:func:`.moving.moving_rho`)."""
         from .moving import carried_velocity, surfaces_of, trail_faces, vertex_normals
 
         mv, hit, rays = self._frame(j)
@@ -239,14 +246,15 @@ class _Moving:
             self.normals = vertex_normals(self.mesh)
         trail = trail_faces(self.mesh, mv.mesh, velocity, steps, k - j, self.normals)
         if not trail.any():
-            return mv, velocity, trail, self._rho(j, inv)
+            return mv, velocity, trail, self._rho_of(mv, rays, j, inv, (j2, velocity * (j2 - j)))
         free = (hit < 0) | trail[np.maximum(hit, 0)]
         grown = surfaces_of(
             self.frames.xyz[j], self.frames.grid[j], rays, free, j, wrap=not self.frames.cut
         )
         velocity = carried_velocity(grown, mv, velocity)
         trail |= trail_faces(self.mesh, grown.mesh, velocity, steps, k - j, self.normals)
-        return grown, velocity, trail, self._rho_of(grown, rays, j, inv)
+        partner = (j2, velocity * (j2 - j))
+        return grown, velocity, trail, self._rho_of(grown, rays, j, inv, partner)
 
     def at(self, k: int, inv, hidden=None):
         """``(scene, extra, keep, record, moved)`` at held-out frame ``k``: the static surfaces
@@ -266,7 +274,7 @@ class _Moving:
         if j2 is not None:
             velocity = self._velocity(j, j2)
             tracked = float((np.linalg.norm(velocity, axis=1) > 0).mean())
-            mv, velocity, trail, extra = self._whole(j, k, velocity, inv)
+            mv, velocity, trail, extra = self._whole(j, j2, k, velocity, inv)
             gone |= trail
             record.update(
                 partner=self.drive.ids[j2], tracked=tracked, trail=int(trail.sum()),

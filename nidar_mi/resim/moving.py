@@ -24,7 +24,10 @@ Its reflectance is each vertex's own return inverted through the recovered senso
 (:mod:`.inversion`), so ``ρ = (y + b) / (G_l · r(d) · cos θ)`` (no lower than the sensor
 detects: :meth:`.inversion.SensorFit.reflectance_of`), with ``cos θ`` taken on the
 vertex normal Mitsuba computes for the mesh (the normal the renderer shades the vertex with:
-re-scanned from where it was measured, the vertex gives back its return's intensity).
+re-scanned from where it was measured, the vertex gives back its return's intensity). Where
+the second frame that times the motion saw it too (a return of that frame within
+:data:`~.observations.ON_SURFACE_M` of the vertex moved on to its time), the vertex takes the
+mean of the two returns' ρ, each inverted on the same normal (:func:`moving_rho`).
 Casting each return into the mesh, as the inversion's samples are cast, would lose about a
 quarter of them: a ray through a mesh's vertex may pass between its triangles.
 
@@ -157,10 +160,10 @@ def surfaces_of(xyz: np.ndarray, grid, rays: Rays, free: np.ndarray, frame: int,
 
 
 def moving_rho(
-    moving: MovingSurfaces, rays: Rays, intensity: np.ndarray, sensor, load_scene
+    moving: MovingSurfaces, rays: Rays, intensity: np.ndarray, sensor, load_scene, partner=None
 ) -> np.ndarray:
     """(V,) the moving vertices' ρ from their own returns (module docstring), in
-    [0, RHO_MAX].
+    [0, RHO_MAX]; with ``partner``, averaged with the second frame's return on the same surface.
 
     Args:
         moving: the surfaces; rays: the frame's return rays (world), in the order of its scan;
@@ -168,6 +171,12 @@ def moving_rho(
             :class:`.inversion.SensorFit` (gains, range response, offset);
         load_scene: ``load_scene(mesh) -> mi.Scene`` of a mesh alone
             (:func:`.build.scratch_scene`), whose vertex normals the renderer shades with.
+        partner: ``(rays2, intensity2, shift)`` or None: the return rays (world) and (N2,)
+            intensities of the frame that times the motion (:func:`partner_frame`) and (V, 3)
+            each vertex's motion from this frame to that one, m. A vertex moved on by its
+            shift with a return of that frame within :data:`ON_SURFACE_M` takes the mean of
+            its own ρ and that return's, inverted on the same vertex normal: the surface seen
+            twice, from two poses and most often by two lasers.
     """
     import mitsuba as mi
 
@@ -180,7 +189,21 @@ def moving_rho(
     normals = np.asarray(params[f"{SHAPE_ID}.vertex_normals"].numpy(), np.float64).reshape(-1, 3)
     cos = np.abs(np.einsum("ij,ij->i", normals, rays.direction[idx]))
     y = np.asarray(intensity, np.float64)[idx]
-    return sensor.reflectance_of(y, rays.ring[idx], rays.range_m[idx], cos)
+    rho = sensor.reflectance_of(y, rays.ring[idx], rays.range_m[idx], cos)
+    if partner is None or not len(partner[0].range_m):
+        return rho
+    from scipy.spatial import cKDTree
+
+    rays2, intensity2, shift = partner
+    seen = rays2.origin + rays2.direction * rays2.range_m[:, None]
+    gap, near = cKDTree(seen).query(moving.mesh.vertices + shift)
+    twice = gap <= ON_SURFACE_M
+    n = near[twice]
+    cos2 = np.abs(np.einsum("ij,ij->i", normals[twice], rays2.direction[n]))
+    y2 = np.asarray(intensity2, np.float64)[n]
+    rho2 = sensor.reflectance_of(y2, rays2.ring[n], rays2.range_m[n], cos2)
+    rho[twice] = 0.5 * (rho[twice] + rho2)
+    return rho
 
 
 def partner_frame(k: int, j: int, train) -> int | None:

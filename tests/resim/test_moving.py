@@ -167,6 +167,30 @@ def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
     empty = MovingSurfaces(4, Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), np.zeros(0, int))
     assert moving_rho(empty, rays, y, sensor, load).shape == (0,)
 
+    # seen again by the partner frame (frame 5's beams, its panel moved 1 m towards the
+    # sensor, each vertex's shift saying so, and read 0.1 brighter): the mean of its own ρ and
+    # that of the partner's nearest return, inverted on the panel's normal with that return's
+    # laser and range
+    from scipy.spatial import cKDTree
+
+    from nidar_mi.resim.beam_rays import Rays
+
+    _, _, rays5, panel5 = _rays(5)
+    on = np.flatnonzero(panel5)
+    w5 = rays5.origin[on] + rays5.direction[on] * rays5.range_m[on, None]
+    d5 = rays5.range_m[on]
+    y5 = sensor.gains[rays5.ring[on]] * sensor.response_at(d5) * (0.3 + 0.05 * w5[:, 0])
+    y5 = y5 * np.abs(rays5.direction[on, 1]) - sensor.offset
+    away = np.array([0.0, -1.0, 0.0])
+    moved5 = Rays(rays5.origin[on] + away, rays5.direction[on], d5, rays5.ring[on], rays5.frame[on])
+    expect = 0.5 * (rho + 0.3 + 0.05 * w5[cKDTree(w5).query(world)[1], 0])
+    shift = np.tile(away, (len(world), 1))
+    got = moving_rho(moving, rays, y, sensor, load, (moved5, y5, shift))
+    np.testing.assert_allclose(got, expect, rtol=1e-5)
+    # without the shift its returns lie 1 m off the vertices: each keeps its own return's ρ
+    got = moving_rho(moving, rays, y, sensor, load, (moved5, y5, 0 * shift))
+    np.testing.assert_allclose(got, rho, rtol=1e-5)
+
 
 def test_the_partner_frame_times_the_motion_from_the_other_side_or_before():
     from nidar_mi.resim.moving import partner_frame
