@@ -16,7 +16,6 @@ the re-simulation's scores beside. KITTI is research-only data: only numbers are
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -63,13 +62,11 @@ def neighbour_scores(run_dir: Path, out_dir: Path) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--work", required=True, type=Path, help="a resim_drives.py --work folder")
-    ap.add_argument("--runs", default=None, help="runs to score (default: every one there)")
+    from work_folder import work_parser, work_runs
+
+    ap = work_parser(__doc__.split("\n\n")[0])
     args = ap.parse_args(argv)
-    runs = (
-        args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
-    )
+    runs = work_runs(args)
     print(
         "| run | nearest real scan, m | Chamfer (m) | F@0.1 m | drop agr. | Spearman / RMSE "
         "| re-simulation: Chamfer / F / drop agr. / Spearman / RMSE |"

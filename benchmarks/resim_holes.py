@@ -35,7 +35,6 @@ every drive, and the margins are under it too. Prints a markdown table. KITTI is
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -155,9 +154,9 @@ def _ab_table(args, runs) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--work", required=True, type=Path, help="a resim_drives.py --work folder")
-    ap.add_argument("--runs", default=None, help="runs to score (default: every one there)")
+    from work_folder import work_parser, work_runs
+
+    ap = work_parser(__doc__.split("\n\n")[0])
     one = ap.add_mutually_exclusive_group()  # what to measure: one of these
     one.add_argument("--radii", default="0.3,0.4,0.5,0.7", help="radii, degrees")
     one.add_argument("--reaches", default=None, help="reach margins, m ('none': no reach test)")
@@ -197,9 +196,7 @@ def main(argv=None) -> int:
     else:
         settings = [(float(r), REACH_M, SPARSE_SHARE, None, True) for r in args.radii.split(",")]
         heads = [f"{r}°" for r, _, _, _, _ in settings]
-    runs = (
-        args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
-    )
+    runs = work_runs(args)
     if args.ab:
         out = _ab_table(args, runs)
         if args.json:

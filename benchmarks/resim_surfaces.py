@@ -20,7 +20,6 @@ research-only data: only numbers are printed.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -79,15 +78,13 @@ def run_split(run_dir: Path, out_dir: Path) -> dict:
 
 
 def main(argv=None) -> int:
+    from work_folder import work_parser, work_runs
+
     from nidar_mi.resim.scan_scores import intensity_metrics
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--work", required=True, type=Path, help="a resim_drives.py --work folder")
-    ap.add_argument("--runs", default=None, help="runs to split (default: every one there)")
+    ap = work_parser(__doc__.split("\n\n")[0])
     args = ap.parse_args(argv)
-    runs = (
-        args.runs.split(",") if args.runs else sorted(p.name for p in (args.work / "out").iterdir())
-    )
+    runs = work_runs(args)
     head = " | ".join(f"{k}: share / RMSE / Spearman" for k in KINDS)
     print(f"| run | all: RMSE | {head} |")
     print("| --- | ---: |" + " ---: |" * len(KINDS))

@@ -35,3 +35,25 @@ def test_points_on_the_mesh_on_a_splat_and_off_both():
     np.testing.assert_array_equal(bench.surface_kind(pts, v, f, 2), [0, 0, 1, 1, 2, 2])
     # every triangle counted as the mesh's: no splat
     np.testing.assert_array_equal(bench.surface_kind(pts, v, f, 4), [0, 0, 0, 0, 2, 2])
+
+
+def test_a_work_folder_lists_its_runs_and_refuses_what_it_lacks(tmp_path, capsys):
+    import pytest
+    from work_folder import work_parser, work_runs
+
+    for run in ("r2", "r1"):
+        (tmp_path / "out" / run).mkdir(parents=True)
+        (tmp_path / "out" / run / "report.json").write_text("{}")
+        (tmp_path / "drives" / run).mkdir(parents=True)
+    ap = work_parser("test")
+    assert work_runs(ap.parse_args(["--work", str(tmp_path)])) == ["r1", "r2"]
+    assert work_runs(ap.parse_args(["--work", str(tmp_path), "--runs", "r2"])) == ["r2"]
+    for argv, said in (
+        (["--work", str(tmp_path), "--runs", "r3"], "no run 'r3'"),
+        (["--work", str(tmp_path / "none")], "is not a resim_drives.py --work folder"),
+    ):
+        with pytest.raises(SystemExit) as stop:
+            work_runs(ap.parse_args(argv))
+        assert stop.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and said in err and err.count("\n") == 1
