@@ -45,11 +45,13 @@ def test_a_work_folder_lists_its_runs_and_refuses_what_it_lacks(tmp_path, capsys
         (tmp_path / "out" / run).mkdir(parents=True)
         (tmp_path / "out" / run / "report.json").write_text("{}")
         (tmp_path / "drives" / run).mkdir(parents=True)
+    (tmp_path / "out" / "unfinished").mkdir()  # no report.json: not listed
     ap = work_parser("test")
     assert work_runs(ap.parse_args(["--work", str(tmp_path)])) == ["r1", "r2"]
     assert work_runs(ap.parse_args(["--work", str(tmp_path), "--runs", "r2"])) == ["r2"]
     for argv, said in (
         (["--work", str(tmp_path), "--runs", "r3"], "no run 'r3'"),
+        (["--work", str(tmp_path), "--runs", "unfinished"], "no run 'unfinished'"),
         (["--work", str(tmp_path / "none")], "is not a resim_drives.py --work folder"),
     ):
         with pytest.raises(SystemExit) as stop:

@@ -17,12 +17,15 @@ def work_parser(description: str) -> argparse.ArgumentParser:
 
 
 def work_runs(args) -> list[str]:
-    """The runs that ``--runs`` names, or every run in ``--work``'s ``out/``, sorted; one
-    ``error:`` line and exit 2 when the folder is not such a folder or a run is not in it."""
+    """The runs that ``--runs`` names, or every finished run (with its ``report.json``) in
+    ``--work``'s ``out/``, sorted; one ``error:`` line and exit 2 when the folder is not such a
+    folder or a named run is not in it."""
     out = Path(args.work) / "out"
     if not out.is_dir():
         _fail(f"{args.work} is not a resim_drives.py --work folder (no out/ in it)")
-    runs = args.runs.split(",") if args.runs else sorted(p.name for p in out.iterdir())
+    if not args.runs:  # every finished run there
+        return sorted(p.name for p in out.iterdir() if (p / "report.json").is_file())
+    runs = args.runs.split(",")
     for run in runs:
         if not (out / run / "report.json").is_file() or not (out.parent / "drives" / run).is_dir():
             _fail(f"no run {run!r} in {args.work} (out/{run}/report.json and drives/{run}/)")

@@ -269,9 +269,11 @@ class _Moving:
         mv = self._frame(j)[0]
         record = {"from": self.drive.ids[j], "triangles": len(mv.mesh.faces), "partner": None}
         gone = np.zeros(len(self.mesh.faces), bool) if hidden is None else hidden.copy()
-        extra, velocity = self._rho(j, inv), np.zeros((len(mv.mesh.vertices), 3))
+        velocity = np.zeros((len(mv.mesh.vertices), 3))
         j2 = partner_frame(k, j, self.train) if len(mv.mesh.faces) else None
-        if j2 is not None:
+        if j2 is None:  # its own returns alone
+            extra = self._rho(j, inv)
+        else:
             velocity = self._velocity(j, j2)
             tracked = float((np.linalg.norm(velocity, axis=1) > 0).mean())
             mv, velocity, trail, extra = self._whole(j, j2, k, velocity, inv)

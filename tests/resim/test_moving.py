@@ -168,9 +168,9 @@ def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
     assert moving_rho(empty, rays, y, sensor, load).shape == (0,)
 
     # seen again by the partner frame (frame 5's beams, its panel moved 1 m towards the
-    # sensor, each vertex's shift saying so, and read 0.1 brighter): the mean of its own ρ and
-    # that of the partner's nearest return, inverted on the panel's normal with that return's
-    # laser and range
+    # sensor, each vertex's shift saying so, and its ρ 0.1 higher there): the mean of its own
+    # ρ and that of the partner's nearest return, inverted on the panel's normal with that
+    # return's laser and range
     from scipy.spatial import cKDTree
 
     from nidar_mi.resim.beam_rays import Rays
@@ -181,15 +181,20 @@ def test_moving_reflectance_inverts_the_return_model(variant, tmp_path):
     d5 = rays5.range_m[on]
     y5 = sensor.gains[rays5.ring[on]] * sensor.response_at(d5) * (0.3 + 0.05 * w5[:, 0])
     y5 = y5 * np.abs(rays5.direction[on, 1]) - sensor.offset
-    away = np.array([0.0, -1.0, 0.0])
-    moved5 = Rays(rays5.origin[on] + away, rays5.direction[on], d5, rays5.ring[on], rays5.frame[on])
+    step = np.array([0.0, -1.0, 0.0])
+    moved5 = Rays(rays5.origin[on] + step, rays5.direction[on], d5, rays5.ring[on], rays5.frame[on])
     expect = 0.5 * (rho + 0.3 + 0.05 * w5[cKDTree(w5).query(world)[1], 0])
-    shift = np.tile(away, (len(world), 1))
+    shift = np.tile(step, (len(world), 1))
     got = moving_rho(moving, rays, y, sensor, load, (moved5, y5, shift))
     np.testing.assert_allclose(got, expect, rtol=1e-5)
     # without the shift its returns lie 1 m off the vertices: each keeps its own return's ρ
     got = moving_rho(moving, rays, y, sensor, load, (moved5, y5, 0 * shift))
     np.testing.assert_allclose(got, rho, rtol=1e-5)
+    # the shift on the panel's left half alone: that half averaged, the right half its own
+    left = world[:, 0] < 0
+    got = moving_rho(moving, rays, y, sensor, load, (moved5, y5, shift * left[:, None]))
+    assert 0.3 < left.mean() < 0.7
+    np.testing.assert_allclose(got, np.where(left, expect, rho), rtol=1e-5)
 
 
 def test_the_partner_frame_times_the_motion_from_the_other_side_or_before():
