@@ -10,6 +10,8 @@ the frames that saw it.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from .drive_folder import Drive, evenly_spread
@@ -37,14 +39,18 @@ def nidar_prior(drive: Drive, vertices: np.ndarray, poses: np.ndarray, *, weight
     """
     from ..datasets.kitti_objects import load_kitti_frame
     from ..errors import NidarError
-    from ..nidar.pipeline import NidarModel
+    from ..extras import require
 
     frames = _frames_with_images(drive)
     if not frames:
         return None
-    try:
+    try:  # the fit runs without the prior when NIDAR cannot run, and says why
+        require("nidar", "NIDAR's prior")
+        from ..nidar.pipeline import NidarModel
+
         model = NidarModel.load(weights)
-    except NidarError:
+    except NidarError as e:
+        logging.getLogger("nidar_mi.reconstruct").warning("no NIDAR prior: %s", e)
         return None
     total = np.zeros(len(vertices))
     count = np.zeros(len(vertices))
