@@ -11,7 +11,9 @@ extra           modules                     what needs it
 ``nidar``       torch, safetensors,         the NIDAR networks and sensor profiles:
                 lightgbm                    ``render --intensity nidar``, ``train``,
                                             ``assign``, ``pseudo_nir``, ``calibrate``,
-                                            ``evaluate``, ``drive --sources nidar``
+                                            ``evaluate``, ``reflectance_cue``,
+                                            ``drive --sources nidar``, ``reconstruct``'s
+                                            prior (optional there)
 ``drive``       kiss_icp, gtsam             the drive study (``drive``): odometry, loop
                                             registration, pose-graph correction
 ``resim``       open3d                      ``reconstruct`` of a drive without a poses
@@ -34,7 +36,7 @@ import importlib.util
 
 from .errors import NidarError
 
-__all__ = ["EXTRAS", "extra_of", "missing_extra", "require"]
+__all__ = ["EXTRAS", "extra_of", "installed", "missing_extra", "require"]
 
 #: Extra -> the top-level modules it installs.
 EXTRAS: dict[str, tuple[str, ...]] = {
@@ -50,7 +52,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
 }
 
 
-def _installed(module: str) -> bool:
+def installed(module: str) -> bool:
     """Whether ``module`` can be imported (without importing it)."""
     try:
         return importlib.util.find_spec(module) is not None
@@ -67,7 +69,7 @@ def extra_of(module: str) -> str | None:
 def missing_extra(extra: str, feature: str, modules: tuple[str, ...] | None = None) -> str:
     """The one-line message: ``feature`` needs ``extra``, which ``modules`` (default: the
     missing modules of the extra) belong to, and how to install it."""
-    absent = modules or tuple(m for m in EXTRAS[extra] if not _installed(m)) or EXTRAS[extra]
+    absent = modules or tuple(m for m in EXTRAS[extra] if not installed(m)) or EXTRAS[extra]
     return (
         f"{feature} needs the optional '{extra}' dependencies ({', '.join(absent)} not "
         f"installed): pip install 'nidar_mi[{extra}]'"
@@ -80,5 +82,5 @@ def require(extra: str, feature: str) -> None:
     Raises:
         NidarError: one line naming ``feature``, the missing modules and the extra to install.
     """
-    if not all(_installed(m) for m in EXTRAS[extra]):
+    if not all(installed(m) for m in EXTRAS[extra]):
         raise NidarError(missing_extra(extra, feature))

@@ -48,6 +48,8 @@ def test_every_module_belongs_to_one_extra():
         ("render", ["scenes/street.xml", "-o", "OUT", "--formats", "npz,laz"], "laz", "lazrs"),
         ("render", ["scenes/street.xml", "-o", "OUT", "--fog", "50"], "weather", "miepython"),
         ("weather", ["scenes", "-o", "OUT", "--rain", "10"], "weather", "miepython"),
+        ("evaluate", ["--data", "data", "-o", "out"], "nidar", "torch"),
+        ("reflectance_cue", ["--test", "data", "-o", "out/cue.json"], "nidar", "torch"),
     ],
 )
 def test_a_command_without_its_extra_fails_in_one_line(
@@ -63,7 +65,21 @@ def test_a_command_without_its_extra_fails_in_one_line(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error: "), err
     assert f"({module} not installed): pip install 'nidar_mi[{extra}]'" in err
+    assert "this command" not in err  # checked up front, naming what needs it
     assert not (tmp_path / "OUT").exists() and not (tmp_path / "out").exists()
+
+
+def test_a_profile_without_nidar_intensity_is_a_usage_error_first(monkeypatch, tmp_path, capsys):
+    """``--profile`` without ``--intensity nidar`` has no effect: that is the error, whether or
+    not the extra that ``--intensity nidar`` would need is installed."""
+    from nidar_mi.cli.render import main
+
+    _hide(monkeypatch, "torch")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "scenes").symlink_to(_repo_scenes())
+    assert main(["scenes/street.xml", "-o", "OUT", "--profile", "kitti-hdl64e"]) == 2
+    assert capsys.readouterr().err == "error: --profile applies to --intensity nidar\n"
+    assert not (tmp_path / "OUT").exists()
 
 
 def _repo_scenes() -> str:

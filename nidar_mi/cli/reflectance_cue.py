@@ -187,8 +187,10 @@ def main(argv=None) -> int:
 
     def work():
         from ..eval.tables import write_json
+        from ..extras import require
 
         truths = _requests(args)
+        require("nidar", "reflectance_cue")
         if args.out:
             inputs = [args.test, args.train, args.stn, *(w.partition("=")[2] for w in args.weights)]
             target = _check_out(args.out, inputs, args.overwrite)

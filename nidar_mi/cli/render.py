@@ -333,9 +333,12 @@ def _render_options(args):
 def _require_extras(args) -> None:
     """The optional dependencies the options need (:mod:`nidar_mi.extras`), checked before any
     work."""
+    from ..errors import NidarError
     from ..extras import require
 
-    if args.intensity == "nidar" or args.profile is not None:
+    if args.profile is not None and args.intensity != "nidar":
+        raise NidarError("--profile applies to --intensity nidar")
+    if args.intensity == "nidar":
         require("nidar", "--intensity nidar")
     if "laz" in _parse_formats(args.formats):
         require("laz", "--formats laz")

@@ -104,11 +104,13 @@ def run_evaluation(options: EvaluateOptions) -> dict:
         NidarError: a missing or inconsistent input, LPIPS requested but unavailable, no
             Mitsuba variant set while :attr:`EvaluateOptions.scans_scenes`.
     """
+    from ..extras import require
     from ..io.atomic import check_output_folder, staged_directory
 
     t0 = time.perf_counter()
     out = options.out
     publish = dict(owner=OWNER, overwrite=options.overwrite, inputs=_inputs(options))
+    require("nidar", "evaluate")  # the NIDAR model, always loaded
     check_output_folder(out, **publish)
     meta = _check_inputs(options)
     _check_environment(options)

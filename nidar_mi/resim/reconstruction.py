@@ -85,7 +85,7 @@ class ReconstructOptions:
 def check(options: ReconstructOptions) -> Drive:
     """Every check that needs no work: the drive, the held-out ids, the poses, the bounds, the
     output folder. Raises NidarError."""
-    from ..extras import require
+    from ..extras import installed, require
     from ..io.atomic import check_output_folder
 
     if not 0.02 <= options.voxel_m <= 1.0:
@@ -101,8 +101,19 @@ def check(options: ReconstructOptions) -> Drive:
             f"({options.max_frames})"
         )
     if drive.poses is None:  # KISS-ICP's odometry, refined by Open3D's registration
-        require("drive", "reconstruct of a drive without poses")
-        require("resim", "reconstruct of a drive without poses")
+        absent = [m for m in ("kiss_icp", "open3d") if not installed(m)]
+        if absent:
+            raise NidarError(
+                "reconstruct of a drive without poses needs the optional 'drive' and 'resim' "
+                f"dependencies ({', '.join(absent)} not installed): "
+                "pip install 'nidar_mi[drive,resim]' (or give --poses)"
+            )
+    if options.weights is not None:
+        if not options.prior:
+            raise NidarError("`weights` is NIDAR's prior's: it has no effect with `no-prior`")
+        if not os.path.isdir(options.weights):
+            raise NidarError(f"`weights`: {options.weights} is not a folder")
+        require("nidar", "`weights` (NIDAR's prior)")
     check_output_folder(
         options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
     )

@@ -18,7 +18,7 @@ def test_without_the_nidar_extra_there_is_no_prior_and_a_warning(tmp_path, monke
         (tmp_path / "image_2" / f"{k:06d}.png").write_bytes(b"")
         (tmp_path / "calib" / f"{k:06d}.txt").write_text("")
     drive = open_drive(str(tmp_path))
-    monkeypatch.setattr(extras, "_installed", lambda module: module != "torch")
+    monkeypatch.setattr(extras, "installed", lambda module: module != "torch")
     with caplog.at_level(logging.WARNING, logger="nidar_mi.reconstruct"):
         prior = nidar_prior(drive, np.zeros((3, 3)), np.tile(np.eye(4), (2, 1, 1)))
     assert prior is None

@@ -36,9 +36,12 @@ def _eye(n):
         ("bad range", "not a range"),
         ("missing poses file", "does not exist"),
         ("negative transient frames", "`transient-frames` must be >= 0"),
+        ("weights without the prior", "no effect with `no-prior`"),
+        ("weights not a folder", "is not a folder"),
+        ("no odometry", "needs the optional 'drive' and 'resim' dependencies (kiss_icp, open3d"),
     ],
 )
-def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsys):
+def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsys, monkeypatch):
     root = tmp_path / "drive"
     extra: list[str] = []
     if case == "one scan":
@@ -70,6 +73,17 @@ def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsy
     elif case == "negative transient frames":
         _drive(root, 3)
         extra = ["--transient-frames", "-1"]
+    elif case == "weights without the prior":
+        _drive(root, 3, _eye(3))
+        extra = ["--weights", str(tmp_path), "--no-prior"]
+    elif case == "weights not a folder":
+        _drive(root, 3, _eye(3))
+        extra = ["--weights", str(tmp_path / "nope")]
+    elif case == "no odometry":
+        from nidar_mi import extras
+
+        _drive(root, 3)
+        monkeypatch.setattr(extras, "installed", lambda m: m not in ("kiss_icp", "open3d"))
     out = tmp_path / "out"
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
     status = main([str(root), "-o", str(out), *extra])
