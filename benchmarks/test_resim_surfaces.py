@@ -37,6 +37,22 @@ def test_points_on_the_mesh_on_a_splat_and_off_both():
     np.testing.assert_array_equal(bench.surface_kind(pts, v, f, 4), [0, 0, 0, 0, 2, 2])
 
 
+def test_far_causes_read_the_real_beam_beside_each_return():
+    # real returns: one 5 m along +x, one 10 m along +y, one 20 m along -x
+    real = np.array([[5.0, 0, 0], [0, 10.0, 0], [-20.0, 0, 0]])
+    az = np.radians(0.2)  # within BEAM_DEG (0.3°) of +x
+    sim = np.array(
+        [
+            [9.0 * np.cos(az), 9.0 * np.sin(az), 0],  # +x at 9 m: the real beam stopped at 5 m
+            [0, 8.0, 0],  # +y at 8 m: the real beam went on to 10 m
+            [0, 0, 7.0],  # straight up: no real return within 0.3°
+            [-20.3, 0, 0],  # -x, 0.3 m past the real return: within FAR_M
+            [5.0 * np.cos(0.01), 5.0 * np.sin(0.01), 0],  # 0.57° off +x: no real beam
+        ]
+    )
+    np.testing.assert_array_equal(bench.far_causes(sim, real), [0, 1, 2, 3, 2])
+
+
 def test_a_work_folder_lists_its_runs_and_refuses_what_it_lacks(tmp_path, capsys):
     import pytest
     from work_folder import work_parser, work_runs
