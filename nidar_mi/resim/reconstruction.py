@@ -110,7 +110,7 @@ def check(options: ReconstructOptions) -> Drive:
             )
     if options.weights is not None:
         if not options.prior:
-            raise NidarError("`weights` is NIDAR's prior's: it has no effect with `no-prior`")
+            raise NidarError("`weights` are the NIDAR prior's: they have no effect with `no-prior`")
         if not os.path.isdir(options.weights):
             raise NidarError(f"`weights`: {options.weights} is not a folder")
         require("nidar", "`weights` (NIDAR's prior)")
