@@ -75,8 +75,18 @@ class Terminated(KeyboardInterrupt):
     """
 
 
+#: The signals that arrived during :func:`run`'s work, in order.
+_signalled: list[int] = []
+
+
 def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
+    _signalled.append(signal.SIGTERM)
     raise Terminated()
+
+
+def _on_sigint(signum, frame):  # noqa: ARG001 - signal handler signature
+    _signalled.append(signal.SIGINT)
+    raise KeyboardInterrupt()
 
 
 class _Parser(argparse.ArgumentParser):
@@ -275,11 +285,16 @@ def run(
     Returns:
         The exit status (see the module docstring).
     """
-    previous = signal.getsignal(signal.SIGTERM)
+    previous = {signal.SIGTERM: signal.getsignal(signal.SIGTERM)}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not ignored
+        previous[signal.SIGINT] = signal.default_int_handler
+    handlers = {signal.SIGTERM: _on_sigterm, signal.SIGINT: _on_sigint}
     try:
-        signal.signal(signal.SIGTERM, _on_sigterm)
-    except ValueError:  # not the main thread: leave SIGTERM alone
-        previous = None
+        for sig in previous:
+            signal.signal(sig, handlers[sig])
+    except ValueError:  # not the main thread: leave the signals alone
+        previous = {}
+    _signalled.clear()
     try:
         bars = show_progress(args) if args is not None else stderr_is_terminal()
         with warnings.catch_warnings(), _log_level(args), bars_allowed(bars):
@@ -304,12 +319,27 @@ def run(
         print(f"error: {message}", file=sys.stderr)
         return EXIT_USER_ERROR
     except OSError as e:
+        if _signalled:
+            return _stopped(on_interrupt)
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"error: {where}{_one_line(e.strerror or e)}", file=sys.stderr)
         return EXIT_USER_ERROR
+    except Exception:
+        if _signalled:  # a signal unwinding an import: the extension's loader re-raised it
+            return _stopped(on_interrupt)
+        raise
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _stopped(on_interrupt) -> int:
+    """The line and status of a run that a signal stopped, whatever exception it became."""
+    if _signalled[-1] == signal.SIGTERM:
+        print(f"terminated; {_left(on_interrupt)}", file=sys.stderr)
+        return EXIT_TERMINATED
+    print(f"interrupted; {_left(on_interrupt)}", file=sys.stderr)
+    return EXIT_INTERRUPTED
 
 
 def add_weather_args(p: argparse.ArgumentParser, *, what: str) -> None:

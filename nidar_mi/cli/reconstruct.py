@@ -56,7 +56,12 @@ def _add_step_switches(p) -> None:
 
 
 def build_parser():
-    from ..resim.reconstruction import MAX_FRAMES, ReconstructOptions
+    from ..resim.reconstruction import (
+        MAX_CARVE_PASSES,
+        MAX_FRAMES,
+        MAX_ITERATIONS,
+        ReconstructOptions,
+    )
 
     d = ReconstructOptions("", "")
     p = parser(
@@ -87,13 +92,16 @@ def build_parser():
         "--voxel", type=float, default=d.voxel_m, help=f"mesh vertex spacing, m ({d.voxel_m})"
     )
     p.add_argument(
-        "--iterations", type=int, default=d.iterations, help=f"fit steps ({d.iterations})"
+        "--iterations",
+        type=int,
+        default=d.iterations,
+        help=f"fit steps ({d.iterations}; at most {MAX_ITERATIONS})",
     )
     p.add_argument(
         "--carve-passes",
         type=int,
         default=d.carve_passes,
-        help=f"free-space carving passes ({d.carve_passes}; 0: none)",
+        help=f"free-space carving passes ({d.carve_passes}; 0: none; at most {MAX_CARVE_PASSES})",
     )
     p.add_argument(
         "--transient-frames",
@@ -148,7 +156,7 @@ def main(argv=None) -> int:
         options = ReconstructOptions(
             drive=args.drive,
             out=args.out,
-            holdout=tuple(parse_ids(args.holdout)),
+            holdout=tuple(parse_ids(args.holdout, limit=max(args.max_frames, 2))),
             poses=args.poses,
             voxel_m=args.voxel,
             iterations=args.iterations,

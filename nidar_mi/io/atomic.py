@@ -510,6 +510,24 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
+def _missing_folders(folder: Path) -> list[Path]:
+    """``folder`` and its ancestors that do not exist yet, deepest first."""
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first) that a failed run created, as long as they are empty."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
+
+
 def _new_stage(parent: Path, prefix: str) -> tuple[Path, int]:
     """A new hidden staging folder in ``parent``, world-readable like any output, and the lock
     that marks it in use."""
@@ -559,9 +577,11 @@ def staged_directory(
     publish = dict(owner=owner, overwrite=overwrite, inputs=inputs, nested=nested)
     target = check_output_folder(out_dir, **publish)
     _clear_stale(target)
+    made = _missing_folders(target.parent)  # removed again if the run fails
     try:
         stage, lock = _new_stage(target.parent, f".{target.name}.partial-")
     except OSError as e:
+        _remove_empty(made)
         raise NidarError(f"cannot write {target}: {e.strerror or e}") from None
     old_lock = None
     try:
@@ -580,9 +600,11 @@ def staged_directory(
             shutil.rmtree(old, ignore_errors=True)
     except OSError as e:
         shutil.rmtree(stage, ignore_errors=True)
+        _remove_empty(made)
         raise NidarError(f"cannot write {target}: {e.strerror or e}") from None
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
+        _remove_empty(made)
         raise
     finally:
         _unlock(lock)

@@ -21,7 +21,11 @@ import numpy as np
 
 from ..errors import NidarError
 
-__all__ = ["Drive", "open_drive", "parse_ids", "evenly_spread"]
+__all__ = ["Drive", "MAX_SCAN_POINTS", "open_drive", "parse_ids", "evenly_spread"]
+
+#: The most points a scan may hold (16 bytes each): a 128-ring sensor at 4096 columns with two
+#: returns per beam holds about 1 M.
+MAX_SCAN_POINTS = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -82,9 +86,10 @@ def evenly_spread(items: list, limit: int) -> list:
     return [items[k] for k in pick]
 
 
-def parse_ids(text: str | None) -> list[str]:
+def parse_ids(text: str | None, limit: int | None = None) -> list[str]:
     """Frame ids from ``A,B,C`` and ranges ``A:B`` (both ends included, ids of equal width);
-    empty or None: none."""
+    empty or None: none. ``limit``: the most ids a range may name (a drive of at most that many
+    scans holds no more), checked before the range is expanded."""
     out: list[str] = []
     for part in (text or "").split(","):
         part = part.strip()
@@ -94,6 +99,11 @@ def parse_ids(text: str | None) -> list[str]:
             a, b = (s.strip() for s in part.split(":", 1))
             if not (a.isdigit() and b.isdigit()) or int(b) < int(a):
                 raise NidarError(f"`holdout`: '{part}' is not a range of numeric ids A:B (A <= B)")
+            if limit is not None and int(b) - int(a) + 1 > limit:
+                raise NidarError(
+                    f"`holdout`: '{part}' names {int(b) - int(a) + 1} ids, more than a drive "
+                    f"may hold (`max_frames` {limit})"
+                )
             out += [str(k).zfill(len(a)) for k in range(int(a), int(b) + 1)]
         else:
             out.append(part)
@@ -122,6 +132,13 @@ def open_drive(root: str, *, holdout: list[str] | None = None, poses_file: str |
     ids = tuple(sorted(n[:-4] for n in os.listdir(vel) if n.endswith(".bin")))
     if len(ids) < 2:
         raise NidarError(f"{vel} holds {len(ids)} scan(s); a drive needs at least 2")
+    for i in ids:  # memory bounded before any scan is read
+        path = os.path.join(vel, i + ".bin")
+        if os.path.isfile(path) and os.path.getsize(path) > MAX_SCAN_POINTS * 16:
+            raise NidarError(
+                f"{path} holds {os.path.getsize(path) // 16} points, more than a scan may "
+                f"({MAX_SCAN_POINTS})"
+            )
     held = list(dict.fromkeys(holdout or []))
     unknown = [i for i in held if i not in ids]
     if unknown:

@@ -4,6 +4,7 @@ drive's columns per revolution, layout and coverage.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,12 +13,17 @@ from .drive_folder import Drive
 from .laser_layout import RingLayout, fit_layout
 from .range_image import ScanGrid, azimuth_coverage, columns_per_revolution, scan_grid
 
+log = logging.getLogger("nidar_mi.reconstruct")
+
 __all__ = ["Frames", "load_frames", "RINGS"]
 
 #: Lasers of the drives' sensor (KITTI's HDL-64E).
 RINGS = 64
 #: Returns closer than this are the car itself (m); they are left out.
 MIN_RANGE_M = 2.5
+#: The fewest returns beyond MIN_RANGE_M a scan may hold (a recorded HDL-64E scan holds
+#: 50 000-120 000; one cut to the camera's view about a half).
+MIN_RETURNS = 1000
 
 
 @dataclass
@@ -47,12 +53,20 @@ class Frames:
 
 
 def _read(drive: Drive, frame_id: str):
+    """``(xyz, intensity, dropped, clipped)``: the scan's finite points, their intensities
+    clipped to KITTI's [0, 1], and how many points were dropped and intensities clipped."""
     from ..io.kitti import read_kitti_bin
 
     xyz, intensity = read_kitti_bin(drive.scan_path(frame_id))
     xyz = np.asarray(xyz, dtype=np.float64)
     keep = np.isfinite(xyz).all(axis=1) & np.isfinite(intensity)
-    return xyz[keep], np.clip(intensity[keep], 0.0, 1.0)
+    out = (intensity[keep] < 0.0) | (intensity[keep] > 1.0)
+    return (
+        xyz[keep],
+        np.clip(intensity[keep], 0.0, 1.0),
+        int(np.sum(~keep)),
+        int(np.sum(out)),
+    )
 
 
 def load_frames(drive: Drive, *, progress: bool = False) -> Frames:
@@ -64,7 +78,21 @@ def load_frames(drive: Drive, *, progress: bool = False) -> Frames:
     from ..progress import progress_bar
     from .range_image import recovered_rings
 
-    raw = [_read(drive, i) for i in progress_bar(drive.ids, show=progress, desc="read")]
+    raw = []
+    for i in progress_bar(drive.ids, show=progress, desc="read"):
+        xyz, intensity, dropped, clipped = _read(drive, i)
+        returns = int(np.sum(np.linalg.norm(xyz, axis=1) >= MIN_RANGE_M))
+        if returns < MIN_RETURNS:
+            raise NidarError(
+                f"{drive.scan_path(i)}: {returns} returns beyond {MIN_RANGE_M:g} m; a scan needs "
+                f"at least {MIN_RETURNS}"
+            )
+        if dropped or clipped:
+            log.warning(
+                "%s: %d non-finite points dropped, %d intensities outside [0, 1] clipped",
+                drive.scan_path(i), dropped, clipped,
+            )  # fmt: skip
+        raw.append((xyz, intensity))
     train = [drive.index(i) for i in drive.train]
     rings = [recovered_rings(raw[k][0]) for k in range(len(raw))]
     ordered = [k for k in train if rings[k] is not None and len(raw[k][0])]
@@ -73,7 +101,10 @@ def load_frames(drive: Drive, *, progress: bool = False) -> Frames:
             f"{drive.root}: no training scan keeps the sensor's storage order (rings unknown)"
         )
     columns = columns_per_revolution(raw[ordered[0]][0], rings[ordered[0]])
-    layout = fit_layout([raw[k][0] for k in ordered], [rings[k] for k in ordered], RINGS)
+    try:
+        layout = fit_layout([raw[k][0] for k in ordered], [rings[k] for k in ordered], RINGS)
+    except ValueError as e:  # too few returns per ring
+        raise NidarError(f"{drive.root}: {e}") from None
     xyz, intensity, grids = [], [], []
     for p, i in raw:
         near = np.linalg.norm(p, axis=1) >= MIN_RANGE_M

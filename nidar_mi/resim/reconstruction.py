@@ -55,6 +55,9 @@ OWNER = Owner(
 
 #: The most frames a drive may have (bounds memory and time before any work).
 MAX_FRAMES = 400
+#: The most fit steps and carving passes (each a pass over every training sample).
+MAX_ITERATIONS = 10_000
+MAX_CARVE_PASSES = 16
 
 
 @dataclass(frozen=True)
@@ -90,10 +93,16 @@ def check(options: ReconstructOptions) -> Drive:
 
     if not 0.02 <= options.voxel_m <= 1.0:
         raise NidarError(f"`voxel` must lie in [0.02, 1] m (got {options.voxel_m:g})")
-    if options.transient_frames < 0:
-        raise NidarError(f"`transient-frames` must be >= 0 (got {options.transient_frames})")
-    if options.iterations < 1:
-        raise NidarError(f"`iterations` must be >= 1 (got {options.iterations})")
+    if options.max_frames < 2:
+        raise NidarError(f"`max_frames` must be >= 2 (got {options.max_frames})")
+    for name, value, top in (
+        ("transient_frames", options.transient_frames, options.max_frames),
+        ("iterations", options.iterations, MAX_ITERATIONS),
+        ("carve_passes", options.carve_passes, MAX_CARVE_PASSES),
+    ):
+        low = 1 if name == "iterations" else 0
+        if not low <= value <= top:
+            raise NidarError(f"`{name}` must lie in [{low}, {top}] (got {value})")
     drive = open_drive(options.drive, holdout=list(options.holdout), poses_file=options.poses)
     if len(drive.ids) > options.max_frames:
         raise NidarError(
@@ -110,14 +119,23 @@ def check(options: ReconstructOptions) -> Drive:
             )
     if options.weights is not None:
         if not options.prior:
-            raise NidarError("`weights` are the NIDAR prior's: they have no effect with `no-prior`")
+            raise NidarError("`weights` are the NIDAR prior's: they have no effect with `no_prior`")
         if not os.path.isdir(options.weights):
             raise NidarError(f"`weights`: {options.weights} is not a folder")
         require("nidar", "`weights` (NIDAR's prior)")
+    velodyne = os.path.realpath(os.path.join(options.drive, "velodyne"))
+    out = os.path.realpath(options.out)
+    if os.path.commonpath([velodyne, out]) == velodyne:
+        raise NidarError(f"`out` {options.out} lies in the drive's scans ({velodyne})")
     check_output_folder(
-        options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
+        options.out, owner=OWNER, overwrite=options.overwrite, inputs=_inputs(options)
     )
     return drive
+
+
+def _inputs(options: ReconstructOptions) -> list[str | None]:
+    """What the command reads, which ``out`` may neither be nor hold."""
+    return [options.drive, options.poses, options.weights]
 
 
 def reconstruct(options: ReconstructOptions) -> dict:
@@ -126,7 +144,7 @@ def reconstruct(options: ReconstructOptions) -> dict:
 
     drive = check(options)
     with staged_directory(
-        options.out, owner=OWNER, overwrite=options.overwrite, inputs=[options.drive]
+        options.out, owner=OWNER, overwrite=options.overwrite, inputs=_inputs(options)
     ) as stage:
         report = _run(drive, options, str(stage))
     return report

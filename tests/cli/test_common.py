@@ -143,6 +143,41 @@ def test_signal_during_render_leaves_nothing(tmp_path, sig, status, word):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    "sig, status, word",
+    [
+        (signal.SIGTERM, EXIT_TERMINATED, "terminated"),
+        (signal.SIGINT, EXIT_INTERRUPTED, "interrupted"),
+    ],
+)
+def test_a_signal_that_an_import_turns_into_another_error_is_still_one_line(
+    sig, status, word, capsys
+):
+    """A C extension's loader re-raises the signal's exception as an ImportError (Dr.Jit's
+    does, while it initialises): still the signal's line and status, no traceback."""
+    from nidar_mi.cli._common import run
+
+    def work():
+        try:
+            os.kill(os.getpid(), sig)
+            time.sleep(5)
+        except KeyboardInterrupt as e:
+            raise ImportError("Encountered an error while initializing the extension.") from e
+
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert run(work) == status
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert capsys.readouterr().err == f"{word}; nothing written\n"
+
+    def bug():
+        raise ImportError("a bug, not a signal")
+
+    with pytest.raises(ImportError):  # without a signal: a traceback, as before
+        run(bug)
+
+
 @pytest.mark.parametrize("command", list(COMMANDS))
 def test_every_command_has_quiet_verbose_and_progress_options(command, capsys):
     """``-q`` / ``-v`` on every command; ``--progress`` / ``--no-progress`` where it has bars."""

@@ -156,6 +156,20 @@ def test_staged_directory_failure_leaves_target_untouched(tmp_path, exc):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_staged_directory_failure_removes_the_folders_it_created(tmp_path):
+    """The parents made for ``out`` go again when the run fails; one that existed stays."""
+    from nidar_mi.io.atomic import staged_directory
+
+    (tmp_path / "kept").mkdir()
+    out = tmp_path / "kept" / "a" / "b" / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with staged_directory(out, owner=OWNER) as stage:
+            (stage / "half.txt").write_text("x")
+            raise KeyboardInterrupt()
+    assert [p.name for p in tmp_path.iterdir()] == ["kept"]
+    assert list((tmp_path / "kept").iterdir()) == []
+
+
 def test_staged_directory_bad_targets(tmp_path):
     from nidar_mi.io.atomic import staged_directory
 

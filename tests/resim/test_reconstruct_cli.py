@@ -35,10 +35,22 @@ def _eye(n):
         ("all held out", "--holdout holds out every frame"),
         ("bad range", "not a range"),
         ("missing poses file", "does not exist"),
-        ("negative transient frames", "`transient-frames` must be >= 0"),
-        ("weights without the prior", "no effect with `no-prior`"),
+        ("negative transient frames", "--transient-frames must lie in [0, 400] (got -1)"),
+        ("weights without the prior", "no effect with --no-prior"),
         ("weights not a folder", "is not a folder"),
         ("no odometry", "needs the optional 'drive' and 'resim' dependencies (kiss_icp, open3d"),
+        ("out holds the poses", "holds the input"),
+        ("out in the scans", "lies in the drive's scans"),
+        (
+            "huge holdout range",
+            "names 300000001 ids, more than a drive may hold (--max-frames 400)",
+        ),
+        ("scan too large", "more than a scan may (4000000)"),
+        ("carving passes", "--carve-passes must lie in [0, 16] (got -3)"),
+        ("iterations", "--iterations must lie in [1, 10000] (got 99999999999)"),
+        ("max frames", "--max-frames must be >= 2 (got -5)"),
+        ("empty scan", "0 returns beyond 2.5 m; a scan needs at least 1000"),
+        ("all-zero scans", "0 returns beyond 2.5 m; a scan needs at least 1000"),
     ],
 )
 def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsys, monkeypatch):
@@ -79,14 +91,39 @@ def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsy
     elif case == "weights not a folder":
         _drive(root, 3, _eye(3))
         extra = ["--weights", str(tmp_path / "nope")]
+    elif case == "out holds the poses":
+        _drive(root, 3)
+        (tmp_path / "out").mkdir()
+        np.savetxt(tmp_path / "out" / "poses.txt", _eye(3))
+        extra = ["--poses", str(tmp_path / "out" / "poses.txt"), "--overwrite"]
+    elif case == "out in the scans":
+        _drive(root, 3, _eye(3))
+        extra = ["-o", str(root / "velodyne" / "sub.bin")]
+    elif case == "huge holdout range":
+        _drive(root, 3, _eye(3))
+        extra = ["--holdout", "000000:300000000"]
+    elif case == "scan too large":
+        _drive(root, 3, _eye(3))
+        with open(root / "velodyne" / "000001.bin", "r+b") as f:
+            f.truncate(16 * 4_000_001)  # sparse: no disk used
+    elif case in ("carving passes", "iterations", "max frames"):
+        _drive(root, 3, _eye(3))
+        flag = {"carving passes": "--carve-passes", "max frames": "--max-frames"}
+        value = {"carving passes": "-3", "iterations": "99999999999", "max frames": "-5"}
+        extra = [flag.get(case, "--iterations"), value[case]]
+    elif case in ("empty scan", "all-zero scans"):
+        _drive(root, 3, _eye(3))  # all-zero points; one scan empty
+        if case == "empty scan":
+            (root / "velodyne" / "000001.bin").write_bytes(b"")
+        extra = ["--no-prior"]
     elif case == "no odometry":
         from nidar_mi import extras
 
         _drive(root, 3)
         monkeypatch.setattr(extras, "installed", lambda m: m not in ("kiss_icp", "open3d"))
-    out = tmp_path / "out"
+    out = [] if "-o" in extra else ["-o", str(tmp_path / "out")]
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
-    status = main([str(root), "-o", str(out), *extra])
+    status = main([str(root), *out, *extra])
     err = capsys.readouterr().err
     assert status == 2
     lines = err.strip().splitlines()
