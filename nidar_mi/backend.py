@@ -15,10 +15,13 @@ worker processes of a parallel job with :func:`worker_setup`.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import re
+import signal
 import sys
+import threading
 
 from .errors import NidarError
 
@@ -28,6 +31,7 @@ __all__ = [
     "configure_llvm",
     "default_variant",
     "set_variant",
+    "signals_deferred",
     "active_variant",
     "prepare_worker",
     "worker_setup",
@@ -132,6 +136,44 @@ def set_variant(variant: str | None = None) -> str:
         NidarError: the variant is unknown, not a spectral one, or its back end is missing.
     """
     configure_llvm()
+    with signals_deferred():
+        return _set_variant(variant)
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """SIGINT and SIGTERM held back until the block ends, then delivered to their handlers.
+
+    Dr.Jit's and Mitsuba's extensions load and start their back end in C++: a Python exception
+    raised by a signal handler inside it comes out as another error (an ImportError, a
+    SystemError) or aborts the process. Held back (the block's handlers only note the signal),
+    it is raised again when the block ends and handled as anywhere else. A signal the process
+    ignores stays ignored; outside the main thread nothing is held back.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+
+    def hold(signum, frame):  # noqa: ARG001 - signal handler signature
+        held.append(signum)
+
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(sig)
+        if handler not in (signal.SIG_IGN, None):
+            previous[sig] = handler
+            signal.signal(sig, hold)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(held):
+            signal.raise_signal(sig)
+
+
+def _set_variant(variant: str | None) -> str:
     import mitsuba as mi
 
     variant = variant or default_variant()

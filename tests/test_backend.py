@@ -111,3 +111,22 @@ def test_parameter_error_reads_the_plugin_message(text, message):
 
     assert parameter_error(RuntimeError(text)) == message
     assert parameter_error(NidarError("x: parameter 'y' bad")) == "x: parameter 'y' bad"
+
+
+def test_signals_wait_until_the_extensions_are_loaded():
+    """A SIGTERM that arrives while the variant starts is handled when it has started."""
+    import os
+    import signal
+    import time
+
+    order = []
+    old = signal.signal(signal.SIGTERM, lambda *a: order.append("handled"))
+    try:
+        with backend.signals_deferred():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.05)
+            order.append("block ended")
+        time.sleep(0.05)
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert order == ["block ended", "handled"]

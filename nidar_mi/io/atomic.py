@@ -577,7 +577,8 @@ def staged_directory(
     publish = dict(owner=owner, overwrite=overwrite, inputs=inputs, nested=nested)
     target = check_output_folder(out_dir, **publish)
     _clear_stale(target)
-    made = _missing_folders(target.parent)  # removed again if the run fails
+    # the folders made for it go again if the run fails (a cache keeps its caller's)
+    made = [] if nested else _missing_folders(target.parent)
     try:
         stage, lock = _new_stage(target.parent, f".{target.name}.partial-")
     except OSError as e:
