@@ -115,7 +115,7 @@ def check(options: ReconstructOptions) -> Drive:
             raise NidarError(
                 "reconstruct of a drive without poses needs the optional 'drive' and 'resim' "
                 f"dependencies ({', '.join(absent)} not installed): "
-                "pip install 'nidar_mi[drive,resim]' (or give --poses)"
+                "pip install 'nidar_mi[drive,resim]' (or give `poses`)"
             )
     if options.weights is not None:
         if not options.prior:
