@@ -148,12 +148,15 @@ def _variant_in_task() -> str:
 @pytest.fixture()
 def caller_variant(variant):
     """The caller's variant for one test: ``scalar_spectral``, not the default one (which a
-    worker without a variant of its own would take); the session's variant back afterwards."""
+    worker without a variant of its own would take); the session's variant back afterwards,
+    its plugins registered again (``nidar_mi.plugins.<name>`` that variant's modules)."""
     import mitsuba as mi
+
+    from nidar_mi.backend import set_variant
 
     mi.set_variant("scalar_spectral")
     yield "scalar_spectral"
-    mi.set_variant(variant)
+    set_variant(variant)
 
 
 def test_a_serial_job_keeps_the_callers_variant(caller_variant):
