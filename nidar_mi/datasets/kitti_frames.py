@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import NidarError
+from ..io.atomic import folder_lock
 from ..io.cache_key import cache_key
 from ..io.ownership import Owner
 from .kitti_objects import KittiFrame, frame_ids, load_kitti_frame
@@ -321,5 +322,7 @@ def kitti_training_data(kitti_dirs=None, *, progress: bool = True) -> Path:
         )
     key = cache_key([str(d.resolve()) for d in dirs] + [KITTI_FRAMES_VERSION])
     out = cache_dir("kitti_frames", key)
-    build_kitti_frames(dirs, out, progress=progress, overwrite=True)  # the package's own cache
+    # the package's own cache; a second process building it at the same time waits
+    with folder_lock(out.parent, "the KITTI frame cache"):
+        build_kitti_frames(dirs, out, progress=progress, overwrite=True)
     return out

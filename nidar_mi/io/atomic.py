@@ -50,6 +50,7 @@ __all__ = [
     "check_outside_inputs",
     "check_writable",
     "file_problem",
+    "folder_lock",
     "staged_entries",
     "atomic_write_text",
     "atomic_write_json",
@@ -423,6 +424,29 @@ def _lock(path: Path) -> int:
 
 def _unlock(fd: int | None) -> None:
     if fd is not None:
+        os.close(fd)
+
+
+@contextmanager
+def folder_lock(path: str | os.PathLike, what: str = "") -> Iterator[Path]:
+    """Hold the folder ``path`` (made if missing) locked against other processes, waiting for
+    one that holds it (a line on stderr says what it waits for); released when the block ends
+    or the process ends however it ends (``flock``). For shared caches that two runs may build
+    at once: the second waits and then finds the first one's work done."""
+    import sys
+
+    folder = Path(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            label = what or str(folder)
+            print(f"waiting for another process writing {label}", file=sys.stderr, flush=True)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield folder
+    finally:
         os.close(fd)
 
 

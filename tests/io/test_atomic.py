@@ -213,3 +213,40 @@ def test_leftovers_of_a_killed_writer_are_found_by_target_name(tmp_path):
     old.mkdir()
     assert ("scene.v1", old) in atomic.leftovers(tmp_path)
     assert atomic.leftovers(tmp_path / "missing") == []
+
+
+def test_folder_lock_makes_a_second_writer_wait_its_turn(tmp_path, capsys):
+    """Two writers of one shared cache: the second waits (and says so) until the first is done."""
+    import threading
+    import time
+
+    from nidar_mi.io.atomic import folder_lock
+
+    order: list[str] = []
+    inside, release = threading.Event(), threading.Event()
+
+    def first():
+        with folder_lock(tmp_path / "cache"):
+            order.append("first in")
+            inside.set()
+            release.wait(10)
+            order.append("first out")
+
+    def second():
+        with folder_lock(tmp_path / "cache", "the cache") as folder:
+            order.append(f"second in {folder.name}")
+
+    a = threading.Thread(target=first)
+    a.start()
+    assert inside.wait(10)
+    b = threading.Thread(target=second)
+    b.start()
+    time.sleep(0.3)
+    assert order == ["first in"]  # still waiting
+    release.set()
+    a.join(10)
+    b.join(10)
+    assert order == ["first in", "first out", "second in cache"]
+    assert "waiting for another process writing the cache" in capsys.readouterr().err
+    with folder_lock(tmp_path / "cache"):  # released: taken at once
+        pass
