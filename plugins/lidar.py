@@ -11,6 +11,7 @@ import re
 import mitsuba as mi
 
 from nidar_mi.errors import NidarError
+from nidar_mi.extras import require
 from nidar_mi.lidar.config import PARAMETERS, LidarConfig
 from nidar_mi.weather.conditions import PARAMETERS as WEATHER_PARAMETERS
 from nidar_mi.weather.conditions import Weather
@@ -271,6 +272,9 @@ class LidarSensor(mi.Sensor):
         except NidarError as e:
             message = re.sub(r"`(\w+)`", r"parameter '\1'", str(e))
             raise NidarError(f"lidar '{name}': {message}") from None
+        if self.weather is not None and not self.weather.clear:
+            # checked when the scene loads, before any scan: only the XML says it needs it
+            require("weather", f"lidar '{name}' with fog, rain or snow")
 
     def to_string(self) -> str:
         return f"LidarSensor[{self.config}]"

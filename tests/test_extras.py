@@ -102,3 +102,25 @@ def test_run_turns_a_missing_extra_module_into_one_line(capsys):
 
     with pytest.raises(ModuleNotFoundError):  # a bug, not a missing extra: a traceback
         run(other)
+
+
+def test_a_scene_whose_lidar_has_weather_needs_the_extra_before_any_scan(
+    monkeypatch, tmp_path, capsys
+):
+    """Only the scene's XML says that its lidar scans in fog: the extra is checked when the scene
+    loads, in one line, before anything is scanned or written."""
+    from nidar_mi.cli.render import main
+
+    text = open(f"{_repo_scenes()}/target.xml", encoding="utf-8").read()
+    cut = '<float name="range_max" value="40"/>'
+    assert cut in text
+    scene = tmp_path / "foggy.xml"
+    scene.write_text(text.replace(cut, cut + '<float name="fog" value="50"/>'), encoding="utf-8")
+    _hide(monkeypatch, "miepython")
+    monkeypatch.chdir(tmp_path)
+    assert main([str(scene), "-o", "OUT", "--no-cameras"]) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: "), err
+    assert "lidar 'lidar' with fog, rain or snow needs the optional 'weather'" in err
+    assert "(miepython not installed): pip install 'nidar_mi[weather]'" in err
+    assert not (tmp_path / "OUT").exists()
