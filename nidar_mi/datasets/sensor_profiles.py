@@ -143,7 +143,7 @@ def _cached_fit(model: NidarModel, data: dict, where: str, scans, progress: bool
     """``kitti-hdl64e`` fitted on ``scans()`` (the frames ``data`` names, ``where`` in words),
     cached in the user's cache folder under a key of ``data``, the weights, the form and the
     fitting version; one warning when it is fitted."""
-    from ..io.atomic import atomic_write_json
+    from ..io.atomic import atomic_write_json, folder_lock
     from ..io.cache_key import cache_key
     from .paths import cache_dir
     from .profile_fitting import fit_scan_profile
@@ -153,22 +153,26 @@ def _cached_fit(model: NidarModel, data: dict, where: str, scans, progress: bool
     path = cache_dir("profiles", f"{DEFAULT_KITTI_PROFILE}-{key}.json")
     if path.is_file():
         return load_profile(path)
-    warnings.warn(
-        f"fitting the {DEFAULT_KITTI_PROFILE} profile on {where} (once; cached in {path})",
-        stacklevel=4,
-    )
-    profile = fit_scan_profile(
-        model,
-        scans(),
-        name=DEFAULT_KITTI_PROFILE,
-        sensor=_KITTI_SENSOR,
-        form=KITTI_PROFILE_FORM,
-        branch="R",
-        provenance={**data, "cache": str(path)},
-        progress=progress,
-        **KITTI_PROFILE_OPTIONS,
-    )
-    atomic_write_json(path, profile.to_dict())
+    # a second process fitting it at the same time waits, then reads the first one's
+    with folder_lock(path.parent, f"the {DEFAULT_KITTI_PROFILE} profile"):
+        if path.is_file():
+            return load_profile(path)
+        warnings.warn(
+            f"fitting the {DEFAULT_KITTI_PROFILE} profile on {where} (once; cached in {path})",
+            stacklevel=4,
+        )
+        profile = fit_scan_profile(
+            model,
+            scans(),
+            name=DEFAULT_KITTI_PROFILE,
+            sensor=_KITTI_SENSOR,
+            form=KITTI_PROFILE_FORM,
+            branch="R",
+            provenance={**data, "cache": str(path)},
+            progress=progress,
+            **KITTI_PROFILE_OPTIONS,
+        )
+        atomic_write_json(path, profile.to_dict())
     return profile
 
 
