@@ -62,6 +62,7 @@ def build_parser():
         MAX_ITERATIONS,
         ReconstructOptions,
     )
+    from ..resim.write import DEFAULT_ALBEDO_SCALE
 
     d = ReconstructOptions("", "")
     p = parser(
@@ -113,6 +114,15 @@ def build_parser():
     )
     _add_step_switches(p)
     p.add_argument("--weights", default=None, help="NIDAR weights folder (default: shipped)")
+    p.add_argument(
+        "--albedo-scale",
+        type=float,
+        default=None,
+        metavar="K",
+        help="the fitted ρ over the surfaces' reflectance, e.g. from a target of known "
+        "reflectance (default: NIDAR's, from the images; without them "
+        f"{DEFAULT_ALBEDO_SCALE}, KITTI's HDL-64E)",
+    )
     p.add_argument("--seed", type=int, default=d.seed, help="sampling seed (0)")
     p.add_argument(
         "--max-frames",
@@ -169,6 +179,7 @@ def main(argv=None) -> int:
             range_offsets=not args.no_range_offsets,
             prior=not args.no_prior,
             weights=args.weights,
+            albedo_scale=args.albedo_scale,
             seed=check_seed(args.seed),
             max_frames=args.max_frames,
             progress=show_progress(args),

@@ -53,7 +53,9 @@ def _variants(cfg, inv) -> dict:
     inverts a moving surface's returns or None: the median ρ there) of the re-simulated
     methods."""
     quiet = {"receiver_noise_std": 0.0, "noise_intensity_std": 0.0, "noise_range_std": 0.0}
-    det = replace(cfg, dropout=0.0, **quiet)
+    # the scene holds ρ / k with gain k (:func:`.write.albedo_scale`); the methods' ρ are the
+    # fitted ones: gain 1, the same product
+    det = replace(cfg, gain=1.0, dropout=0.0, **quiet)
     s = inv.sensor_flat
     flat = replace(
         det,

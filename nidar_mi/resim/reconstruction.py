@@ -58,6 +58,8 @@ MAX_FRAMES = 400
 #: The most fit steps and carving passes (each a pass over every training sample).
 MAX_ITERATIONS = 10_000
 MAX_CARVE_PASSES = 16
+#: The accepted ``albedo_scale`` (the fitted ρ over the surfaces' reflectance).
+ALBEDO_SCALE_RANGE = (0.01, 100.0)
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,7 @@ class ReconstructOptions:
     range_offsets: bool = True
     prior: bool = True
     weights: str | None = None
+    albedo_scale: float | None = None
     seed: int = 0
     max_frames: int = MAX_FRAMES
     progress: bool = False
@@ -103,6 +106,10 @@ def check(options: ReconstructOptions) -> Drive:
         low = 1 if name == "iterations" else 0
         if not low <= value <= top:
             raise NidarError(f"`{name}` must lie in [{low}, {top}] (got {value})")
+    k = options.albedo_scale
+    low, top = ALBEDO_SCALE_RANGE
+    if k is not None and not low <= k <= top:  # NaN fails too
+        raise NidarError(f"`albedo_scale` must lie in [{low:g}, {top:g}] (got {k:g})")
     drive = open_drive(options.drive, holdout=list(options.holdout), poses_file=options.poses)
     if len(drive.ids) > options.max_frames:
         raise NidarError(
@@ -172,7 +179,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     from .invert import invert
     from .mesh import merge_meshes
     from .range_offsets import corrected_frames, fit_range_offsets
-    from .write import write_outputs
+    from .write import albedo_scale, write_outputs
 
     clock = _Clock()
     frames = load_frames(drive, progress=options.progress)
@@ -191,7 +198,10 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     inv = invert(drive, frames, poses, mesh, options, stage, splats=splats)
     clock.lap("fit")
     surfaces = merge_meshes([mesh, splats.mesh])  # inv's ρ: the mesh's vertices, then the splats'
-    scene_path = write_outputs(stage, drive, frames, poses, surfaces, inv, range_offsets=offsets)
+    albedo = albedo_scale(inv, options.albedo_scale)
+    scene_path = write_outputs(
+        stage, drive, frames, poses, surfaces, inv, range_offsets=offsets, albedo=albedo
+    )
     clock.lap("write")
     held = evaluate_heldout(
         scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving,
@@ -221,7 +231,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
             "vertical_offset_m": frames.layout.vertical_offset_m.tolist(),
         },
         "range_offsets": None if offsets is None else offsets.summary(),
-        "fit": inv.summary(),
+        "fit": inv.summary() | {"albedo": {"scale": albedo[0], "source": albedo[1]}},
         "shadow": inv.shadow.summary(),
         "heldout": held,
         "timings_s": clock.times,

@@ -12,18 +12,42 @@ from .frames import MIN_RANGE_M, Frames
 from .inversion import SensorFit
 from .mesh import Mesh
 
-__all__ = ["sensor_params", "write_outputs", "LASER_PRESET"]
+__all__ = ["sensor_params", "write_outputs", "albedo_scale", "LASER_PRESET", "DEFAULT_ALBEDO_SCALE"]
 
 #: The preset whose firing timing the recovered layout keeps (a 64-laser drive).
 LASER_PRESET = "hdl64e"
+#: The fitted ρ over the surfaces' reflectance (the scene's ``gain``) where no camera gives it:
+#: the median over the five KITTI drives of docs/RESIMULATION.md of NIDAR's scale (each drive's
+#: median ratio of the fitted ρ to NIDAR's R; 1.8 to 3.4, the drive's two runs averaged).
+DEFAULT_ALBEDO_SCALE = 2.4
+
+
+def albedo_scale(inv, given: float | None = None) -> tuple[float, str]:
+    """``(k, source)``: the scale ``k`` of the fitted ρ over the surfaces' reflectance (ρ at
+    normal incidence, 0 to 1 for a diffuse surface), from ``given`` (``"given"``), else NIDAR's
+    prior (``"nidar"``: the median ratio of the fitted ρ to R where the camera sees the
+    vertices), else :data:`DEFAULT_ALBEDO_SCALE` (``"default"``)."""
+    if given is not None:
+        return float(given), "given"
+    scale = getattr(inv, "prior_scale", float("nan"))
+    if getattr(inv, "prior", None) is not None and np.isfinite(scale) and scale > 0:
+        return float(scale), "nidar"
+    return DEFAULT_ALBEDO_SCALE, "default"
 
 
 def sensor_params(
-    frames: Frames, s: SensorFit, *, laser_gains: bool = True, shadow=(), range_offsets=None
+    frames: Frames,
+    s: SensorFit,
+    *,
+    laser_gains: bool = True,
+    shadow=(),
+    range_offsets=None,
+    gain: float = 1.0,
 ) -> dict:
     """The ``lidar`` plugin's parameters of the recovered sensor (``shadow``: its
     ``laser_shadow`` intervals, :mod:`.shadow`; ``range_offsets``: (R,) its
-    ``laser_range_offsets``, m, :mod:`.range_offsets`)."""
+    ``laser_range_offsets``, m, :mod:`.range_offsets`; ``gain``: its ``gain``, the scale of
+    the fitted ρ over the surfaces' ρ as written, :func:`albedo_scale`)."""
     from .scene_files import LAYOUT
     from .shadow import shadow_value
 
@@ -32,7 +56,7 @@ def sensor_params(
         "calibration_file": LAYOUT,
         "horizontal_resolution": int(frames.columns),
         "intensity_mode": "compensated",
-        "gain": 1.0,
+        "gain": float(gain),
         "range_min": MIN_RANGE_M,
         "range_response": ", ".join(f"{d:g}:{f:.6g}" for d, f in zip(s.knots_m, s.response)),
         "intensity_offset": float(round(s.offset, 6)),
@@ -54,24 +78,36 @@ def sensor_params(
 
 
 def write_outputs(
-    stage: str, drive: Drive, frames: Frames, poses, mesh: Mesh, inv, range_offsets=None
+    stage: str,
+    drive: Drive,
+    frames: Frames,
+    poses,
+    mesh: Mesh,
+    inv,
+    range_offsets=None,
+    albedo: tuple[float, str] = (1.0, "given"),
 ) -> str:
     """Write the scene and ``poses.txt`` into ``stage``; returns the scene file's path
-    (``range_offsets``: the recovered :class:`.range_offsets.RangeOffsets` or None)."""
+    (``range_offsets``: the recovered :class:`.range_offsets.RangeOffsets` or None;
+    ``albedo``: :func:`albedo_scale`'s ``(k, source)``: the surfaces are written with the
+    fitted ρ over ``k`` and the recovered sensor with ``gain`` ``k``, the same product, so that
+    the 905 → 1550 nm map and the presets read reflectance)."""
     from ..io.kitti import write_kitti_poses
     from ..lidar.layouts import preset_table
     from .laser_layout import write_velodyne_yaml
     from .scene_files import LAYOUT, SCENE, SURFACES, SensorXml, write_scene, write_surfaces_ply
     from .spectral import band_map
 
-    rho1550 = band_map(905.0, 1550.0)(inv.rho)
-    write_surfaces_ply(os.path.join(stage, SURFACES), mesh, {"rho": inv.rho, "rho1550": rho1550})
+    k = float(albedo[0])
+    rho = np.asarray(inv.rho, dtype=np.float64) / k
+    rho1550 = band_map(905.0, 1550.0)(rho)
+    write_surfaces_ply(os.path.join(stage, SURFACES), mesh, {"rho": rho, "rho1550": rho1550})
     table = preset_table(LASER_PRESET)
     ids = table.laser_id if frames.layout.rings == table.rings else range(frames.layout.rings)
     write_velodyne_yaml(os.path.join(stage, LAYOUT), frames.layout, list(ids))
     shadow = inv.shadow.intervals
     offsets = None if range_offsets is None else range_offsets.offsets_m
-    params = sensor_params(frames, inv.sensor, shadow=shadow, range_offsets=offsets)
+    params = sensor_params(frames, inv.sensor, shadow=shadow, range_offsets=offsets, gain=k)
     recovered = SensorXml("lidar", params, np.eye(4))
     preset = SensorXml(
         "lidar",

@@ -49,6 +49,8 @@ def _eye(n):
         ("carving passes", "--carve-passes must lie in [0, 16] (got -3)"),
         ("iterations", "--iterations must lie in [1, 10000] (got 99999999999)"),
         ("max frames", "--max-frames must be >= 2 (got -5)"),
+        ("albedo scale", "--albedo-scale must lie in [0.01, 100] (got 0)"),
+        ("albedo scale nan", "--albedo-scale must lie in [0.01, 100] (got nan)"),
         ("empty scan", "0 returns beyond 2.5 m; a scan needs at least 1000"),
         ("all-zero scans", "0 returns beyond 2.5 m; a scan needs at least 1000"),
     ],
@@ -111,6 +113,9 @@ def test_bad_drives_are_one_line_and_write_nothing(case, needle, tmp_path, capsy
         flag = {"carving passes": "--carve-passes", "max frames": "--max-frames"}
         value = {"carving passes": "-3", "iterations": "99999999999", "max frames": "-5"}
         extra = [flag.get(case, "--iterations"), value[case]]
+    elif case.startswith("albedo scale"):
+        _drive(root, 3, _eye(3))
+        extra = ["--albedo-scale", "nan" if case.endswith("nan") else "0"]
     elif case in ("empty scan", "all-zero scans"):
         _drive(root, 3, _eye(3))  # all-zero points; one scan empty
         if case == "empty scan":
