@@ -3,6 +3,10 @@
 if __name__ == "__main__":
     import sys
 
+    from nidar_mi.cli import early_signals
+
+    early_signals.install()  # Ctrl-C and SIGTERM while the command imports
+
     from nidar_mi.cli.train import main
 
     sys.exit(main())

@@ -42,6 +42,7 @@ from collections.abc import Callable, Mapping
 from ..errors import MAX_SEED, NidarError, check_seed, flag_message
 from ..extras import extra_of, missing_extra
 from ..progress import bars_allowed, stderr_is_terminal
+from . import early_signals
 
 __all__ = [
     "EXIT_OK",
@@ -286,8 +287,9 @@ def run(
         The exit status (see the module docstring).
     """
     previous = {signal.SIGTERM: signal.getsignal(signal.SIGTERM)}
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not ignored
-        previous[signal.SIGINT] = signal.default_int_handler
+    sigint = signal.getsignal(signal.SIGINT)
+    if sigint in (signal.default_int_handler, early_signals.early_handler):  # not ignored
+        previous[signal.SIGINT] = sigint
     handlers = {signal.SIGTERM: _on_sigterm, signal.SIGINT: _on_sigint}
     try:
         for sig in previous:

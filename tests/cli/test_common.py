@@ -305,3 +305,80 @@ def test_readme_names_the_installed_console_scripts():
     assert {f"nidar-{c.replace('_', '-')}" for c in COMMANDS} | {"nidar-mi"} == set(scripts)
     named = set(re.findall(r"`(nidar-[a-z<][a-z>-]*)", readme))
     assert named == set(scripts)
+
+
+@pytest.mark.parametrize(
+    "sig, status, word",
+    [
+        (signal.SIGTERM, EXIT_TERMINATED, "terminated"),
+        (signal.SIGINT, EXIT_INTERRUPTED, "interrupted"),
+    ],
+)
+def test_a_signal_while_a_command_imports_is_one_line(sig, status, word):
+    """What a command's ``__main__`` does first: a signal before its run (while it imports) is
+    the same line and status as one during it, not a traceback or a silent exit."""
+    code = (
+        "import os, signal, time\n"
+        "from nidar_mi.cli import early_signals\n"
+        "early_signals.install()\n"
+        f"os.kill(os.getpid(), {int(sig)})\n"
+        "time.sleep(10)\n"
+        "print('not stopped')\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=default_sigint,
+    )
+    assert (proc.returncode, proc.stderr, proc.stdout) == (status, f"{word}; nothing written\n", "")
+
+
+def test_run_takes_over_from_the_early_handlers(capsys):
+    """After :func:`early_signals.install`, ``run`` still turns Ctrl-C into its own line (its
+    clean-up runs) and gives the early handlers back; an ignored SIGINT stays ignored."""
+    from nidar_mi.cli import early_signals
+    from nidar_mi.cli._common import run
+
+    def work():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(5)
+
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        early_signals.install()
+        assert run(work, on_interrupt="the partial output removed") == EXIT_INTERRUPTED
+        assert capsys.readouterr().err == "interrupted; the partial output removed\n"
+        for s in (signal.SIGINT, signal.SIGTERM):
+            assert signal.getsignal(s) is early_signals.early_handler
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        early_signals.install()
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def test_every_command_module_takes_the_signals_first():
+    """Every ``python -m`` entry of a command installs the early handlers before it imports
+    the command."""
+    import pathlib
+    import re
+
+    entries = [
+        p
+        for p in pathlib.Path(REPO, "nidar_mi").rglob("*.py")
+        if re.search(r"^\s*from nidar_mi\.cli(\.\w+)? import .*\bmain\b", p.read_text(), re.M)
+    ]
+    assert len(entries) >= len(COMMANDS)
+    for path in entries:
+        text = path.read_text()
+        assert "early_signals.install()" in text, path
+        first = text.index("early_signals.install()")
+        assert first < text.index("sys.exit(main())"), path
+        command = re.search(r"from nidar_mi\.cli\.\w+ import main", text)
+        assert command is None or first < command.start(), path
