@@ -430,21 +430,32 @@ def _unlock(fd: int | None) -> None:
 @contextmanager
 def folder_lock(path: str | os.PathLike, what: str = "") -> Iterator[Path]:
     """Hold the folder ``path`` (made if missing) locked against other processes, waiting for
-    one that holds it (a line on stderr says what it waits for); released when the block ends
-    or the process ends however it ends (``flock``). For shared caches that two runs may build
-    at once: the second waits and then finds the first one's work done."""
-    import sys
+    one that holds it (logged at INFO: what it waits for); released when the block ends or
+    the process ends however it ends (``flock``). For shared caches that two runs may build
+    at once: the second waits and then finds the first one's work done. Where the file system
+    has no ``flock`` the block runs unlocked.
+
+    Raises:
+        NidarError: the folder cannot be made.
+    """
+    import logging
 
     folder = Path(path)
-    folder.mkdir(parents=True, exist_ok=True)
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError as e:
+        raise NidarError(f"cannot write {folder}: {e.strerror or e}") from None
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            label = what or str(folder)
-            print(f"waiting for another process writing {label}", file=sys.stderr, flush=True)
+            logging.getLogger("nidar_mi").info(
+                "waiting for another process writing %s", what or str(folder)
+            )
             fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:  # no flock here (some network file systems): unlocked
+            pass
         yield folder
     finally:
         os.close(fd)

@@ -6,10 +6,12 @@ Files (all in one folder, referenced relative to ``scene.xml``)::
     scene.xml              the surfaces and ``<include filename="sensor_$sensor.xml"/>``
     surfaces.ply           the mesh and the splats (:mod:`.splats`, their vertices last); vertex
                            properties ``rho_0`` (the recovered reflectance at
-                           the sensor's wavelength: Mitsuba's attribute ``vertex_rho``) and
-                           ``rho1550_0`` (the same surface at 1550 nm: ``vertex_rho1550``)
+                           the sensor's wavelength, the fitted ρ over the albedo scale of
+                           :func:`.write.albedo_scale`: Mitsuba's attribute ``vertex_rho``)
+                           and ``rho1550_0`` (the same surface at 1550 nm: ``vertex_rho1550``)
     sensor_recovered.xml   the recovered sensor (``lidar``: its per-laser layout in
-                           ``layout.yaml``, ``laser_gains``, ``range_response``,
+                           ``layout.yaml``, ``laser_gains`` (times the albedo scale),
+                           ``range_response``,
                            ``laser_range_response``, offset, threshold, receiver noise,
                            dropout and the mounting's ``laser_shadow``: :mod:`.shadow`) at
                            frame 0's pose, the world origin

@@ -16,7 +16,8 @@ __all__ = ["sensor_params", "write_outputs", "albedo_scale", "LASER_PRESET", "DE
 
 #: The preset whose firing timing the recovered layout keeps (a 64-laser drive).
 LASER_PRESET = "hdl64e"
-#: The fitted ρ over the surfaces' reflectance (the scene's ``gain``) where no camera gives it:
+#: The fitted ρ over the surfaces' reflectance (the written per-laser gains' geometric mean)
+#: where no camera gives it:
 #: the median over the five KITTI drives of docs/RESIMULATION.md of NIDAR's scale (each drive's
 #: median ratio of the fitted ρ to NIDAR's R; 1.8 to 3.4, the drive's two runs averaged).
 DEFAULT_ALBEDO_SCALE = 2.4
@@ -42,12 +43,14 @@ def sensor_params(
     laser_gains: bool = True,
     shadow=(),
     range_offsets=None,
-    gain: float = 1.0,
+    scale: float = 1.0,
 ) -> dict:
     """The ``lidar`` plugin's parameters of the recovered sensor (``shadow``: its
     ``laser_shadow`` intervals, :mod:`.shadow`; ``range_offsets``: (R,) its
-    ``laser_range_offsets``, m, :mod:`.range_offsets`; ``gain``: its ``gain``, the scale of
-    the fitted ρ over the surfaces' ρ as written, :func:`albedo_scale`)."""
+    ``laser_range_offsets``, m, :mod:`.range_offsets`; ``scale``: the fitted ρ over the
+    surfaces' ρ as written, :func:`albedo_scale`, carried by the per-laser gains: their
+    geometric mean is ``scale``, and ``gain`` stays 1, the full scale of the KITTI and LAS
+    encodings)."""
     from .scene_files import LAYOUT
     from .shadow import shadow_value
 
@@ -56,7 +59,7 @@ def sensor_params(
         "calibration_file": LAYOUT,
         "horizontal_resolution": int(frames.columns),
         "intensity_mode": "compensated",
-        "gain": float(gain),
+        "gain": 1.0,
         "range_min": MIN_RANGE_M,
         "range_response": ", ".join(f"{d:g}:{f:.6g}" for d, f in zip(s.knots_m, s.response)),
         "intensity_offset": float(round(s.offset, 6)),
@@ -64,8 +67,10 @@ def sensor_params(
         "receiver_noise_std": float(round(s.noise, 6)),
         "dropout": float(round(s.dropout, 6)),
     }
+    if not laser_gains and scale != 1.0:
+        raise ValueError("sensor_params: a scale needs the per-laser gains that carry it")
     if laser_gains:
-        params["laser_gains"] = ", ".join(f"{g:.6g}" for g in s.gains)
+        params["laser_gains"] = ", ".join(f"{g * scale:.6g}" for g in s.gains)
         if s.laser_response is not None:
             params["laser_range_response"] = "; ".join(
                 ", ".join(f"{f:.6g}" for f in row) for row in s.laser_response
@@ -90,8 +95,8 @@ def write_outputs(
     """Write the scene and ``poses.txt`` into ``stage``; returns the scene file's path
     (``range_offsets``: the recovered :class:`.range_offsets.RangeOffsets` or None;
     ``albedo``: :func:`albedo_scale`'s ``(k, source)``: the surfaces are written with the
-    fitted ρ over ``k`` and the recovered sensor with ``gain`` ``k``, the same product, so that
-    the 905 → 1550 nm map and the presets read reflectance)."""
+    fitted ρ over ``k`` and the recovered sensor's per-laser gains times ``k``, the same
+    product, so that the 905 → 1550 nm map and the presets read reflectance)."""
     from ..io.kitti import write_kitti_poses
     from ..lidar.layouts import preset_table
     from .laser_layout import write_velodyne_yaml
@@ -107,7 +112,7 @@ def write_outputs(
     write_velodyne_yaml(os.path.join(stage, LAYOUT), frames.layout, list(ids))
     shadow = inv.shadow.intervals
     offsets = None if range_offsets is None else range_offsets.offsets_m
-    params = sensor_params(frames, inv.sensor, shadow=shadow, range_offsets=offsets, gain=k)
+    params = sensor_params(frames, inv.sensor, shadow=shadow, range_offsets=offsets, scale=k)
     recovered = SensorXml("lidar", params, np.eye(4))
     preset = SensorXml(
         "lidar",

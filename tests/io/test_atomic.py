@@ -215,8 +215,9 @@ def test_leftovers_of_a_killed_writer_are_found_by_target_name(tmp_path):
     assert atomic.leftovers(tmp_path / "missing") == []
 
 
-def test_folder_lock_makes_a_second_writer_wait_its_turn(tmp_path, capsys):
+def test_folder_lock_makes_a_second_writer_wait_its_turn(tmp_path, caplog):
     """Two writers of one shared cache: the second waits (and says so) until the first is done."""
+    import logging
     import threading
     import time
 
@@ -236,6 +237,7 @@ def test_folder_lock_makes_a_second_writer_wait_its_turn(tmp_path, capsys):
         with folder_lock(tmp_path / "cache", "the cache") as folder:
             order.append(f"second in {folder.name}")
 
+    caplog.set_level(logging.INFO, logger="nidar_mi")
     a = threading.Thread(target=first)
     a.start()
     assert inside.wait(10)
@@ -247,6 +249,10 @@ def test_folder_lock_makes_a_second_writer_wait_its_turn(tmp_path, capsys):
     a.join(10)
     b.join(10)
     assert order == ["first in", "first out", "second in cache"]
-    assert "waiting for another process writing the cache" in capsys.readouterr().err
+    assert "waiting for another process writing the cache" in caplog.text
     with folder_lock(tmp_path / "cache"):  # released: taken at once
         pass
+    (tmp_path / "file").write_text("")
+    with pytest.raises(NidarError, match="cannot write"):  # a file where the folder goes
+        with folder_lock(tmp_path / "file" / "cache"):
+            pass
