@@ -145,12 +145,14 @@ def test_rendered_drive_recovers_gains_rho_and_layout(variant, tmp_path):
 
 def _render_against_heldout(out, k: int):
     """The written scene with its recovered sensor scanned at held-out frame ``k``'s pose,
-    against the held-out scan ``reconstruct`` wrote: (returns matched within 2 cm, the median
+    encoded as the renderer writes a KITTI ``.bin``, against the held-out scan ``reconstruct``
+    wrote: (returns matched within 2 cm, the median
     and 99th percentile of their intensities' absolute difference)."""
     from scipy.spatial import cKDTree
 
     from nidar_mi.io.kitti import read_kitti_bin, read_kitti_poses
     from nidar_mi.lidar.scan import scan
+    from nidar_mi.render_folder import bin_intensity_values
     from nidar_mi.scene import load_scene
 
     loaded = load_scene(str(out / "scene.xml"))
@@ -159,7 +161,8 @@ def _render_against_heldout(out, k: int):
     xyz = r.range[..., None] * r.directions
     if r.origins is not None:
         xyz = xyz + r.origins
-    got, intensity = xyz[r.valid], np.clip(r.intensity[r.valid], 0.0, 1.0)
+    got = xyz[r.valid]
+    intensity = bin_intensity_values(r.intensity[r.valid], sensor.config)  # what a .bin holds
     held, ref = read_kitti_bin(str(out / "heldout" / f"{k:06d}.bin"))
     d, i = cKDTree(got).query(held)
     ok = d < 0.02
