@@ -48,14 +48,14 @@ METHODS = (
 )
 
 
-def _variants(cfg, inv, scale: float = 1.0) -> dict:
+def _variants(cfg, inv) -> dict:
     """Method -> (per-vertex ρ, sensor configuration, the :class:`.inversion.SensorFit` that
     inverts a moving surface's returns or None: the median ρ there) of the re-simulated
     methods; ``cfg``: the written scene's recovered sensor, whose per-laser gains carry the
-    albedo scale ``scale`` (:func:`.write.albedo_scale`), divided out here: the methods' ρ are
-    the fitted ones (the same product)."""
+    albedo scale (:func:`.write.albedo_scale`): the methods' ρ are the fitted ones, so their
+    sensor takes the fitted gains (the same product)."""
     quiet = {"receiver_noise_std": 0.0, "noise_intensity_std": 0.0, "noise_range_std": 0.0}
-    gains = None if cfg.laser_gains is None else tuple(g / scale for g in cfg.laser_gains)
+    gains = None if cfg.laser_gains is None else tuple(float(g) for g in inv.sensor.gains)
     det = replace(cfg, laser_gains=gains, dropout=0.0, **quiet)
     s = inv.sensor_flat
     flat = replace(
@@ -319,14 +319,12 @@ def evaluate_heldout(
     moving: bool = True,
     holes: bool = True,
     through: bool = True,
-    albedo_scale: float = 1.0,
 ):
     """Re-simulate, write and score every held-out frame; ``{"frames": {id: metrics},
     "mean": ...}``. ``mesh``: the static surfaces of ``scene_path`` (:class:`.mesh.Mesh`),
     needed with ``moving`` and ``through``; ``holes``: drop the returns in the holes of the
     training scans next to each frame; ``through``: hide the static triangles they saw through
-    (module docstring); ``albedo_scale``: the scale the scene's per-laser gains carry
-    (:func:`.write.albedo_scale`)."""
+    (module docstring)."""
     import mitsuba as mi
 
     from ..io.kitti import write_kitti_bin
@@ -343,7 +341,7 @@ def evaluate_heldout(
     loaded = load_scene(scene_path)
     static = loaded.scene
     sensor = next(s for s in static.sensors() if hasattr(s, "config"))
-    variants = _variants(sensor.config, inv, albedo_scale)
+    variants = _variants(sensor.config, inv)
     train = _training_world(drive, frames, poses)
     os.makedirs(os.path.join(stage, "heldout"), exist_ok=True)
     per_frame = {}

@@ -205,7 +205,7 @@ def _run(drive: Drive, options: ReconstructOptions, stage: str) -> dict:
     clock.lap("write")
     held = evaluate_heldout(
         scene_path, drive, frames, poses, inv, stage, mesh=surfaces, moving=options.moving,
-        holes=options.holes, through=options.through, albedo_scale=albedo[0],
+        holes=options.holes, through=options.through,
     )  # fmt: skip
     clock.lap("evaluate")
     report = {
