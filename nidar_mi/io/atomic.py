@@ -26,6 +26,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import json
+import logging
 import os
 import re
 import secrets
@@ -438,8 +439,6 @@ def folder_lock(path: str | os.PathLike, what: str = "") -> Iterator[Path]:
     Raises:
         NidarError: the folder cannot be made.
     """
-    import logging
-
     folder = Path(path)
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -30,9 +30,8 @@ def albedo_scale(inv, given: float | None = None) -> tuple[float, str]:
     vertices), else :data:`DEFAULT_ALBEDO_SCALE` (``"default"``)."""
     if given is not None:
         return float(given), "given"
-    scale = getattr(inv, "prior_scale", float("nan"))
-    if getattr(inv, "prior", None) is not None and np.isfinite(scale) and scale > 0:
-        return float(scale), "nidar"
+    if inv.prior is not None and np.isfinite(inv.prior_scale) and inv.prior_scale > 0:
+        return float(inv.prior_scale), "nidar"
     return DEFAULT_ALBEDO_SCALE, "default"
 
 
