@@ -332,6 +332,8 @@ def run(
         raise
     finally:
         for sig, handler in previous.items():
+            if handler is early_signals.early_handler:  # its "nothing written" no longer holds
+                handler = signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL
             signal.signal(sig, handler)
 
 
